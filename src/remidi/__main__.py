@@ -1,0 +1,5 @@
+import sys
+
+from remidi.cli import main
+
+sys.exit(main())

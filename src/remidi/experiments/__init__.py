@@ -1,0 +1,23 @@
+"""Registry of the reproducible experiments: ``remidi run NAME``."""
+
+from __future__ import annotations
+
+from remidi.errors import one_of
+from remidi.experiments.base import Experiment
+
+
+def all_experiments() -> dict[str, Experiment]:
+    from remidi.experiments import tabular
+
+    found: dict[str, Experiment] = {}
+    for module in (tabular,):
+        for exp in module.EXPERIMENTS:
+            found[exp.name] = exp
+    return found
+
+
+def get_experiment(name: str) -> Experiment:
+    experiments = all_experiments()
+    if name not in experiments:
+        raise one_of("experiment", name, experiments)
+    return experiments[name]

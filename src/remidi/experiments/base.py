@@ -1,0 +1,149 @@
+"""The experiment contract and the driver that every ``remidi run`` goes through.
+
+An :class:`Experiment` says which algorithms and presets it has, how to build and validate its
+configuration, how to train one algorithm for a set of seeds (returning a :class:`RunResult`)
+and how to plot results. :func:`run_experiment` does the rest identically for all of them:
+validate everything before writing anything, write ``config.json`` first (so a killed run can
+be resumed), then ``metrics.csv``, ``summary.json`` and the plots.
+
+With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
+panel per algorithm) go to ``OUT/``; with one, everything goes to ``OUT/`` directly.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from remidi import __version__
+from remidi.errors import ConfigError, one_of
+from remidi.experiments import outputs
+from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict
+
+
+@dataclass
+class RunResult:
+    """What training one algorithm for all seeds produced.
+
+    ``history[name]`` f[S, T] at ``steps`` i[T]; ``final[name]`` f[S] (defaults to the last
+    history entry); ``extra`` goes into summary.json as additional top-level keys.
+    """
+
+    steps: np.ndarray
+    history: dict[str, np.ndarray]
+    final: dict[str, np.ndarray] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def final_metrics(self) -> dict[str, np.ndarray]:
+        if self.final:
+            return self.final
+        return {name: np.asarray(v)[:, -1] for name, v in self.history.items()}
+
+
+@dataclass
+class RunContext:
+    experiment: str
+    algo: str
+    preset: str
+    seeds: list[int]
+    config: Any
+    out: Path
+    resume: bool = False
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    description: str
+    algorithms: tuple[str, ...]
+    config_factory: Callable[[], Any]
+    presets: dict[str, dict[str, Any]]  # preset name → overrides of the paper defaults
+    preset_seeds: dict[str, int]  # default number of seeds per preset
+    validate: Callable[[Any, str], None]  # (config, algo) → raise ConfigError
+    train: Callable[[RunContext], RunResult]
+    plot: Callable[[Path, dict[str, RunResult], Any], None]  # (folder, {algo: result}, config)
+
+
+def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any]):
+    if preset not in exp.presets:
+        raise one_of("--preset", preset, exp.presets)
+    config = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
+    return apply_overrides(config, overrides)
+
+
+def parse_algos(exp: Experiment, text: str | None) -> list[str]:
+    if text is None or text == "all":
+        return list(exp.algorithms)
+    algos = [a.strip() for a in text.split(",") if a.strip()]
+    if not algos:
+        raise one_of("--algo", text, exp.algorithms)
+    for algo in algos:
+        if algo not in exp.algorithms:
+            raise one_of("--algo", algo, exp.algorithms + ("all",))
+    if len(set(algos)) != len(algos):
+        raise ConfigError(f"--algo: {text!r} names an algorithm twice")
+    return algos
+
+
+def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: list[int],
+                   overrides: dict[str, Any], out: Path, progress: bool = True,
+                   argv: list[str] | None = None) -> dict[str, dict]:
+    """Validate, train every algorithm, write all outputs; return ``{algo: summary}``."""
+    config = resolve_config(exp, preset, overrides)
+    for algo in algos:
+        exp.validate(config, algo)
+    if not seeds:
+        raise ConfigError("--seeds: must be an integer ≥ 1")
+    out = outputs.prepare_out_dir(out)
+    folders = {algo: (out / algo if len(algos) > 1 else out) for algo in algos}
+    for algo, folder in folders.items():
+        if folder != out:
+            outputs.prepare_out_dir(folder)
+        write_run_config(folder, exp, algo, preset, seeds, config, argv)
+    return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress)
+
+
+def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
+    """Continue the run in ``folder`` (one algorithm) from its last checkpoint."""
+    folder = outputs.prepare_out_dir(folder, resume=True)
+    saved = outputs.read_json(folder / "config.json")
+    exp = exp_lookup(saved["experiment"])
+    config = config_from_dict(type(exp.config_factory()), saved["config"])
+    algo = saved["algo"]
+    exp.validate(config, algo)
+    return _train_and_write(exp, {algo: folder}, saved["preset"], saved["seeds"], config, folder,
+                            resume=True, progress=progress)
+
+
+def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seeds: list[int], config, argv) -> None:
+    outputs.write_json(folder / "config.json", {
+        "experiment": exp.name,
+        "algo": algo,
+        "preset": preset,
+        "seeds": seeds,
+        "config": config_to_dict(config),
+        "command": ["remidi", *(argv if argv is not None else sys.argv[1:])],
+        "remidi_version": __version__,
+    })
+
+
+def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress):
+    results: dict[str, RunResult] = {}
+    summaries: dict[str, dict] = {}
+    for algo, folder in folders.items():
+        ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress)
+        result = exp.train(ctx)
+        results[algo] = result
+        outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(result.steps, result.history, seeds))
+        summaries[algo] = outputs.write_summary(
+            folder / "summary.json", experiment=exp.name, algo=algo, preset=preset, seeds=seeds,
+            final=result.final_metrics(), **result.extra)
+        exp.plot(folder, {algo: result}, config)
+    if len(folders) > 1:
+        exp.plot(out, results, config)
+    return summaries

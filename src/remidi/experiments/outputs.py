@@ -1,0 +1,127 @@
+"""What every experiment writes into its output folder, written atomically.
+
+* ``config.json``: everything needed to rerun (experiment, algorithm, preset, seeds, the full
+  resolved configuration, the command line, the package version).
+* ``metrics.csv``: long format, one row per (seed, step, metric, value).
+* ``summary.json``: ``{"experiment", "algo", "preset", "seeds", "metrics": {NAME: {"mean",
+  "std", "per_seed"}}}`` with the final value of each metric.
+* PNG plots.
+
+Each file is written to a temporary name in the same folder and moved into place, so a killed
+run never leaves a half-written file, and a folder that already holds a run is never reused
+unless the caller resumes it.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from remidi.errors import ConfigError
+
+
+def prepare_out_dir(out: Path, *, resume: bool = False) -> Path:
+    """Check that ``out`` can receive a new run (or holds the run to resume); create it."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out: {out} exists and is not a folder")
+    holds_run = (out / "config.json").exists()
+    if resume and not holds_run:
+        raise ConfigError(f"--resume: {out} holds no run (no config.json)")
+    if not resume and holds_run:
+        raise ConfigError(f"--out: {out} already holds a run; choose another folder or pass --resume {out}")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _atomic_write(path: Path, write) -> None:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe copy: NumPy scalars/arrays → Python, non-finite floats → None."""
+    if isinstance(obj, Mapping):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        value = float(obj)
+        return value if math.isfinite(value) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def write_json(path: Path, obj: Any) -> None:
+    _atomic_write(path, lambda fh: json.dump(_clean(obj), fh, indent=2, allow_nan=False))
+
+
+def read_json(path: Path) -> Any:
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def metric_rows(steps: np.ndarray, history: Mapping[str, np.ndarray], seeds: Iterable[int]) -> Iterable[tuple]:
+    """Long-format rows ``(seed, step, metric, value)`` from ``history[name]`` f[S, T]."""
+    seeds = list(seeds)
+    for name, values in history.items():
+        values = np.asarray(values, dtype=float)
+        for s, seed in enumerate(seeds):
+            for t, step in enumerate(steps):
+                yield seed, int(step), name, float(values[s, t])
+
+
+def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
+    def write(fh):
+        w = csv.writer(fh)
+        w.writerow(["seed", "step", "metric", "value"])
+        for seed, step, name, value in rows:
+            w.writerow([seed, step, name, repr(float(value))])
+
+    _atomic_write(path, write)
+
+
+def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
+    with open(path, newline="") as fh:
+        r = csv.reader(fh)
+        next(r)
+        return [(int(seed), int(step), name, float(value)) for seed, step, name, value in r]
+
+
+def summarize(final: Mapping[str, np.ndarray]) -> dict[str, dict[str, Any]]:
+    """``{name: {"mean", "std", "per_seed"}}`` from final values f[S] per metric."""
+    out = {}
+    for name, values in final.items():
+        values = np.asarray(values, dtype=float)
+        out[name] = {"mean": float(values.mean()), "std": float(values.std()), "per_seed": values.tolist()}
+    return out
+
+
+def write_summary(path: Path, *, experiment: str, algo: str, preset: str, seeds: list[int],
+                  final: Mapping[str, np.ndarray], **extra: Any) -> dict:
+    summary = {"experiment": experiment, "algo": algo, "preset": preset, "seeds": seeds,
+               "metrics": summarize(final), **extra}
+    write_json(path, summary)
+    return summary

@@ -1,0 +1,279 @@
+"""Regret games over a sequence-form policy polytope, solved with HiGHS linear programs.
+
+Both game kinds reduce to the same data:
+
+* a :class:`Polytope` of realisation plans ``x`` [S] over the agent's sequences (``x[0] = 1`` for
+  the empty sequence; for every information set ``I`` the mass of its action sequences equals the
+  mass of its parent sequence). A one-step game is the special case where every observation is an
+  information set whose parent is the empty sequence, so ``x`` is the stacked policy rows.
+* a payoff matrix ``C`` [L, S]: the return on level ``l`` is linear, ``U_l(x) = C[l] @ x``.
+* a reach matrix ``reach`` [L, I]: the chance probability of arriving at information set ``I`` on
+  level ``l`` if the agent plays towards it; ``I`` is *realisable* on ``l`` under ``x`` iff
+  ``reach[l, I] * x[parent(I)] > 0``.
+
+Regret is ``R_l(x) = U*_l - C[l] @ x`` with ``U*_l`` the best return on level ``l`` alone.
+
+**Equilibrium adversary.** Each round reports the *maximal-support* equilibrium adversary: the
+levels that receive positive probability in *some* equilibrium adversary. For every level not yet
+seen positive, an LP maximises that level's probability over the set of equilibrium adversaries
+(the adversary's LP with its value constrained to within ``_VALUE_SLACK`` of its optimum); the
+reported adversary is the average of these solutions (still an equilibrium, since the set is
+convex), restricted to the levels whose maximum exceeded ``tol``. A plain LP dual would be a
+vertex and could miss levels (e.g. with two duplicate levels it names only one). A level outside
+every equilibrium can reach at most ``_VALUE_SLACK / gap`` probability, where ``gap`` is how much
+adversary value a unit of its mass costs, so it is misclassified only if ``gap < 1e-4`` (in
+normalised units) with the default ``tol = 1e-7``.
+
+Payoffs are divided by their largest magnitude before solving, so tolerances are relative.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+#: HiGHS options: feasibility tolerances well below ``tol``, so LP noise never looks like support.
+_HIGHS_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
+#: Slack (normalised payoff units) by which an equilibrium adversary may miss the game value.
+_VALUE_SLACK = 1e-11
+#: A level whose regret under an optimal plan is this far below the value is in no support.
+_CANDIDATE_GAP = 1e-9
+
+
+@dataclass(frozen=True)
+class Polytope:
+    """Sequence-form policy space.
+
+    ``parent[i]`` is the sequence leading to information set ``i``; ``children[i]`` are the
+    sequences ``(i, a)``, one per available action, in action order. Information sets are listed
+    so that every one comes after the information set owning its parent sequence.
+    """
+
+    n_sequences: int
+    parent: tuple[int, ...]
+    children: tuple[tuple[int, ...], ...]
+
+    def equalities(self) -> tuple[np.ndarray, np.ndarray]:
+        """Constraints ``E @ x = e`` of realisation plans: E [1 + I, S], e [1 + I]."""
+        n_infosets = len(self.parent)
+        matrix = np.zeros((1 + n_infosets, self.n_sequences))
+        matrix[0, 0] = 1.0
+        for i, (par, kids) in enumerate(zip(self.parent, self.children)):
+            matrix[1 + i, par] = -1.0
+            matrix[1 + i, list(kids)] = 1.0
+        rhs = np.zeros(1 + n_infosets)
+        rhs[0] = 1.0
+        return matrix, rhs
+
+    def behaviour(self, plan: np.ndarray, info: int) -> np.ndarray:
+        """Action distribution [len(children[info])] the plan [S] plays at an information set.
+
+        Only meaningful where ``plan[parent(info)] > 0``.
+        """
+        mass = np.clip(plan[list(self.children[info])], 0.0, None)
+        return mass / mass.sum()
+
+
+@dataclass(frozen=True)
+class RawRound:
+    """One solved regret game: value, adversary [L], support [L] bool, plan [S], regret [L]."""
+
+    value: float
+    adversary: np.ndarray
+    support: np.ndarray
+    plan: np.ndarray
+    regret: np.ndarray
+
+
+def best_response_values(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
+    """Best return U*_l on each level alone [L], by backward induction over information sets.
+
+    With perfect recall the best response is computed bottom-up: the value of a sequence is its
+    own terminal payoff plus, for each information set it leads to, the best child sequence.
+    """
+    value = np.array(payoff, dtype=float)
+    for info in reversed(range(len(poly.parent))):
+        value[:, poly.parent[info]] += value[:, list(poly.children[info])].max(axis=1)
+    return value[:, 0]
+
+
+def regret_of_plan(payoff: np.ndarray, optimal: np.ndarray, plan: np.ndarray) -> np.ndarray:
+    """Regret [L] of a plan [S], given payoff [L, S] and best returns [L]."""
+    return optimal - payoff @ plan
+
+
+def _check(result, what: str):
+    """Return a linprog result, raising RuntimeError if HiGHS did not solve it."""
+    if result.status != 0:
+        raise RuntimeError(f"{what}: HiGHS failed ({result.message})")
+    return result
+
+
+def _min_max_regret(
+    payoff: np.ndarray, optimal: np.ndarray, eq: tuple[np.ndarray, np.ndarray], active: np.ndarray
+) -> np.ndarray:
+    """A plan [S] minimising the maximum regret over the active levels.
+
+    LP over (x [S], t): minimise t s.t. U*_l - C[l] @ x <= t for active l, E @ x = e, x >= 0.
+    """
+    n_seq = payoff.shape[1]
+    cost = np.zeros(n_seq + 1)
+    cost[-1] = 1.0
+    a_ub = np.hstack([-payoff[active], -np.ones((int(active.sum()), 1))])
+    a_eq = np.hstack([eq[0], np.zeros((eq[0].shape[0], 1))])
+    bounds = [(0, None)] * n_seq + [(None, None)]
+    result = _check(
+        linprog(cost, A_ub=a_ub, b_ub=-optimal[active], A_eq=a_eq, b_eq=eq[1], bounds=bounds,
+                method="highs", options=_HIGHS_OPTIONS),
+        "minimax regret LP",
+    )
+    return np.clip(result.x[:n_seq], 0.0, None)
+
+
+def _maximal_support_adversary(
+    payoff: np.ndarray,
+    optimal: np.ndarray,
+    eq: tuple[np.ndarray, np.ndarray],
+    active: np.ndarray,
+    candidates: np.ndarray,
+    tol: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Maximal-support equilibrium adversary [L] and its support [L] bool (see module docstring).
+
+    Only ``candidates`` [L] bool are tried for support: by complementary slackness a level in
+    some equilibrium adversary's support has regret equal to the value under every optimal plan.
+
+    Adversary LP over (lambda [La], y [M]): the value of lambda is ``lambda @ U* + e @ y``
+    subject to ``C_a.T @ lambda + E.T @ y <= 0`` (dual of the agent's best response),
+    ``sum(lambda) = 1``, ``lambda >= 0``. A first LP maximises that value; the equilibria are
+    then the points within ``_VALUE_SLACK`` of it, and each further LP maximises one level's
+    probability among them.
+    """
+    levels = np.flatnonzero(active)
+    n_act, (n_rows, n_seq) = len(levels), eq[0].shape
+    value_row = np.concatenate([optimal[levels], eq[1]])
+    a_ub = np.hstack([payoff[levels].T, eq[0].T])
+    a_eq = np.concatenate([np.ones(n_act), np.zeros(n_rows)])[None, :]
+    bounds = [(0, None)] * n_act + [(None, None)] * n_rows
+
+    def solve(cost: np.ndarray, a_ub: np.ndarray, b_ub: np.ndarray) -> np.ndarray:
+        result = _check(
+            linprog(cost, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=[1.0], bounds=bounds,
+                    method="highs", options=_HIGHS_OPTIONS),
+            "equilibrium adversary LP",
+        )
+        return result.x
+
+    first = solve(-value_row, a_ub, np.zeros(n_seq))
+    a_ub = np.vstack([a_ub, -value_row[None, :]])
+    b_ub = np.concatenate([np.zeros(n_seq), [_VALUE_SLACK - value_row @ first]])
+    solutions = [np.clip(first[:n_act], 0.0, None)]
+    for k in np.flatnonzero(candidates[levels]):
+        if any(sol[k] > tol for sol in solutions):
+            continue
+        cost = np.zeros(n_act + n_rows)
+        cost[k] = -1.0
+        solutions.append(np.clip(solve(cost, a_ub, b_ub)[:n_act], 0.0, None))
+    stacked = np.array(solutions)
+    support = stacked.max(axis=0) > tol
+    mean = np.where(support, stacked.mean(axis=0), 0.0)
+    adversary, support_mask = np.zeros(len(active)), np.zeros(len(active), dtype=bool)
+    adversary[levels] = mean / mean.sum()
+    support_mask[levels] = support
+    return adversary, support_mask
+
+
+def solve_regret_game(
+    payoff: np.ndarray,
+    optimal: np.ndarray,
+    eq: tuple[np.ndarray, np.ndarray],
+    active: np.ndarray,
+    tol: float,
+) -> RawRound:
+    """Solve min over plans (E x = e, x >= 0) of max over active levels [L] bool of regret.
+
+    ``payoff`` [L, S] and ``optimal`` [L] must already be normalised (magnitudes <= 1).
+    """
+    plan = _min_max_regret(payoff, optimal, eq, active)
+    regret = regret_of_plan(payoff, optimal, plan)
+    value = float(regret[active].max())
+    candidates = active & (regret >= value - _CANDIDATE_GAP)
+    adversary, support = _maximal_support_adversary(payoff, optimal, eq, active, candidates, tol)
+    return RawRound(value, adversary, support, plan, regret)
+
+
+def realisable_infosets(
+    poly: Polytope, reach: np.ndarray, plan: np.ndarray, levels: np.ndarray, tol: float
+) -> np.ndarray:
+    """Information sets [I] bool reached with positive probability under plan [S] on some level
+    of ``levels`` [L] bool, given reach [L, I]."""
+    chance = reach[levels].sum(axis=0) > 0
+    played = plan[list(poly.parent)] > tol
+    return chance & played
+
+
+def fixing_equalities(
+    poly: Polytope, plan: np.ndarray, fixed: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows [F, S] and rhs [F] pinning the behaviour of ``plan`` at the ``fixed`` [I] infosets.
+
+    For each fixed information set and each action but the last (implied by the information-set
+    constraint): ``x[(I, a)] - pi(a | I) * x[parent(I)] = 0``.
+    """
+    rows = []
+    for info in np.flatnonzero(fixed):
+        probs = poly.behaviour(plan, info)
+        for seq, prob in zip(poly.children[info][:-1], probs[:-1]):
+            row = np.zeros(poly.n_sequences)
+            row[seq] += 1.0
+            row[poly.parent[info]] -= prob
+            rows.append(row)
+    return np.array(rows).reshape(len(rows), poly.n_sequences), np.zeros(len(rows))
+
+
+def normalise(payoff: np.ndarray, optimal: np.ndarray) -> float:
+    """Scale [scalar] that maps the payoffs into [-1, 1] (1 if they are all zero)."""
+    scale = max(float(np.abs(payoff).max(initial=0.0)), float(np.abs(optimal).max(initial=0.0)))
+    return scale if scale > 0 else 1.0
+
+
+def _rescaled(raw: RawRound, scale: float) -> RawRound:
+    """A round with value and regret [L] multiplied back by ``scale``."""
+    return RawRound(raw.value * scale, raw.adversary, raw.support, raw.plan, raw.regret * scale)
+
+
+def solve_mmr_plan(poly: Polytope, payoff: np.ndarray, tol: float) -> RawRound:
+    """Minimax regret over all levels: payoff [L, S] -> round (value, adversary, plan, regret)."""
+    optimal = best_response_values(poly, payoff)
+    scale = normalise(payoff, optimal)
+    active = np.ones(payoff.shape[0], dtype=bool)
+    raw = solve_regret_game(payoff / scale, optimal / scale, poly.equalities(), active, tol)
+    return _rescaled(raw, scale)
+
+
+def solve_blp_plans(
+    poly: Polytope, payoff: np.ndarray, reach: np.ndarray, tol: float
+) -> list[RawRound]:
+    """BLP by iterated refinement: the list of rounds, the last one holding the final plan.
+
+    Round 1 is minimax regret over all levels. Round k+1 fixes the behaviour of round k's plan on
+    every information set realisable on the union of the earlier supports, and lets the
+    adversary choose only among levels outside those supports. Stops when every level is covered.
+    """
+    optimal = best_response_values(poly, payoff)
+    scale = normalise(payoff, optimal)
+    payoff_n, optimal_n = payoff / scale, optimal / scale
+    base = poly.equalities()
+    eq = base
+    covered = np.zeros(payoff.shape[0], dtype=bool)
+    rounds: list[RawRound] = []
+    while not covered.all():
+        raw = solve_regret_game(payoff_n, optimal_n, eq, ~covered, tol)
+        rounds.append(_rescaled(raw, scale))
+        covered |= raw.support
+        fixed = realisable_infosets(poly, reach, raw.plan, covered, tol)
+        rows, rhs = fixing_equalities(poly, raw.plan, fixed)
+        eq = (np.vstack([base[0], rows]), np.concatenate([base[1], rhs]))
+    return rounds

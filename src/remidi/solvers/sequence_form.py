@@ -1,0 +1,264 @@
+"""Exact minimax regret and BLP for finite multi-step games, via the sequence form.
+
+Each level is a tree of chance nodes, agent decision nodes labelled with an observation, and
+terminal rewards. The agent knows only its action-observation history (AOH)
+``(o0, a0, o1, a1, ..., ok)``: decision nodes with the same AOH, in any levels, form one
+information set and must offer the same actions. Because the AOH contains the whole past, the
+agent has perfect recall, so realisation plans (:mod:`remidi.solvers.lp`) represent exactly the
+behavioural policies, and the regret games are linear programs.
+
+Policies are mappings ``{AOH tuple: {action: probability}}``. Solver results list only the
+information sets the policy itself reaches (``x[parent] > tol``); elsewhere any behaviour is
+equivalent because the agent never arrives there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Union
+
+import numpy as np
+
+from remidi.solvers import lp
+from remidi.solvers.onestep import OneStepGame, solve_mmr as solve_onestep_mmr
+from remidi.solvers.results import BLPResult, MMRResult, Round
+
+AOH = tuple[str, ...]
+TreePolicy = dict[AOH, dict[str, float]]
+
+
+@dataclass(frozen=True)
+class Terminal:
+    """A leaf paying ``reward``."""
+
+    reward: float
+
+
+@dataclass(frozen=True)
+class Chance:
+    """A chance node: ``outcomes`` is a tuple of (probability, child node)."""
+
+    outcomes: tuple[tuple[float, "Node"], ...]
+
+
+@dataclass(frozen=True)
+class Decision:
+    """An agent decision node showing ``observation``; ``children`` maps action name -> node."""
+
+    observation: str
+    children: Mapping[str, "Node"]
+
+
+Node = Union[Terminal, Chance, Decision]
+
+
+@dataclass(frozen=True)
+class TreeGame:
+    """actions [A] names; level_names [L]; trees [L] root nodes."""
+
+    actions: tuple[str, ...]
+    level_names: tuple[str, ...]
+    trees: tuple[Node, ...]
+
+
+@dataclass(frozen=True)
+class SequenceForm:
+    """Compiled game.
+
+    infosets [I]: AOH of each information set (parents first); infoset_actions [I]: action names
+    available there, in ``game.actions`` order; poly: the plan polytope; payoff [L, S]; reach
+    [L, I]: chance probability of each information set per level; members [I]: the
+    (level index, chance probability, decision node) triples making up each information set.
+    """
+
+    infosets: tuple[AOH, ...]
+    infoset_actions: tuple[tuple[str, ...], ...]
+    poly: lp.Polytope
+    payoff: np.ndarray
+    reach: np.ndarray
+    members: tuple[tuple[tuple[int, float, Decision], ...], ...]
+
+
+def _describe(aoh: AOH) -> str:
+    """An AOH as text, e.g. ``s0 a1 sA``."""
+    return " ".join(aoh)
+
+
+def build_sequence_form(game: TreeGame) -> SequenceForm:
+    """Compile a tree game; raises ValueError if an information set has inconsistent actions."""
+    index: dict[AOH, int] = {}
+    infosets: list[AOH] = []
+    actions: list[tuple[str, ...]] = []
+    parents: list[int] = []
+    children: list[tuple[int, ...]] = []
+    members: list[list[tuple[int, float, Decision]]] = []
+    payoff_terms: list[tuple[int, int, float]] = []
+    counter = [1]
+    owner: dict[AOH, str] = {}
+
+    def visit(level: int, node: Node, aoh: AOH, seq: int, prob: float) -> None:
+        if isinstance(node, Terminal):
+            payoff_terms.append((level, seq, prob * node.reward))
+        elif isinstance(node, Chance):
+            for p, child in node.outcomes:
+                visit(level, child, aoh, seq, prob * p)
+        else:
+            key = aoh + (node.observation,)
+            here = tuple(a for a in game.actions if a in node.children)
+            if key not in index:
+                index[key] = len(infosets)
+                infosets.append(key)
+                actions.append(here)
+                parents.append(seq)
+                children.append(tuple(range(counter[0], counter[0] + len(here))))
+                members.append([])
+                counter[0] += len(here)
+                owner[key] = game.level_names[level]
+            info = index[key]
+            if actions[info] != here:
+                raise ValueError(
+                    f"information set '{_describe(key)}': actions {list(here)} in level "
+                    f"'{game.level_names[level]}' but {list(actions[info])} in level '{owner[key]}'"
+                )
+            members[info].append((level, prob, node))
+            for a, s in zip(here, children[info]):
+                visit(level, node.children[a], key + (a,), s, prob)
+
+    for level, tree in enumerate(game.trees):
+        visit(level, tree, (), 0, 1.0)
+    poly = lp.Polytope(counter[0], tuple(parents), tuple(children))
+    payoff = np.zeros((len(game.trees), poly.n_sequences))
+    for level, seq, value in payoff_terms:
+        payoff[level, seq] += value
+    reach = np.zeros((len(game.trees), len(infosets)))
+    for info, group in enumerate(members):
+        for level, prob, _ in group:
+            reach[level, info] += prob
+    return SequenceForm(tuple(infosets), tuple(actions), poly, payoff, reach,
+                        tuple(tuple(m) for m in members))
+
+
+def _policy(form: SequenceForm, plan: np.ndarray, tol: float) -> TreePolicy:
+    """Behavioural policy at the information sets the plan [S] reaches (``x[parent] > tol``)."""
+    return {
+        aoh: dict(zip(form.infoset_actions[i], map(float, form.poly.behaviour(plan, i))))
+        for i, aoh in enumerate(form.infosets)
+        if plan[form.poly.parent[i]] > tol
+    }
+
+
+def node_value(node: Node, aoh: AOH, policy: Mapping[AOH, Mapping[str, float]]) -> float:
+    """Expected return of a subtree whose decision nodes follow ``policy``; ``aoh`` is the history
+    before ``node``. Zero-probability branches are skipped, so only reached AOHs need entries."""
+    if isinstance(node, Terminal):
+        return node.reward
+    if isinstance(node, Chance):
+        return sum(p * node_value(child, aoh, policy) for p, child in node.outcomes if p > 0)
+    key = aoh + (node.observation,)
+    if key not in policy:
+        raise ValueError(f"policy has no entry for reached history '{_describe(key)}'")
+    return sum(
+        p * node_value(node.children[a], key + (a,), policy)
+        for a, p in policy[key].items() if p > 0
+    )
+
+
+def optimal_returns(game: TreeGame) -> np.ndarray:
+    """Best return U* [L] on each level alone."""
+    form = build_sequence_form(game)
+    return lp.best_response_values(form.poly, form.payoff)
+
+
+def policy_return(game: TreeGame, policy: Mapping[AOH, Mapping[str, float]]) -> np.ndarray:
+    """Expected return [L] of a behavioural policy on each level."""
+    return np.array([node_value(tree, (), policy) for tree in game.trees])
+
+
+def policy_regret(game: TreeGame, policy: Mapping[AOH, Mapping[str, float]]) -> np.ndarray:
+    """Regret [L] of a behavioural policy on each level."""
+    return optimal_returns(game) - policy_return(game, policy)
+
+
+def _support_names(game: TreeGame, support: np.ndarray) -> tuple[str, ...]:
+    """Names of the levels where support [L] is true."""
+    return tuple(n for n, s in zip(game.level_names, support) if s)
+
+
+def solve_mmr(game: TreeGame, tol: float = 1e-7) -> MMRResult[TreePolicy]:
+    """Minimax regret: value, behavioural policy, maximal-support adversary [L], regret [L]."""
+    form = build_sequence_form(game)
+    raw = lp.solve_mmr_plan(form.poly, form.payoff, tol)
+    return MMRResult(raw.value, _policy(form, raw.plan, tol), raw.adversary, raw.regret,
+                     lp.best_response_values(form.poly, form.payoff))
+
+
+def solve_blp(game: TreeGame, tol: float = 1e-7) -> BLPResult[TreePolicy]:
+    """Bayesian level-perfect minimax regret by iterated refinement over AOHs.
+
+    ``tol`` is the probability below which a level is outside an adversary's support and a
+    sequence counts as never played.
+
+    Each round fixes the behaviour on every AOH realisable under the previous round's policy on
+    a level of an earlier support (see :func:`remidi.solvers.lp.solve_blp_plans`).
+    """
+    form = build_sequence_form(game)
+    rounds = [
+        Round(raw.value, _support_names(game, raw.support), raw.adversary,
+              _policy(form, raw.plan, tol), raw.regret)
+        for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol)
+    ]
+    return BLPResult(rounds[0].value, rounds, rounds[-1].policy, rounds[-1].regret,
+                     lp.best_response_values(form.poly, form.payoff))
+
+
+def _local_game(
+    game: TreeGame, form: SequenceForm, info: int, policy: TreePolicy
+) -> OneStepGame | None:
+    """The one-step game at an information set, or None if no level reaches it.
+
+    Its levels are the levels reaching the set; the reward of action ``a`` on level ``l`` is the
+    expected return on ``l`` *conditional on* arriving there, playing ``a`` and then following
+    ``policy`` (already defined on all later information sets).
+    """
+    aoh, names = form.infosets[info], form.infoset_actions[info]
+    weight: dict[int, float] = {}
+    total: dict[int, np.ndarray] = {}
+    for level, prob, node in form.members[info]:
+        if prob <= 0:
+            continue
+        values = np.array([node_value(node.children[a], aoh + (a,), policy) for a in names])
+        weight[level] = weight.get(level, 0.0) + prob
+        total[level] = total.get(level, 0.0) + prob * values
+    if not weight:
+        return None
+    levels = sorted(weight)
+    rewards = np.array([total[l] / weight[l] for l in levels])
+    return OneStepGame(names, tuple(game.level_names[l] for l in levels),
+                       (_describe(aoh),) * len(levels), rewards)
+
+
+def local_mmr_policy(game: TreeGame) -> TreePolicy:
+    """The locally minimax-regret policy (the paper's appendix counter-example to local regret).
+
+    Information sets are processed backwards; at each, the one-step MMR of the game returned by
+    :func:`_local_game` (regret measured against the best action under the continuation policy).
+    Information sets reached by no level get the uniform distribution.
+    """
+    form = build_sequence_form(game)
+    policy: TreePolicy = {}
+    for info in reversed(range(len(form.infosets))):
+        names = form.infoset_actions[info]
+        local = _local_game(game, form, info, policy)
+        probs = (np.full(len(names), 1.0 / len(names)) if local is None
+                 else solve_onestep_mmr(local).policy[0])
+        policy[form.infosets[info]] = dict(zip(names, map(float, probs)))
+    return {aoh: policy[aoh] for aoh in form.infosets}
+
+
+def one_step_to_tree(game: OneStepGame) -> TreeGame:
+    """The same game as trees: one decision node per level, then terminal rewards."""
+    trees = tuple(
+        Decision(obs, {a: Terminal(float(r)) for a, r in zip(game.actions, rewards)})
+        for obs, rewards in zip(game.observations, game.rewards)
+    )
+    return TreeGame(game.actions, game.level_names, trees)

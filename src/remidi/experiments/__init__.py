@@ -7,10 +7,10 @@ from remidi.experiments.base import Experiment
 
 
 def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import tabular
+    from remidi.experiments import lever, tabular
 
     found: dict[str, Experiment] = {}
-    for module in (tabular,):
+    for module in (tabular, lever):
         for exp in module.EXPERIMENTS:
             found[exp.name] = exp
     return found

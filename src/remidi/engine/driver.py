@@ -1,0 +1,163 @@
+"""Driving a UED run: all seeds in one compiled program, evaluation, progress and checkpoints.
+
+The run is cut into blocks of ``eval_every`` updates. One block is a single jit-compiled
+``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds. After each block
+the driver evaluates, records the block's metrics, updates the progress bar and, every
+``checkpoint_every`` updates, writes a checkpoint atomically (temporary file, then rename), so a
+killed run never leaves a corrupt checkpoint. ``resume`` continues from the last checkpoint and
+ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from remidi.engine import train as tr
+from remidi.envs.interface import UEDTask
+from remidi.errors import RemidiError
+
+CHECKPOINT = "checkpoint.npz"
+
+
+def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
+    """Aggregate per-step metrics f[S, B] of one block into f[S]; ``replayed/<tag>`` counts
+    become ``replay_fraction/<tag>``, the tag's share among the levels replayed in the block."""
+    out = {}
+    replays = step_metrics["replay"].sum(axis=1)
+    for name, values in step_metrics.items():
+        if name.startswith("replayed/"):
+            tag = name.split("/", 1)[1]
+            out[f"replay_fraction/{tag}"] = np.where(
+                replays > 0, values.sum(axis=1) / np.maximum(replays * num_envs, 1), np.nan)
+        elif name in ("rejected", "inserted"):
+            out[name] = values.sum(axis=1)
+        elif name == "active_buffer":
+            out[name] = values[:, -1]
+        else:
+            out[name] = values.mean(axis=1)
+    return out
+
+
+
+def save_checkpoint(path: Path, runner, meta: dict) -> None:
+    """Write the runner's leaves and ``meta`` (JSON) to ``path`` atomically."""
+    leaves = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(runner))]
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, meta=np.asarray(json.dumps(meta)), **{f"leaf_{i}": x for i, x in enumerate(leaves)})
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def load_checkpoint(path: Path, template):
+    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``."""
+    with np.load(path) as data:
+        meta = json.loads(str(data["meta"]))
+        treedef = jax.tree.structure(template)
+        leaves = [jnp.asarray(data[f"leaf_{i}"]) for i in range(treedef.num_leaves)]
+    return jax.tree.unflatten(treedef, leaves), meta
+
+
+def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], out: Path | None = None,
+                resume: bool = False, progress: bool = True):
+    """Train ``algo`` for every seed. Returns ``(steps i[T], history {name: f[S, T]}, per_step
+    {name: f[S, num_updates]}, runner)``: ``history`` holds block aggregates and evaluations at
+    the end of each block; ``per_step`` the raw per-update replay counters."""
+    setup = tr.make_setup(task, cfg, algo)
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
+    runner = jax.jit(jax.vmap(lambda k: tr.init_runner(setup, k)))(keys)
+
+    def block(runner, length):
+        return jax.lax.scan(lambda r, _: tr.train_step(setup, r), runner, None, length=length)
+
+    compiled_blocks = {}
+
+    def run_block(runner, length):
+        if length not in compiled_blocks:
+            compiled_blocks[length] = jax.jit(jax.vmap(lambda r: block(r, length)))
+        return compiled_blocks[length](runner)
+
+    eval_fn = jax.jit(jax.vmap(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)}))
+
+    steps: list[int] = []
+    history: list[dict[str, np.ndarray]] = []
+    per_step: list[dict[str, np.ndarray]] = []
+    done = 0
+    ckpt = Path(out) / CHECKPOINT if out is not None else None
+    if resume:
+        if ckpt is None or not ckpt.exists():
+            raise RemidiError(f"--resume: no checkpoint in {out}; the run must be started again")
+        runner, meta = load_checkpoint(ckpt, runner)
+        done, steps = meta["done"], meta["steps"]
+        saved = np.load(ckpt.with_suffix(".history.npz"))
+        history = _unstack(saved, "h", len(steps))
+        per_step = _unstack(saved, "p", meta["num_blocks"])
+
+    bar = _progress(cfg.num_updates, done, f"{algo} × {len(seeds)} seeds", progress)
+    while done < cfg.num_updates:
+        length = min(cfg.eval_every, cfg.num_updates - done)
+        start = time.perf_counter()
+        runner, step_metrics = run_block(runner, length)
+        step_metrics = jax.tree.map(np.asarray, step_metrics)
+        evals = jax.tree.map(np.asarray, eval_fn(runner, jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)))
+        done += length
+        steps.append(done)
+        history.append({**_block_metrics(step_metrics, cfg.num_envs), **evals})
+        per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
+        if bar is not None:
+            bar.update(length)
+            bar.set_postfix_str(f"{length / (time.perf_counter() - start):.1f} updates/s")
+        if ckpt is not None and (done % cfg.checkpoint_every < length or done == cfg.num_updates):
+            _save_all(ckpt, runner, done, steps, history, per_step)
+    if bar is not None:
+        bar.close()
+    names = history[0].keys()
+    hist = {name: np.stack([h[name] for h in history], axis=1) for name in names}
+    raw = {name: np.concatenate([p[name] for p in per_step], axis=1) for name in per_step[0]}
+    return np.asarray(steps), hist, raw, runner
+
+
+def _save_all(ckpt: Path, runner, done, steps, history, per_step) -> None:
+    arrays = {}
+    for i, h in enumerate(history):
+        arrays.update({f"h{i}|{k}": v for k, v in h.items()})
+    for i, p in enumerate(per_step):
+        arrays.update({f"p{i}|{k}": v for k, v in p.items()})
+    hist_path = ckpt.with_suffix(".history.npz")
+    fd, tmp = tempfile.mkstemp(dir=ckpt.parent, prefix=".history.", suffix=".tmp")
+    with os.fdopen(fd, "wb") as fh:
+        np.savez(fh, **arrays)
+    os.replace(tmp, hist_path)
+    # the runner checkpoint is written last: it is what marks the history as complete
+    save_checkpoint(ckpt, runner, {"done": done, "steps": steps, "num_blocks": len(per_step)})
+
+
+def _unstack(saved, prefix: str, count: int) -> list[dict[str, np.ndarray]]:
+    out = [dict() for _ in range(count)]
+    for key in saved.files:
+        head, name = key.split("|", 1)
+        if head[0] == prefix and int(head[1:]) < count:
+            out[int(head[1:])][name] = saved[key]
+    return out
+
+
+def _progress(total: int, initial: int, desc: str, enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, desc=desc, unit="upd", dynamic_ncols=True)

@@ -1,0 +1,86 @@
+"""Rolling a policy out on a batch of levels, optionally tracking distinguishability.
+
+One rollout = ``num_steps`` steps on N environments that all start a fresh episode on their
+level; an environment whose episode ends restarts the same level (:class:`AutoReplay`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.engine import tracker as trk
+from remidi.envs.interface import AutoReplay, UEDTask
+
+
+@struct.dataclass
+class Trajectory:
+    """A rollout; every field has leading dims [T, N]."""
+
+    obs: Any  # observation pytree, leaves [T, N, ...]
+    reset: jax.Array  # bool: step t is the first of an episode
+    action: jax.Array  # i32
+    log_prob: jax.Array  # f32
+    value: jax.Array  # f32
+    reward: jax.Array  # f32
+    done: jax.Array  # bool: the episode ended at step t
+    indist: jax.Array  # bool: the prefix up to obs[t] is indistinguishable from a frozen level
+
+
+@struct.dataclass
+class Frozen:
+    """The frozen buffers' levels as one batch: ``levels`` leaves [F, ...], ``valid`` bool[F]."""
+
+    levels: Any
+    valid: jax.Array
+
+
+def rollout(rng, task: UEDTask, apply_fn: Callable, params, init_carry, levels, num_steps: int,
+            frozen: Frozen | None = None, tracker_mode: str = "prefix"):
+    """Roll out the policy on ``levels`` (leaves [N, ...]) for ``num_steps`` steps.
+
+    ``apply_fn({"params": params}, carry, obs[1, N, ...], reset bool[1, N]) -> carry,
+    (logits [1, N, A], value [1, N])`` (a flax module's ``apply``). With ``frozen`` the tracker runs beside every env; without it ``indist``
+    is all False. Returns ``(trajectory, last_value f32[N])``.
+    """
+    env = AutoReplay(task.env)
+    num_envs = jax.tree.leaves(levels)[0].shape[0]
+    rng, rng_reset = jax.random.split(rng)
+    reset_keys = jax.random.split(rng_reset, num_envs)
+    obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, task.params)
+    if frozen is not None:
+        tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
+            task.env, task.params, reset_keys, frozen.levels, frozen.valid, obs)
+    else:
+        tstate = None
+
+    def step(carry, key):
+        state, obs, reset, hidden, tstate = carry
+        k_act, k_env = jax.random.split(key)
+        if tstate is not None:
+            indist = jax.vmap(trk.indistinguishable, in_axes=(0, None))(tstate, tracker_mode)
+        else:
+            indist = jnp.zeros((num_envs,), bool)
+        obs_in = jax.tree.map(lambda x: x[None], obs)
+        hidden, (logits, value) = apply_fn({"params": params}, hidden, obs_in, reset[None])
+        logits, value = logits[0], value[0]
+        action = jax.random.categorical(k_act, logits)
+        log_prob = jnp.take_along_axis(jax.nn.log_softmax(logits), action[:, None], axis=-1)[:, 0]
+        env_keys = jax.random.split(k_env, num_envs)
+        next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+            env_keys, state, action, task.params)
+        if tstate is not None:
+            tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
+                task.env, task.params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
+        record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
+                            reward=reward.astype(jnp.float32), done=done, indist=indist)
+        return (state, next_obs, done, hidden, tstate), record
+
+    first = jnp.ones((num_envs,), bool)
+    carry = (state, obs, first, init_carry, tstate)
+    (state, obs, reset, hidden, _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
+    _, (_, last_value) = apply_fn({"params": params}, hidden, jax.tree.map(lambda x: x[None], obs), reset[None])
+    return traj, last_value[0]

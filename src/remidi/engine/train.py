@@ -1,0 +1,319 @@
+"""The one UED train step shared by every algorithm: DR, PLR⊥, minimax return, ReMiDi.
+
+One train step, top to bottom (:func:`train_step`):
+
+1. Pick the branch: *replay* (probability ``buffer.replay_prob`` once the active buffer holds
+   enough levels) or *new levels*. DR always takes the new-level branch.
+2. **New levels**: sample N random levels, roll the policy out on them (with the
+   distinguishability tracker against the frozen buffers, for ReMiDi), score them.
+   DR trains on them; the PLR family does not (robust PLR⊥). A level whose rollout is
+   indistinguishable from a frozen level at every step ("complete overlap") is scored −inf and
+   therefore never inserted; the others go into the active buffer by score.
+3. **Replay**: sample N levels from the active buffer, roll out, rescore them, PPO update with
+   the loss masked to the distinguishable steps.
+4. ReMiDi: after ``remidi.steps_per_buffer`` updates (or replays) in the active buffer, freeze it
+   and move to the next; stay on the last.
+
+PLR⊥ is ReMiDi with one buffer; minimax return is PLR⊥ scored by negative return. Everything in
+a step is a pure function of :class:`Runner`, jit-ed and vmapped over seeds by the driver.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+from flax.training.train_state import TrainState
+
+from remidi.engine import buffer as buf
+from remidi.engine import scores as sc
+from remidi.engine.networks import make_network
+from remidi.engine.ppo import Batch, PPOConfig, compute_gae, create_train_state, ppo_update
+from remidi.engine.rollout import Frozen, Trajectory, rollout
+from remidi.envs.interface import UEDTask
+
+ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
+
+
+@dataclass(frozen=True)
+class ReMiDiConfig:
+    num_buffers: int = 2  # the sequence of adversaries (level buffers)
+    buffer_capacity: int = 32  # capacity of each buffer
+    steps_per_buffer: int = 1000  # switching rule: stay this long on a buffer, then freeze it
+    count: str = "updates"  # what steps_per_buffer counts: "updates" or "replays"
+    tracker: str = "prefix"  # "prefix" (one frozen level matches the whole prefix) or "per_step"
+
+
+@dataclass(frozen=True)
+class UEDConfig:
+    """A UED run's hyper-parameters (hashable; static under jit)."""
+
+    num_updates: int = 2500
+    num_envs: int = 32
+    num_steps: int = 16
+    score: str = "perfect_regret"  # one of scores.SCORES; minimax-return always uses neg_return
+    network: str = "mlp"
+    eval_every: int = 100
+    eval_attempts: int = 10
+    checkpoint_every: int = 500
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
+    remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
+
+
+def score_name(cfg: UEDConfig, algo: str) -> str:
+    return "neg_return" if algo == "minimax-return" else cfg.score
+
+
+def num_buffers(cfg: UEDConfig, algo: str) -> int:
+    return cfg.remidi.num_buffers if algo == "remidi" else 1
+
+
+def buffer_config(cfg: UEDConfig, algo: str) -> buf.BufferConfig:
+    if algo == "remidi":
+        return dataclasses.replace(cfg.buffer, capacity=cfg.remidi.buffer_capacity)
+    return cfg.buffer
+
+
+@struct.dataclass
+class Runner:
+    """Everything one seed's training carries from step to step."""
+
+    rng: jax.Array
+    train_state: TrainState
+    buffers: buf.BufferState  # K stacked buffers, leaves [K, capacity, ...]
+    active: jax.Array  # i32[], index of the buffer being filled and replayed
+    count: jax.Array  # i32[], updates (or replays) spent on the active buffer
+    update: jax.Array  # i32[], train steps done
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Static pieces of a run: the task, the config, the algorithm and the network."""
+
+    task: UEDTask
+    cfg: UEDConfig
+    algo: str
+    net: object = field(compare=False)
+
+
+def make_setup(task: UEDTask, cfg: UEDConfig, algo: str) -> Setup:
+    return Setup(task=task, cfg=cfg, algo=algo, net=make_network(cfg.network, task.num_actions))
+
+
+def init_runner(setup: Setup, rng) -> Runner:
+    task, cfg = setup.task, setup.cfg
+    rng, k_net, k_level = jax.random.split(rng, 3)
+    example_level = task.sample_level(k_level)
+    example_obs, _ = task.env.reset_to_level(k_level, example_level, task.params)
+    ppo_cfg = dataclasses.replace(cfg.ppo, total_updates=cfg.num_updates)
+    train_state = create_train_state(k_net, setup.net, example_obs, cfg.num_envs, ppo_cfg)
+    one = buf.init_buffer(buffer_config(cfg, setup.algo), example_level, extra_names=("max_return",))
+    buffers = buf.stack_buffers([one] * num_buffers(cfg, setup.algo))
+    zero = jnp.zeros((), jnp.int32)
+    return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero)
+
+
+# ------------------------------------------------------------------------------- pieces
+def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
+    """The levels of every buffer before the active one, as one batch of F = (K−1)·capacity."""
+    if setup.algo != "remidi" or setup.cfg.remidi.num_buffers < 2:
+        return None
+    earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
+    k = earlier.valid.shape[0]
+    valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
+    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+    return Frozen(levels=flat, valid=valid.reshape(-1))
+
+
+def collect(setup: Setup, runner: Runner, rng, levels, frozen):
+    """Roll out on ``levels`` [N] and compute GAE and scores.
+
+    Returns ``(traj, advantages f32[T, N], targets f32[T, N], scores f32[N], mean_return f32[N],
+    max_return f32[N])``; ``max_return`` is this rollout's best episode (the caller combines it
+    with the buffer's record for MaxMC).
+    """
+    cfg, task = setup.cfg, setup.task
+    carry = setup.net.initialize_carry(cfg.num_envs)
+    traj, last_value = rollout(rng, task, setup.net.apply, runner.train_state.params, carry, levels,
+                               cfg.num_steps, frozen, cfg.remidi.tracker)
+    adv, targets = compute_gae(traj.reward, traj.value, traj.done, last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+    mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
+    return traj, adv, targets, mean_return, best_return
+
+
+def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
+    optimal = jax.vmap(setup.task.optimal_return)(levels) if setup.task.optimal_return is not None else None
+    return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value,
+                           advantages=adv, max_return=max_return, optimal_return=optimal)
+
+
+def learn(setup: Setup, train_state: TrainState, rng, traj: Trajectory, adv, targets):
+    """Masked PPO on a rollout: only the distinguishable steps (``~indist``) are trained on."""
+    batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
+                  values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
+    carry = setup.net.initialize_carry(setup.cfg.num_envs)
+    ppo_cfg = dataclasses.replace(setup.cfg.ppo, total_updates=setup.cfg.num_updates)
+    train_state, _ = ppo_update(train_state, carry, batch, rng, ppo_cfg, setup.net.apply)
+    return train_state
+
+
+def tag_counts(setup: Setup, levels, weight) -> dict[str, jax.Array]:
+    """Σ weight over the levels [N] that carry each tag."""
+    tags = jax.vmap(setup.task.level_tags)(levels)
+    return {name: jnp.sum(jnp.where(t, weight, 0.0)) for name, t in tags.items()}
+
+
+# ---------------------------------------------------------------------------- the step
+def train_step(setup: Setup, runner: Runner):
+    """One update. Returns ``(runner, metrics)``, metrics a dict of f32[] scalars."""
+    cfg, algo = setup.cfg, setup.algo
+    bcfg = buffer_config(cfg, algo)
+    rng, k_branch, k_roll, k_levels, k_learn, k_sample = jax.random.split(runner.rng, 6)
+    active = buf.select_buffer(runner.buffers, runner.active)
+    frozen = frozen_levels(setup, runner)
+    n = cfg.num_envs
+    if algo == "dr":
+        replay = jnp.asarray(False)
+    else:
+        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
+
+    def new_levels(_):
+        levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
+        traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
+        scores = score(setup, levels, traj, adv, mean_ret, best_ret)
+        overlap = jnp.all(traj.indist, axis=0)  # bool[N]: complete overlap with a frozen level
+        train_state = runner.train_state
+        if algo == "dr":
+            train_state = learn(setup, train_state, k_learn, traj, adv, targets)
+            buffers, inserted = runner.buffers, jnp.zeros((n,), bool)
+        else:
+            new_buf, inserted, _ = buf.insert_batch(active, bcfg, levels, jnp.where(overlap, -jnp.inf, scores),
+                                                    {"max_return": best_ret})
+            buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
+        return train_state, buffers, levels, traj, mean_ret, scores, {
+            "rejected": jnp.sum(overlap).astype(jnp.float32),
+            "inserted": jnp.sum(inserted).astype(jnp.float32),
+        }
+
+    def replay_levels(_):
+        sampled_buf, idxs, levels = buf.sample_replay(active, bcfg, k_sample, n)
+        traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
+        best_ret = jnp.maximum(best_ret, sampled_buf.extras["max_return"][idxs])
+        scores = score(setup, levels, traj, adv, mean_ret, best_ret)
+        new_buf = buf.update_scores(sampled_buf, idxs, scores, {"max_return": best_ret})
+        buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
+        train_state = learn(setup, runner.train_state, k_learn, traj, adv, targets)
+        return train_state, buffers, levels, traj, mean_ret, scores, {
+            "rejected": jnp.zeros(()), "inserted": jnp.zeros(()),
+        }
+
+    if algo == "dr":
+        train_state, buffers, levels, traj, mean_ret, scores, extra = new_levels(None)
+    else:
+        train_state, buffers, levels, traj, mean_ret, scores, extra = jax.lax.cond(
+            replay, replay_levels, new_levels, None)
+
+    # ReMiDi's switching rule (a no-op with one buffer).
+    count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
+    k = runner.buffers.valid.shape[0]
+    switch = (count >= cfg.remidi.steps_per_buffer) & (runner.active + 1 < k) if algo == "remidi" else jnp.asarray(False)
+    runner = Runner(rng=rng, train_state=train_state, buffers=buffers,
+                    active=jnp.where(switch, runner.active + 1, runner.active),
+                    count=jnp.where(switch, 0, count), update=runner.update + 1)
+
+    trained = replay | (algo == "dr")
+    metrics = {
+        "replay": replay.astype(jnp.float32),
+        "mean_return": jnp.mean(mean_ret),
+        "mean_score": jnp.mean(jnp.where(jnp.isfinite(scores), scores, 0.0)),
+        "trained_fraction_masked": jnp.where(trained, jnp.mean(traj.indist.astype(jnp.float32)), 0.0),
+        "active_buffer": runner.active.astype(jnp.float32),
+        **extra,
+    }
+    for name, c in tag_counts(setup, levels, jnp.where(replay, 1.0, 0.0)).items():
+        metrics[f"replayed/{name}"] = c
+    return runner, metrics
+
+
+def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
+    """Share of each tag among the valid levels of the active buffer, and of every buffer."""
+    out = {}
+    k = runner.buffers.valid.shape[0]
+    for b in range(k):
+        one = buf.select_buffer(runner.buffers, b)
+        counts = tag_counts(setup, one.levels, one.valid.astype(jnp.float32))
+        size = jnp.maximum(jnp.sum(one.valid), 1)
+        for name, c in counts.items():
+            out[f"buffer_fraction/{name}/b{b}"] = c / size
+    active = buf.select_buffer(runner.buffers, runner.active)
+    counts = tag_counts(setup, active.levels, active.valid.astype(jnp.float32))
+    size = jnp.maximum(jnp.sum(active.valid), 1)
+    for name, c in counts.items():
+        out[f"buffer_fraction/{name}"] = c / size
+    out["buffer_size"] = jnp.sum(active.valid).astype(jnp.float32)
+    return out
+
+
+# ---------------------------------------------------------------------------- evaluation
+def first_episode_return(reward: jax.Array, done: jax.Array) -> jax.Array:
+    """f32[N]: return of the first episode of each env (``reward``, ``done``: [T, N])."""
+    ended_before = jnp.cumsum(done, axis=0) - done  # episodes finished before step t
+    return jnp.sum(jnp.where(ended_before == 0, reward, 0.0), axis=0)
+
+
+def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
+    """Solve rate and mean return on each evaluation set: ``eval_attempts`` sampled episodes per level."""
+    task, cfg = setup.task, setup.cfg
+    out = {}
+    for i, (name, levels) in enumerate(sorted(task.eval_sets.items())):
+        tiled = jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), levels)
+        n = jax.tree.leaves(tiled)[0].shape[0]
+        carry = setup.net.initialize_carry(n)
+        traj, _ = rollout(jax.random.fold_in(rng, i), task, setup.net.apply, runner.train_state.params,
+                          carry, tiled, task.max_episode_steps)
+        returns = first_episode_return(traj.reward, traj.done)
+        out[f"solve_rate/{name}"] = jnp.mean(task.solved(returns).astype(jnp.float32))
+        out[f"return/{name}"] = jnp.mean(returns)
+    return out
+
+
+# ---------------------------------------------------------------------------- validation
+def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
+    """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
+    from remidi.engine.networks import make_network
+    from remidi.engine.ppo import validate_ppo_config
+    from remidi.engine.tracker import MODES
+    from remidi.errors import ConfigError
+    from remidi.experiments.config import choice, positive_int, require
+
+    choice("--algo", algo, ALGORITHMS)
+    for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
+        positive_int(key, getattr(cfg, key))
+    require(cfg.eval_every <= cfg.num_updates, "eval_every", f"≤ num_updates ({cfg.num_updates})", cfg.eval_every)
+    choice("score", cfg.score, sc.SCORES)
+    if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
+        raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
+                          f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
+    make_network(cfg.network, task.num_actions)
+    for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
+                             ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):
+        try:
+            validate()
+        except ConfigError as err:
+            msg = str(err)
+            raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
+    r = cfg.remidi
+    positive_int("remidi.num_buffers", r.num_buffers)
+    positive_int("remidi.buffer_capacity", r.buffer_capacity)
+    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
+    choice("remidi.count", r.count, ("updates", "replays"))
+    choice("remidi.tracker", r.tracker, MODES)
+    if algo == "remidi":
+        needed = (r.num_buffers - 1) * r.steps_per_buffer
+        require(needed < cfg.num_updates, "remidi.num_buffers",
+                f"small enough that every buffer gets updates ((num_buffers − 1) × steps_per_buffer = "
+                f"{needed} < num_updates = {cfg.num_updates})", r.num_buffers)

@@ -1,0 +1,99 @@
+"""The environment interface: ``jaxued``'s ``UnderspecifiedEnv``, plus what UED needs around it.
+
+An environment is a ``jaxued.environments.UnderspecifiedEnv`` (bring your own: any subclass
+works): ``obs, state = env.reset_to_level(rng, level, params)`` and ``obs, state, reward,
+done, info = env.step(rng, state, action, params)``, levels are pytrees, and the environment
+never resets by itself. :class:`AutoReplay` restarts the *same* level when an episode ends.
+
+A :class:`UEDTask` bundles an environment with the level generator and the extras the engine
+uses: the optimal return of a level (for the perfect-regret score), named evaluation level
+sets, and boolean level tags to report (e.g. which levels hide the answer).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+from jaxued.environments.underspecified_env import EnvParams, UnderspecifiedEnv
+
+__all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal"]
+
+
+@struct.dataclass
+class AutoReplayState:
+    env_state: Any
+    level: Any
+
+
+class AutoReplay(UnderspecifiedEnv):
+    """Restart the same level when an episode ends.
+
+    On a terminal step the returned observation and state are those of the fresh episode on the
+    same level; ``done`` is still True for that step, and the reward is the terminal reward.
+    """
+
+    def __init__(self, env: UnderspecifiedEnv):
+        self._env = env
+
+    @property
+    def default_params(self):
+        return self._env.default_params
+
+    def action_space(self, params):
+        return self._env.action_space(params)
+
+    def reset_env_to_level(self, rng, level, params):
+        obs, state = self._env.reset_to_level(rng, level, params)
+        return obs, AutoReplayState(env_state=state, level=level)
+
+    def step_env(self, rng, state: AutoReplayState, action, params):
+        rng_step, rng_reset = jax.random.split(rng)
+        obs, env_state, reward, done, info = self._env.step(rng_step, state.env_state, action, params)
+        obs_re, env_state_re = self._env.reset_to_level(rng_reset, state.level, params)
+        obs = tree_select(done, obs_re, obs)
+        env_state = tree_select(done, env_state_re, env_state)
+        return obs, AutoReplayState(env_state=env_state, level=state.level), reward, done, info
+
+
+def tree_select(pred, on_true, on_false):
+    """Leafwise ``where(pred, on_true, on_false)`` for a scalar ``pred``."""
+    return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
+
+
+def tree_equal(a, b) -> jax.Array:
+    """bool[]: every leaf of ``a`` equals the corresponding leaf of ``b`` everywhere."""
+    leaves = jax.tree.leaves(jax.tree.map(lambda x, y: jnp.all(x == y), a, b))
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+@dataclass(frozen=True)
+class UEDTask:
+    """Everything the UED engine needs to know about a domain.
+
+    Attributes:
+        env: the (non-resetting) environment.
+        params: its ``EnvParams``.
+        sample_level: ``rng -> level``, the random level generator (domain randomisation).
+        num_actions: size of the discrete action space.
+        max_episode_steps: an upper bound on an episode's length (evaluation rolls this long).
+        optimal_return: ``level -> f32[]`` best achievable return, or None if unknown (then the
+            perfect-regret score is unavailable).
+        eval_sets: name → level batch (leading dim = number of levels) to report solve rates on.
+        level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
+            fractions (e.g. ``{"hidden": ...}``).
+        solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved.
+    """
+
+    env: UnderspecifiedEnv
+    params: Any
+    sample_level: Callable[[jax.Array], Any]
+    num_actions: int
+    max_episode_steps: int
+    optimal_return: Callable[[Any], jax.Array] | None = None
+    eval_sets: dict[str, Any] = field(default_factory=dict)
+    level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
+    solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0

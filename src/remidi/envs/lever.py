@@ -1,0 +1,86 @@
+"""The lever game (paper §6.4): a one-step game where half of the levels hide the answer.
+
+A level is (correct lever, visible?). The observation is a one-hot vector of size
+``num_levers + 1``: index 0 means "answer hidden", index ``i > 0`` means "lever ``i − 1`` is
+correct". Pulling the correct lever pays ``+1`` (visible) or ``+10`` (hidden), any other lever
+``−1`` / ``−10``; the episode ends after one step. The optimal return of a level is ``+1`` or
+``+10``, so hidden levels carry irreducible regret ``20·(1 − 1/num_levers)`` for any policy
+that cannot see the answer.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+
+
+@struct.dataclass
+class LeverLevel:
+    correct: jax.Array  # i32[]
+    visible: jax.Array  # bool[]
+
+
+@struct.dataclass
+class LeverState:
+    level: LeverLevel
+    done: jax.Array  # bool[]
+
+
+@struct.dataclass
+class LeverParams:
+    hidden_multiplier: float = 10.0
+
+
+class LeverGame(UnderspecifiedEnv):
+    def __init__(self, num_levers: int = 64):
+        self.num_levers = num_levers
+
+    @property
+    def default_params(self) -> LeverParams:
+        return LeverParams()
+
+    def action_space(self, params):
+        from gymnax.environments import spaces
+
+        return spaces.Discrete(self.num_levers)
+
+    def observation(self, level: LeverLevel) -> jax.Array:
+        """f32[num_levers + 1] one-hot."""
+        index = jnp.where(level.visible, level.correct + 1, 0)
+        return jax.nn.one_hot(index, self.num_levers + 1)
+
+    def reset_env_to_level(self, rng, level: LeverLevel, params):
+        return self.observation(level), LeverState(level=level, done=jnp.asarray(False))
+
+    def step_env(self, rng, state: LeverState, action, params):
+        scale = jnp.where(state.level.visible, 1.0, params.hidden_multiplier)
+        reward = jnp.where(action == state.level.correct, 1.0, -1.0) * scale
+        return self.observation(state.level), state.replace(done=jnp.asarray(True)), reward, jnp.asarray(True), {}
+
+    def sample_level(self, rng, visible_prob: float = 0.5) -> LeverLevel:
+        k1, k2 = jax.random.split(rng)
+        return LeverLevel(correct=jax.random.randint(k1, (), 0, self.num_levers),
+                          visible=jax.random.uniform(k2) < visible_prob)
+
+    def all_levels(self, visible: bool) -> LeverLevel:
+        """Every level with the given visibility, batched: leading dim num_levers."""
+        return LeverLevel(correct=jnp.arange(self.num_levers, dtype=jnp.int32),
+                          visible=jnp.full((self.num_levers,), visible))
+
+
+def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplier: float = 10.0) -> UEDTask:
+    env = LeverGame(num_levers)
+    params = LeverParams(hidden_multiplier=hidden_multiplier)
+    return UEDTask(
+        env=env,
+        params=params,
+        sample_level=lambda rng: env.sample_level(rng, visible_prob),
+        num_actions=num_levers,
+        max_episode_steps=1,
+        optimal_return=lambda level: jnp.where(level.visible, 1.0, hidden_multiplier),
+        eval_sets={"visible": env.all_levels(True), "hidden": env.all_levels(False)},
+        level_tags=lambda level: {"hidden": ~level.visible},
+    )

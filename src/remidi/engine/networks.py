@@ -1,0 +1,192 @@
+"""Actor-critic networks sharing one interface for feed-forward and recurrent agents.
+
+Every network is a :class:`flax.linen.Module` applied to a whole rollout at once::
+
+    carry, (logits, value) = net.apply(variables, carry, obs, reset)
+
+- ``obs``: an observation pytree whose leaves are shaped ``[T, N, ...]`` (time, envs).
+- ``reset``: ``bool[T, N]``, True where a new episode starts at that step; a recurrent net
+  re-initialises its carry *before* processing such a step.
+- ``logits``: ``f32[T, N, num_actions]``; ``value``: ``f32[T, N]``.
+- ``carry``: the recurrent state for the ``N`` envs after the last step. Every carry leaf has the
+  env axis first, so a PPO minibatch of envs is ``jax.tree.map(lambda x: x[ids], carry)``.
+
+``net.initialize_carry(n)`` returns the initial carry for ``n`` envs and needs no parameters.
+Feed-forward nets return a dummy carry (``f32[n]`` zeros) unchanged.
+
+Initialisation follows common PPO practice: orthogonal weights with gain ``sqrt(2)`` in hidden
+layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero biases.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from remidi.errors import one_of
+
+ACTIVATIONS = {"tanh": nn.tanh, "relu": nn.relu}
+
+_HIDDEN_INIT = nn.initializers.orthogonal(np.sqrt(2.0))
+_POLICY_INIT = nn.initializers.orthogonal(0.01)
+_VALUE_INIT = nn.initializers.orthogonal(1.0)
+_ZEROS = nn.initializers.zeros
+
+
+def _activation(name: str):
+    """The activation function called ``name`` (``"tanh"`` or ``"relu"``)."""
+    if name not in ACTIVATIONS:
+        raise one_of("network.activation", name, sorted(ACTIVATIONS))
+    return ACTIVATIONS[name]
+
+
+def obs_field(obs: Any, name: str):
+    """Field ``name`` of an observation given as a dict or as any object with that attribute."""
+    return obs[name] if isinstance(obs, dict) else getattr(obs, name)
+
+
+def flatten_obs(obs: Any) -> jax.Array:
+    """Flatten every leaf of ``obs`` (leaves ``[T, N, ...]``) after ``[T, N]`` and concatenate.
+
+    Returns ``f32[T, N, D]`` with leaves in ``jax.tree.leaves`` order.
+    """
+    leaves = jax.tree.leaves(obs)
+    return jnp.concatenate(
+        [jnp.reshape(x, x.shape[:2] + (-1,)).astype(jnp.float32) for x in leaves], axis=-1
+    )
+
+
+class ActorCriticHeads(nn.Module):
+    """Separate policy and value heads: ``Dense(hidden) -> act -> Dense(out)`` each.
+
+    ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``.
+    """
+
+    num_actions: int
+    hidden: int = 32
+    activation: str = "relu"
+
+    @nn.compact
+    def __call__(self, x):
+        act = _activation(self.activation)
+        pi = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="policy_hidden")(x))
+        logits = nn.Dense(self.num_actions, kernel_init=_POLICY_INIT, bias_init=_ZEROS, name="policy_out")(pi)
+        v = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="value_hidden")(x))
+        value = nn.Dense(1, kernel_init=_VALUE_INIT, bias_init=_ZEROS, name="value_out")(v)
+        return logits, jnp.squeeze(value, axis=-1)
+
+
+class FeedForwardActorCritic(nn.Module):
+    """MLP actor-critic: flattened obs -> ``hidden`` trunk -> 32-unit policy and value heads.
+
+    Default: two 256-unit tanh layers (the lever-game agent). ``tanh`` is the default because it
+    is the usual choice for PPO MLPs and keeps the trunk's outputs bounded; ``relu`` is available.
+    The carry is a dummy ``f32[N]`` returned unchanged.
+    """
+
+    num_actions: int
+    hidden: tuple[int, ...] = (256, 256)
+    head_hidden: int = 32
+    activation: str = "tanh"
+
+    @nn.nowrap
+    def initialize_carry(self, batch_size: int) -> jax.Array:
+        """Dummy carry ``f32[batch_size]`` (zeros)."""
+        return jnp.zeros((batch_size,), jnp.float32)
+
+    @nn.compact
+    def __call__(self, carry, obs, reset):
+        del reset  # no state to reset
+        act = _activation(self.activation)
+        x = flatten_obs(obs)
+        for i, width in enumerate(self.hidden):
+            x = act(nn.Dense(width, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name=f"trunk_{i}")(x))
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, self.activation, name="heads")(x)
+        return carry, (logits, value)
+
+
+class ResetLSTM(nn.Module):
+    """An LSTM scanned over time whose carry is zeroed at steps where ``reset`` is True.
+
+    ``carry``: ``(c, h)`` each ``f32[N, features]``; ``inputs``: ``(x f32[T, N, D], reset bool[T, N])``.
+    Returns ``(carry, y f32[T, N, features])``.
+    """
+
+    features: int
+
+    @functools.partial(
+        nn.scan, variable_broadcast="params", split_rngs={"params": False}, in_axes=0, out_axes=0
+    )
+    @nn.compact
+    def __call__(self, carry, inputs):
+        x, reset = inputs
+        carry = jax.tree.map(lambda c: jnp.where(reset[:, None], jnp.zeros_like(c), c), carry)
+        return nn.OptimizedLSTMCell(self.features, name="cell")(carry, x)
+
+
+class MazeLSTMActorCritic(nn.Module):
+    """The maze agent: conv(5x5 view) + embedded direction -> LSTM(256) -> 32-unit heads.
+
+    ``obs`` has ``image`` (u8/f32 ``[T, N, 5, 5, 3]``) and ``agent_dir`` (i32 ``[T, N]``, 0..3),
+    as attributes (e.g. jaxued's ``Observation``) or dict keys. The image goes through a 3x3
+    ``VALID`` conv with 16 channels and is flattened; the direction is one-hot encoded and
+    embedded by ``Dense(5)``; the concatenation passes a relu into the LSTM, whose output feeds
+    the relu policy and value heads. Carry: ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially.
+    """
+
+    num_actions: int
+    lstm_size: int = 256
+    conv_features: int = 16
+    dir_embed: int = 5
+    head_hidden: int = 32
+
+    @nn.nowrap
+    def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
+        """Zero LSTM state ``(c, h)``, each ``f32[batch_size, lstm_size]``."""
+        zeros = jnp.zeros((batch_size, self.lstm_size), jnp.float32)
+        return zeros, zeros
+
+    @nn.compact
+    def __call__(self, carry, obs, reset):
+        image = obs_field(obs, "image").astype(jnp.float32)
+        direction = obs_field(obs, "agent_dir")
+        lead = image.shape[:2]
+        conv = nn.Conv(
+            self.conv_features, (3, 3), padding="VALID", kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="conv"
+        )(image.reshape((-1,) + image.shape[2:]))
+        image_embed = conv.reshape(lead + (-1,))
+        dir_embed = nn.Dense(self.dir_embed, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="dir_embed")(
+            jax.nn.one_hot(direction, 4)
+        )
+        x = nn.relu(jnp.concatenate([image_embed, dir_embed], axis=-1))
+        carry, y = ResetLSTM(self.lstm_size, name="lstm")(carry, (x, reset))
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, "relu", name="heads")(y)
+        return carry, (logits, value)
+
+
+NETWORKS = {"mlp": FeedForwardActorCritic, "maze_lstm": MazeLSTMActorCritic}
+
+
+def make_network(kind: str, num_actions: int, **kwargs) -> nn.Module:
+    """Build the network registered as ``kind`` (``"mlp"`` or ``"maze_lstm"``).
+
+    ``kwargs`` are module fields (e.g. ``hidden=(64, 64)`` for ``"mlp"``); lists become tuples.
+    Raises :class:`remidi.errors.ConfigError` for an unknown kind, option or activation.
+    """
+    if kind not in NETWORKS:
+        raise one_of("network", kind, sorted(NETWORKS))
+    cls = NETWORKS[kind]
+    allowed = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in ("num_actions", "parent", "name")]
+    for key in kwargs:
+        if key not in allowed:
+            raise one_of(f"network.{kind} option", key, allowed)
+    if "activation" in kwargs:
+        _activation(kwargs["activation"])
+    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
+    return cls(num_actions=num_actions, **kwargs)

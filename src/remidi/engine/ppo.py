@@ -1,0 +1,260 @@
+"""PPO with a per-timestep loss mask (ReMiDi trains only on distinguishable steps).
+
+Shapes: ``T`` rollout steps, ``N`` envs. A rollout is stored as a :class:`Batch` of ``[T, N]``
+arrays; :func:`ppo_update` runs ``epochs`` passes, each splitting the *env* axis into
+``minibatches`` shuffled groups of whole time sequences, so a recurrent net replays each group
+from its slice of the rollout's initial carry.
+
+Masking: every loss term is a masked mean ``sum(mask * l) / max(sum(mask), 1)``; advantages are
+normalised with the mean/std of the minibatch's unmasked entries. Masked actions, log-probs,
+values, advantages and targets are replaced by zeros before any arithmetic, so whatever they hold
+(even NaN) cannot reach the update; masked observations still pass through the network (a
+recurrent net needs them as inputs) and must be finite. A minibatch with no unmasked entry
+leaves params, optimiser state and step count unchanged.
+
+Networks follow :mod:`remidi.engine.networks`:
+``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import flax
+import jax
+import jax.numpy as jnp
+import optax
+from flax.training.train_state import TrainState
+
+from remidi.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyperparameters (hashable: pass as a static argument to ``jax.jit``).
+
+    Defaults are the paper's maze settings. With ``anneal_lr`` the learning rate decays linearly
+    from ``lr`` to 0 over ``total_updates * epochs * minibatches`` optimiser steps.
+    """
+
+    gamma: float = 0.995
+    gae_lambda: float = 0.95
+    clip_eps: float = 0.2
+    clip_value: bool = True
+    vf_coef: float = 0.5
+    ent_coef: float = 0.0
+    epochs: int = 5
+    minibatches: int = 1
+    lr: float = 1e-3
+    anneal_lr: bool = True
+    adam_eps: float = 1e-5
+    max_grad_norm: float = 0.5
+    total_updates: int = 30000
+
+
+def validate_ppo_config(cfg: PPOConfig, num_envs: int) -> None:
+    """Raise :class:`ConfigError` naming the first invalid field of ``cfg`` for ``num_envs`` envs."""
+    checks = [
+        ("gamma", 0.0 <= cfg.gamma <= 1.0, "must lie in [0, 1]"),
+        ("gae_lambda", 0.0 <= cfg.gae_lambda <= 1.0, "must lie in [0, 1]"),
+        ("clip_eps", cfg.clip_eps > 0, "must be > 0"),
+        ("vf_coef", cfg.vf_coef >= 0, "must be >= 0"),
+        ("ent_coef", cfg.ent_coef >= 0, "must be >= 0"),
+        ("epochs", cfg.epochs >= 1, "must be >= 1"),
+        ("minibatches", cfg.minibatches >= 1, "must be >= 1"),
+        ("minibatches", num_envs % max(cfg.minibatches, 1) == 0, f"must divide num_envs={num_envs}"),
+        ("lr", cfg.lr > 0, "must be > 0"),
+        ("adam_eps", cfg.adam_eps > 0, "must be > 0"),
+        ("max_grad_norm", cfg.max_grad_norm > 0, "must be > 0"),
+        ("total_updates", cfg.total_updates >= 1, "must be >= 1"),
+    ]
+    for field, ok, why in checks:
+        if not ok:
+            raise ConfigError(f"ppo.{field}: {getattr(cfg, field)!r} {why}")
+
+
+@functools.lru_cache(maxsize=64)
+def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
+    """Global-norm gradient clipping then Adam, with a linear LR decay to 0 if ``cfg.anneal_lr``.
+
+    Cached per config: train states built from equal configs then share one ``tx`` object, which
+    is part of the :class:`TrainState` pytree structure, so jitted updates are not recompiled.
+    """
+    lr = cfg.lr
+    if cfg.anneal_lr:
+        lr = optax.linear_schedule(cfg.lr, 0.0, cfg.total_updates * cfg.epochs * cfg.minibatches)
+    return optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(lr, eps=cfg.adam_eps))
+
+
+def _is_rollout_shaped(example_obs: Any, num_envs: int) -> bool:
+    """Whether every leaf of ``example_obs`` starts with ``[1, num_envs]``."""
+    return all(jnp.ndim(x) >= 2 and jnp.shape(x)[:2] == (1, num_envs) for x in jax.tree.leaves(example_obs))
+
+
+def create_train_state(rng: jax.Array, net, example_obs: Any, num_envs: int, cfg: PPOConfig) -> TrainState:
+    """Initialise ``net`` and a :class:`TrainState` with :func:`make_optimizer`.
+
+    ``example_obs``: leaves ``[1, num_envs, ...]`` or a single unbatched observation (then a
+    ``[1, 1]`` prefix is added; parameters do not depend on the batch size). Validates ``cfg``.
+    """
+    validate_ppo_config(cfg, num_envs)
+    n = num_envs
+    if not _is_rollout_shaped(example_obs, num_envs):
+        example_obs = jax.tree.map(lambda x: jnp.asarray(x)[None, None], example_obs)
+        n = 1
+    reset = jnp.ones((1, n), bool)
+    params = net.init(rng, net.initialize_carry(n), example_obs, reset)["params"]
+    return TrainState.create(apply_fn=net.apply, params=params, tx=make_optimizer(cfg))
+
+
+def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
+    """Generalised advantage estimation.
+
+    ``rewards``, ``values``: ``f32[T, N]``; ``dones``: ``bool[T, N]``, True where the episode ended
+    at step t (no bootstrapping from step t+1); ``last_value``: ``f32[N]``, value of the state after
+    the last step. Returns ``(advantages, targets)``, both ``f32[T, N]``, targets = adv + values.
+    """
+    not_done = 1.0 - dones.astype(jnp.float32)
+    next_values = jnp.concatenate([values[1:], last_value[None]], axis=0)
+    deltas = rewards + gamma * not_done * next_values - values
+
+    def step(next_adv, x):
+        delta, nd = x
+        adv = delta + gamma * lam * nd * next_adv
+        return adv, adv
+
+    _, advantages = jax.lax.scan(step, jnp.zeros_like(last_value), (deltas, not_done), reverse=True)
+    return advantages, advantages + values
+
+
+@flax.struct.dataclass
+class Batch:
+    """A rollout for PPO; every field is ``[T, N, ...]``.
+
+    ``obs`` pytree; ``reset`` bool (new episode starts at this step); ``actions`` i32;
+    ``log_probs``, ``values``, ``advantages``, ``targets`` f32; ``mask`` bool (train on this step).
+    """
+
+    obs: Any
+    reset: jax.Array
+    actions: jax.Array
+    log_probs: jax.Array
+    values: jax.Array
+    advantages: jax.Array
+    targets: jax.Array
+    mask: jax.Array
+
+
+def masked_mean(x, mask):
+    """``sum(mask * x) / max(sum(mask), 1)``; masked entries of ``x`` are never read."""
+    total = jnp.sum(jnp.where(mask, x, 0.0))
+    return total / jnp.maximum(jnp.sum(mask), 1)
+
+
+def normalize_advantages(adv, mask):
+    """Standardise ``adv`` with the mean and (population) std of its unmasked entries.
+
+    ``std + 1e-8`` in the denominator; one unmasked entry becomes 0, masked entries become 0.
+    """
+    mean = masked_mean(adv, mask)
+    std = jnp.sqrt(masked_mean(jnp.square(adv - mean), mask))
+    return jnp.where(mask, (adv - mean) / (std + 1e-8), 0.0)
+
+
+def _zero_masked(batch: Batch) -> Batch:
+    """Replace the per-step training targets at masked steps by zeros (obs and reset are kept)."""
+    zero = lambda x: jnp.where(batch.mask, x, jnp.zeros_like(x))  # noqa: E731
+    return batch.replace(
+        actions=zero(batch.actions),
+        log_probs=zero(batch.log_probs),
+        values=zero(batch.values),
+        advantages=zero(batch.advantages),
+        targets=zero(batch.targets),
+    )
+
+
+def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig):
+    """Masked PPO loss on one minibatch (envs ``M``): returns ``(total_loss, metrics dict)``.
+
+    ``carry``: the net's carry for the ``M`` envs at the first step of ``batch``. Clipped
+    surrogate + ``vf_coef`` x value loss (``0.5 * max(unclipped^2, clipped^2)`` if ``clip_value``)
+    - ``ent_coef`` x entropy, each a masked mean.
+    """
+    mask = batch.mask
+    batch = _zero_masked(batch)
+    _, (logits, value) = apply_fn({"params": params}, carry, batch.obs, batch.reset)
+    log_pi = jax.nn.log_softmax(logits)
+    log_prob = jnp.take_along_axis(log_pi, batch.actions[..., None].astype(jnp.int32), axis=-1)[..., 0]
+    log_ratio = jnp.where(mask, log_prob - batch.log_probs, 0.0)
+    ratio = jnp.exp(log_ratio)
+
+    adv = normalize_advantages(batch.advantages, mask)
+    surrogate = jnp.minimum(ratio * adv, jnp.clip(ratio, 1.0 - cfg.clip_eps, 1.0 + cfg.clip_eps) * adv)
+    policy_loss = -masked_mean(surrogate, mask)
+
+    value_sq = jnp.square(value - batch.targets)
+    if cfg.clip_value:
+        clipped = batch.values + jnp.clip(value - batch.values, -cfg.clip_eps, cfg.clip_eps)
+        value_sq = jnp.maximum(value_sq, jnp.square(clipped - batch.targets))
+    value_loss = 0.5 * masked_mean(value_sq, mask)
+
+    entropy = masked_mean(-jnp.sum(jnp.exp(log_pi) * log_pi, axis=-1), mask)
+    total = policy_loss + cfg.vf_coef * value_loss - cfg.ent_coef * entropy
+    metrics = {
+        "total_loss": total,
+        "policy_loss": policy_loss,
+        "value_loss": value_loss,
+        "entropy": entropy,
+        "approx_kl": masked_mean((ratio - 1.0) - log_ratio, mask),
+        "clip_frac": masked_mean((jnp.abs(ratio - 1.0) > cfg.clip_eps).astype(jnp.float32), mask),
+        "masked_fraction": 1.0 - jnp.mean(mask.astype(jnp.float32)),
+    }
+    return total, metrics
+
+
+def _minibatch_step(state: TrainState, carry, batch: Batch, cfg: PPOConfig, apply_fn: Callable):
+    """One optimiser step on a minibatch; a no-op (state returned bit-identical) if all masked."""
+    grad_fn = jax.value_and_grad(ppo_loss, has_aux=True)
+    (_, metrics), grads = grad_fn(state.params, apply_fn, carry, batch, cfg)
+    stepped = state.apply_gradients(grads=grads)
+    any_unmasked = jnp.any(batch.mask)
+    state = jax.tree.map(lambda new, old: jnp.where(any_unmasked, new, old), stepped, state)
+    metrics["grad_norm"] = jnp.where(any_unmasked, optax.tree.norm(grads), 0.0)
+    return state, metrics
+
+
+def ppo_update(
+    train_state: TrainState,
+    init_carry,
+    batch: Batch,
+    rng: jax.Array,
+    cfg: PPOConfig,
+    apply_fn: Callable | None = None,
+):
+    """Run ``cfg.epochs`` x ``cfg.minibatches`` masked PPO steps on a rollout.
+
+    ``init_carry``: the net's carry for the ``N`` envs at the rollout's first step (env axis
+    first in every leaf). Minibatches are shuffled groups of ``N / minibatches`` envs with their
+    whole ``T``-step sequences. ``apply_fn`` defaults to ``train_state.apply_fn``. Jit-able with
+    ``cfg`` and ``apply_fn`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
+    policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm, masked_fraction) are
+    averaged over all minibatch steps. Raises :class:`ConfigError` if ``cfg`` is invalid for N.
+    """
+    apply_fn = train_state.apply_fn if apply_fn is None else apply_fn
+    num_envs = batch.mask.shape[1]
+    validate_ppo_config(cfg, num_envs)
+    size = num_envs // cfg.minibatches
+
+    def minibatch(state, ids):
+        carry = jax.tree.map(lambda x: x[ids], init_carry)
+        sub = jax.tree.map(lambda x: x[:, ids], batch)
+        return _minibatch_step(state, carry, sub, cfg, apply_fn)
+
+    def epoch(state, key):
+        groups = jax.random.permutation(key, num_envs).reshape(cfg.minibatches, size)
+        return jax.lax.scan(minibatch, state, groups)
+
+    train_state, metrics = jax.lax.scan(epoch, train_state, jax.random.split(rng, cfg.epochs))
+    return train_state, jax.tree.map(jnp.mean, metrics)

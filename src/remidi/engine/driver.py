@@ -11,10 +11,10 @@ ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +23,7 @@ import numpy as np
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
 from remidi.errors import RemidiError
+from remidi.experiments.outputs import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
 
@@ -49,18 +50,8 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
 
 def save_checkpoint(path: Path, runner, meta: dict) -> None:
     """Write the runner's leaves and ``meta`` (JSON) to ``path`` atomically."""
-    leaves = [np.asarray(x) for x in jax.tree.leaves(jax.device_get(runner))]
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, meta=np.asarray(json.dumps(meta)), **{f"leaf_{i}": x for i, x in enumerate(leaves)})
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    leaves = {f"leaf_{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(jax.device_get(runner)))}
+    atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
 
 
 def load_checkpoint(path: Path, template):
@@ -72,32 +63,38 @@ def load_checkpoint(path: Path, template):
     return jax.tree.unflatten(treedef, leaves), meta
 
 
+@partial(jax.jit, static_argnums=0)
+def _init(setup: tr.Setup, keys):
+    return jax.vmap(lambda k: tr.init_runner(setup, k))(keys)
+
+
+@partial(jax.jit, static_argnums=(0, 2))
+def _run_block(setup: tr.Setup, runner, length: int):
+    """``length`` train steps for every seed: ``(runner, per-step metrics f[S, length])``."""
+    return jax.vmap(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
+
+
+@partial(jax.jit, static_argnums=0)
+def _evaluate(setup: tr.Setup, runner, keys):
+    return jax.vmap(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
+
+
 def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], out: Path | None = None,
-                resume: bool = False, progress: bool = True):
+                resume: bool = False, progress: bool = True, on_block: Callable[[int, dict], None] | None = None):
     """Train ``algo`` for every seed. Returns ``(steps i[T], history {name: f[S, T]}, per_step
     {name: f[S, num_updates]}, runner)``: ``history`` holds block aggregates and evaluations at
-    the end of each block; ``per_step`` the raw per-update replay counters."""
+    the end of each block; ``per_step`` the raw per-update replay counters. ``on_block(updates
+    done, block metrics)`` is called after each block, once its checkpoint is written."""
     setup = tr.make_setup(task, cfg, algo)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    runner = jax.jit(jax.vmap(lambda k: tr.init_runner(setup, k)))(keys)
-
-    def block(runner, length):
-        return jax.lax.scan(lambda r, _: tr.train_step(setup, r), runner, None, length=length)
-
-    compiled_blocks = {}
-
-    def run_block(runner, length):
-        if length not in compiled_blocks:
-            compiled_blocks[length] = jax.jit(jax.vmap(lambda r: block(r, length)))
-        return compiled_blocks[length](runner)
-
-    eval_fn = jax.jit(jax.vmap(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)}))
-
+    runner = _init(setup, keys)
     steps: list[int] = []
     history: list[dict[str, np.ndarray]] = []
     per_step: list[dict[str, np.ndarray]] = []
     done = 0
     ckpt = Path(out) / CHECKPOINT if out is not None else None
+    if ckpt is not None:
+        ckpt.parent.mkdir(parents=True, exist_ok=True)
     if resume:
         if ckpt is None or not ckpt.exists():
             raise RemidiError(f"--resume: no checkpoint in {out}; the run must be started again")
@@ -111,9 +108,9 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     while done < cfg.num_updates:
         length = min(cfg.eval_every, cfg.num_updates - done)
         start = time.perf_counter()
-        runner, step_metrics = run_block(runner, length)
+        runner, step_metrics = _run_block(setup, runner, length)
         step_metrics = jax.tree.map(np.asarray, step_metrics)
-        evals = jax.tree.map(np.asarray, eval_fn(runner, jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)))
+        evals = jax.tree.map(np.asarray, _evaluate(setup, runner, jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)))
         done += length
         steps.append(done)
         history.append({**_block_metrics(step_metrics, cfg.num_envs), **evals})
@@ -123,6 +120,8 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
             bar.set_postfix_str(f"{length / (time.perf_counter() - start):.1f} updates/s")
         if ckpt is not None and (done % cfg.checkpoint_every < length or done == cfg.num_updates):
             _save_all(ckpt, runner, done, steps, history, per_step)
+        if on_block is not None:
+            on_block(done, history[-1])
     if bar is not None:
         bar.close()
     names = history[0].keys()
@@ -137,11 +136,7 @@ def _save_all(ckpt: Path, runner, done, steps, history, per_step) -> None:
         arrays.update({f"h{i}|{k}": v for k, v in h.items()})
     for i, p in enumerate(per_step):
         arrays.update({f"p{i}|{k}": v for k, v in p.items()})
-    hist_path = ckpt.with_suffix(".history.npz")
-    fd, tmp = tempfile.mkstemp(dir=ckpt.parent, prefix=".history.", suffix=".tmp")
-    with os.fdopen(fd, "wb") as fh:
-        np.savez(fh, **arrays)
-    os.replace(tmp, hist_path)
+    atomic_write(ckpt.with_suffix(".history.npz"), lambda fh: np.savez(fh, **arrays), binary=True)
     # the runner checkpoint is written last: it is what marks the history as complete
     save_checkpoint(ckpt, runner, {"done": done, "steps": steps, "num_blocks": len(per_step)})
 

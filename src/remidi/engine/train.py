@@ -92,7 +92,8 @@ class Runner:
 
 @dataclass(frozen=True)
 class Setup:
-    """Static pieces of a run: the task, the config, the algorithm and the network."""
+    """Static pieces of a run: the task, the config, the algorithm and the network (derived
+    from the other three, so left out of equality). Hashable: a static argument under jit."""
 
     task: UEDTask
     cfg: UEDConfig
@@ -300,6 +301,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
     make_network(cfg.network, task.num_actions)
     for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
+                             ("buffer.", lambda: buf.validate_buffer_config(cfg.buffer)),
                              ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):
         try:
             validate()

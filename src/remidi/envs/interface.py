@@ -70,9 +70,11 @@ def tree_equal(a, b) -> jax.Array:
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class UEDTask:
     """Everything the UED engine needs to know about a domain.
+
+    Compared and hashed by identity, so that compiled train steps are reused for the same task.
 
     Attributes:
         env: the (non-resetting) environment.

@@ -41,11 +41,15 @@ def prepare_out_dir(out: Path, *, resume: bool = False) -> Path:
     return out
 
 
-def _atomic_write(path: Path, write) -> None:
+def atomic_write(path: Path, write, binary: bool = False) -> None:
+    """Call ``write(file)`` on a temporary file beside ``path``, then move it onto ``path``.
+
+    A write that is interrupted leaves ``path`` as it was (and no temporary file behind).
+    """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", newline="") as fh:
+        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="")) as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
@@ -75,7 +79,7 @@ def _clean(obj: Any) -> Any:
 
 
 def write_json(path: Path, obj: Any) -> None:
-    _atomic_write(path, lambda fh: json.dump(_clean(obj), fh, indent=2, allow_nan=False))
+    atomic_write(path, lambda fh: json.dump(_clean(obj), fh, indent=2, allow_nan=False))
 
 
 def read_json(path: Path) -> Any:
@@ -100,7 +104,7 @@ def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
         for seed, step, name, value in rows:
             w.writerow([seed, step, name, repr(float(value))])
 
-    _atomic_write(path, write)
+    atomic_write(path, write)
 
 
 def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:

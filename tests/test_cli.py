@@ -86,3 +86,83 @@ def test_help_for_every_subcommand(capsys):
             main([*sub, "--help"])
         assert exc.value.code == 0
         assert "usage: remidi" in capsys.readouterr().out
+
+
+LEVER_TINY = ["--set", "num_updates=20", "--set", "eval_every=10", "--set", "checkpoint_every=10",
+              "--set", "num_envs=8", "--set", "num_steps=2", "--set", "ppo.epochs=1",
+              "--set", "buffer.capacity=16", "--set", "buffer.topk_k=8",
+              "--set", "remidi.buffer_capacity=8", "--set", "remidi.steps_per_buffer=8"]
+
+
+def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
+    from remidi.experiments import ued
+
+    base = ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY]
+    assert run_cli(capsys, *base, "--out", str(tmp_path / "full"))[0] == 0
+
+    real = ued.train_seeds
+
+    def interrupted(*args, **kwargs):
+        def ctrl_c(done, metrics):
+            if done == 10:
+                raise KeyboardInterrupt
+        return real(*args, **kwargs, on_block=ctrl_c)
+
+    monkeypatch.setattr(ued, "train_seeds", interrupted)
+    code, _, err = run_cli(capsys, *base, "--out", str(tmp_path / "cut"))
+    assert code == 130 and "interrupted" in err
+    assert (tmp_path / "cut" / "checkpoint.npz").exists() and not (tmp_path / "cut" / "summary.json").exists()
+    monkeypatch.setattr(ued, "train_seeds", real)
+
+    code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path / "cut"), "--quiet")
+    assert code == 0, err
+    assert (tmp_path / "cut" / "metrics.csv").read_text() == (tmp_path / "full" / "metrics.csv").read_text()
+    full = json.loads((tmp_path / "full" / "summary.json").read_text())
+    cut = json.loads((tmp_path / "cut" / "summary.json").read_text())
+    assert full["metrics"] == cut["metrics"]
+
+
+def test_resume_errors_are_one_line(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path / "nothing"))
+    assert code == 2 and "holds no run" in err and err.count("\n") == 1
+    code, _, err = run_cli(capsys, "run", "lever", "--resume", str(tmp_path))
+    assert code == 2 and "--resume: takes only the run folder" in err
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "lever", "--set", "buffer.replay_prob=1.5"], "buffer.replay_prob"),
+    (["run", "lever", "--set", "buffer.capacity=-1"], "buffer.capacity"),
+    (["run", "lever", "--set", "remidi.num_buffers=9"], "remidi.num_buffers: must be small enough"),
+    (["run", "lever", "--set", "ppo.nope=1"], "--set: unknown key 'ppo.nope'; allowed:"),
+    (["run", "lever", "--set", "score=regret"], "score: unknown value 'regret'"),
+])
+def test_lever_bad_config_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle):
+    out = tmp_path / "never"
+    code, _, err = run_cli(capsys, *argv, "--out", str(out))
+    assert code == 2 and needle in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, capsys, monkeypatch):
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def stop_in_remidi(task, cfg, algo, *args, **kwargs):
+        def ctrl_c(done, metrics):
+            if algo == "remidi" and done == 10:
+                raise KeyboardInterrupt
+        return real(task, cfg, algo, *args, **kwargs, on_block=ctrl_c)
+
+    monkeypatch.setattr(ued, "train_seeds", stop_in_remidi)
+    out = tmp_path / "both"
+    code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "1", "--quiet", *LEVER_TINY,
+                         "--out", str(out))
+    assert code == 130
+    assert (out / "plr" / "summary.json").exists() and not (out / "remidi" / "summary.json").exists()
+    plr_before = (out / "plr" / "metrics.csv").read_text()
+    monkeypatch.setattr(ued, "train_seeds", real)
+    code, _, err = run_cli(capsys, "run", "--resume", str(out), "--quiet")
+    assert code == 0, err
+    assert (out / "remidi" / "summary.json").exists() and (out / "training.png").exists()
+    assert (out / "plr" / "metrics.csv").read_text() == plr_before  # finished runs are left alone

@@ -22,7 +22,6 @@ import numpy as np
 
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
-from remidi.errors import RemidiError
 from remidi.experiments.outputs import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
@@ -95,9 +94,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     ckpt = Path(out) / CHECKPOINT if out is not None else None
     if ckpt is not None:
         ckpt.parent.mkdir(parents=True, exist_ok=True)
-    if resume:
-        if ckpt is None or not ckpt.exists():
-            raise RemidiError(f"--resume: no checkpoint in {out}; the run must be started again")
+    if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
         done, steps = meta["done"], meta["steps"]
         saved = np.load(ckpt.with_suffix(".history.npz"))

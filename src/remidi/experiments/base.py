@@ -109,15 +109,58 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
 
 
 def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
-    """Continue the run in ``folder`` (one algorithm) from its last checkpoint."""
+    """Continue the run in ``folder`` from its last checkpoint.
+
+    ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
+    run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
+    are redrawn.
+    """
+    folder = Path(folder)
+    if not (folder / "config.json").exists() and folder.is_dir():
+        subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
+        if subs:
+            return _resume_several(exp_lookup, folder, subs, progress)
     folder = outputs.prepare_out_dir(folder, resume=True)
+    exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)
+    return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress)
+
+
+def _saved_run(exp_lookup, folder: Path):
     saved = outputs.read_json(folder / "config.json")
     exp = exp_lookup(saved["experiment"])
     config = config_from_dict(type(exp.config_factory()), saved["config"])
-    algo = saved["algo"]
-    exp.validate(config, algo)
-    return _train_and_write(exp, {algo: folder}, saved["preset"], saved["seeds"], config, folder,
-                            resume=True, progress=progress)
+    exp.validate(config, saved["algo"])
+    return exp, saved["algo"], saved["preset"], saved["seeds"], config
+
+
+def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) -> dict[str, dict]:
+    runs = [(sub, *_saved_run(exp_lookup, sub)) for sub in subs]
+    summaries = {}
+    for sub, exp, algo, preset, seeds, config in runs:
+        if (sub / "summary.json").exists():
+            summaries[algo] = outputs.read_json(sub / "summary.json")
+        else:
+            summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
+                                              progress=progress))
+    exp, config = runs[0][1], runs[0][5]
+    results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
+    exp.plot(folder, results, config)
+    return summaries
+
+
+def result_from_files(folder: Path) -> RunResult:
+    """Rebuild a :class:`RunResult` from a finished run's metrics.csv and summary.json."""
+    rows = outputs.read_metrics_csv(folder / "metrics.csv")
+    summary = outputs.read_json(folder / "summary.json")
+    seeds = summary["seeds"]
+    steps = sorted({step for _, step, _, _ in rows})
+    names = list(dict.fromkeys(name for _, _, name, _ in rows))
+    history = {name: np.full((len(seeds), len(steps)), np.nan) for name in names}
+    seed_index, step_index = {s: i for i, s in enumerate(seeds)}, {s: i for i, s in enumerate(steps)}
+    for seed, step, name, value in rows:
+        history[name][seed_index[seed], step_index[step]] = value
+    extra = {k: v for k, v in summary.items() if k not in ("experiment", "algo", "preset", "seeds", "metrics")}
+    return RunResult(steps=np.asarray(steps), history=history, extra=extra)
 
 
 def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seeds: list[int], config, argv) -> None:

@@ -64,7 +64,10 @@ def load_checkpoint(path: Path, template):
 
 @partial(jax.jit, static_argnums=0)
 def _init(setup: tr.Setup, keys):
-    return jax.vmap(lambda k: tr.init_runner(setup, k))(keys)
+    # lax.map, not vmap: several *batched* QR decompositions (orthogonal initialisers) in one
+    # program hang the CPU runtime of jaxlib 0.10.2 (reproduced with 2+ seeds); initialising
+    # one seed after another avoids them, and runs once per run.
+    return jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
 
 
 @partial(jax.jit, static_argnums=(0, 2))

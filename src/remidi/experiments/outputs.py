@@ -41,6 +41,12 @@ def prepare_out_dir(out: Path, *, resume: bool = False) -> Path:
     return out
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write(path: Path, write, binary: bool = False) -> None:
     """Call ``write(file)`` on a temporary file beside ``path``, then move it onto ``path``.
 
@@ -53,6 +59,7 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are ordinary files
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -166,3 +166,13 @@ def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, c
     assert code == 0, err
     assert (out / "remidi" / "summary.json").exists() and (out / "training.png").exists()
     assert (out / "plr" / "metrics.csv").read_text() == plr_before  # finished runs are left alone
+
+
+def test_several_algorithms_into_a_folder_holding_one_of_them_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "both"
+    (out / "remidi").mkdir(parents=True)
+    (out / "remidi" / "config.json").write_text("{}")
+    code, _, err = run_cli(capsys, "run", "tabular-shared", "--out", str(out), *FAST)
+    assert code == 2 and "already holds a run" in err
+    assert sorted(p.name for p in out.iterdir()) == ["remidi"]
+    assert (out / "remidi" / "config.json").read_text() == "{}"

@@ -99,11 +99,12 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
         exp.validate(config, algo)
     if not seeds:
         raise ConfigError("--seeds: must be an integer ≥ 1")
-    out = outputs.prepare_out_dir(out)
+    out = Path(out)
     folders = {algo: (out / algo if len(algos) > 1 else out) for algo in algos}
+    for folder in {out, *folders.values()}:  # check every folder before writing anything
+        outputs.prepare_out_dir(folder, create=False)
     for algo, folder in folders.items():
-        if folder != out:
-            outputs.prepare_out_dir(folder)
+        outputs.prepare_out_dir(folder)
         write_run_config(folder, exp, algo, preset, seeds, config, argv)
     return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress)
 

@@ -27,8 +27,9 @@ import numpy as np
 from remidi.errors import ConfigError
 
 
-def prepare_out_dir(out: Path, *, resume: bool = False) -> Path:
-    """Check that ``out`` can receive a new run (or holds the run to resume); create it."""
+def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> Path:
+    """Check that ``out`` can receive a new run (or holds the run to resume); create it unless
+    ``create`` is False (check only)."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out: {out} exists and is not a folder")
@@ -37,7 +38,8 @@ def prepare_out_dir(out: Path, *, resume: bool = False) -> Path:
         raise ConfigError(f"--resume: {out} holds no run (no config.json)")
     if not resume and holds_run:
         raise ConfigError(f"--out: {out} already holds a run; choose another folder or pass --resume {out}")
-    out.mkdir(parents=True, exist_ok=True)
+    if create:
+        out.mkdir(parents=True, exist_ok=True)
     return out
 
 

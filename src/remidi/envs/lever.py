@@ -10,6 +10,8 @@ that cannot see the answer.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -71,7 +73,10 @@ class LeverGame(UnderspecifiedEnv):
                           visible=jnp.full((self.num_levers,), visible))
 
 
+@functools.lru_cache(maxsize=None)
 def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplier: float = 10.0) -> UEDTask:
+    """The lever game as a UED task. Cached: the same arguments give the same (immutable) task,
+    so runs in one process reuse its compiled train steps."""
     env = LeverGame(num_levers)
     params = LeverParams(hidden_multiplier=hidden_multiplier)
     return UEDTask(

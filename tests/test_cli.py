@@ -176,3 +176,8 @@ def test_several_algorithms_into_a_folder_holding_one_of_them_writes_nothing(tmp
     assert code == 2 and "already holds a run" in err
     assert sorted(p.name for p in out.iterdir()) == ["remidi"]
     assert (out / "remidi" / "config.json").read_text() == "{}"
+
+
+def test_derived_keys_are_not_settable(capsys, tmp_path):
+    code, _, err = run_cli(capsys, "run", "lever", "--set", "ppo.total_updates=5", "--out", str(tmp_path / "x"))
+    assert code == 2 and "unknown key 'ppo.total_updates'" in err

@@ -63,6 +63,13 @@ class UEDConfig:
     buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
     remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
 
+    def __post_init__(self):
+        # the learning-rate schedule spans the run: ppo.total_updates is always num_updates
+        object.__setattr__(self, "ppo", dataclasses.replace(self.ppo, total_updates=self.num_updates))
+
+
+DERIVED_KEYS = ("ppo.total_updates",)  # not settable: follows num_updates
+
 
 def score_name(cfg: UEDConfig, algo: str) -> str:
     return "neg_return" if algo == "minimax-return" else cfg.score
@@ -110,8 +117,7 @@ def init_runner(setup: Setup, rng) -> Runner:
     rng, k_net, k_level = jax.random.split(rng, 3)
     example_level = task.sample_level(k_level)
     example_obs, _ = task.env.reset_to_level(k_level, example_level, task.params)
-    ppo_cfg = dataclasses.replace(cfg.ppo, total_updates=cfg.num_updates)
-    train_state = create_train_state(k_net, setup.net, example_obs, cfg.num_envs, ppo_cfg)
+    train_state = create_train_state(k_net, setup.net, example_obs, cfg.num_envs, cfg.ppo)
     one = buf.init_buffer(buffer_config(cfg, setup.algo), example_level, extra_names=("max_return",))
     buffers = buf.stack_buffers([one] * num_buffers(cfg, setup.algo))
     zero = jnp.zeros((), jnp.int32)
@@ -157,8 +163,7 @@ def learn(setup: Setup, train_state: TrainState, rng, traj: Trajectory, adv, tar
     batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
                   values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
-    ppo_cfg = dataclasses.replace(setup.cfg.ppo, total_updates=setup.cfg.num_updates)
-    train_state, _ = ppo_update(train_state, carry, batch, rng, ppo_cfg, setup.net.apply)
+    train_state, _ = ppo_update(train_state, carry, batch, rng, setup.cfg.ppo, setup.net.apply)
     return train_state
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import typing
 from typing import Any, Iterable
 
@@ -29,13 +30,18 @@ def parse_set_items(items: Iterable[str]) -> dict[str, str]:
 
 
 def field_names(config) -> list[str]:
-    """All settable keys of a (nested) config dataclass, dotted, in declaration order."""
+    """All settable keys of a (nested) config dataclass, dotted, in declaration order.
+
+    A config class may name keys it derives itself in a ``DERIVED_KEYS`` module attribute
+    (e.g. ``ppo.total_updates`` follows ``num_updates``); those are not settable.
+    """
+    derived = set(getattr(sys.modules[type(config).__module__], "DERIVED_KEYS", ()))
     names = []
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         if dataclasses.is_dataclass(value):
-            names += [f"{f.name}.{sub}" for sub in field_names(value)]
-        else:
+            names += [f"{f.name}.{sub}" for sub in field_names(value) if f"{f.name}.{sub}" not in derived]
+        elif f.name not in derived:
             names.append(f.name)
     return names
 
@@ -114,7 +120,8 @@ def config_from_dict(cls, data: dict[str, Any]):
                 flat[f"{prefix}{k}"] = v
 
     walk("", data)
-    return apply_overrides(cls(), flat, source="config.json")
+    settable = set(field_names(cls()))
+    return apply_overrides(cls(), {k: v for k, v in flat.items() if k in settable}, source="config.json")
 
 
 # ------------------------------------------------------------------------------ validation

@@ -100,9 +100,9 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
         done, steps = meta["done"], meta["steps"]
-        saved = np.load(ckpt.with_suffix(".history.npz"))
-        history = _unstack(saved, "h", len(steps))
-        per_step = _unstack(saved, "p", meta["num_blocks"])
+        with np.load(ckpt.with_suffix(".history.npz")) as saved:
+            history = _unstack(saved, "h", len(steps))
+            per_step = _unstack(saved, "p", meta["num_blocks"])
 
     bar = _progress(cfg.num_updates, done, f"{algo} × {len(seeds)} seeds", progress)
     while done < cfg.num_updates:

@@ -168,6 +168,16 @@ def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, c
     assert (out / "plr" / "metrics.csv").read_text() == plr_before  # finished runs are left alone
 
 
+def test_undefined_metrics_print_as_na(capsys):
+    from remidi.cli import _print_summaries
+
+    _print_summaries({"dr": {"experiment": "lever", "preset": "smoke", "seeds": [0], "metrics": {
+        "replay_fraction/hidden": {"mean": None, "std": None, "per_seed": [None]},
+        "solve_rate/visible": {"mean": 0.5, "std": 0.0, "per_seed": [0.5]}}}}, "out")
+    printed = capsys.readouterr().out
+    assert "n/a" in printed and "0.5000" in printed
+
+
 def test_several_algorithms_into_a_folder_holding_one_of_them_writes_nothing(tmp_path, capsys):
     out = tmp_path / "both"
     (out / "remidi").mkdir(parents=True)

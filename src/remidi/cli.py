@@ -45,7 +45,10 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     for algo, summary in summaries.items():
         print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {len(summary['seeds'])} seeds): final metrics")
         for name, m in summary["metrics"].items():
-            print(f"  {name:32s} {m['mean']:10.4f} ± {m['std']:.4f}")
+            if m["mean"] is None or m["mean"] != m["mean"]:  # undefined (null in JSON, NaN in memory)
+                print(f"  {name:32s} {'n/a':>10s}")
+            else:
+                print(f"  {name:32s} {m['mean']:10.4f} ± {m['std']:.4f}")
     print(f"\nwrote {out}")
 
 

@@ -27,24 +27,29 @@ from remidi.experiments.outputs import atomic_write
 CHECKPOINT = "checkpoint.npz"
 
 
+def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
+    """``replay_fraction/<tag>`` f[S]: the tag's share among the levels replayed in the given
+    steps (``replay`` and ``replayed/<tag>`` are f[S, steps]); NaN where nothing was replayed."""
+    replays = step_metrics["replay"].sum(axis=1)
+    return {f"replay_fraction/{name.split('/', 1)[1]}":
+            np.where(replays > 0, counts.sum(axis=1) / np.maximum(replays * num_envs, 1), np.nan)
+            for name, counts in step_metrics.items() if name.startswith("replayed/")}
+
+
 def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
     """Aggregate per-step metrics f[S, B] of one block into f[S]; ``replayed/<tag>`` counts
-    become ``replay_fraction/<tag>``, the tag's share among the levels replayed in the block."""
-    out = {}
-    replays = step_metrics["replay"].sum(axis=1)
+    become :func:`replay_fractions` of the block."""
+    out = replay_fractions(step_metrics, num_envs)
     for name, values in step_metrics.items():
         if name.startswith("replayed/"):
-            tag = name.split("/", 1)[1]
-            out[f"replay_fraction/{tag}"] = np.where(
-                replays > 0, values.sum(axis=1) / np.maximum(replays * num_envs, 1), np.nan)
-        elif name in ("rejected", "inserted"):
+            continue
+        if name in ("rejected", "inserted"):
             out[name] = values.sum(axis=1)
         elif name == "active_buffer":
             out[name] = values[:, -1]
         else:
             out[name] = values.mean(axis=1)
     return out
-
 
 
 def save_checkpoint(path: Path, runner, meta: dict) -> None:

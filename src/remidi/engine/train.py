@@ -246,21 +246,17 @@ def train_step(setup: Setup, runner: Runner):
 
 
 def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
-    """Share of each tag among the valid levels of the active buffer, and of every buffer."""
+    """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active one."""
     out = {}
-    k = runner.buffers.valid.shape[0]
-    for b in range(k):
-        one = buf.select_buffer(runner.buffers, b)
-        counts = tag_counts(setup, one.levels, one.valid.astype(jnp.float32))
-        size = jnp.maximum(jnp.sum(one.valid), 1)
-        for name, c in counts.items():
-            out[f"buffer_fraction/{name}/b{b}"] = c / size
-    active = buf.select_buffer(runner.buffers, runner.active)
-    counts = tag_counts(setup, active.levels, active.valid.astype(jnp.float32))
-    size = jnp.maximum(jnp.sum(active.valid), 1)
-    for name, c in counts.items():
-        out[f"buffer_fraction/{name}"] = c / size
-    out["buffer_size"] = jnp.sum(active.valid).astype(jnp.float32)
+    valid = runner.buffers.valid  # bool[K, C]
+    sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
+    counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels, valid)
+    for name, c in counts.items():  # c: f32[K]
+        fractions = c / sizes
+        for b in range(valid.shape[0]):
+            out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
+        out[f"buffer_fraction/{name}"] = fractions[runner.active]
+    out["buffer_size"] = jnp.sum(valid[runner.active]).astype(jnp.float32)
     return out
 
 

@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from remidi.engine.driver import train_seeds
+from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.train import ALGORITHMS, UEDConfig, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
@@ -23,14 +23,7 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
     """Share of each tag among the levels replayed over the last ``last`` of training, f[S]."""
     n = raw["replay"].shape[1]
     window = slice(n - max(1, int(round(n * last))), n)
-    replays = raw["replay"][:, window].sum(axis=1)
-    out = {}
-    for name, counts in raw.items():
-        if name.startswith("replayed/"):
-            tag = name.split("/", 1)[1]
-            out[f"replay_fraction/{tag}"] = np.where(
-                replays > 0, counts[:, window].sum(axis=1) / np.maximum(replays * num_envs, 1), np.nan)
-    return out
+    return replay_fractions({name: values[:, window] for name, values in raw.items()}, num_envs)
 
 
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...]):

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from remidi.engine.rollout import Frozen, rollout
-from remidi.envs.interface import AutoReplay, UEDTask
+from remidi.envs.interface import AutoReplay
 from seq_env import SeqEnv, level, stack
 
 ENV = SeqEnv()
@@ -15,14 +15,13 @@ def run_tracker(agent_level, frozen_levels, valid=None, mode="prefix", steps=Non
     """Roll a constant-action policy on one agent level; return indist bool[T]."""
     frozen_batch = stack(*frozen_levels)
     valid = jnp.ones(len(frozen_levels), bool) if valid is None else jnp.asarray(valid)
-    task = UEDTask(env=ENV, params=None, sample_level=None, num_actions=2, max_episode_steps=10)
 
     def apply(variables, carry, obs, reset):
         return carry, (jnp.zeros(obs.shape + (2,)).at[..., 0].set(10.0), jnp.zeros(obs.shape))
 
     levels = stack(agent_level)
     steps = steps or int(agent_level.length)
-    traj, _ = rollout(jax.random.PRNGKey(0), task, apply, {}, jnp.zeros(1), levels, steps,
+    traj, _ = rollout(jax.random.PRNGKey(0), ENV, None, apply, {}, jnp.zeros(1), levels, steps,
                       Frozen(levels=frozen_batch, valid=valid), mode)
     return np.asarray(traj.indist[:, 0])
 

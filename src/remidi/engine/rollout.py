@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from remidi.engine import tracker as trk
-from remidi.envs.interface import AutoReplay, UEDTask
+from remidi.envs.interface import AutoReplay, UnderspecifiedEnv
 
 
 @struct.dataclass
@@ -38,22 +38,22 @@ class Frozen:
     valid: jax.Array
 
 
-def rollout(rng, task: UEDTask, apply_fn: Callable, params, init_carry, levels, num_steps: int,
-            frozen: Frozen | None = None, tracker_mode: str = "prefix"):
-    """Roll out the policy on ``levels`` (leaves [N, ...]) for ``num_steps`` steps.
+def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
+            num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix"):
+    """Roll out the policy on ``levels`` (leaves [N, ...]) of ``env`` for ``num_steps`` steps.
 
     ``apply_fn({"params": params}, carry, obs[1, N, ...], reset bool[1, N]) -> carry,
     (logits [1, N, A], value [1, N])`` (a flax module's ``apply``). With ``frozen`` the tracker runs beside every env; without it ``indist``
     is all False. Returns ``(trajectory, last_value f32[N])``.
     """
-    env = AutoReplay(task.env)
+    base_env, env = env, AutoReplay(env)
     num_envs = jax.tree.leaves(levels)[0].shape[0]
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
-    obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, task.params)
+    obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
     if frozen is not None:
         tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
-            task.env, task.params, reset_keys, frozen.levels, frozen.valid, obs)
+            base_env, env_params, reset_keys, frozen.levels, frozen.valid, obs)
     else:
         tstate = None
 
@@ -71,10 +71,10 @@ def rollout(rng, task: UEDTask, apply_fn: Callable, params, init_carry, levels, 
         log_prob = jnp.take_along_axis(jax.nn.log_softmax(logits), action[:, None], axis=-1)[:, 0]
         env_keys = jax.random.split(k_env, num_envs)
         next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-            env_keys, state, action, task.params)
+            env_keys, state, action, env_params)
         if tstate is not None:
             tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
-                task.env, task.params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
+                base_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
                             reward=reward.astype(jnp.float32), done=done, indist=indist)
         return (state, next_obs, done, hidden, tstate), record

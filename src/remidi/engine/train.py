@@ -145,8 +145,8 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     """
     cfg, task = setup.cfg, setup.task
     carry = setup.net.initialize_carry(cfg.num_envs)
-    traj, last_value = rollout(rng, task, setup.net.apply, runner.train_state.params, carry, levels,
-                               cfg.num_steps, frozen, cfg.remidi.tracker)
+    traj, last_value = rollout(rng, task.env, task.params, setup.net.apply, runner.train_state.params, carry,
+                               levels, cfg.num_steps, frozen, cfg.remidi.tracker)
     adv, targets = compute_gae(traj.reward, traj.value, traj.done, last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
     mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
     return traj, adv, targets, mean_return, best_return
@@ -267,19 +267,41 @@ def first_episode_return(reward: jax.Array, done: jax.Array) -> jax.Array:
     return jnp.sum(jnp.where(ended_before == 0, reward, 0.0), axis=0)
 
 
+def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
+    """The evaluation sets grouped by the environment that plays them (``task.eval_envs``, else
+    ``task.env``), each group's names sorted: one rollout per group."""
+    groups: list[tuple[object, list[str]]] = []
+    for name in sorted(task.eval_sets):
+        env = task.eval_envs.get(name, task.env)
+        for genv, names in groups:
+            if genv is env:
+                names.append(name)
+                break
+        else:
+            groups.append((env, [name]))
+    return groups
+
+
 def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
-    """Solve rate and mean return on each evaluation set: ``eval_attempts`` sampled episodes per level."""
+    """Solve rate and mean return on each evaluation set: ``eval_attempts`` sampled episodes per
+    level, the first episode of each. The sets one environment plays are rolled out together."""
     task, cfg = setup.task, setup.cfg
     out = {}
-    for i, (name, levels) in enumerate(sorted(task.eval_sets.items())):
-        tiled = jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), levels)
-        n = jax.tree.leaves(tiled)[0].shape[0]
-        carry = setup.net.initialize_carry(n)
-        traj, _ = rollout(jax.random.fold_in(rng, i), task, setup.net.apply, runner.train_state.params,
-                          carry, tiled, task.max_episode_steps)
+    for i, (env, names) in enumerate(eval_groups(task)):
+        tiled = [jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), task.eval_sets[name])
+                 for name in names]
+        sizes = [jax.tree.leaves(t)[0].shape[0] for t in tiled]
+        levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
+        carry = setup.net.initialize_carry(sum(sizes))
+        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply,
+                          runner.train_state.params, carry, levels, task.max_episode_steps)
         returns = first_episode_return(traj.reward, traj.done)
-        out[f"solve_rate/{name}"] = jnp.mean(task.solved(returns).astype(jnp.float32))
-        out[f"return/{name}"] = jnp.mean(returns)
+        start = 0
+        for name, size in zip(names, sizes):
+            ret = returns[start:start + size]
+            start += size
+            out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
+            out[f"return/{name}"] = jnp.mean(ret)
     return out
 
 

@@ -85,6 +85,8 @@ class UEDTask:
         optimal_return: ``level -> f32[]`` best achievable return, or None if unknown (then the
             perfect-regret score is unavailable).
         eval_sets: name → level batch (leading dim = number of levels) to report solve rates on.
+        eval_envs: name → the environment that plays that evaluation set, where it is not ``env``
+            (e.g. a held-out maze larger than the training grid); same ``params``.
         level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
             fractions (e.g. ``{"hidden": ...}``).
         solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved.
@@ -97,5 +99,6 @@ class UEDTask:
     max_episode_steps: int
     optimal_return: Callable[[Any], jax.Array] | None = None
     eval_sets: dict[str, Any] = field(default_factory=dict)
+    eval_envs: dict[str, UnderspecifiedEnv] = field(default_factory=dict)
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
     solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0

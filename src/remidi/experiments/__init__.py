@@ -7,10 +7,10 @@ from remidi.experiments.base import Experiment
 
 
 def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import lever, tabular
+    from remidi.experiments import lever, maze, tabular
 
     found: dict[str, Experiment] = {}
-    for module in (tabular, lever):
+    for module in (tabular, lever, maze):
         for exp in module.EXPERIMENTS:
             found[exp.name] = exp
     return found

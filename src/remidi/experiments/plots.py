@@ -52,6 +52,30 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "") -> None:
         ax.legend(fontsize=8)
     if title:
         fig.suptitle(title)
+    _save(fig, path)
+
+
+def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "") -> None:
+    """Grouped bar chart into the PNG ``path``: one group per label, one bar per series;
+    ``series[name]`` f[len(labels), S] over seeds, drawn as mean with a ± std error bar."""
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(labels) * max(1, len(series)) ** 0.5 + 2), 4.2))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    width = 0.8 / max(1, len(series))
+    x = np.arange(len(labels))
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values, dtype=float)
+        ax.bar(x + (i - (len(series) - 1) / 2) * width, values.mean(axis=1), width, yerr=values.std(axis=1),
+               label=name, color=colors[i % len(colors)], capsize=2)
+    ax.set_xticks(x, labels, rotation=35, ha="right", fontsize=8)
+    ax.set_title(title)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8)
+    _save(fig, path)
+
+
+def _save(fig, path: Path) -> None:
+    """Save atomically (temporary file, then rename) and close the figure."""
     fig.tight_layout()
     tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
     fig.savefig(tmp, dpi=110)

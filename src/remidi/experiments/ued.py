@@ -16,7 +16,7 @@ from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.train import ALGORITHMS, UEDConfig, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import Curve, Panel, plot_panels
+from remidi.experiments.plots import Curve, Panel, plot_bars, plot_panels
 
 
 def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: float = 0.1) -> dict[str, np.ndarray]:
@@ -26,12 +26,18 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
     return replay_fractions({name: values[:, window] for name, values in raw.items()}, num_envs)
 
 
-def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...]):
+def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
+               derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None):
+    """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
+    over evaluation sets), f[S, T] each."""
+
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
         steps, history, raw, _ = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
                                              progress=ctx.progress)
+        if derive is not None:
+            history.update(derive(history))
         final = {name: history[name][:, -1] for name in history}
         final.update(final_replay_fractions(raw, cfg.num_envs))
         ordered = {name: final[name] for name in summary_metrics if name in final}
@@ -41,8 +47,10 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
     return train
 
 
-def make_plot(panels: tuple[tuple[str, str], ...]):
-    """``panels``: (metric, title) pairs; one panel per metric, one curve per algorithm."""
+def make_plot(panels: tuple[tuple[str, str], ...], bars: tuple[str, tuple[str, ...]] | None = None):
+    """``panels``: (metric, title) pairs; one panel per metric, one curve per algorithm, saved as
+    ``training.png``. ``bars``: (title, metrics): a bar chart of those metrics' final values per
+    algorithm (mean ± std over seeds), saved as ``final.png``."""
 
     def plot(folder: Path, results: dict[str, RunResult], cfg) -> None:
         figure = []
@@ -50,17 +58,24 @@ def make_plot(panels: tuple[tuple[str, str], ...]):
             curves = [Curve(algo, r.steps, r.history[metric]) for algo, r in results.items() if metric in r.history]
             figure.append(Panel(title, curves, metric.split("/")[0].replace("_", " "), "update"))
         plot_panels(folder / "training.png", figure)
+        if bars is not None:
+            title, metrics = bars
+            finals = {algo: r.final_metrics() for algo, r in results.items()}
+            series = {algo: np.stack([np.asarray(f[m], float) for m in metrics]) for algo, f in finals.items()
+                      if all(m in f for m in metrics)}  # [M, S] per algorithm
+            labels = [m.split("/", 1)[-1] for m in metrics]
+            plot_bars(folder / "final.png", title, labels, series, metrics[0].split("/")[0].replace("_", " "))
 
     return plot
 
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
-                        summary_metrics, plot_panels_spec) -> Experiment:
+                        summary_metrics, plot_panels_spec, derive=None, bar_chart=None) -> Experiment:
     def validate(cfg: UEDConfig, algo: str) -> None:
         validate_ued_config(cfg, algo, task_factory(cfg))
 
     return Experiment(
         name=name, description=description, algorithms=ALGORITHMS, config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_factory, summary_metrics), plot=make_plot(plot_panels_spec),
+        train=make_train(task_factory, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
     )

@@ -1,0 +1,334 @@
+"""The maze domain (paper §6.3): MiniGrid-style mazes, T-mazes, blindfolded mazes, held-out mazes.
+
+The environment is ``jaxued``'s :class:`~jaxued.environments.Maze` (the UED reference
+implementation), wrapped by :class:`MazeEnv`, which adds two kinds of level the ReMiDi paper
+needs. On an ordinary level :class:`MazeEnv` *is* ``jaxued``'s ``Maze`` (observations, rewards
+and dones agree step for step, see ``tests/test_maze_env.py``):
+
+* a ``size × size`` grid (13 for training), walls, a goal and an agent with a direction;
+* actions ``0`` left, ``1`` right, ``2`` forward (``3..6`` do nothing), so 7 discrete actions;
+* an egocentric 5×5 view (object, colour, state channels, divided by 10) plus the direction;
+* reward ``1 − 0.9·(t+1)/T`` on the step ``t`` (0-based) that moves into the goal, which ends
+  the episode; ``T = 250`` steps at most.
+
+Level kinds (flags of :class:`MazeLevel`):
+
+* **T-maze** (``tmaze``): the agent stands at the junction of a T facing its top wall; the goal
+  sits at the end of the left or the right arm and is drawn as an empty cell, so it cannot be
+  seen. The first action that changes the agent's position ends the episode with ``+1`` if it
+  moved towards the goal (the Manhattan distance to the goal fell) and ``−1`` otherwise (the
+  other arm, or the stem). Every cell the agent can never see from the junction is a wall with
+  probability 1/2, so T-mazes are distinct levels that all play identically. Optimal return 1;
+  any policy that cannot see the goal has regret ≥ 1 on one of the two sides.
+* **Blind** (``blind``): an ordinary maze whose observations are all zeros (image and direction).
+
+Optimal return (:func:`optimal_return`): an exact shortest path over (position, direction)
+states, see its docstring for the convention.
+
+Held-out test mazes (:func:`held_out_sets`): eight ``jaxued`` prefabs, loaded from
+``jaxued.environments.maze.level.prefabs`` at run time, and the two corridor mazes of
+:func:`corridor_levels`. Each is played at its own size (LargeCorridor is 19×19) by the same
+network, since the observation is always the 5×5 view.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+from jaxued.environments.maze import Maze
+from jaxued.environments.maze.env import DIR_TO_VEC, EnvParams, Observation, make_maze_map
+
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+
+__all__ = [
+    "MazeLevel", "MazeState", "MazeEnv", "MAX_STEPS", "TRAIN_SIZE", "NUM_WALLS", "PREFAB_NAMES", "HELD_OUT_NAMES",
+    "random_maze", "tmaze_level", "prefab_level", "corridor_levels", "held_out_sets", "cost_to_go", "shortest_path_steps",
+    "optimal_return", "maze_task", "from_jaxued",
+]
+
+MAX_STEPS = 250
+TRAIN_SIZE = 13
+NUM_WALLS = 25
+VIEW = 5
+UP = 3
+PREFAB_NAMES = ("SixteenRooms", "SixteenRooms2", "Labyrinth", "LabyrinthFlipped", "Labyrinth2",
+                "StandardMaze", "StandardMaze2", "StandardMaze3")
+CORRIDORS = {"SmallCorridor": 13, "LargeCorridor": 19}
+HELD_OUT_NAMES = PREFAB_NAMES + tuple(CORRIDORS)
+
+
+@struct.dataclass
+class MazeLevel:
+    """One maze level. Positions are ``(x, y)``; ``wall_map[y, x]``; directions 0 right, 1 down,
+    2 left, 3 up. Field names and dtypes follow ``jaxued``'s ``Level`` (without its width and
+    height: the wall map's shape is the level's size)."""
+
+    wall_map: jax.Array  # bool[H, W]
+    goal_pos: jax.Array  # u32[2]
+    agent_pos: jax.Array  # u32[2]
+    agent_dir: jax.Array  # u8[]
+    tmaze: jax.Array  # bool[]: a T-maze (hidden goal, one move decides)
+    blind: jax.Array  # bool[]: observations are all zeros
+
+    @classmethod
+    def make(cls, wall_map, goal_pos, agent_pos, agent_dir, tmaze=False, blind=False) -> "MazeLevel":
+        """A level with canonical dtypes (so every level has the same pytree type)."""
+        return cls(wall_map=jnp.asarray(wall_map, bool), goal_pos=jnp.asarray(goal_pos, jnp.uint32).reshape(2),
+                   agent_pos=jnp.asarray(agent_pos, jnp.uint32).reshape(2),
+                   agent_dir=jnp.asarray(agent_dir, jnp.uint8).reshape(()),
+                   tmaze=jnp.asarray(tmaze, bool), blind=jnp.asarray(blind, bool))
+
+
+def from_jaxued(level) -> MazeLevel:
+    """An ordinary :class:`MazeLevel` from a ``jaxued`` ``Level``."""
+    return MazeLevel.make(level.wall_map, level.goal_pos, level.agent_pos, level.agent_dir)
+
+
+@struct.dataclass
+class MazeState:
+    inner: object  # jaxued's EnvState (agent_pos, agent_dir, goal_pos, wall_map, maze_map, time, terminal)
+    tmaze: jax.Array  # bool[]
+    blind: jax.Array  # bool[]
+
+
+class MazeEnv(UnderspecifiedEnv):
+    """``jaxued``'s ``Maze`` (normalised observations, time-penalised reward) plus T-mazes and
+    blindfolds. ``size``: the grid side this instance plays (levels must be ``size × size``)."""
+
+    def __init__(self, size: int = TRAIN_SIZE, view: int = VIEW):
+        self.size = size
+        self.view = view
+        self.maze = Maze(max_height=size, max_width=size, agent_view_size=view, normalize_obs=True)
+
+    def __hash__(self):
+        return hash((MazeEnv, self.size, self.view))
+
+    def __eq__(self, other):
+        return isinstance(other, MazeEnv) and (self.size, self.view) == (other.size, other.view)
+
+    @property
+    def default_params(self) -> EnvParams:
+        return EnvParams(max_steps_in_episode=MAX_STEPS)
+
+    def action_space(self, params):
+        return self.maze.action_space(params)
+
+    def _canonical(self, inner):
+        # jaxued's state mixes Python scalars and u8/i32 directions; fix one type for scan carries
+        return inner.replace(agent_pos=inner.agent_pos.astype(jnp.uint32), agent_dir=jnp.asarray(inner.agent_dir, jnp.uint8),
+                             time=jnp.asarray(inner.time, jnp.int32), terminal=jnp.asarray(inner.terminal, bool))
+
+    def _observe(self, state: MazeState) -> Observation:
+        obs = self.maze.get_obs(state.inner)
+        return Observation(image=jnp.where(state.blind, 0.0, obs.image),
+                           agent_dir=jnp.where(state.blind, 0, obs.agent_dir).astype(jnp.uint8))
+
+    def reset_env_to_level(self, rng, level: MazeLevel, params):
+        inner = self.maze.init_state_from_level(level)
+        # a T-maze's goal is drawn as an empty cell
+        hidden = make_maze_map(level, self.view - 1, ignore_goal=True)
+        inner = self._canonical(inner.replace(maze_map=jnp.where(level.tmaze, hidden, inner.maze_map)))
+        state = MazeState(inner=inner, tmaze=level.tmaze, blind=level.blind)
+        return self._observe(state), state
+
+    def step_env(self, rng, state: MazeState, action, params):
+        _, inner, reward, done, info = self.maze.step_env(rng, state.inner, action, params)
+        inner = self._canonical(inner)
+        old, new = state.inner.agent_pos.astype(jnp.int32), inner.agent_pos.astype(jnp.int32)
+        goal = state.inner.goal_pos.astype(jnp.int32)
+        moved = jnp.any(new != old)
+        towards = jnp.sum(jnp.abs(new - goal)) < jnp.sum(jnp.abs(old - goal))
+        reward = jnp.where(state.tmaze, jnp.where(moved, jnp.where(towards, 1.0, -1.0), 0.0), reward)
+        done = jnp.where(state.tmaze, moved | done, done)
+        state = state.replace(inner=inner.replace(terminal=done))
+        return self._observe(state), state, reward.astype(jnp.float32), done, info
+
+
+# ------------------------------------------------------------------------------------ levels
+def random_maze(rng, size: int = TRAIN_SIZE, num_walls: int = NUM_WALLS) -> MazeLevel:
+    """The UED standard random maze: ``num_walls`` wall cells drawn i.i.d. (with replacement, as
+    ``jaxued``'s generator does), then the agent (random direction) and the goal on free cells."""
+    from jaxued.environments.maze import make_level_generator
+
+    return from_jaxued(make_level_generator(size, size, num_walls)(rng))
+
+
+def view_window(pos, direction: int, view: int = VIEW, size: int = TRAIN_SIZE) -> np.ndarray:
+    """bool[size, size]: the cells inside the agent's view from ``pos`` (x, y) facing ``direction``
+    (the same window ``jaxued``'s partial observation slices, clipped to the grid)."""
+    fwd = np.asarray(DIR_TO_VEC)[direction].astype(int)
+    pos = np.asarray(pos, int)
+    side = (fwd == 0) * (view // 2)
+    corners = np.stack([pos, pos + fwd * (view - 1), pos + side, pos - side])
+    lo, hi = corners.min(0), corners.max(0)
+    ys, xs = np.mgrid[0:size, 0:size]
+    return (xs >= lo[0]) & (xs <= hi[0]) & (ys >= lo[1]) & (ys <= hi[1])
+
+
+@functools.lru_cache(maxsize=None)
+def _tmaze_layout(size: int, view: int):
+    """(open bool[size, size], visible bool[size, size]) of the T-maze: junction at the centre,
+    arms and stem ``view − 1`` long; ``visible`` = every cell seen from the junction."""
+    c = size // 2
+    arm = min(view - 1, c)
+    open_ = np.zeros((size, size), bool)
+    open_[c, c - arm:c + arm + 1] = True  # the top bar of the T
+    open_[c:c + arm + 1, c] = True  # the stem
+    visible = np.zeros((size, size), bool)
+    for d in range(4):
+        visible |= view_window((c, c), d, view, size)
+    return open_, visible
+
+
+def tmaze_level(rng, size: int = TRAIN_SIZE, view: int = VIEW) -> MazeLevel:
+    """A T-maze: agent at the junction facing up, hidden goal at the end of a random arm, every
+    never-seen cell a wall with probability 1/2."""
+    open_, visible = _tmaze_layout(size, view)
+    k_side, k_walls = jax.random.split(rng)
+    c = size // 2
+    arm = min(view - 1, c)
+    noise = jax.random.bernoulli(k_walls, 0.5, (size, size))
+    wall_map = jnp.where(visible, ~open_, noise)
+    goal_x = jnp.where(jax.random.bernoulli(k_side), c + arm, c - arm)
+    return MazeLevel.make(wall_map, jnp.stack([goal_x, jnp.asarray(c)]), (c, c), UP, tmaze=True)
+
+
+def prefab_level(name: str) -> MazeLevel:
+    """A ``jaxued`` prefab maze (``jaxued.environments.maze.level.prefabs``), loaded at run time."""
+    from jaxued.environments.maze.level import Level, prefabs
+
+    return from_jaxued(Level.from_str(prefabs[name]))
+
+
+def corridor_levels(size: int) -> MazeLevel:
+    """The corridor maze of side ``size`` (odd), one level per goal placement (leading dim = number
+    of dead ends); the goal is drawn uniformly per episode, so a solve rate over the batch is the
+    expected solve rate.
+
+    Layout: a ring corridor along the border; the middle row is a wall except at its two ends;
+    every even interior column holds two dead-end corridors, one running from the top border down
+    towards the middle row and one from the bottom border up towards it; every other cell is a
+    wall. The agent starts at the left end of the middle row, facing up; the goal sits at the
+    inner end of one dead end (the cell next to the middle row).
+    """
+    assert size % 2 == 1 and size >= 5, size
+    mid = size // 2
+    walls = np.ones((size, size), bool)
+    walls[0, :] = walls[-1, :] = walls[:, 0] = walls[:, -1] = False  # the ring
+    columns = list(range(2, size - 2, 2))
+    for x in columns:
+        walls[1:mid, x] = False  # from the top border to the middle
+        walls[mid + 1:size - 1, x] = False  # from the bottom border to the middle
+    goals = [(x, y) for x in columns for y in (mid - 1, mid + 1)]
+    levels = [MazeLevel.make(walls, goal, (0, mid), UP) for goal in goals]
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *levels)
+
+
+def _stack(levels):
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *levels)
+
+
+def held_out_sets() -> dict[str, tuple[int, MazeLevel]]:
+    """name → (grid size, level batch) for the ten held-out test mazes."""
+    sets = {name: (TRAIN_SIZE, _stack([prefab_level(name)])) for name in PREFAB_NAMES}
+    for name, size in CORRIDORS.items():
+        sets[name] = (size, corridor_levels(size))
+    return sets
+
+
+# ----------------------------------------------------------------------------- optimal return
+def cost_to_go(level: MazeLevel) -> jax.Array:
+    """f32[4, H, W]: from each state (facing ``d``, at ``(x, y)`` → index ``[d, y, x]``), the fewest
+    actions after which the agent receives the goal reward (the last one is the forward move into
+    the goal); ``inf`` where the goal is unreachable, and on walls. Exact: a shortest path over
+    (position, direction) states — turn left, turn right, or forward (blocked by walls and the
+    grid's edge) — as the fixed point of the Bellman equation, iterated until nothing changes
+    (jit-able, vmappable)."""
+    h, w = level.wall_map.shape
+    is_goal = (jnp.arange(h)[:, None] == level.goal_pos[1]) & (jnp.arange(w)[None, :] == level.goal_pos[0])
+    # the goal cell counts as reached (0); walls can never be stood on (inf)
+    fixed = jnp.broadcast_to(jnp.where(is_goal, 0.0, jnp.inf), (4, h, w))
+    pinned = jnp.broadcast_to(level.wall_map | is_goal, (4, h, w))
+
+    def ahead(cost_d, d):
+        """cost_d f32[H, W] of the cell in front of each cell when facing d (inf past the edge)."""
+        padded = jnp.pad(cost_d, 1, constant_values=jnp.inf)
+        dx, dy = [(1, 0), (0, 1), (-1, 0), (0, -1)][d]
+        return padded[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+
+    def relax(cost):
+        forward = jnp.stack([ahead(cost[d], d) for d in range(4)])
+        turn = jnp.minimum(jnp.roll(cost, 1, axis=0), jnp.roll(cost, -1, axis=0))  # now facing d∓1
+        return jnp.where(pinned, fixed, jnp.minimum(cost, 1.0 + jnp.minimum(turn, forward)))
+
+    _, cost = jax.lax.while_loop(lambda c: jnp.any(c[0] != c[1]), lambda c: (c[1], relax(c[1])),
+                                 (fixed, relax(fixed)))
+    return cost
+
+
+def shortest_path_steps(level: MazeLevel) -> jax.Array:
+    """f32[]: the fewest actions from the level's start to the goal reward (:func:`cost_to_go`)."""
+    cost = cost_to_go(level)
+    return cost[level.agent_dir.astype(jnp.int32), level.agent_pos[1], level.agent_pos[0]]
+
+
+def optimal_return(level: MazeLevel, max_steps: int = MAX_STEPS) -> jax.Array:
+    """f32[]: the best return achievable on ``level``.
+
+    Convention: an ordinary (or blind) maze's goal reached with the ``n``-th action pays
+    ``1 − 0.9·n/T`` (the reward the environment gives at step ``t = n − 1``), so the optimal
+    return is that value for ``n`` = :func:`shortest_path_steps`, and ``0`` when the goal is
+    unreachable or ``n > T``. (``jaxued``'s ``MazeSolved.optimal_value`` uses ``n + 1``, one step
+    too many.) A T-maze's optimal return is ``1``: an agent that could see the goal would step
+    towards it at once. Blindness does not change the level's optimum.
+    """
+    n = shortest_path_steps(level)
+    maze = jnp.where(n <= max_steps, 1.0 - 0.9 * n / max_steps, 0.0)
+    return jnp.where(level.tmaze, 1.0, maze).astype(jnp.float32)
+
+
+# -------------------------------------------------------------------------------------- tasks
+KINDS = ("maze", "tmaze", "blindfold")
+
+
+@functools.lru_cache(maxsize=None)
+def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS) -> UEDTask:
+    """The maze domain as a UED task. Cached: the same arguments give the same task (and reuse its
+    compiled train steps).
+
+    ``kind``: ``"tmaze"`` (each generated level is a T-maze with probability ``prob``, tag
+    ``tmaze``), ``"blindfold"`` (each is blind with probability ``prob``, tag ``blind``) or
+    ``"maze"`` (ordinary mazes only). Evaluation sets: the ten held-out mazes.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"maze kind must be one of {KINDS}, got {kind!r}")
+    env = MazeEnv(TRAIN_SIZE)
+
+    def sample_level(rng):
+        k_kind, k_maze, k_t = jax.random.split(rng, 3)
+        special = jax.random.bernoulli(k_kind, prob) if kind != "maze" else jnp.asarray(False)
+        maze = random_maze(k_maze, TRAIN_SIZE, num_walls)
+        if kind == "tmaze":
+            t = tmaze_level(k_t, TRAIN_SIZE)
+            return jax.tree.map(lambda a, b: jnp.where(special, a, b), t, maze)
+        return maze.replace(blind=special)
+
+    tag = {"tmaze": "tmaze", "blindfold": "blind"}.get(kind)
+    sets = held_out_sets()
+    envs = {size: (env if size == TRAIN_SIZE else MazeEnv(size)) for size, _ in sets.values()}
+    return UEDTask(
+        env=env,
+        params=env.default_params,
+        sample_level=sample_level,
+        num_actions=env.action_space(env.default_params).n,
+        max_episode_steps=MAX_STEPS,
+        optimal_return=optimal_return,
+        eval_sets={name: levels for name, (_, levels) in sets.items()},
+        eval_envs={name: envs[size] for name, (size, _) in sets.items() if size != TRAIN_SIZE},
+        level_tags=(lambda level: {tag: getattr(level, "tmaze" if tag == "tmaze" else "blind")}) if tag else
+        (lambda level: {}),
+    )

@@ -1,4 +1,4 @@
-"""The ``remidi`` command line: ``solve``, ``run``, ``list``.
+"""The ``remidi`` command line: ``solve``, ``run``, ``list``, ``render``.
 
 Bad input never reaches JAX: every argument is validated first and reported as one line
 ``remidi: error: ...`` with exit status 2, before anything is written.
@@ -85,6 +85,23 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_render(args) -> int:
+    from remidi import render
+
+    if args.what == "maze":
+        print(f"wrote {render.render_maze(args.name, out=args.out, tile=args.tile)}")
+    elif args.what == "buffers":
+        path = render.render_buffers(args.run_dir, top=args.top, seed=args.seed, out=args.out, tile=args.tile)
+        print(f"wrote {path}")
+    elif args.what == "episode":
+        episode = render.render_episode(args.run_dir, args.maze, seed=args.seed, attempt_seed=args.attempt_seed,
+                                        goal_index=args.goal_index, out=args.out, tile=args.tile)
+        print(episode.line())
+    else:
+        raise RemidiError("remidi render: say what to draw: maze, buffers or episode (see remidi render --help)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="remidi", description="ReMiDi and Bayesian level-perfect minimax regret for UED.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -114,6 +131,41 @@ def build_parser() -> argparse.ArgumentParser:
     lst = sub.add_parser("list", help="list experiments, algorithms, presets and config keys",
                          description="List experiments with their algorithms, presets and --set keys.")
     lst.set_defaults(func=_cmd_list)
+
+    render = sub.add_parser("render", help="draw held-out mazes, a run's level buffers, or an episode",
+                            description="Draw a held-out maze (PNG), the top-scored levels of each level buffer "
+                                        "of a maze run's checkpoint (PNG), or the checkpoint's agent playing one "
+                                        "episode on a held-out maze (animated GIF).")
+    what = render.add_subparsers(dest="what", metavar="WHAT", parser_class=_Parser)
+    tile = dict(type=int, default=16, help="pixels per maze cell (default 16)")
+    maze = what.add_parser("maze", help="a held-out maze (every goal placement of a corridor maze)",
+                           description="Draw a held-out maze as a PNG; the corridor mazes get one tile per "
+                                       "goal placement.")
+    maze.add_argument("name", metavar="NAME", help="held-out maze name (e.g. SixteenRooms, SmallCorridor)")
+    maze.add_argument("--out", metavar="FILE.png", help="output file (default: NAME.png in the current folder)")
+    maze.add_argument("--tile", **tile)
+    buffers = what.add_parser("buffers", help="the top-scored levels of each level buffer of a maze run",
+                              description="Draw the top-K scored levels of every level buffer in RUN_DIR's "
+                                          "checkpoint, one row per buffer (the active one marked), each titled "
+                                          "with its score and tags.")
+    run_dir = "a tmaze or blindfold run folder (config.json, checkpoint.npz)"
+    buffers.add_argument("run_dir", metavar="RUN_DIR", help=run_dir)
+    buffers.add_argument("--top", type=int, default=8, help="levels per buffer (default 8)")
+    buffers.add_argument("--seed", type=int, help="which of the run's seeds (default: its first)")
+    buffers.add_argument("--out", metavar="FILE.png", help="output file (default: RUN_DIR/buffers_seed<S>.png)")
+    buffers.add_argument("--tile", **tile)
+    episode = what.add_parser("episode", help="the trained agent playing one episode on a held-out maze (GIF)",
+                              description="Play one episode (at most 250 steps) of RUN_DIR's checkpointed agent "
+                                          "on a held-out maze and save it as an animated GIF showing the agent "
+                                          "and its 5x5 view.")
+    episode.add_argument("run_dir", metavar="RUN_DIR", help=run_dir)
+    episode.add_argument("--maze", required=True, metavar="NAME", help="held-out maze name")
+    episode.add_argument("--seed", type=int, help="which of the run's seeds (default: its first)")
+    episode.add_argument("--attempt-seed", type=int, default=0, help="seed of the sampled actions (default 0)")
+    episode.add_argument("--goal-index", type=int, help="goal placement of a corridor maze (default 0)")
+    episode.add_argument("--out", metavar="FILE.gif", help="output file (default: RUN_DIR/episode_<NAME>_seed<S>.gif)")
+    episode.add_argument("--tile", **tile)
+    render.set_defaults(func=_cmd_render)
     return parser
 
 

@@ -131,13 +131,15 @@ class ResetLSTM(nn.Module):
 
 
 class MazeLSTMActorCritic(nn.Module):
-    """The maze agent: conv(5x5 view) + embedded direction -> LSTM(256) -> 32-unit heads.
+    """The maze agent of the paper (SPEC §5) and of jaxued's maze examples: conv(5x5 view) +
+    embedded direction -> LSTM(256) -> 32-unit heads.
 
     ``obs`` has ``image`` (u8/f32 ``[T, N, 5, 5, 3]``) and ``agent_dir`` (i32 ``[T, N]``, 0..3),
     as attributes (e.g. jaxued's ``Observation``) or dict keys. The image goes through a 3x3
-    ``VALID`` conv with 16 channels and is flattened; the direction is one-hot encoded and
-    embedded by ``Dense(5)``; the concatenation passes a relu into the LSTM, whose output feeds
-    the relu policy and value heads. Carry: ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially.
+    ``VALID`` conv with 16 channels, is flattened and passes a relu; the direction is one-hot
+    encoded and embedded by a linear ``Dense(5)``; their concatenation feeds the LSTM, whose
+    output feeds the relu policy and value heads (``Dense(32) -> relu -> Dense``). Carry:
+    ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially.
     """
 
     num_actions: int
@@ -160,11 +162,11 @@ class MazeLSTMActorCritic(nn.Module):
         conv = nn.Conv(
             self.conv_features, (3, 3), padding="VALID", kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="conv"
         )(image.reshape((-1,) + image.shape[2:]))
-        image_embed = conv.reshape(lead + (-1,))
+        image_embed = nn.relu(conv.reshape(lead + (-1,)))
         dir_embed = nn.Dense(self.dir_embed, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="dir_embed")(
             jax.nn.one_hot(direction, 4)
         )
-        x = nn.relu(jnp.concatenate([image_embed, dir_embed], axis=-1))
+        x = jnp.concatenate([image_embed, dir_embed], axis=-1)
         carry, y = ResetLSTM(self.lstm_size, name="lstm")(carry, (x, reset))
         logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, "relu", name="heads")(y)
         return carry, (logits, value)

@@ -55,10 +55,11 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "") -> None:
     _save(fig, path)
 
 
-def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "") -> None:
+def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
+              ylim: tuple[float, float] | None = None) -> None:
     """Grouped bar chart into the PNG ``path``: one group per label, one bar per series;
     ``series[name]`` f[len(labels), S] over seeds, drawn as mean with a ± std error bar."""
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(labels) * max(1, len(series)) ** 0.5 + 2), 4.2))
+    fig, ax = plt.subplots(figsize=(min(14.0, max(6.0, 0.55 * len(labels) * max(1, len(series)) ** 0.5 + 2)), 4.2))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     width = 0.8 / max(1, len(series))
     x = np.arange(len(labels))
@@ -69,6 +70,8 @@ def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.nd
     ax.set_xticks(x, labels, rotation=35, ha="right", fontsize=8)
     ax.set_title(title)
     ax.set_ylabel(ylabel)
+    if ylim is not None:
+        ax.set_ylim(*ylim)
     ax.grid(alpha=0.3, axis="y")
     ax.legend(fontsize=8)
     _save(fig, path)

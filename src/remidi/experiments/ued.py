@@ -64,7 +64,9 @@ def make_plot(panels: tuple[tuple[str, str], ...], bars: tuple[str, tuple[str, .
             series = {algo: np.stack([np.asarray(f[m], float) for m in metrics]) for algo, f in finals.items()
                       if all(m in f for m in metrics)}  # [M, S] per algorithm
             labels = [m.split("/", 1)[-1] for m in metrics]
-            plot_bars(folder / "final.png", title, labels, series, metrics[0].split("/")[0].replace("_", " "))
+            kind = metrics[0].split("/")[0]
+            plot_bars(folder / "final.png", title, labels, series, kind.replace("_", " "),
+                      ylim=(0.0, 1.0) if kind == "solve_rate" else None)
 
     return plot
 

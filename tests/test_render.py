@@ -1,0 +1,259 @@
+"""``remidi render``: held-out mazes, a run's level buffers and an episode, as PNG / GIF files;
+every bad input is one line on stderr, exit 2, and writes nothing.
+
+The run folder is built the way ``remidi run`` builds one (``write_run_config``, the driver's
+``_init`` runner and ``save_checkpoint``), with its buffers filled by hand instead of by training:
+a real training run compiles for close to a minute on a 2-core CPU.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from PIL import Image
+
+from remidi import render
+from remidi.cli import main
+
+SEEDS = [0, 1]
+NUM_BUFFERS, CAPACITY = 3, 6
+TINY = {"num_updates": 20, "num_envs": 4, "num_steps": 8, "eval_every": 10, "checkpoint_every": 10,
+        "eval_attempts": 1, "remidi.num_buffers": NUM_BUFFERS, "remidi.buffer_capacity": CAPACITY,
+        "remidi.steps_per_buffer": 5}
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def snapshot(*folders):
+    return {str(p): p.read_bytes() for folder in folders for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def level_pool(num_tmazes: int, num_mazes: int):
+    """T-mazes (the generator's) and random 13×13 mazes (25 walls, built with NumPy: no compiling)."""
+    from remidi.envs.maze import MazeLevel, tmaze_level
+
+    rng = np.random.default_rng(1)
+    levels = [tmaze_level(jax.random.PRNGKey(i)) for i in range(num_tmazes)]
+    for _ in range(num_mazes):
+        cells = rng.choice(13 * 13, 27, replace=False)
+        walls = np.zeros(13 * 13, bool)
+        walls[cells[:25]] = True
+        (gy, gx), (ay, ax) = np.divmod(cells[25], 13), np.divmod(cells[26], 13)
+        levels.append(MazeLevel.make(walls.reshape(13, 13), (gx, gy), (ax, ay), rng.integers(4)))
+    return jax.tree.map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *levels)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """``{"maze": a tmaze/remidi run folder with a checkpoint, "lever": a lever run's folder}``.
+
+    Buffers of seed s: buffer 0 full (CAPACITY levels), buffer 1 with 3 levels in scattered slots,
+    buffer 2 empty; buffer 1 is the active one. Scores are distinct; seed 0's buffer 0 holds a
+    T-maze at its best score."""
+    from remidi.engine import driver
+    from remidi.engine import train as tr
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import resolve_config, write_run_config
+    from remidi.experiments.maze import task_factory
+
+    root = tmp_path_factory.mktemp("render")
+    exp = get_experiment("tmaze")
+    config = resolve_config(exp, "smoke", TINY)
+    exp.validate(config, "remidi")
+    folder = root / "tmaze_run"
+    folder.mkdir()
+    write_run_config(folder, exp, "remidi", "smoke", SEEDS, config, argv=["run", "tmaze"])
+    setup = tr.make_setup(task_factory("tmaze")(config), config, "remidi")
+    runner = jax.device_get(driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.asarray(SEEDS, jnp.uint32))))
+
+    pool = level_pool(2, 2 * (CAPACITY + 3))
+    tmazes, mazes = np.flatnonzero(pool.tmaze), np.flatnonzero(~pool.tmaze)
+    # [S, K, C] index into the pool, valid flags and scores
+    pick = np.zeros((len(SEEDS), NUM_BUFFERS, CAPACITY), int)
+    valid = np.zeros_like(pick, bool)
+    scores = np.zeros(pick.shape, np.float32)
+    rng = np.random.default_rng(0)
+    for s in range(len(SEEDS)):
+        ordinary = iter(mazes[s * (CAPACITY + 3):])
+        pick[s, 0] = [tmazes[s]] + [next(ordinary) for _ in range(CAPACITY - 1)]
+        valid[s, 0] = True
+        scores[s, 0] = [5.0] + list(rng.uniform(0, 1, CAPACITY - 1))
+        for slot in (0, 2, 5):
+            pick[s, 1, slot] = next(ordinary)
+            valid[s, 1, slot] = True
+        scores[s, 1] = rng.uniform(0, 1, CAPACITY)
+    levels = jax.tree.map(
+        lambda x: np.where(valid.reshape(valid.shape + (1,) * (x.ndim - 1)), x[pick], 0).astype(x.dtype), pool)
+    runner = runner.replace(buffers=runner.buffers.replace(levels=levels, valid=valid,
+                                                           scores=np.where(valid, scores, 0.0).astype(np.float32)),
+                            active=np.ones(len(SEEDS), np.int32))
+    driver.save_checkpoint(folder / driver.CHECKPOINT, runner, {"done": 20, "steps": [10, 20], "num_blocks": 2})
+
+    lever = root / "lever_run"
+    lever.mkdir()
+    lexp = get_experiment("lever")
+    write_run_config(lever, lexp, "remidi", "smoke", [0], resolve_config(lexp, "smoke", {}), argv=["run", "lever"])
+    (lever / driver.CHECKPOINT).write_bytes(b"")
+    return {"maze": folder, "lever": lever, "levels": levels, "scores": scores, "valid": valid}
+
+
+def sheet_size(rows: int, columns: int, tile: int, size: int = 13, row_header: bool = False):
+    """(width, height) of a render sheet (see remidi.render's module docstring)."""
+    tile_px = (size + 2) * tile
+    row_h = (render.ROW_HEADER if row_header else 0) + render.CAPTION + tile_px + render.PAD
+    return render.PAD + columns * (tile_px + render.PAD), render.HEADER + rows * row_h + render.PAD
+
+
+# ------------------------------------------------------------------------------------- maze
+@pytest.mark.parametrize("name, rows, columns, size", [
+    ("SmallCorridor", 2, 5, 13),  # 10 goal placements
+    ("LargeCorridor", 2, 8, 19),  # 16
+    ("SixteenRooms", 1, 1, 13),
+])
+def test_render_maze_writes_the_grid_of_goal_placements(tmp_path, capsys, monkeypatch, name, rows, columns, size):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, "render", "maze", name, "--tile", 4)
+    assert code == 0, err
+    assert out == f"wrote {name}.png\n"
+    with Image.open(tmp_path / f"{name}.png") as img:
+        assert img.format == "PNG"
+        assert img.size == sheet_size(rows, columns, 4, size)
+
+
+def test_render_maze_tiles_are_the_renderers(tmp_path):
+    from jaxued.environments.maze.renderer import MazeRenderer
+
+    from remidi.envs.maze import MazeEnv, held_out_sets
+
+    path = render.render_maze("SmallCorridor", out=tmp_path / "c.png", tile=3)
+    img = np.asarray(Image.open(path).convert("RGB"))
+    _, levels = held_out_sets()["SmallCorridor"]
+    env = MazeEnv(13)
+    tile_px = 15 * 3
+    # goal placement #3 is the second row (bottom dead ends), second column
+    want = np.asarray(MazeRenderer(env.maze, 3).render_level(jax.tree.map(lambda x: x[3], levels), env.default_params))
+    top = render.HEADER + (render.CAPTION + tile_px + render.PAD) + render.CAPTION
+    left = render.PAD + (tile_px + render.PAD)
+    np.testing.assert_array_equal(img[top:top + tile_px, left:left + tile_px], want)
+
+
+# ---------------------------------------------------------------------------------- buffers
+def test_render_buffers_one_row_per_buffer_active_marked(runs, capsys):
+    folder = runs["maze"]
+    code, out, err = run_cli(capsys, "render", "buffers", folder, "--tile", 4, "--top", 4)
+    assert code == 0, err
+    path = folder / "buffers_seed0.png"
+    assert out == f"wrote {path}\n"
+    img = np.asarray(Image.open(path).convert("RGB"))
+    assert (img.shape[1], img.shape[0]) == sheet_size(NUM_BUFFERS, 4, 4, row_header=True)
+    tile_px = 15 * 4
+    row_h = render.ROW_HEADER + render.CAPTION + tile_px + render.PAD
+    band = lambda k: img[render.HEADER + k * row_h + 1, -3]  # noqa: E731 (right end of row k's header band)
+    assert tuple(band(1)) == render.ACTIVE_BAND  # buffer 1 is the active one
+    assert tuple(band(0)) == tuple(band(2)) == render.BACKGROUND
+
+    def tile(k, c):
+        top = render.HEADER + k * row_h + render.ROW_HEADER + render.CAPTION
+        left = render.PAD + c * (tile_px + render.PAD)
+        return img[top:top + tile_px, left:left + tile_px]
+
+    # buffer 0: the best level (the T-maze, score 5) first; buffer 1: 3 levels; buffer 2: empty
+    best = jax.tree.map(lambda x: x[0, 0, 0], runs["levels"])
+    np.testing.assert_array_equal(tile(0, 0), render._render_levels(jax.tree.map(lambda x: x[None], best), 13, 4)[0])
+    assert (tile(1, 2) != 255).any() and (tile(1, 3) == 255).all()
+    assert (tile(2, 0) == 255).all()
+
+
+def test_render_buffers_other_seed_top_beyond_capacity_and_out(runs, tmp_path, capsys):
+    out = tmp_path / "b.png"
+    code, stdout, err = run_cli(capsys, "render", "buffers", runs["maze"], "--seed", 1, "--top", 50, "--tile", 2,
+                                "--out", out)
+    assert code == 0, err
+    assert stdout == f"wrote {out}\n"
+    with Image.open(out) as img:
+        assert img.size == sheet_size(NUM_BUFFERS, CAPACITY, 2, row_header=True)
+
+
+# ---------------------------------------------------------------------------------- episode
+def test_render_episode_writes_an_animated_gif(runs, capsys):
+    folder = runs["maze"]
+    code, out, err = run_cli(capsys, "render", "episode", folder, "--maze", "LargeCorridor", "--seed", 1,
+                             "--goal-index", 3, "--attempt-seed", 2, "--tile", 3)
+    assert code == 0, err
+    path = folder / "episode_LargeCorridor_seed1.gif"
+    assert out.startswith(f"wrote {path} (LargeCorridor goal #3, seed 1: ") and out.count("\n") == 1
+    assert "return " in out and "solved" in out
+    with Image.open(path) as img:
+        assert img.format == "GIF"
+        assert 1 < img.n_frames <= 251
+        assert img.size[0] >= (19 + 2) * 3 + 5 * 2 * 3
+
+
+# ----------------------------------------------------------------------------------- errors
+ALLOWED_MAZES = "allowed: SixteenRooms, SixteenRooms2, Labyrinth, LabyrinthFlipped, Labyrinth2"
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["render", "maze", "Nope"], f"maze: unknown value 'Nope'; {ALLOWED_MAZES}"),
+    (["render", "maze", "SmallCorridor", "--out", "{tmp}/missing/x.png"], "--out: folder"),
+    (["render", "maze", "SmallCorridor", "--out", "{tmp}/x.gif"], "--out: {tmp}/x.gif must be a .png file name"),
+    (["render", "maze", "SmallCorridor", "--tile", "0"], "--tile: must be an integer in [2, 64]"),
+    (["render", "buffers", "{tmp}"], "holds no run (no config.json)"),
+    (["render", "buffers", "{tmp}/nowhere"], "is not a folder"),
+    (["render", "buffers", "{nockpt}"], "has no checkpoint.npz"),
+    (["render", "buffers", "{maze}", "--seed", "7"], "--seed: unknown value 7; allowed: 0, 1"),
+    (["render", "buffers", "{maze}", "--top", "0"], "--top: must be an integer ≥ 1"),
+    (["render", "buffers", "{maze}", "--out", "{tmp}/missing/b.png"], "--out: folder"),
+    (["render", "buffers", "{lever}"], "is a 'lever' run; render buffers/episode needs a maze run"),
+    (["render", "episode", "{lever}", "--maze", "SmallCorridor"], "is a 'lever' run"),
+    (["render", "episode", "{maze}", "--maze", "Nope"], f"--maze: unknown value 'Nope'; {ALLOWED_MAZES}"),
+    (["render", "episode", "{maze}", "--maze", "SmallCorridor", "--goal-index", "10"],
+     "--goal-index: must be an integer in [0, 9] for SmallCorridor"),
+    (["render", "episode", "{maze}", "--maze", "Labyrinth", "--goal-index", "1"], "--goal-index: must be 0"),
+    (["render", "episode", "{maze}", "--maze", "Labyrinth", "--seed", "3"], "--seed: unknown value 3"),
+    (["render", "episode", "{maze}", "--maze", "Labyrinth", "--attempt-seed", "-1"], "--attempt-seed"),
+    (["render", "episode", "{maze}", "--maze", "Labyrinth", "--out", "{tmp}/e.png"], "must be a .gif file name"),
+    (["render", "episode", "{maze}"], "the following arguments are required: --maze"),
+    (["render", "episode", "{nockpt}", "--maze", "Labyrinth"], "has no checkpoint.npz"),
+    (["render"], "remidi render: say what to draw"),
+])
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(runs, tmp_path, capsys, monkeypatch, argv, needle):
+    nockpt = tmp_path / "no_checkpoint"
+    nockpt.mkdir()
+    shutil.copy(runs["maze"] / "config.json", nockpt / "config.json")
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    names = {"tmp": tmp_path, "maze": runs["maze"], "lever": runs["lever"], "nockpt": nockpt}
+    argv = [a.format(**names) for a in argv]
+    before = snapshot(tmp_path, runs["maze"], runs["lever"])
+    code, out, err = run_cli(capsys, *argv)
+    assert code == 2
+    assert err.startswith("remidi: error: ") and err.count("\n") == 1, err
+    assert needle.format(**names) in err
+    assert out == ""
+    assert snapshot(tmp_path, runs["maze"], runs["lever"]) == before
+
+
+def test_a_several_algorithm_folder_names_its_runs(runs, tmp_path, capsys):
+    (tmp_path / "both" / "remidi").mkdir(parents=True)
+    shutil.copy(runs["maze"] / "config.json", tmp_path / "both" / "remidi" / "config.json")
+    code, _, err = run_cli(capsys, "render", "buffers", tmp_path / "both")
+    assert code == 2 and "pass one of its sub-folders: remidi" in err
+
+
+def test_help(capsys):
+    for sub in (["render"], ["render", "maze"], ["render", "buffers"], ["render", "episode"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*sub, "--help"])
+        assert exc.value.code == 0
+        assert "usage: remidi render" in capsys.readouterr().out
+

@@ -135,3 +135,23 @@ def test_jaxued_maze_trains_through_our_interface():
     _, hist, _, runner = driver.train_seeds(task, cfg, "remidi", [0], progress=False)
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(runner.train_state.params))
     assert np.isfinite(hist["mean_return"]).all()
+
+
+@pytest.mark.parametrize("algo", ["dr", "plr", "remidi"])
+def test_one_update_rolls_out_once(algo, monkeypatch):
+    """Replay or fresh levels, an update performs a single rollout (chosen levels first, then one
+    rollout), and so traces the environment's step once for the agent's envs."""
+    from remidi.engine import rollout as ro
+    from remidi.engine import train as tr
+
+    calls = []
+
+    def counting_rollout(*args, **kwargs):
+        calls.append(1)
+        return ro.rollout(*args, **kwargs)
+
+    monkeypatch.setattr(tr, "rollout", counting_rollout)
+    setup = tr.make_setup(TASK, TINY, algo)
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    jax.make_jaxpr(lambda r: tr.train_step(setup, r))(runner)
+    assert len(calls) == 1

@@ -2,16 +2,17 @@
 
 One train step, top to bottom (:func:`train_step`):
 
-1. Pick the branch: *replay* (probability ``buffer.replay_prob`` once the active buffer holds
-   enough levels) or *new levels*. DR always takes the new-level branch.
-2. **New levels**: sample N random levels, roll the policy out on them (with the
-   distinguishability tracker against the frozen buffers, for ReMiDi), score them.
-   DR trains on them; the PLR family does not (robust PLR⊥). A level whose rollout is
-   indistinguishable from a frozen level at every step ("complete overlap") is scored −inf and
-   therefore never inserted; the others go into the active buffer by score.
-3. **Replay**: sample N levels from the active buffer, roll out, rescore them, PPO update with
-   the loss masked to the distinguishable steps.
-4. ReMiDi: after ``remidi.steps_per_buffer`` updates (or replays) in the active buffer, freeze it
+1. Choose the levels: *replay* (probability ``buffer.replay_prob`` once the active buffer holds
+   enough levels) samples N levels from the active buffer; otherwise N fresh random levels. DR
+   always takes fresh levels.
+2. Roll the policy out once on them (with the distinguishability tracker against the frozen
+   buffers, for ReMiDi) and score them.
+3. Buffer: replayed levels get their new scores; fresh levels go into the active buffer by score,
+   except those whose rollout was indistinguishable from a frozen level at every step ("complete
+   overlap"), which are scored −inf and therefore never inserted.
+4. Train: PPO on replayed levels (the PLR family does not train on fresh levels: robust PLR⊥; DR
+   does), with the loss masked to the distinguishable steps.
+5. ReMiDi: after ``remidi.steps_per_buffer`` updates (or replays) in the active buffer, freeze it
    and move to the next; stay on the last.
 
 PLR⊥ is ReMiDi with one buffer; minimax return is PLR⊥ scored by negative return. Everything in
@@ -187,41 +188,44 @@ def train_step(setup: Setup, runner: Runner):
     else:
         replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
 
-    def new_levels(_):
-        levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
-        traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
-        scores = score(setup, levels, traj, adv, mean_ret, best_ret)
-        overlap = jnp.all(traj.indist, axis=0)  # bool[N]: complete overlap with a frozen level
-        train_state = runner.train_state
-        if algo == "dr":
-            train_state = learn(setup, train_state, k_learn, traj, adv, targets)
-            buffers, inserted = runner.buffers, jnp.zeros((n,), bool)
-        else:
-            new_buf, inserted, _ = buf.insert_batch(active, bcfg, levels, jnp.where(overlap, -jnp.inf, scores),
-                                                    {"max_return": best_ret})
-            buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
-        return train_state, buffers, levels, traj, mean_ret, scores, {
-            "rejected": jnp.sum(overlap).astype(jnp.float32),
-            "inserted": jnp.sum(inserted).astype(jnp.float32),
-        }
-
-    def replay_levels(_):
-        sampled_buf, idxs, levels = buf.sample_replay(active, bcfg, k_sample, n)
-        traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
-        best_ret = jnp.maximum(best_ret, sampled_buf.extras["max_return"][idxs])
-        scores = score(setup, levels, traj, adv, mean_ret, best_ret)
-        new_buf = buf.update_scores(sampled_buf, idxs, scores, {"max_return": best_ret})
-        buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
-        train_state = learn(setup, runner.train_state, k_learn, traj, adv, targets)
-        return train_state, buffers, levels, traj, mean_ret, scores, {
-            "rejected": jnp.zeros(()), "inserted": jnp.zeros(()),
-        }
-
+    # 1. choose the levels: a replay sample from the active buffer, or fresh random levels
+    new = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
     if algo == "dr":
-        train_state, buffers, levels, traj, mean_ret, scores, extra = new_levels(None)
+        sampled_buf, idxs, levels = active, None, new
     else:
-        train_state, buffers, levels, traj, mean_ret, scores, extra = jax.lax.cond(
-            replay, replay_levels, new_levels, None)
+        sampled_buf, idxs, replayed = buf.sample_replay(active, bcfg, k_sample, n)
+        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+
+    # 2. one rollout (with the tracker against the frozen buffers, for ReMiDi), then score
+    traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
+    if algo != "dr":  # MaxMC's record: the best return ever seen on a replayed level
+        best_ret = jnp.where(replay, jnp.maximum(best_ret, sampled_buf.extras["max_return"][idxs]), best_ret)
+    scores = score(setup, levels, traj, adv, mean_ret, best_ret)
+    overlap = jnp.all(traj.indist, axis=0) & ~replay  # bool[N]: new level overlapping a frozen one completely
+
+    # 3. the buffer: replayed levels get their new scores; new levels are inserted by score, never
+    #    one that overlaps completely (robust PLR⊥ does not train on new levels)
+    if algo == "dr":
+        buffers, inserted = runner.buffers, jnp.zeros((n,), bool)
+    else:
+        def rescore(_):
+            return buf.update_scores(sampled_buf, idxs, scores, {"max_return": best_ret}), jnp.zeros((n,), bool)
+
+        def insert(_):
+            new_buf, ins, _ = buf.insert_batch(active, bcfg, levels, jnp.where(overlap, -jnp.inf, scores),
+                                               {"max_return": best_ret})
+            return new_buf, ins
+
+        new_buf, inserted = jax.lax.cond(replay, rescore, insert, None)
+        buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
+
+    # 4. train (masked PPO) on replayed levels, and on every level for DR
+    if algo == "dr":
+        train_state = learn(setup, runner.train_state, k_learn, traj, adv, targets)
+    else:
+        train_state = jax.lax.cond(replay, lambda ts: learn(setup, ts, k_learn, traj, adv, targets),
+                                   lambda ts: ts, runner.train_state)
+    extra = {"rejected": jnp.sum(overlap).astype(jnp.float32), "inserted": jnp.sum(inserted).astype(jnp.float32)}
 
     # ReMiDi's switching rule (a no-op with one buffer).
     count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)

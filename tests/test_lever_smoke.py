@@ -1,6 +1,7 @@
 """End-to-end `remidi run lever --preset smoke`, one algorithm per test: the qualitative pattern
 of the paper's Figure 8 at smoke size."""
 
+import csv
 import json
 
 import pytest
@@ -16,6 +17,10 @@ def run(tmp_path, algo):
     for name in ("config.json", "metrics.csv", "summary.json", "training.png", "checkpoint.npz"):
         assert (out / name).exists(), name
     metrics = json.loads((out / "summary.json").read_text())["metrics"]
+    if algo != "remidi":  # nothing is ever masked without frozen buffers: at every logged step
+        with open(out / "metrics.csv") as fh:
+            masked = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "trained_fraction_masked"]
+        assert masked and all(v == 0 for v in masked)
     return {k: v["mean"] for k, v in metrics.items()}, metrics
 
 

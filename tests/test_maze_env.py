@@ -16,6 +16,7 @@ from remidi.envs import maze as M
 ENV = M.MazeEnv()
 PARAMS = ENV.default_params
 KEY = jax.random.PRNGKey(0)
+OPTIMAL = jax.jit(jax.vmap(M.optimal_return))
 
 
 def stack(levels):
@@ -101,12 +102,12 @@ def test_tmaze_stem_and_blocked_moves():
     assert not done[:, :3].any() and (reward[:, :3] == 0).all()
     np.testing.assert_array_equal(reward[:, 3], -1.0)  # down the stem: away from either arm
     assert done[:, 3].all()
-    np.testing.assert_array_equal(jax.vmap(M.optimal_return)(TMAZES), 1.0)
+    np.testing.assert_array_equal(OPTIMAL(TMAZES), 1.0)
 
 
 # ----------------------------------------------------------------------------- blindfold
 def test_blind_levels_see_zeros_but_play_the_same_maze():
-    levels = jax.vmap(M.random_maze)(jax.random.split(jax.random.PRNGKey(6), 16))
+    levels = jax.jit(jax.vmap(M.random_maze))(jax.random.split(jax.random.PRNGKey(6), 16))
     blind = levels.replace(blind=jnp.ones(16, bool))
     actions = jax.random.choice(jax.random.PRNGKey(7), 3, (16, 200))
     seen, dirs, r_seen, d_seen = play(ENV, levels, actions)
@@ -115,19 +116,19 @@ def test_blind_levels_see_zeros_but_play_the_same_maze():
     assert (seen != 0).any(axis=(2, 3, 4)).all()  # an ordinary view is never all zeros
     np.testing.assert_array_equal(reward, r_seen)
     np.testing.assert_array_equal(done, d_seen)
-    np.testing.assert_array_equal(jax.vmap(M.optimal_return)(blind), jax.vmap(M.optimal_return)(levels))
+    np.testing.assert_array_equal(OPTIMAL(blind), OPTIMAL(levels))
 
 
 def test_level_mixtures_and_tags():
     for kind, tag in (("tmaze", "tmaze"), ("blindfold", "blind")):
         task = M.maze_task(kind, 0.5)
-        levels = jax.vmap(task.sample_level)(jax.random.split(KEY, 1000))
+        levels = jax.jit(jax.vmap(task.sample_level))(jax.random.split(KEY, 1000))
         flags = np.asarray(jax.vmap(task.level_tags)(levels)[tag])
         assert 0.45 < flags.mean() < 0.55
         assert flags.tolist() == np.asarray(getattr(levels, tag)).tolist()
         other = "blind" if tag == "tmaze" else "tmaze"
         assert not np.asarray(getattr(levels, other)).any()
-    none = jax.vmap(M.maze_task("tmaze", 0.0).sample_level)(jax.random.split(KEY, 200))
+    none = jax.jit(jax.vmap(M.maze_task("tmaze", 0.0).sample_level))(jax.random.split(KEY, 200))
     assert not np.asarray(none.tmaze).any()
 
 
@@ -156,14 +157,14 @@ def brute_force_steps(walls: np.ndarray, goal, start, direction) -> float:
 
 @pytest.mark.parametrize("size, walls", [(5, 8), (7, 20), (13, 25), (13, 60)])
 def test_shortest_path_matches_brute_force(size, walls):
-    levels = jax.vmap(lambda k: M.random_maze(k, size, walls))(jax.random.split(jax.random.PRNGKey(size + walls), 40))
+    levels = jax.jit(jax.vmap(lambda k: M.random_maze(k, size, walls)))(jax.random.split(jax.random.PRNGKey(size + walls), 40))
     got = np.asarray(jax.jit(jax.vmap(M.shortest_path_steps))(levels))
     want = [brute_force_steps(np.asarray(levels.wall_map[i]), np.asarray(levels.goal_pos[i]).tolist(),
                               np.asarray(levels.agent_pos[i]).tolist(), int(levels.agent_dir[i])) for i in range(40)]
     np.testing.assert_array_equal(got, want)
     if walls >= 20:
         assert np.isinf(got).any() and np.isfinite(got).any()  # both cases are exercised
-    opt = np.asarray(jax.vmap(M.optimal_return)(levels))
+    opt = np.asarray(OPTIMAL(levels))
     np.testing.assert_allclose(opt, np.where(np.isinf(want), 0.0, 1 - 0.9 * np.asarray(want) / 250), rtol=1e-6)
 
 
@@ -174,9 +175,10 @@ def test_optimal_return_is_what_a_shortest_path_agent_earns():
     levels = [M.prefab_level(n) for n in M.PREFAB_NAMES] + [M.random_maze(jax.random.PRNGKey(11))]
     step = jax.jit(ENV.step)
     solved = MazeSolved(max_height=13, max_width=13, normalize_obs=True)
+    solved_init, costs, optimal = jax.jit(solved.init_state_from_level), jax.jit(M.cost_to_go), jax.jit(M.optimal_return)
     for name, level in zip(names, levels):
-        cost = np.asarray(jax.jit(M.cost_to_go)(level))
-        n = float(M.shortest_path_steps(level))
+        cost = np.asarray(costs(level))
+        n = float(cost[int(level.agent_dir), int(level.agent_pos[1]), int(level.agent_pos[0])])
         assert np.isfinite(n), name
         _, state = ENV.reset_to_level(KEY, level, PARAMS)
         total, t, done = 0.0, 0, False
@@ -191,8 +193,8 @@ def test_optimal_return_is_what_a_shortest_path_agent_earns():
             state, total, t, done = nxt, total + float(r), t + 1, bool(d)
         assert t == n, name
         assert total > 0, name
-        np.testing.assert_allclose(total, float(M.optimal_return(level)), rtol=1e-6, err_msg=name)
-        sstate = solved.init_state_from_level(level)
+        np.testing.assert_allclose(total, float(optimal(level)), rtol=1e-6, err_msg=name)
+        sstate = solved_init(level)
         assert float(solved.min_steps_to_goal(sstate)) == n
         assert float(solved.optimal_value(sstate, 1.0, PARAMS)) < total
 
@@ -216,7 +218,7 @@ def test_held_out_sets():
         np.testing.assert_array_equal(levels.agent_pos, np.tile([0, mid], (dead_ends, 1)))
         goals = {tuple(g) for g in np.asarray(levels.goal_pos).tolist()}
         assert len(goals) == dead_ends and all(y in (mid - 1, mid + 1) and x % 2 == 0 for x, y in goals)
-        assert np.isfinite(jax.vmap(M.shortest_path_steps)(levels)).all()
+        assert np.isfinite(jax.jit(jax.vmap(M.shortest_path_steps))(levels)).all()
 
 
 def test_large_corridor_is_played_at_its_own_size():

@@ -87,15 +87,6 @@ def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
     assert hist["rejected"][:, -1].sum() > 0
 
 
-@pytest.mark.parametrize("algo", ["dr", "plr", "minimax-return"])
-def test_other_algorithms_run_and_never_mask(algo):
-    _, hist, _, _ = driver.train_seeds(TASK, TINY, algo, [0], progress=False)
-    assert np.all(hist["trained_fraction_masked"] == 0)
-    assert np.all(np.isfinite(hist["solve_rate/visible"]))
-    if algo == "dr":
-        assert np.all(hist["replay"] == 0)
-
-
 @pytest.mark.parametrize("change, needle", [
     (dict(num_updates=0), "num_updates: must be an integer ≥ 1"),
     (dict(score="regret"), "score: unknown value 'regret'; allowed: perfect_regret, pvl, maxmc, neg_return"),

@@ -88,9 +88,11 @@ def test_help_for_every_subcommand(capsys):
         assert "usage: remidi" in capsys.readouterr().out
 
 
-LEVER_TINY = ["--set", "num_updates=20", "--set", "eval_every=10", "--set", "checkpoint_every=10",
-              "--set", "num_envs=8", "--set", "num_steps=2", "--set", "ppo.epochs=1",
-              "--set", "buffer.capacity=16", "--set", "buffer.topk_k=8",
+# the same configuration as tests/test_ued_engine.py's TINY, so the compiled programs are shared
+# (through the persistent compilation cache) instead of compiled again
+LEVER_TINY = ["--set", "num_updates=40", "--set", "eval_every=10", "--set", "checkpoint_every=10",
+              "--set", "num_envs=8", "--set", "num_steps=4", "--set", "eval_attempts=2", "--set", "ppo.epochs=1",
+              "--set", "buffer.capacity=16", "--set", "buffer.topk_k=8", "--set", "buffer.min_fill=0.25",
               "--set", "remidi.buffer_capacity=8", "--set", "remidi.steps_per_buffer=8"]
 
 
@@ -156,7 +158,7 @@ def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, c
 
     monkeypatch.setattr(ued, "train_seeds", stop_in_remidi)
     out = tmp_path / "both"
-    code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "1", "--quiet", *LEVER_TINY,
+    code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY,
                          "--out", str(out))
     assert code == 130
     assert (out / "plr" / "summary.json").exists() and not (out / "remidi" / "summary.json").exists()

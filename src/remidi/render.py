@@ -266,6 +266,17 @@ def _load_runner(run: _Run, path: Path):
     return runner, meta
 
 
+def _open_run(run_dir, seed, out, default_name: str, suffix: str):
+    """Check everything about a run-folder command, then load the checkpoint: ``(run, seed index,
+    seed, output path, runner, checkpoint meta)``; ``default_name`` may use ``{seed}``."""
+    run = _load_run(run_dir)
+    s = _check_seed(run, seed)
+    seed = run.seeds[s]
+    path = _check_out(out, run.folder / default_name.format(seed=seed), suffix)
+    runner, meta = _load_runner(run, _check_checkpoint(run))
+    return run, s, seed, path, runner, meta
+
+
 # ------------------------------------------------------------------------------ render buffers
 def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out=None,
                    tile: int = DEFAULT_TILE) -> Path:
@@ -278,11 +289,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
     _check_tile(tile)
     if not isinstance(top, int) or top < 1:
         raise RemidiError(f"--top: must be an integer ≥ 1, got {top}")
-    run = _load_run(run_dir)
-    s = _check_seed(run, seed)
-    seed = run.seeds[s]
-    path = _check_out(out, run.folder / f"buffers_seed{seed}.png", ".png")
-    runner, meta = _load_runner(run, _check_checkpoint(run))
+    run, s, seed, path, runner, meta = _open_run(run_dir, seed, out, "buffers_seed{seed}.png", ".png")
 
     buffers = jax.tree.map(lambda x: np.asarray(x[s]), runner.buffers)  # leaves [K, C, ...]
     active = int(np.asarray(runner.active)[s])
@@ -412,11 +419,7 @@ def render_episode(run_dir, maze: str, seed: int | None = None, attempt_seed: in
         raise RemidiError(f"--goal-index: must be {allowed} for {maze}, got {goal_index}")
     if not isinstance(attempt_seed, int) or attempt_seed < 0:
         raise RemidiError(f"--attempt-seed: must be an integer ≥ 0, got {attempt_seed}")
-    run = _load_run(run_dir)
-    s = _check_seed(run, seed)
-    seed = run.seeds[s]
-    path = _check_out(out, run.folder / f"episode_{maze}_seed{seed}.gif", ".gif")
-    runner, _ = _load_runner(run, _check_checkpoint(run))
+    run, s, seed, path, runner, _ = _open_run(run_dir, seed, out, f"episode_{maze}_seed{{seed}}.gif", ".gif")
 
     index = goal_index or 0
     level = jax.tree.map(lambda x: x[index], levels)

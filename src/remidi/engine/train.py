@@ -156,7 +156,7 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
 def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
     optimal = jax.vmap(setup.task.optimal_return)(levels) if setup.task.optimal_return is not None else None
     return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value,
-                           advantages=adv, max_return=max_return, optimal_return=optimal)
+                           advantages=adv, max_return=max_return, done=traj.done, optimal_return=optimal)
 
 
 def learn(setup: Setup, train_state: TrainState, rng, traj: Trajectory, adv, targets):
@@ -286,10 +286,26 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
     return groups
 
 
+def first_step_policy(setup: Setup, params, env, levels) -> jax.Array:
+    """f32[L, A]: the policy's action probabilities at the first step of each level (leaves [L, ...])."""
+    n = jax.tree.leaves(levels)[0].shape[0]
+    obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(jax.random.split(jax.random.PRNGKey(0), n),
+                                                                 levels, setup.task.params)
+    _, (logits, _) = setup.net.apply({"params": params}, setup.net.initialize_carry(n),
+                                     jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool))
+    return jax.nn.softmax(logits[0], axis=-1)
+
+
 def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
-    """Solve rate and mean return on each evaluation set: ``eval_attempts`` sampled episodes per
-    level, the first episode of each. The sets one environment plays are rolled out together."""
+    """Metrics on each evaluation set ``<set>``: ``eval_attempts`` sampled episodes per level (the
+    first episode of each; the sets one environment plays are rolled out together) give
+    ``solve_rate/<set>`` and ``return/<set>``. With the task's optimal return, the regret per level
+    gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's levels): the *expected*
+    regret ``optimal − E[return]``, exact for a one-step task that knows its ``expected_return``
+    (which adds ``entropy/<set>``, the mean entropy of the policy over the set's levels), estimated
+    from the sampled episodes otherwise."""
     task, cfg = setup.task, setup.cfg
+    params = runner.train_state.params
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
         tiled = [jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), task.eval_sets[name])
@@ -298,7 +314,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
         carry = setup.net.initialize_carry(sum(sizes))
         traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply,
-                          runner.train_state.params, carry, levels, task.max_episode_steps)
+                          params, carry, levels, task.max_episode_steps)
         returns = first_episode_return(traj.reward, traj.done)
         start = 0
         for name, size in zip(names, sizes):
@@ -306,6 +322,19 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
             start += size
             out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
+            if task.optimal_return is None:
+                continue
+            set_levels = task.eval_sets[name]
+            if task.expected_return is not None:
+                probs = first_step_policy(setup, params, env, set_levels)  # [L, A]
+                expected = jax.vmap(task.expected_return)(set_levels, probs)
+                entropy = -jnp.sum(probs * jnp.log(jnp.maximum(probs, 1e-30)), axis=-1)
+                out[f"entropy/{name}"] = jnp.mean(entropy)
+            else:
+                expected = ret.reshape(-1, cfg.eval_attempts).mean(axis=1)  # levels were repeated in place
+            regret = jax.vmap(task.optimal_return)(set_levels) - expected
+            out[f"regret/{name}/mean"] = jnp.mean(regret)
+            out[f"regret/{name}/worst"] = jnp.max(regret)
     return out
 
 

@@ -90,6 +90,9 @@ class UEDTask:
         level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
             fractions (e.g. ``{"hidden": ...}``).
         solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved.
+        expected_return: for a one-step task, ``(level, probs f32[num_actions]) -> f32[]``, the
+            exact expected return of a policy with those action probabilities; makes the
+            evaluation's regret exact (instead of sampled) and adds the policy's entropy.
     """
 
     env: UnderspecifiedEnv
@@ -102,3 +105,4 @@ class UEDTask:
     eval_envs: dict[str, UnderspecifiedEnv] = field(default_factory=dict)
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
     solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0
+    expected_return: Callable[[Any, jax.Array], jax.Array] | None = None

@@ -62,6 +62,12 @@ class LeverGame(UnderspecifiedEnv):
         reward = jnp.where(action == state.level.correct, 1.0, -1.0) * scale
         return self.observation(state.level), state.replace(done=jnp.asarray(True)), reward, jnp.asarray(True), {}
 
+    def expected_return(self, level: LeverLevel, probs: jax.Array, params: LeverParams) -> jax.Array:
+        """f32[]: the exact expected reward of pulling lever ``a`` with probability ``probs[a]``."""
+        scale = jnp.where(level.visible, 1.0, params.hidden_multiplier)
+        p_correct = probs[level.correct]
+        return scale * (p_correct - (1.0 - p_correct))
+
     def sample_level(self, rng, visible_prob: float = 0.5) -> LeverLevel:
         k1, k2 = jax.random.split(rng)
         return LeverLevel(correct=jax.random.randint(k1, (), 0, self.num_levers),
@@ -88,4 +94,5 @@ def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplie
         optimal_return=lambda level: jnp.where(level.visible, 1.0, hidden_multiplier),
         eval_sets={"visible": env.all_levels(True), "hidden": env.all_levels(False)},
         level_tags=lambda level: {"hidden": ~level.visible},
+        expected_return=lambda level, probs: env.expected_return(level, probs, params),
     )

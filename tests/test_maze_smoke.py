@@ -70,3 +70,16 @@ def test_blindfold_remidi_rejects_blind_levels(tmp_path):
     assert m["buffer_fraction/blind/b1"] < 0.1 and m["buffer_fraction/blind/b2"] < 0.1
     assert m["replay_fraction/blind"] < 0.1 and m["rejected"] > 0
     check_held_out_metrics(summary)
+
+
+@pytest.mark.parametrize("experiment, setting, needle", [
+    ("tmaze", "maze.prob=2", "maze.prob: must be in [0, 1], got 2.0"),
+    ("blindfold", "maze.num_walls=500", "maze.num_walls: must be an integer in [0, 167], got 500"),
+    ("tmaze", "maze.size=9", "--set: unknown key 'maze.size'"),
+])
+def test_bad_maze_settings_are_one_line_errors(tmp_path, capsys, experiment, setting, needle):
+    out = tmp_path / "run"
+    assert main(["run", experiment, "--set", setting, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+    assert not out.exists()

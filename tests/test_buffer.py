@@ -187,6 +187,31 @@ def test_duplicate_check_updates_existing_entry():
     assert not bool(inserted) and int(idx) == -1 and float(same.scores[1]) == 2.0
 
 
+def test_duplicate_keeps_running_max_of_max_extras_and_overwrites_others():
+    cfg = config(duplicate_check=True)
+    state = B.init_buffer(cfg, make_level(0), extra_names=("max_return", "last_return"))
+    state, _, _ = B.insert(state, cfg, make_level(5), 1.0, {"max_return": 0.75, "last_return": 0.75})
+    state, inserted, idx = B.insert(state, cfg, make_level(5), 2.0, {"max_return": 0.25, "last_return": 0.25})
+    assert not bool(inserted) and int(idx) == 0
+    assert float(state.extras["max_return"][0]) == 0.75  # the MaxMC record does not go down
+    assert float(state.extras["last_return"][0]) == 0.25  # any other extra is overwritten
+    state, _, _ = B.insert(state, cfg, make_level(5), 2.0, {"max_return": 0.875})
+    assert float(state.extras["max_return"][0]) == 0.875
+    # a new entry takes the given value, whatever its slot held before
+    state, _, _ = B.insert(state, cfg, make_level(6), 1.0, {"max_return": -3.0})
+    assert float(state.extras["max_return"][1]) == -3.0
+
+
+def test_update_scores_keeps_running_max_over_every_occurrence():
+    cfg = config()
+    state = manual_state(cfg, **HAND_STATE, extra_names=("max_return", "last_return"))
+    state = state.replace(extras={"max_return": jnp.array([5.0, 1.0, 2.0, 0.0]), "last_return": jnp.zeros(4)})
+    state = B.update_scores(state, jnp.array([1, 1, 0, -1]), jnp.zeros(4),
+                            {"max_return": jnp.array([4.0, 3.0, 1.0, 9.0]), "last_return": jnp.array([4.0, 3.0, 1.0, 9.0])})
+    np.testing.assert_allclose(state.extras["max_return"], [5.0, 4.0, 2.0, 0.0])
+    np.testing.assert_allclose(state.extras["last_return"], [1.0, 3.0, 0.0, 0.0])  # last occurrence wins
+
+
 def test_without_duplicate_check_copies_are_inserted():
     cfg = config()
     state = B.init_buffer(cfg, make_level(0))

@@ -57,7 +57,7 @@ def test_json_report_of_the_shared_game():
     report = json.loads(solve_command(str(EXAMPLES / "tabular_shared.json"), as_json=True))
     assert report["mmr_value"] == 1.0
     assert report["rounds"][0] == {"value": 1.0, "support": ["theta5", "theta6"],
-                                   "adversary": {"theta5": 0.5, "theta6": 0.5}}
+                                   "adversary": {"theta5": 0.5, "theta6": 0.5}, "unique": True}
     assert report["rounds"][1]["value"] == 0.175
     assert report["rounds"][1]["support"] == ["theta1", "theta2", "theta3", "theta4"]
     assert report["policy"]["h1"] == {"A": 0.875, "B": 0.125}
@@ -73,7 +73,27 @@ def test_json_report_of_the_lottery_uses_history_strings():
     assert report["policy"]["s0 a1 sA"] == {"a1": 1.0, "a2": 0.0}
     assert report["policy"]["s0 a1 sB"] == {"a1": 0.0, "a2": 1.0}
     assert report["regret"] == {"thetaA": 2.0, "thetaB": 2.0}
-    assert report["adversary"] == {"thetaA": 0.99, "thetaB": 0.01}
+    # the equilibrium adversaries are every P(thetaA) in [0.01, 0.99] (test_solver_sequence_form)
+    adversary = report["adversary"]
+    assert set(adversary) == {"thetaA", "thetaB"} and adversary["thetaA"] + adversary["thetaB"] == pytest.approx(1.0)
+    assert 0.01 <= adversary["thetaA"] <= 0.99
+    assert report["rounds"][0]["unique"] is True
+
+
+AMBIGUOUS = {"actions": ["a1", "a2", "a3"], "levels": [
+    {"name": "x", "observation": "o", "rewards": [1, 0, 0]},
+    {"name": "y", "observation": "o", "rewards": [0, 1, 1]},
+    {"name": "z", "observation": "o", "rewards": [0, 0, 0.2]},
+]}
+
+
+def test_report_says_whether_the_blp_policy_is_unique(tmp_path):
+    path = tmp_path / "ambiguous.json"
+    path.write_text(json.dumps(AMBIGUOUS))
+    assert [r["unique"] for r in json.loads(solve_command(str(path), as_json=True))["rounds"]] == [False, True]
+    assert "The BLP policy is not unique: round(s) 1 froze" in solve_command(str(path), as_json=False)
+    shared = solve_command(str(EXAMPLES / "tabular_shared.json"), as_json=False)
+    assert "The BLP policy is unique" in shared
 
 
 def test_text_report_shows_rounds_policy_and_regret():

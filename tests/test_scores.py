@@ -29,11 +29,52 @@ def test_score_formulas():
     mean = jnp.array([0.5, -1.0])
     np.testing.assert_allclose(sc.perfect_regret(mean, jnp.array([1.0, 10.0])), [0.5, 11.0])
     np.testing.assert_allclose(sc.negative_return(mean), [-0.5, 1.0])
-    adv = jnp.array([[1.0, -2.0], [-1.0, 4.0]])
-    np.testing.assert_allclose(sc.positive_value_loss(adv), [0.5, 2.0])
-    values = jnp.array([[0.0, 1.0], [1.0, 1.0]])
-    np.testing.assert_allclose(sc.max_mc(values, jnp.array([2.0, 1.0])), [1.5, 0.0])
-    for name in sc.SCORES:
-        out = sc.score_levels(name, mean_return=mean, values=values, advantages=adv,
-                              max_return=jnp.array([2.0, 1.0]), optimal_return=jnp.array([1.0, 10.0]))
-        assert out.shape == (2,)
+
+
+# [T=4, N=3]. env 0: episodes [t0] and [t1..t3]; env 1: episode [t0], then an unfinished tail;
+# env 2: no finished episode.
+X = jnp.array([[1.0, 2.0, 5.0], [3.0, -1.0, 5.0], [-2.0, 4.0, 5.0], [6.0, 8.0, 5.0]])
+EPISODE_DONE = jnp.array([[True, True, False], [False, False, False], [False, False, False], [True, False, False]])
+MAX_RETURN = jnp.array([4.0, 3.0, 1.0])
+# PVL: max(X, 0) per episode: env 0 -> mean(1, mean(3, 0, 6) = 3) = 2; env 1 -> 2 (tail left out)
+PVL = [2.0, 2.0, -np.inf]
+# MaxMC with values X: max_return - X is env 0 [3, 1, 6, -2] -> mean(3, 5/3) = 7/3; env 1 [1, ...] -> 1
+MAXMC = [7 / 3, 1.0, -np.inf]
+
+
+def test_pvl_and_maxmc_average_per_finished_episode():
+    np.testing.assert_allclose(sc.positive_value_loss(X, EPISODE_DONE), PVL, rtol=1e-6)
+    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, EPISODE_DONE), MAXMC, rtol=1e-6)
+
+
+def test_one_step_episodes_reduce_to_the_mean_over_steps():
+    done = jnp.ones_like(EPISODE_DONE)
+    np.testing.assert_allclose(sc.positive_value_loss(X, done), [2.5, 3.5, 5.0], rtol=1e-6)
+    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, done), [2.0, -0.25, -4.0], rtol=1e-6)
+
+
+def test_score_levels_dispatches_by_name():
+    mean = jnp.array([0.5, -1.0, 2.0])
+    optimal = jnp.array([1.0, 10.0, 2.0])
+    expected = {"perfect_regret": [0.5, 11.0, 0.0], "pvl": PVL, "maxmc": MAXMC, "neg_return": [-0.5, 1.0, -2.0]}
+    assert set(expected) == set(sc.SCORES)
+    for name, want in expected.items():
+        got = sc.score_levels(name, mean_return=mean, values=X, advantages=X, max_return=MAX_RETURN,
+                              done=EPISODE_DONE, optimal_return=optimal)
+        np.testing.assert_allclose(got, want, rtol=1e-6, err_msg=name)
+
+
+def test_pvl_and_maxmc_agree_with_jaxued(monkeypatch):
+    """jaxued's scores (from minimax's ued_scores.py) are the reference; jaxued still calls the
+    removed ``jax.tree_map``."""
+    import jax
+
+    monkeypatch.setattr(jax, "tree_map", jax.tree.map, raising=False)
+    from jaxued import utils as ref
+
+    k_x, k_done, k_max = jax.random.split(jax.random.PRNGKey(0), 3)
+    x = jax.random.normal(k_x, (40, 6))
+    done = (jax.random.uniform(k_done, (40, 6)) < 0.15).at[:, 0].set(False)  # env 0: no finished episode
+    max_return = jax.random.normal(k_max, (6,))
+    np.testing.assert_allclose(sc.positive_value_loss(x, done), ref.positive_value_loss(done, x), rtol=1e-5)
+    np.testing.assert_allclose(sc.max_mc(x, max_return, done), ref.max_mc(done, x, max_return), rtol=1e-5)

@@ -98,6 +98,35 @@ def test_adversary_support_is_maximal_with_duplicate_levels():
     assert result.adversary.sum() == pytest.approx(1.0)
 
 
+# ---------------------------------------------------------------- uniqueness of the BLP policy
+
+
+def ambiguous_game() -> OneStepGame:
+    """Round 1 fixes P(a1) = 0.5 on the first two levels; any split of the rest between a2 and a3
+    is optimal, and the third level's regret is 0.2 - 0.2 P(a3)."""
+    return OneStepGame(("a1", "a2", "a3"), ("x", "y", "z"), ("o", "o", "o"),
+                       np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.2]]))
+
+
+def test_blp_policy_need_not_be_unique():
+    game = ambiguous_game()
+    result = solve_blp(game)
+    assert [r.value for r in result.rounds] == pytest.approx([0.5, result.regret[2]])
+    assert [set(r.support) for r in result.rounds] == [{"x", "y"}, {"z"}]
+    assert [r.unique for r in result.rounds] == [False, True]
+    # two round-1-optimal policies that end with different regret on z
+    for policy, z_regret in (([0.5, 0.5, 0.0], 0.2), ([0.5, 0.0, 0.5], 0.1)):
+        regret = direct_regret(game, {"o": np.array(policy)})
+        assert regret[:2].max() == pytest.approx(result.rounds[0].value)
+        assert regret[2] == pytest.approx(z_regret)
+    assert 0.1 - 1e-9 <= result.regret[2] <= 0.2 + 1e-9
+
+
+def test_blp_policy_of_the_shared_game_is_unique():
+    assert [r.unique for r in solve_blp(paper_game("shared")).rounds] == [True, True]
+    assert [r.unique for r in solve_blp(paper_game("distinct")).rounds] == [True]
+
+
 # ---------------------------------------------------------------- brute force
 
 

@@ -118,15 +118,27 @@ def lottery() -> TreeGame:
 # ---------------------------------------------------------------- lottery (paper appendix)
 
 
-def test_lottery_global_mmr_has_regret_two():
+def test_lottery_global_mmr_is_an_equilibrium_with_regret_two():
     game = lottery()
+    table = np.array([returns(game, p) for p in deterministic_policies(game)])  # [P, L]
+    optimal = table.max(axis=0)
+    regret = optimal - table
+    assert matrix_game_value(regret) == pytest.approx(2.0, abs=1e-9)  # the game's MMR value
     result = solve_mmr(game)
     assert result.value == pytest.approx(2.0, abs=1e-9)
+    assert result.optimal_return == pytest.approx(optimal)
+    achieved = optimal - returns(game, result.policy)
+    assert result.regret == pytest.approx(achieved, abs=1e-9)
+    assert achieved.max() == pytest.approx(2.0, abs=1e-9)  # worst case = the value: MMR
+    # the adversary is an equilibrium one: no policy has expected regret below 2 against it
+    assert result.adversary.sum() == pytest.approx(1.0)
+    assert (regret @ result.adversary).min() == pytest.approx(2.0, abs=1e-7)
+    # Regret is 200 - 198 p - 2 q on thetaA and 2 p + 198 q on thetaB (p = P(a1 | sA),
+    # q = P(a1 | sB)), so the MMR policy p = 1, q = 0 is unique, while every adversary with
+    # P(thetaA) in [0.01, 0.99] is an equilibrium one.
     assert result.policy[("s0", "a1", "sA")]["a1"] == pytest.approx(1.0)
     assert result.policy[("s0", "a1", "sB")]["a2"] == pytest.approx(1.0)
-    assert result.regret == pytest.approx([2.0, 2.0], abs=1e-9)
-    assert returns(game, result.policy) == pytest.approx([98.0, 98.0])
-    assert result.optimal_return == pytest.approx([100.0, 100.0])
+    assert 0.01 - 1e-9 <= result.adversary[0] <= 0.99 + 1e-9
 
 
 def test_lottery_local_mmr_has_worst_case_regret_100():
@@ -142,6 +154,14 @@ def test_lottery_blp_is_a_single_round():
     result = solve_blp(lottery())
     assert [r.value for r in result.rounds] == pytest.approx([2.0])
     assert set(result.rounds[0].support) == {"thetaA", "thetaB"}
+    assert result.rounds[0].unique  # P(a1 | sA) = 1, P(a1 | sB) = 0 is the only MMR policy
+
+
+def test_uniqueness_is_checked_on_trees_too():
+    game = one_step_to_tree(onestep.OneStepGame(
+        ("a1", "a2", "a3"), ("x", "y", "z"), ("o", "o", "o"),
+        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.2]])))
+    assert [r.unique for r in solve_blp(game).rounds] == [False, True]
 
 
 # ---------------------------------------------------------------- one-step games as trees

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.envs.tabular import paper_game
+from remidi.envs.tabular import PAPER_REWARDS, TabularGame, paper_game
 from remidi.tabular_ued import (
     TabularUEDConfig, agent_action_values, combined_probs, game_arrays, init_state, level_regret,
     maybe_switch, obs_regret, train,
@@ -15,6 +15,15 @@ from remidi.tabular_ued import (
 
 SHARED = paper_game("shared")
 DISTINCT = paper_game("distinct")
+# 12 + 12 levels: six copies each of θ1, θ2 behind observation "easy", of θ5, θ6 behind "hard".
+# An adversary spread over the 12 hard levels gives each less than 0.1.
+WIDE = TabularGame(
+    actions=("A", "B"),
+    level_names=tuple(f"{name}_{i}" for name in ("theta1", "theta2", "theta5", "theta6") for i in range(6)),
+    observation_names=("easy", "hard"),
+    level_obs=np.repeat([0, 0, 1, 1], 6),
+    rewards=np.repeat(PAPER_REWARDS[[0, 1, 4, 5]], 6, axis=0),
+)
 
 
 def test_level_regret_matches_hand_values():
@@ -52,6 +61,28 @@ def test_switch_freezes_support_observations_and_restricts_next_adversary():
     # Combine: h5 is played by policy 0 whatever policy 1 does there
     s2 = s._replace(agent_logits=s.agent_logits.at[1, 2].set(jnp.array([5.0, -5.0])))
     np.testing.assert_allclose(combined_probs(s2)[2], combined_probs(s)[2])
+
+
+def test_support_is_scale_free_with_many_levels():
+    cfg = TabularUEDConfig(iters_per_adversary=10)
+    g = game_arrays(WIDE)
+    state = init_state(jax.random.PRNGKey(0), g, cfg, 2)
+    hard = jnp.concatenate([jnp.full(12, -9.0), jnp.zeros(12)])  # ≈ 1/12 < 0.1 on each hard level
+    s = maybe_switch(state._replace(adv_logits=state.adv_logits.at[0].set(hard)), g, cfg, 10)
+    assert int(s.stage) == 1
+    np.testing.assert_array_equal(np.asarray(s.owner), [2, 0])  # "hard" frozen to policy 0
+    np.testing.assert_array_equal(np.asarray(s.allowed[1]), np.repeat([1, 0], 12))
+
+
+def test_support_keeps_levels_within_the_threshold_of_the_largest():
+    cfg = TabularUEDConfig(iters_per_adversary=10, support_threshold=0.1)
+    g = game_arrays(SHARED)
+    state = init_state(jax.random.PRNGKey(0), g, cfg, 2)
+    # probabilities ∝ [1, 0.01, 0.11, 0.09, 0.01, 0.01]: θ1 (h1) and θ3 (h3, prob 0.089 but
+    # 0.11 × the largest) are in the support; θ4 (0.09 × the largest) and θ5, θ6 (h5) are not
+    logits = jnp.log(jnp.array([1.0, 0.01, 0.11, 0.09, 0.01, 0.01]))
+    s = maybe_switch(state._replace(adv_logits=state.adv_logits.at[0].set(logits)), g, cfg, 10)
+    np.testing.assert_array_equal(np.asarray(s.owner), [0, 0, 2])
 
 
 def test_no_switch_when_every_level_is_covered():
@@ -95,6 +126,14 @@ def test_shared_mmr_stagnates_and_remidi_reaches_blp():
     h5_policy = rem["policy"][:, switch:, 2, 0]
     np.testing.assert_array_equal(h5_policy, h5_policy[:, :1].repeat(h5_policy.shape[1], 1))
     assert (rem["stage"][:, -1] == 1).all()  # θ1..θ4 all in the second support: nothing left
+
+
+def test_remidi_on_twelve_plus_twelve_levels_freezes_the_hard_observation():
+    states, h = train(range(3), WIDE, SMOKE, 2)
+    np.testing.assert_array_equal(np.asarray(states.owner), [[2, 0]] * 3)  # "hard" owned by policy 0
+    final = h["regret"][:, -1]
+    assert (final[:, 0] < 0.25).all(), "the second adversary should bring 'easy' towards 0.175"
+    np.testing.assert_allclose(final[:, 1], 1.0, atol=0.05)
 
 
 @pytest.mark.parametrize("b1", [0.9])

@@ -21,6 +21,15 @@ Clock
     ``time - last_seen = 0``. :func:`insert` (one level) and :func:`update_scores` do not move the
     clock; :func:`insert` stamps with the current time.
 
+Extras
+    Per-level extras (``extra_names`` of :func:`init_buffer`) are written by :func:`insert` and
+    :func:`update_scores`. An extra whose name starts with ``max_`` (e.g. ``max_return``, MaxMC's
+    record of the best return ever seen on a level) is a running maximum: when an existing entry
+    is updated (a duplicate re-insertion or :func:`update_scores`) it keeps the element-wise
+    maximum of its stored and new values (over every occurrence in one :func:`update_scores`
+    call), so the record never goes down while the entry lives. Every other extra is overwritten
+    by the new value. A new entry simply takes the given values.
+
 Scores
     Higher scores are higher priority. A level scored ``-inf`` or NaN is never inserted; ``+inf``
     is allowed. A valid entry whose score is later set to NaN by :func:`update_scores` ranks like
@@ -41,6 +50,7 @@ import jax.numpy as jnp
 from remidi.errors import ConfigError, one_of
 
 PRIORITIZATIONS = ("rank", "topk")
+RUNNING_MAX_PREFIX = "max_"  # extras named max_* keep their maximum on updates (module docstring)
 
 
 @dataclass(frozen=True)
@@ -262,6 +272,10 @@ def get_levels(state: BufferState, idxs: jax.Array):
     return jax.tree.map(lambda x: x[idxs], state.levels)
 
 
+def _is_running_max(name: str) -> bool:
+    return name.startswith(RUNNING_MAX_PREFIX)
+
+
 def _check_extra_names(state: BufferState, extras: Mapping[str, Any] | None) -> dict:
     """``extras`` as a dict, raising ``ValueError`` on a name the buffer does not track."""
     extras = dict(extras or {})
@@ -286,7 +300,8 @@ def update_scores(state: BufferState, idxs: jax.Array, scores: jax.Array, extras
         idxs: ``i32[n]`` entry indices; negative indices (e.g. the ``-1`` of a rejected
             insertion) are ignored, and for a repeated index the last occurrence wins.
         scores: ``f32[n]``.
-        extras: optional ``{name: f32[n]}``; extras not given are left unchanged.
+        extras: optional ``{name: f32[n]}``; extras not given are left unchanged, ``max_*``
+            extras keep the maximum of the stored value and every given one.
 
     Does not move the clock or change ``last_seen`` (:func:`sample_replay` already stamped).
     """
@@ -294,11 +309,19 @@ def update_scores(state: BufferState, idxs: jax.Array, scores: jax.Array, extras
     idxs = jnp.asarray(idxs, jnp.int32)
     cap = state.scores.shape[0]
     target = jnp.where(_last_occurrence(idxs) & (idxs >= 0), idxs, cap)  # cap: dropped
+    every = jnp.where(idxs >= 0, idxs, cap)  # every occurrence, for running maxima
 
     def scatter(arr, values):
         return arr.at[target].set(jnp.asarray(values, arr.dtype), mode="drop")
 
-    new_extras = {k: scatter(v, extras[k]) if k in extras else v for k, v in state.extras.items()}
+    def update_extra(name, arr):
+        if name not in extras:
+            return arr
+        if _is_running_max(name):
+            return arr.at[every].max(jnp.asarray(extras[name], arr.dtype), mode="drop")
+        return scatter(arr, extras[name])
+
+    new_extras = {k: update_extra(k, v) for k, v in state.extras.items()}
     return state.replace(scores=scatter(state.scores, scores), extras=new_extras)
 
 
@@ -329,7 +352,8 @@ def insert(state: BufferState, config: BufferConfig, level, score, extras=None):
     Rules, in order:
       * a score of ``-inf`` or NaN is never written (not even into an empty slot);
       * with ``duplicate_check``, a level equal (all leaves) to a valid entry updates that entry's
-        score, given extras and ``last_seen`` instead (``inserted = False``, ``idx`` = that entry);
+        score, given extras (``max_*`` extras keep their maximum) and ``last_seen`` instead
+        (``inserted = False``, ``idx`` = that entry);
       * if there is an empty slot the level goes into the first one;
       * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked), only if its
         score is strictly higher than that entry's score.
@@ -369,9 +393,13 @@ def insert(state: BufferState, config: BufferConfig, level, score, extras=None):
         return arr.at[target].set(jnp.asarray(value, arr.dtype), mode="drop")
 
     def new_extra(name, column):
-        if name in extras:
-            return extras[name]
-        return jnp.where(updated, column[duplicate_idx], 0.0)
+        stored = column[duplicate_idx]
+        if name not in extras:
+            return jnp.where(updated, stored, 0.0)
+        given = jnp.asarray(extras[name], column.dtype)
+        if _is_running_max(name):
+            return jnp.where(updated, jnp.maximum(stored, given), given)
+        return given
 
     state = state.replace(
         levels=jax.tree.map(scatter, state.levels, level),

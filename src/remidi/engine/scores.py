@@ -5,12 +5,25 @@ Higher = replayed more.
 
 * ``perfect_regret``: optimal return − the agent's mean episodic return (exact regret when
   the environment knows its optimal return).
-* ``pvl`` (positive value loss): mean over steps of max(GAE advantage, 0).
-* ``maxmc``: mean over steps of (highest return ever achieved on the level − V(s_t)).
+* ``pvl`` (positive value loss): per finished episode, the mean over its steps of
+  max(GAE advantage, 0); then the mean over the finished episodes.
+* ``maxmc``: per finished episode, the mean over its steps of (highest return ever achieved on
+  the level − V(s_t)); then the mean over the finished episodes.
 * ``neg_return``: −mean episodic return (minimax return).
 
-Episodic returns use the episodes that *ended* inside the rollout; an env whose episode never
-ended is credited with the reward collected so far (its partial return).
+PVL and MaxMC follow Jiang et al. (2021), "Prioritized Level Replay", as its reference
+implementations compute them (minimax's ``ued_scores.py``, and jaxued's ``positive_value_loss``
+and ``max_mc`` derived from it): an episode's score is its per-step average, the level's score
+is the average over the episodes that *ended* inside the rollout, and the steps of an
+unfinished trailing episode are left out. A rollout **without any finished episode** scores
+``-inf`` (the references' ``incomplete_value``): a fresh level scored so is never inserted into
+the buffer, and a replayed one ranks last until it is scored again (staleness can still replay
+it). Make the rollout longer than an episode (``num_steps`` ≥ the episode limit) to score
+every level.
+
+Episodic returns (``perfect_regret``, ``neg_return``) use the episodes that *ended* inside the
+rollout; an env whose episode never ended is credited with the reward collected so far (its
+partial return).
 """
 
 from __future__ import annotations
@@ -21,55 +34,78 @@ import jax.numpy as jnp
 SCORES = ("perfect_regret", "pvl", "maxmc", "neg_return")
 
 
+def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool):
+    """Per env, over the episodes that ended: the sum and the max of each episode's total of ``x``
+    (its per-step mean with ``time_average``), their count, and the same for the unfinished tail.
+
+    ``x`` f32[T, N], ``done`` bool[T, N] (the episode ended at step t) →
+    ``(sum f32[N], max f32[N] (-inf if none), count i32[N], tail f32[N] (0 if no step))``.
+    """
+
+    def step(carry, inp):
+        running, steps, total, best, count = carry
+        xt, d = inp
+        running, steps = running + xt, steps + 1
+        value = running / steps if time_average else running
+        total = total + jnp.where(d, value, 0.0)
+        best = jnp.where(d, jnp.maximum(best, value), best)
+        count = count + d
+        return (jnp.where(d, 0.0, running), jnp.where(d, 0, steps), total, best, count), None
+
+    n = x.shape[1]
+    zeros, izeros = jnp.zeros(n), jnp.zeros(n, jnp.int32)
+    init = (zeros, izeros, zeros, jnp.full(n, -jnp.inf), izeros)
+    (running, steps, total, best, count), _ = jax.lax.scan(step, init, (x, done))
+    tail = running / jnp.maximum(steps, 1) if time_average else running
+    return total, best, count, tail
+
+
 def episode_returns(reward: jax.Array, done: jax.Array):
     """Mean and max return of the episodes that ended, per env.
 
     ``reward`` f32[T, N], ``done`` bool[T, N] → ``(mean f32[N], max f32[N], count i32[N])``;
     with no finished episode, mean = max = the partial return and count = 0.
     """
-
-    def step(carry, x):
-        running, total, best, count = carry
-        r, d = x
-        running = running + r
-        total = total + jnp.where(d, running, 0.0)
-        best = jnp.where(d, jnp.maximum(best, running), best)
-        count = count + d
-        return (jnp.where(d, 0.0, running), total, best, count), None
-
-    zeros = jnp.zeros(reward.shape[1])
-    init = (zeros, zeros, jnp.full(reward.shape[1], -jnp.inf), jnp.zeros(reward.shape[1], jnp.int32))
-    (running, total, best, count), _ = jax.lax.scan(step, init, (reward, done))
-    mean = jnp.where(count > 0, total / jnp.maximum(count, 1), running)
-    best = jnp.where(count > 0, best, running)
+    total, best, count, partial = _episode_stats(reward, done, time_average=False)
+    mean = jnp.where(count > 0, total / jnp.maximum(count, 1), partial)
+    best = jnp.where(count > 0, best, partial)
     return mean, best, count
+
+
+def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float = -jnp.inf) -> jax.Array:
+    """f32[N]: the mean over finished episodes of each episode's per-step mean of ``x`` f32[T, N];
+    ``incomplete_value`` for an env with no finished episode (module docstring)."""
+    total, _, count, _ = _episode_stats(x, done, time_average=True)
+    return jnp.where(count > 0, total / jnp.maximum(count, 1), incomplete_value)
 
 
 def perfect_regret(mean_return: jax.Array, optimal_return: jax.Array) -> jax.Array:
     return optimal_return - mean_return
 
 
-def positive_value_loss(advantages: jax.Array) -> jax.Array:
-    return jnp.mean(jnp.maximum(advantages, 0.0), axis=0)
+def positive_value_loss(advantages: jax.Array, done: jax.Array) -> jax.Array:
+    """``advantages`` f32[T, N] (GAE), ``done`` bool[T, N]."""
+    return episode_mean(jnp.maximum(advantages, 0.0), done)
 
 
-def max_mc(values: jax.Array, max_return: jax.Array) -> jax.Array:
-    """``values`` f32[T, N], ``max_return`` f32[N] (highest return ever seen on the level)."""
-    return jnp.mean(max_return[None, :] - values, axis=0)
+def max_mc(values: jax.Array, max_return: jax.Array, done: jax.Array) -> jax.Array:
+    """``values`` f32[T, N], ``max_return`` f32[N] (highest return ever seen on the level),
+    ``done`` bool[T, N]."""
+    return episode_mean(max_return[None, :] - values, done)
 
 
 def negative_return(mean_return: jax.Array) -> jax.Array:
     return -mean_return
 
 
-def score_levels(name: str, *, mean_return, values, advantages, max_return, optimal_return=None) -> jax.Array:
+def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None) -> jax.Array:
     """Dispatch on the score's name (static)."""
     if name == "perfect_regret":
         return perfect_regret(mean_return, optimal_return)
     if name == "pvl":
-        return positive_value_loss(advantages)
+        return positive_value_loss(advantages, done)
     if name == "maxmc":
-        return max_mc(values, max_return)
+        return max_mc(values, max_return, done)
     if name == "neg_return":
         return negative_return(mean_return)
     raise ValueError(f"score must be one of {SCORES}, got {name!r}")

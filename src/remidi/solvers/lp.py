@@ -24,12 +24,23 @@ every equilibrium can reach at most ``_VALUE_SLACK / gap`` probability, where ``
 adversary value a unit of its mass costs, so it is misclassified only if ``gap < 1e-4`` (in
 normalised units) with the default ``tol = 1e-7``.
 
+**Uniqueness.** A round's optimal plan need not be unique, and the behaviour it freezes decides
+what later rounds can achieve: with one observation and levels paying (1, 0, 0), (0, 1, 1) and
+(0, 0, 0.2) for three actions, round 1 (value 0.5 on the first two levels) fixes P(a1) = 0.5 but
+leaves any split of the other 0.5 between a2 and a3 optimal, and the third level's final regret is
+0.2 − 0.2·P(a3), anywhere in [0.1, 0.2]. So a BLP policy is not unique in general; the solver
+returns the one HiGHS finds. Each round therefore checks whether the policy it freezes is unique
+(:func:`frozen_plan_is_unique`): for every sequence below an information set it freezes, two LPs
+minimise and maximise that sequence's mass over the round's *optimal face* (the plans whose
+regret on every available level is within ``_FACE_SLACK`` of the round's value); the frozen policy
+is unique iff every minimum and maximum agree within ``_UNIQUE_TOL``.
+
 Payoffs are divided by their largest magnitude before solving, so tolerances are relative.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linprog
@@ -40,6 +51,10 @@ _HIGHS_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_toler
 _VALUE_SLACK = 1e-11
 #: A level whose regret under an optimal plan is this far below the value is in no support.
 _CANDIDATE_GAP = 1e-9
+#: Plans whose regret exceeds a round's value by at most this (normalised units) are optimal.
+_FACE_SLACK = 1e-9
+#: Optimal plans differing by more than this on a frozen sequence make the frozen policy non-unique.
+_UNIQUE_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -78,13 +93,15 @@ class Polytope:
 
 @dataclass(frozen=True)
 class RawRound:
-    """One solved regret game: value, adversary [L], support [L] bool, plan [S], regret [L]."""
+    """One solved regret game: value, adversary [L], support [L] bool, plan [S], regret [L], and
+    (BLP rounds only, else None) whether the policy the round freezes is unique."""
 
     value: float
     adversary: np.ndarray
     support: np.ndarray
     plan: np.ndarray
     regret: np.ndarray
+    unique: bool | None = None
 
 
 def best_response_values(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
@@ -204,6 +221,38 @@ def solve_regret_game(
     return RawRound(value, adversary, support, plan, regret)
 
 
+def frozen_plan_is_unique(
+    payoff: np.ndarray,
+    optimal: np.ndarray,
+    eq: tuple[np.ndarray, np.ndarray],
+    active: np.ndarray,
+    value: float,
+    sequences: np.ndarray,
+) -> bool:
+    """Whether every optimal plan of a regret game gives each of ``sequences`` [K] the same mass.
+
+    The optimal face is ``{x : E @ x = e, x >= 0, U*_l - C[l] @ x <= value + _FACE_SLACK for the
+    active l}`` (normalised payoffs, as in :func:`solve_regret_game`); each sequence's mass is
+    minimised and maximised over it (see the module docstring).
+    """
+    a_ub = -payoff[active]
+    b_ub = value + _FACE_SLACK - optimal[active]
+    for seq in sequences:
+        extremes = []
+        for sign in (1.0, -1.0):
+            cost = np.zeros(payoff.shape[1])
+            cost[seq] = sign
+            result = _check(
+                linprog(cost, A_ub=a_ub, b_ub=b_ub, A_eq=eq[0], b_eq=eq[1], bounds=(0, None),
+                        method="highs", options=_HIGHS_OPTIONS),
+                "optimal face LP",
+            )
+            extremes.append(sign * result.fun)
+        if extremes[1] - extremes[0] > _UNIQUE_TOL:
+            return False
+    return True
+
+
 def realisable_infosets(
     poly: Polytope, reach: np.ndarray, plan: np.ndarray, levels: np.ndarray, tol: float
 ) -> np.ndarray:
@@ -241,7 +290,7 @@ def normalise(payoff: np.ndarray, optimal: np.ndarray) -> float:
 
 def _rescaled(raw: RawRound, scale: float) -> RawRound:
     """A round with value and regret [L] multiplied back by ``scale``."""
-    return RawRound(raw.value * scale, raw.adversary, raw.support, raw.plan, raw.regret * scale)
+    return replace(raw, value=raw.value * scale, regret=raw.regret * scale)
 
 
 def solve_mmr_plan(poly: Polytope, payoff: np.ndarray, tol: float) -> RawRound:
@@ -261,6 +310,8 @@ def solve_blp_plans(
     Round 1 is minimax regret over all levels. Round k+1 fixes the behaviour of round k's plan on
     every information set realisable on the union of the earlier supports, and lets the
     adversary choose only among levels outside those supports. Stops when every level is covered.
+    Each round's ``unique`` tells whether the behaviour it fixes is the same in every optimal plan
+    of its regret game (:func:`frozen_plan_is_unique`).
     """
     optimal = best_response_values(poly, payoff)
     scale = normalise(payoff, optimal)
@@ -270,10 +321,13 @@ def solve_blp_plans(
     covered = np.zeros(payoff.shape[0], dtype=bool)
     rounds: list[RawRound] = []
     while not covered.all():
-        raw = solve_regret_game(payoff_n, optimal_n, eq, ~covered, tol)
-        rounds.append(_rescaled(raw, scale))
-        covered |= raw.support
+        active = ~covered
+        raw = solve_regret_game(payoff_n, optimal_n, eq, active, tol)
+        covered = covered | raw.support
         fixed = realisable_infosets(poly, reach, raw.plan, covered, tol)
+        frozen = np.array(sorted({seq for info in np.flatnonzero(fixed) for seq in poly.children[info]}), dtype=int)
+        unique = frozen_plan_is_unique(payoff_n, optimal_n, eq, active, raw.value, frozen)
+        rounds.append(_rescaled(replace(raw, unique=unique), scale))
         rows, rhs = fixing_equalities(poly, raw.plan, fixed)
         eq = (np.vstack([base[0], rows]), np.concatenate([base[1], rhs]))
     return rounds

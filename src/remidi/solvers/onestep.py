@@ -96,6 +96,6 @@ def solve_blp(game: OneStepGame, tol: float = 1e-7) -> BLPResult[np.ndarray]:
     for raw in lp.solve_blp_plans(poly, payoff, reach, tol):
         policy = _policy(game, raw.plan)
         rounds.append(Round(raw.value, _support_names(game, raw.support), raw.adversary, policy,
-                            policy_regret(game, policy)))
+                            policy_regret(game, policy), raw.unique))
     final = rounds[-1]
     return BLPResult(rounds[0].value, rounds, final.policy, final.regret, game.rewards.max(axis=1))

@@ -39,15 +39,18 @@ def summarise(game: OneStepGame | TreeGame) -> dict:
     """JSON-ready summary of the BLP solution (whose first round is the MMR solution).
 
     Keys: format, actions, mmr_value, adversary (round 1, {level: prob}), rounds
-    ([{value, support, adversary}]), policy ({observation/AOH: {action: prob}}), regret,
-    optimal_return and support_round ({level: 1-based round whose support holds it}).
+    ([{value, support, adversary, unique}]; ``unique``: whether the policy the round freezes is
+    the only optimal one, see :class:`~remidi.solvers.results.Round`), policy ({observation/AOH:
+    {action: prob}}), regret, optimal_return and support_round ({level: 1-based round whose
+    support holds it}).
     """
     solver = onestep if isinstance(game, OneStepGame) else sequence_form
     result = solver.solve_blp(game)
     names = game.level_names
     rounds = [
         {"value": _clean(r.value), "support": list(r.support),
-         "adversary": {n: _clean(p) for n, p in zip(names, r.adversary) if n in r.support}}
+         "adversary": {n: _clean(p) for n, p in zip(names, r.adversary) if n in r.support},
+         "unique": bool(r.unique)}
         for r in result.rounds
     ]
     return {
@@ -85,11 +88,17 @@ def format_text(summary: dict, source: str) -> str:
         "",
         "BLP refinement (maximal-support equilibrium adversary per round):",
     ]
-    lines += _table([["round", "value", "adversary support (probability)"]] + [
-        [str(i + 1), _num(r["value"]),
+    lines += _table([["round", "value", "frozen policy unique", "adversary support (probability)"]] + [
+        [str(i + 1), _num(r["value"]), "yes" if r["unique"] else "no",
          ", ".join(f"{n} ({_num(p)})" for n, p in r["adversary"].items())]
         for i, r in enumerate(summary["rounds"])
     ])
+    ambiguous = [str(i + 1) for i, r in enumerate(summary["rounds"]) if not r["unique"]]
+    if ambiguous:
+        lines += [f"  The BLP policy is not unique: round(s) {', '.join(ambiguous)} froze one of several optimal",
+                  "  policies; later rounds, the policy and the regrets below can depend on that choice."]
+    else:
+        lines.append("  The BLP policy is unique: every round froze the only optimal policy.")
     key = "observation" if summary["format"] == "one-step" else "history"
     lines += ["", "BLP policy (probability of each action):"]
     lines += _table([[key] + summary["actions"]] + [

@@ -22,6 +22,10 @@ class Round(Generic[P]):
     support: names of the levels of the maximal-support equilibrium adversary.
     adversary: [L] that adversary (zero outside the available levels).
     policy: the round's policy; regret: [L] its regret on every level.
+    unique: whether the behaviour this round freezes (its policy on every observation / history
+        realisable on the levels covered so far) is the same in every optimal policy of the
+        round. If not, later rounds and the final regrets may depend on which optimal policy the
+        LP solver returned: a BLP policy need not be unique (:mod:`remidi.solvers.lp`).
     """
 
     value: float
@@ -29,6 +33,7 @@ class Round(Generic[P]):
     adversary: np.ndarray
     policy: P
     regret: np.ndarray
+    unique: bool
 
 
 @dataclass(frozen=True)

@@ -204,7 +204,7 @@ def solve_blp(game: TreeGame, tol: float = 1e-7) -> BLPResult[TreePolicy]:
     form = build_sequence_form(game)
     rounds = [
         Round(raw.value, _support_names(game, raw.support), raw.adversary,
-              _policy(form, raw.plan, tol), raw.regret)
+              _policy(form, raw.plan, tol), raw.regret, raw.unique)
         for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol)
     ]
     return BLPResult(rounds[0].value, rounds, rounds[-1].policy, rounds[-1].regret,

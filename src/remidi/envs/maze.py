@@ -317,7 +317,7 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
             return jax.tree.map(lambda a, b: jnp.where(special, a, b), t, maze)
         return maze.replace(blind=special)
 
-    tag = {"tmaze": "tmaze", "blindfold": "blind"}.get(kind)
+    tag = {"tmaze": "tmaze", "blindfold": "blind"}.get(kind)  # the level flag it reports
     sets = held_out_sets()
     envs = {size: (env if size == TRAIN_SIZE else MazeEnv(size)) for size, _ in sets.values()}
     return UEDTask(
@@ -329,6 +329,5 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
         optimal_return=optimal_return,
         eval_sets={name: levels for name, (_, levels) in sets.items()},
         eval_envs={name: envs[size] for name, (size, _) in sets.items() if size != TRAIN_SIZE},
-        level_tags=(lambda level: {tag: getattr(level, "tmaze" if tag == "tmaze" else "blind")}) if tag else
-        (lambda level: {}),
+        level_tags=(lambda level: {tag: getattr(level, tag)}) if tag else (lambda level: {}),
     )

@@ -73,11 +73,12 @@ def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, mon
 
 
 def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
-    _, hist, _, runner = driver.train_seeds(TASK, TINY, "remidi", [0, 1, 2], progress=False)
+    # seeds 0 and 1: the program compiled for the determinism test (shared through the cache)
+    _, hist, _, runner = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False)
     levels, valid = runner.buffers.levels, np.asarray(runner.buffers.valid)  # [S, K, C]
     correct, visible = np.asarray(levels.correct), np.asarray(levels.visible)
-    assert np.asarray(runner.active).tolist() == [1, 1, 1]
-    for s in range(3):
+    assert np.asarray(runner.active).tolist() == [1, 1]
+    for s in range(2):
         first = {(int(c), bool(v)) for c, v, ok in zip(correct[s, 0], visible[s, 0], valid[s, 0]) if ok}
         second = {(int(c), bool(v)) for c, v, ok in zip(correct[s, 1], visible[s, 1], valid[s, 1]) if ok}
         assert any(not v for _, v in first), "PLR's first buffer should hold hidden levels"

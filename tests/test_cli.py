@@ -193,3 +193,28 @@ def test_several_algorithms_into_a_folder_holding_one_of_them_writes_nothing(tmp
 def test_derived_keys_are_not_settable(capsys, tmp_path):
     code, _, err = run_cli(capsys, "run", "lever", "--set", "ppo.total_updates=5", "--out", str(tmp_path / "x"))
     assert code == 2 and "unknown key 'ppo.total_updates'" in err
+
+
+def test_version(capsys):
+    from remidi import __version__
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and capsys.readouterr().out.strip() == f"remidi {__version__}"
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "lever", "--algo", "dr", "--set", "network=maze_lstm"],
+     "network: maze_lstm cannot read this task's observations (AttributeError); allowed: mlp"),
+    (["run", "lever", "--algo", "dr", "--out", "{file}/sub"], "is a file, not a folder"),
+    (["run", "lever", "--algo", "dr", "--out", "/proc/remidi-no-such/run"], "cannot be made"),
+])
+def test_bad_network_and_unwritable_out_are_one_line_errors(tmp_path, capsys, argv, needle):
+    file = tmp_path / "file"
+    file.write_text("x")
+    argv = [a.replace("{file}", str(file)) for a in argv]
+    if "--out" not in argv:
+        argv += ["--out", str(tmp_path / "run")]
+    code, out, err = run_cli(capsys, *argv)
+    assert code == 2 and needle in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"] and file.read_text() == "x"

@@ -103,7 +103,10 @@ def _cmd_render(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from remidi import __version__
+
     parser = _Parser(prog="remidi", description="ReMiDi and Bayesian level-perfect minimax regret for UED.")
+    parser.add_argument("--version", action="version", version=f"remidi {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     solve = sub.add_parser("solve", help="exact MMR and BLP of a finite game file (JSON)",

@@ -339,6 +339,33 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
 
 
 # ---------------------------------------------------------------------------- validation
+def check_network_reads_observations(net, name: str, task: UEDTask) -> None:
+    """Raise ConfigError unless ``net`` can be applied to the task's observations (traced
+    abstractly: nothing is compiled or run)."""
+    from remidi.engine.networks import NETWORKS
+    from remidi.errors import ConfigError
+
+    def init():
+        level = task.sample_level(jax.random.PRNGKey(0))
+        obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
+        obs = jax.tree.map(lambda x: x[None, None], obs)
+        return net.init(jax.random.PRNGKey(0), net.initialize_carry(1), obs, jnp.ones((1, 1), bool))
+
+    try:
+        jax.eval_shape(init)
+    except Exception as err:  # any failure to read the observation is the user's choice of network
+        fits = []
+        for other in sorted(NETWORKS):
+            if other != name:
+                try:
+                    check_network_reads_observations(make_network(other, task.num_actions), other, task)
+                    fits.append(other)
+                except ConfigError:
+                    pass
+        raise ConfigError(f"network: {name} cannot read this task's observations ({type(err).__name__}); "
+                          f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}") from None
+
+
 def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
     from remidi.engine.networks import make_network
@@ -355,7 +382,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
-    make_network(cfg.network, task.num_actions)
+    check_network_reads_observations(make_network(cfg.network, task.num_actions), cfg.network, task)
     for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
                              ("buffer.", lambda: buf.validate_buffer_config(cfg.buffer)),
                              ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):

@@ -101,7 +101,7 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
         raise ConfigError("--seeds: must be an integer ≥ 1")
     out = Path(out)
     folders = {algo: (out / algo if len(algos) > 1 else out) for algo in algos}
-    for folder in {out, *folders.values()}:  # check every folder before writing anything
+    for folder in dict.fromkeys([out, *folders.values()]):  # check every folder before writing anything
         outputs.prepare_out_dir(folder, create=False)
     for algo, folder in folders.items():
         outputs.prepare_out_dir(folder)

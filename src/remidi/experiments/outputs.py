@@ -38,8 +38,17 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
         raise ConfigError(f"--resume: {out} holds no run (no config.json)")
     if not resume and holds_run:
         raise ConfigError(f"--out: {out} already holds a run; choose another folder or pass --resume {out}")
+    if not resume:
+        existing = next(p for p in (out, *out.parents) if p.exists())  # the folder it will be made in
+        if not existing.is_dir():
+            raise ConfigError(f"--out: {out} cannot be made: {existing} is a file, not a folder")
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise ConfigError(f"--out: {out} cannot be made: {existing} is not writable")
     if create:
-        out.mkdir(parents=True, exist_ok=True)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ConfigError(f"--out: {out} cannot be made ({err.strerror or type(err).__name__})") from None
     return out
 
 

@@ -375,12 +375,12 @@ def test_select_and_replace_with_traced_index():
 @pytest.mark.parametrize(
     "field,value,message",
     [
-        ("capacity", 0, r"^capacity: .*>= 1"),
+        ("capacity", 0, r"^capacity: .*≥ 1"),
         ("capacity", 2.0, r"^capacity: "),
         ("prioritization", "softmax", r"^prioritization: .*allowed: rank, topk"),
         ("temperature", 0.0, r"^temperature: .*> 0"),
         ("temperature", -1.0, r"^temperature: "),
-        ("topk_k", 0, r"^topk_k: .*>= 1"),
+        ("topk_k", 0, r"^topk_k: .*≥ 1"),
         ("staleness_coef", 1.5, r"^staleness_coef: .*\[0, 1\]"),
         ("staleness_coef", float("nan"), r"^staleness_coef: "),
         ("replay_prob", -0.1, r"^replay_prob: .*\[0, 1\]"),

@@ -218,3 +218,25 @@ def test_bad_network_and_unwritable_out_are_one_line_errors(tmp_path, capsys, ar
     code, out, err = run_cli(capsys, *argv)
     assert code == 2 and needle in err and err.count("\n") == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"] and file.read_text() == "x"
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "lever", "--algo", "remidi", "--set", "remidi.buffer_capacity=0"],
+     "remidi.buffer_capacity: must be an integer ≥ 1, got 0"),
+    (["run", "lever", "--set", "ppo.lr=abc"], "ppo.lr: expected a number, got 'abc'"),
+    (["run", "lever", "--set", "ppo.epochs=0"], "ppo.epochs: 0 must be ≥ 1"),
+    (["run", "lever", "--algo", "remidi", "--set", "remidi.steps_per_buffer=3000"],
+     "(num_buffers − 1) × steps_per_buffer = (2 − 1) × 3000 = 3000 is not below num_updates = 300; "
+     "lower remidi.num_buffers or remidi.steps_per_buffer, or raise num_updates"),
+])
+def test_errors_name_the_key_that_was_set(tmp_path, capsys, argv, needle):
+    code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "run"))
+    assert code == 2 and needle in err and err.count("\n") == 1, err
+    assert not (tmp_path / "run").exists()
+
+
+def test_resume_of_a_file_names_resume(tmp_path, capsys):
+    file = tmp_path / "f"
+    file.write_text("x")
+    code, _, err = run_cli(capsys, "run", "--resume", str(file))
+    assert code == 2 and err.startswith("remidi: error: --resume:") and file.read_text() == "x"

@@ -117,13 +117,13 @@ def _check_unit_interval(name: str, value) -> None:
 def validate_buffer_config(config: BufferConfig) -> None:
     """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
     if not (_is_int(config.capacity) and config.capacity >= 1):
-        raise ConfigError(f"capacity: must be an integer >= 1, got {config.capacity!r}")
+        raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
     if config.prioritization not in PRIORITIZATIONS:
         raise one_of("prioritization", config.prioritization, PRIORITIZATIONS)
     if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
         raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
     if not (_is_int(config.topk_k) and config.topk_k >= 1):
-        raise ConfigError(f"topk_k: must be an integer >= 1, got {config.topk_k!r}")
+        raise ConfigError(f"topk_k: must be an integer ≥ 1, got {config.topk_k!r}")
     _check_unit_interval("staleness_coef", config.staleness_coef)
     _check_unit_interval("replay_prob", config.replay_prob)
     _check_unit_interval("min_fill", config.min_fill)

@@ -60,15 +60,15 @@ def validate_ppo_config(cfg: PPOConfig, num_envs: int) -> None:
         ("gamma", 0.0 <= cfg.gamma <= 1.0, "must lie in [0, 1]"),
         ("gae_lambda", 0.0 <= cfg.gae_lambda <= 1.0, "must lie in [0, 1]"),
         ("clip_eps", cfg.clip_eps > 0, "must be > 0"),
-        ("vf_coef", cfg.vf_coef >= 0, "must be >= 0"),
-        ("ent_coef", cfg.ent_coef >= 0, "must be >= 0"),
-        ("epochs", cfg.epochs >= 1, "must be >= 1"),
-        ("minibatches", cfg.minibatches >= 1, "must be >= 1"),
+        ("vf_coef", cfg.vf_coef >= 0, "must be ≥ 0"),
+        ("ent_coef", cfg.ent_coef >= 0, "must be ≥ 0"),
+        ("epochs", cfg.epochs >= 1, "must be ≥ 1"),
+        ("minibatches", cfg.minibatches >= 1, "must be ≥ 1"),
         ("minibatches", num_envs % max(cfg.minibatches, 1) == 0, f"must divide num_envs={num_envs}"),
         ("lr", cfg.lr > 0, "must be > 0"),
         ("adam_eps", cfg.adam_eps > 0, "must be > 0"),
         ("max_grad_norm", cfg.max_grad_norm > 0, "must be > 0"),
-        ("total_updates", cfg.total_updates >= 1, "must be >= 1"),
+        ("total_updates", cfg.total_updates >= 1, "must be ≥ 1"),
     ]
     for field, ok, why in checks:
         if not ok:

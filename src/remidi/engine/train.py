@@ -383,6 +383,12 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
     check_network_reads_observations(make_network(cfg.network, task.num_actions), cfg.network, task)
+    r = cfg.remidi
+    positive_int("remidi.num_buffers", r.num_buffers)
+    positive_int("remidi.buffer_capacity", r.buffer_capacity)
+    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
+    choice("remidi.count", r.count, ("updates", "replays"))
+    choice("remidi.tracker", r.tracker, MODES)
     for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
                              ("buffer.", lambda: buf.validate_buffer_config(cfg.buffer)),
                              ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):
@@ -391,14 +397,11 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
         except ConfigError as err:
             msg = str(err)
             raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
-    r = cfg.remidi
-    positive_int("remidi.num_buffers", r.num_buffers)
-    positive_int("remidi.buffer_capacity", r.buffer_capacity)
-    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
-    choice("remidi.count", r.count, ("updates", "replays"))
-    choice("remidi.tracker", r.tracker, MODES)
     if algo == "remidi":
         needed = (r.num_buffers - 1) * r.steps_per_buffer
-        require(needed < cfg.num_updates, "remidi.num_buffers",
-                f"small enough that every buffer gets updates ((num_buffers − 1) × steps_per_buffer = "
-                f"{needed} < num_updates = {cfg.num_updates})", r.num_buffers)
+        if needed >= cfg.num_updates:
+            raise ConfigError(
+                f"remidi.num_buffers: must be small enough that the last buffer gets updates, but "
+                f"(num_buffers − 1) × steps_per_buffer = ({r.num_buffers} − 1) × {r.steps_per_buffer} = {needed} "
+                f"is not below num_updates = {cfg.num_updates}; lower remidi.num_buffers or "
+                f"remidi.steps_per_buffer, or raise num_updates")

@@ -82,25 +82,24 @@ def _convert(key: str, text: Any, kind) -> Any:
     raise ConfigError(f"{key}: cannot be set from the command line")
 
 
-def apply_overrides(config, overrides: dict[str, Any], *, source: str = "--set"):
-    """Return ``config`` with ``overrides`` (dotted keys → text or JSON values) applied."""
+def apply_overrides(config, overrides: dict[str, Any], *, source: str = "--set", prefix: str = ""):
+    """Return ``config`` with ``overrides`` (dotted keys → text or JSON values) applied.
+    ``prefix``: the dotted path of ``config`` inside the top-level config, for error messages."""
     allowed = field_names(config)
     nested: dict[str, dict[str, Any]] = {}
     direct: dict[str, Any] = {}
     hints = typing.get_type_hints(type(config))
     for key, value in overrides.items():
         if key not in allowed:
-            raise ConfigError(f"{source}: unknown key {key!r}; allowed: {', '.join(allowed)}")
+            raise ConfigError(f"{source}: unknown key {prefix + key!r}; "
+                              f"allowed: {', '.join(prefix + name for name in allowed)}")
         head, _, rest = key.partition(".")
         if rest:
             nested.setdefault(head, {})[rest] = value
         else:
-            direct[head] = _convert(key, value, hints[head])
+            direct[head] = _convert(prefix + key, value, hints[head])
     for head, sub in nested.items():
-        try:
-            direct[head] = apply_overrides(getattr(config, head), sub, source=source)
-        except ConfigError as err:
-            raise ConfigError(str(err).replace(f"{source}: unknown key '", f"{source}: unknown key '{head}.")) from None
+        direct[head] = apply_overrides(getattr(config, head), sub, source=source, prefix=f"{prefix}{head}.")
     return dataclasses.replace(config, **direct)
 
 

@@ -31,8 +31,9 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
     """Check that ``out`` can receive a new run (or holds the run to resume); create it unless
     ``create`` is False (check only)."""
     out = Path(out)
+    flag = "--resume" if resume else "--out"
     if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out: {out} exists and is not a folder")
+        raise ConfigError(f"{flag}: {out} exists and is not a folder")
     holds_run = (out / "config.json").exists()
     if resume and not holds_run:
         raise ConfigError(f"--resume: {out} holds no run (no config.json)")

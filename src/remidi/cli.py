@@ -35,7 +35,8 @@ def _cmd_list(args) -> int:
     for exp in all_experiments().values():
         print(f"{exp.name}: {exp.description}")
         print(f"  algorithms: {', '.join(exp.algorithms)}")
-        presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seeds)" for p in exp.presets)
+        presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
+                            for p in exp.presets)
         print(f"  presets:    {presets}")
         print(f"  --set keys: {', '.join(field_names(exp.config_factory()))}")
     return 0
@@ -43,7 +44,8 @@ def _cmd_list(args) -> int:
 
 def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     for algo, summary in summaries.items():
-        print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {len(summary['seeds'])} seeds): final metrics")
+        n = len(summary["seeds"])
+        print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {n} seed{'s' if n != 1 else ''}): final metrics")
         for name, m in summary["metrics"].items():
             if m["mean"] is None or m["mean"] != m["mean"]:  # undefined (null in JSON, NaN in memory)
                 print(f"  {name:32s} {'n/a':>10s}")

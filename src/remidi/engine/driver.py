@@ -109,7 +109,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
             history = _unstack(saved, "h", len(steps))
             per_step = _unstack(saved, "p", meta["num_blocks"])
 
-    bar = _progress(cfg.num_updates, done, f"{algo} × {len(seeds)} seeds", progress)
+    bar = _progress(cfg.num_updates, done, f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}", progress)
     while done < cfg.num_updates:
         length = min(cfg.eval_every, cfg.num_updates - done)
         start = time.perf_counter()

@@ -250,8 +250,11 @@ def train_step(setup: Setup, runner: Runner):
 
 
 def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
-    """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active one."""
+    """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active one;
+    nothing for DR, which has no buffer."""
     out = {}
+    if setup.algo == "dr":
+        return out
     valid = runner.buffers.valid  # bool[K, C]
     sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
     counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels, valid)

@@ -32,21 +32,32 @@ class Trajectory:
 
 @struct.dataclass
 class Frozen:
-    """The frozen buffers' levels as one batch: ``levels`` leaves [F, ...], ``valid`` bool[F]."""
+    """The frozen buffers' levels as one batch: ``levels`` leaves [F, ...], ``valid`` bool[F],
+    buffer-major (F = B·C for B frozen buffers of capacity C). With ``params`` (leaves [B, ...]:
+    the policy frozen with each buffer, ReMiDi's ``Combine``), a step whose prefix one of those
+    buffers' levels produced is acted on by the policy of the earliest such buffer."""
 
     levels: Any
     valid: jax.Array
+    params: Any = None
 
 
 def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
-            num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix"):
+            num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix",
+            tracker_env: UnderspecifiedEnv | None = None):
     """Roll out the policy on ``levels`` (leaves [N, ...]) of ``env`` for ``num_steps`` steps.
+
+    The tracker plays the frozen levels in ``tracker_env`` (default ``env``; they are training
+    levels, so a larger evaluation environment passes the training one). With ``frozen.params``
+    the actions of indistinguishable steps come from the earliest matching buffer's policy (each
+    frozen policy carries its own recurrent state); ``log_prob`` and ``value`` are always the
+    current policy's (PPO trains only on the steps it acted on, ``~indist``).
 
     ``apply_fn({"params": params}, carry, obs[1, N, ...], reset bool[1, N]) -> carry,
     (logits [1, N, A], value [1, N])`` (a flax module's ``apply``). With ``frozen`` the tracker runs beside every env; without it ``indist``
     is all False. Returns ``(trajectory, last_value f32[N])``.
     """
-    base_env, env = env, AutoReplay(env)
+    base_env, env = (tracker_env if tracker_env is not None else env), AutoReplay(env)
     num_envs = jax.tree.leaves(levels)[0].shape[0]
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
@@ -57,8 +68,10 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     else:
         tstate = None
 
+    combine = frozen is not None and frozen.params is not None
+
     def step(carry, key):
-        state, obs, reset, hidden, tstate = carry
+        state, obs, reset, (hidden, frozen_hidden), tstate = carry
         k_act, k_env = jax.random.split(key)
         if tstate is not None:
             indist = jax.vmap(trk.indistinguishable, in_axes=(0, None))(tstate, tracker_mode)
@@ -67,7 +80,12 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
         obs_in = jax.tree.map(lambda x: x[None], obs)
         hidden, (logits, value) = apply_fn({"params": params}, hidden, obs_in, reset[None])
         logits, value = logits[0], value[0]
-        action = jax.random.categorical(k_act, logits)
+        acting = logits
+        if combine:
+            frozen_hidden, (frozen_logits, _) = jax.vmap(
+                lambda p, h: apply_fn({"params": p}, h, obs_in, reset[None]))(frozen.params, frozen_hidden)
+            acting = combined_logits(tstate.match, frozen_logits[:, 0], logits)
+        action = jax.random.categorical(k_act, acting)
         log_prob = jnp.take_along_axis(jax.nn.log_softmax(logits), action[:, None], axis=-1)[:, 0]
         env_keys = jax.random.split(k_env, num_envs)
         next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
@@ -77,10 +95,28 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
                 base_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
                             reward=reward.astype(jnp.float32), done=done, indist=indist)
-        return (state, next_obs, done, hidden, tstate), record
+        return (state, next_obs, done, (hidden, frozen_hidden), tstate), record
 
     first = jnp.ones((num_envs,), bool)
-    carry = (state, obs, first, init_carry, tstate)
-    (state, obs, reset, hidden, _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
+    frozen_carry = None
+    if combine:
+        copies = jax.tree.leaves(frozen.params)[0].shape[0]
+        frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), init_carry)
+    carry = (state, obs, first, (init_carry, frozen_carry), tstate)
+    (state, obs, reset, (hidden, _), _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
     _, (_, last_value) = apply_fn({"params": params}, hidden, jax.tree.map(lambda x: x[None], obs), reset[None])
     return traj, last_value[0]
+
+
+def combined_logits(match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:
+    """ReMiDi's ``Combine``: f32[N, A], the logits of the policy that acts on each env.
+
+    ``match`` bool[N, F] (frozen level f produced env n's whole prefix; buffer-major, F = B·C),
+    ``frozen_logits`` f32[B, N, A] (each frozen buffer's policy), ``logits`` f32[N, A] (current).
+    The earliest buffer with a matching level acts; the current policy where none matches.
+    """
+    copies = frozen_logits.shape[0]
+    buffer_match = match.reshape(match.shape[0], copies, -1).any(axis=-1)  # [N, B]
+    earliest = jnp.argmax(buffer_match, axis=-1)  # first True (0 if none)
+    chosen = jnp.take_along_axis(jnp.moveaxis(frozen_logits, 0, 1), earliest[:, None, None], axis=1)[:, 0]
+    return jnp.where(buffer_match.any(axis=-1)[:, None], chosen, logits)

@@ -33,10 +33,12 @@ from remidi.engine import buffer as buf
 from remidi.engine import scores as sc
 from remidi.engine.networks import make_network
 from remidi.engine.ppo import Batch, PPOConfig, compute_gae, create_train_state, ppo_update
-from remidi.engine.rollout import Frozen, Trajectory, rollout
+from remidi.engine import tracker as trk
+from remidi.engine.rollout import Frozen, Trajectory, combined_logits, rollout
 from remidi.envs.interface import UEDTask
 
 ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
+POLICIES = ("masked", "combine")
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,10 @@ class ReMiDiConfig:
     steps_per_buffer: int = 1000  # switching rule: stay this long on a buffer, then freeze it
     count: str = "updates"  # what steps_per_buffer counts: "updates" or "replays"
     tracker: str = "prefix"  # "prefix" (one frozen level matches the whole prefix) or "per_step"
+    # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
+    # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
+    # buffer acts on the trajectories realisable under that buffer's levels
+    policy: str = "masked"
 
 
 @dataclass(frozen=True)
@@ -96,6 +102,7 @@ class Runner:
     active: jax.Array  # i32[], index of the buffer being filled and replayed
     count: jax.Array  # i32[], updates (or replays) spent on the active buffer
     update: jax.Array  # i32[], train steps done
+    frozen_params: object = None  # remidi.policy=combine: the policy frozen with each buffer, leaves [K−1, ...]
 
 
 @dataclass(frozen=True)
@@ -122,7 +129,16 @@ def init_runner(setup: Setup, rng) -> Runner:
     one = buf.init_buffer(buffer_config(cfg, setup.algo), example_level, extra_names=("max_return",))
     buffers = buf.stack_buffers([one] * num_buffers(cfg, setup.algo))
     zero = jnp.zeros((), jnp.int32)
-    return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero)
+    frozen_params = None
+    if combines(setup):  # filled in at each buffer switch
+        frozen_params = jax.tree.map(lambda x: jnp.stack([x] * (cfg.remidi.num_buffers - 1)), train_state.params)
+    return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
+                  frozen_params=frozen_params)
+
+
+def combines(setup: Setup) -> bool:
+    """ReMiDi with ``remidi.policy=combine`` and at least two buffers."""
+    return setup.algo == "remidi" and setup.cfg.remidi.policy == "combine" and setup.cfg.remidi.num_buffers >= 2
 
 
 # ------------------------------------------------------------------------------- pieces
@@ -134,7 +150,7 @@ def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
     k = earlier.valid.shape[0]
     valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
-    return Frozen(levels=flat, valid=valid.reshape(-1))
+    return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params)
 
 
 def collect(setup: Setup, runner: Runner, rng, levels, frozen):
@@ -231,9 +247,14 @@ def train_step(setup: Setup, runner: Runner):
     count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
     k = runner.buffers.valid.shape[0]
     switch = (count >= cfg.remidi.steps_per_buffer) & (runner.active + 1 < k) if algo == "remidi" else jnp.asarray(False)
+    frozen_params = runner.frozen_params
+    if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
+        frozen_params = jax.tree.map(
+            lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[jnp.minimum(runner.active, f.shape[0] - 1)])),
+            frozen_params, train_state.params)
     runner = Runner(rng=rng, train_state=train_state, buffers=buffers,
                     active=jnp.where(switch, runner.active + 1, runner.active),
-                    count=jnp.where(switch, 0, count), update=runner.update + 1)
+                    count=jnp.where(switch, 0, count), update=runner.update + 1, frozen_params=frozen_params)
 
     trained = replay | (algo == "dr")
     metrics = {
@@ -289,14 +310,24 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
     return groups
 
 
-def first_step_policy(setup: Setup, params, env, levels) -> jax.Array:
-    """f32[L, A]: the policy's action probabilities at the first step of each level (leaves [L, ...])."""
+def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
+    """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
+    the policy that acts there (under ``remidi.policy=combine``, the combined policy)."""
+    task, net = setup.task, setup.net
     n = jax.tree.leaves(levels)[0].shape[0]
-    obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(jax.random.split(jax.random.PRNGKey(0), n),
-                                                                 levels, setup.task.params)
-    _, (logits, _) = setup.net.apply({"params": params}, setup.net.initialize_carry(n),
-                                     jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool))
-    return jax.nn.softmax(logits[0], axis=-1)
+    keys = jax.random.split(jax.random.PRNGKey(0), n)
+    obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(keys, levels, task.params)
+    obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool)
+    _, (logits, _) = net.apply({"params": runner.train_state.params}, net.initialize_carry(n), obs_in, reset)
+    logits = logits[0]
+    if combines(setup):
+        frozen = frozen_levels(setup, runner)
+        tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
+            task.env, task.params, keys, frozen.levels, frozen.valid, obs)
+        _, (frozen_logits, _) = jax.vmap(lambda p: net.apply({"params": p}, net.initialize_carry(n), obs_in, reset))(
+            frozen.params)
+        logits = combined_logits(tstate.match, frozen_logits[:, 0], logits)
+    return jax.nn.softmax(logits, axis=-1)
 
 
 def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
@@ -316,8 +347,9 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         sizes = [jax.tree.leaves(t)[0].shape[0] for t in tiled]
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
         carry = setup.net.initialize_carry(sum(sizes))
-        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply,
-                          params, carry, levels, task.max_episode_steps)
+        frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
+        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply, params, carry, levels,
+                          task.max_episode_steps, frozen, tracker_env=task.env)
         returns = first_episode_return(traj.reward, traj.done)
         start = 0
         for name, size in zip(names, sizes):
@@ -329,7 +361,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
                 continue
             set_levels = task.eval_sets[name]
             if task.expected_return is not None:
-                probs = first_step_policy(setup, params, env, set_levels)  # [L, A]
+                probs = first_step_policy(setup, runner, env, set_levels)  # [L, A]
                 expected = jax.vmap(task.expected_return)(set_levels, probs)
                 entropy = -jnp.sum(probs * jnp.log(jnp.maximum(probs, 1e-30)), axis=-1)
                 out[f"entropy/{name}"] = jnp.mean(entropy)
@@ -392,6 +424,10 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
     choice("remidi.count", r.count, ("updates", "replays"))
     choice("remidi.tracker", r.tracker, MODES)
+    choice("remidi.policy", r.policy, POLICIES)
+    if r.policy == "combine":
+        require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
+                "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
     for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
                              ("buffer.", lambda: buf.validate_buffer_config(cfg.buffer)),
                              ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):

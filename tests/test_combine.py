@@ -1,0 +1,55 @@
+"""ReMiDi's exact ``Combine`` (``remidi.policy=combine``): a frozen copy of the policy per buffer
+acts on the trajectories realisable under that buffer's levels, so earlier behaviour is kept
+bit for bit while the current policy goes on training; the masked single network drifts."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from remidi.engine import driver
+from remidi.engine import train as tr
+from remidi.envs.lever import lever_task
+from remidi.errors import ConfigError
+from test_ued_engine import TINY
+
+TASK = lever_task(64)
+R = dataclasses.replace
+
+
+def hidden_policy(setup, runner):
+    """f32[S, 64, 64]: every seed's first-step action probabilities on the 64 hidden levels."""
+    levels = TASK.eval_sets["hidden"]
+    return np.asarray(jax.jit(jax.vmap(lambda r: tr.first_step_policy(setup, r, TASK.env, levels)))(runner))
+
+
+@pytest.mark.parametrize("policy", ["combine", "masked"])
+def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
+    cfg = R(TINY, remidi=R(TINY.remidi, policy=policy))
+    setup = tr.make_setup(TASK, cfg, "remidi")
+    runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(np.arange(2, dtype=np.uint32)))
+    runner, _ = driver._run_block(setup, runner, 20)  # the switch happens after 8 updates
+    assert np.asarray(runner.active).tolist() == [1, 1]
+    # the first buffer (plain PLR⊥) holds hidden levels: the hidden observation is realisable under it
+    assert (~np.asarray(runner.buffers.levels.visible[:, 0]) & np.asarray(runner.buffers.valid[:, 0])).any(axis=1).all()
+    before, params_before = hidden_policy(setup, runner), runner.train_state.params
+    runner, _ = driver._run_block(setup, runner, 20)
+    after = hidden_policy(setup, runner)
+    moved = max(float(np.abs(a - b).max()) for a, b in zip(jax.tree.leaves(params_before),
+                                                           jax.tree.leaves(runner.train_state.params)))
+    assert moved > 0  # the current policy trained on
+    if policy == "combine":
+        np.testing.assert_array_equal(after, before)  # bit-identical where the earlier buffer acts
+        frozen = jax.tree.map(lambda x: x[:, 0], runner.frozen_params)
+        np.testing.assert_array_equal(np.asarray(jax.tree.leaves(frozen)[0]).shape[0], 2)
+    else:
+        assert np.abs(after - before).max() > 1e-6  # masking alone does not freeze the shared weights
+
+
+def test_combine_needs_the_prefix_tracker():
+    cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="per_step"))
+    with pytest.raises(ConfigError, match="remidi.tracker: must be prefix with remidi.policy=combine"):
+        tr.validate_ued_config(cfg, "remidi", TASK)
+    with pytest.raises(ConfigError, match="remidi.policy: unknown value 'exact'; allowed: masked, combine"):
+        tr.validate_ued_config(R(TINY, remidi=R(TINY.remidi, policy="exact")), "remidi", TASK)

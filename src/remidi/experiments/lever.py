@@ -45,8 +45,11 @@ EXPERIMENTS = [make_ued_experiment(
     config_factory=paper_config,
     presets=PRESETS,
     preset_seeds={"paper": 10, "smoke": 2},
-    summary_metrics=("solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden", "buffer_fraction/hidden"),
+    summary_metrics=("solve_rate/visible", "solve_rate/hidden", "regret/visible/mean", "regret/hidden/worst",
+                     "entropy/hidden", "replay_fraction/hidden", "buffer_fraction/hidden"),
     plot_panels_spec=(("solve_rate/visible", "solve rate, visible answer"),
                       ("solve_rate/hidden", "solve rate, hidden answer"),
+                      ("regret/visible/mean", "mean regret, visible answer"),
+                      ("regret/hidden/worst", "worst-case regret, hidden answer (MMR: 19.69)"),
                       ("replay_fraction/hidden", "share of hidden levels among replayed")),
 )]

@@ -57,14 +57,15 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     (logits [1, N, A], value [1, N])`` (a flax module's ``apply``). With ``frozen`` the tracker runs beside every env; without it ``indist``
     is all False. Returns ``(trajectory, last_value f32[N])``.
     """
-    base_env, env = (tracker_env if tracker_env is not None else env), AutoReplay(env)
+    tracker_env = tracker_env if tracker_env is not None else env
+    env = AutoReplay(env)
     num_envs = jax.tree.leaves(levels)[0].shape[0]
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
     obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
     if frozen is not None:
         tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
-            base_env, env_params, reset_keys, frozen.levels, frozen.valid, obs)
+            tracker_env, env_params, reset_keys, frozen.levels, frozen.valid, obs)
     else:
         tstate = None
 
@@ -92,7 +93,7 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
             env_keys, state, action, env_params)
         if tstate is not None:
             tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
-                base_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
+                tracker_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
                             reward=reward.astype(jnp.float32), done=done, indist=indist)
         return (state, next_obs, done, (hidden, frozen_hidden), tstate), record

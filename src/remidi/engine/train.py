@@ -250,7 +250,7 @@ def train_step(setup: Setup, runner: Runner):
     frozen_params = runner.frozen_params
     if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
         frozen_params = jax.tree.map(
-            lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[jnp.minimum(runner.active, f.shape[0] - 1)])),
+            lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[runner.active]), mode="drop"),
             frozen_params, train_state.params)
     runner = Runner(rng=rng, train_state=train_state, buffers=buffers,
                     active=jnp.where(switch, runner.active + 1, runner.active),
@@ -340,6 +340,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     from the sampled episodes otherwise."""
     task, cfg = setup.task, setup.cfg
     params = runner.train_state.params
+    frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
         tiled = [jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), task.eval_sets[name])
@@ -347,7 +348,6 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         sizes = [jax.tree.leaves(t)[0].shape[0] for t in tiled]
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
         carry = setup.net.initialize_carry(sum(sizes))
-        frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
         traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply, params, carry, levels,
                           task.max_episode_steps, frozen, tracker_env=task.env)
         returns = first_episode_return(traj.reward, traj.done)

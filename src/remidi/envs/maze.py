@@ -224,11 +224,11 @@ def corridor_levels(size: int) -> MazeLevel:
         walls[1:mid, x] = False  # from the top border to the middle
         walls[mid + 1:size - 1, x] = False  # from the bottom border to the middle
     goals = [(x, y) for x in columns for y in (mid - 1, mid + 1)]
-    levels = [MazeLevel.make(walls, goal, (0, mid), UP) for goal in goals]
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *levels)
+    return _stack([MazeLevel.make(walls, goal, (0, mid), UP) for goal in goals])
 
 
 def _stack(levels):
+    """One batch (leaves [L, ...]) from a list of levels."""
     return jax.tree.map(lambda *xs: jnp.stack(xs), *levels)
 
 

@@ -32,10 +32,12 @@ def parse_set_items(items: Iterable[str]) -> dict[str, str]:
 def field_names(config) -> list[str]:
     """All settable keys of a (nested) config dataclass, dotted, in declaration order.
 
-    A config class may name keys it derives itself in a ``DERIVED_KEYS`` module attribute
+    A config class (or any of its base classes) may name keys it derives itself in a
+    ``DERIVED_KEYS`` attribute of the module that defines it
     (e.g. ``ppo.total_updates`` follows ``num_updates``); those are not settable.
     """
-    derived = set(getattr(sys.modules[type(config).__module__], "DERIVED_KEYS", ()))
+    derived = {key for cls in type(config).__mro__
+               for key in getattr(sys.modules.get(cls.__module__), "DERIVED_KEYS", ())}
     names = []
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)

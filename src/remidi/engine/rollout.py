@@ -28,6 +28,8 @@ class Trajectory:
     reward: jax.Array  # f32
     done: jax.Array  # bool: the episode ended at step t
     indist: jax.Array  # bool: the prefix up to obs[t] is indistinguishable from a frozen level
+    overflow: jax.Array  # i32: frozen levels sharing the episode's first observation that the
+    #                      candidate tracker had no slot for (0 for the reference tracker)
 
 
 @struct.dataclass
@@ -35,11 +37,16 @@ class Frozen:
     """The frozen buffers' levels as one batch: ``levels`` leaves [F, ...], ``valid`` bool[F],
     buffer-major (F = B·C for B frozen buffers of capacity C). With ``params`` (leaves [B, ...]:
     the policy frozen with each buffer, ReMiDi's ``Combine``), a step whose prefix one of those
-    buffers' levels produced is acted on by the policy of the earliest such buffer."""
+    buffers' levels produced is acted on by the policy of the earliest such buffer.
+
+    ``budget`` (static) picks the tracker (:mod:`remidi.engine.tracker`): 0, the reference tracker
+    stepping every frozen level; S > 0, the candidate tracker with S slots per env (the
+    environment's reset must ignore its key)."""
 
     levels: Any
     valid: jax.Array
     params: Any = None
+    budget: int = struct.field(pytree_node=False, default=0)
 
 
 def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
@@ -63,13 +70,22 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
     obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
-    if frozen is not None:
+    candidates = frozen is not None and frozen.budget > 0
+    if candidates:
+        if tracker_mode != "prefix":
+            raise ValueError("the candidate tracker (budget > 0) computes the prefix mode only")
+        starts = trk.frozen_starts(tracker_env, env_params, frozen.levels)
+        tstate = jax.vmap(trk.candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, frozen.budget)
+    elif frozen is not None:
         tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
             tracker_env, env_params, reset_keys, frozen.levels, frozen.valid, obs)
     else:
         tstate = None
 
     combine = frozen is not None and frozen.params is not None
+    if combine:
+        copies = jax.tree.leaves(frozen.params)[0].shape[0]
+        capacity = frozen.valid.shape[0] // copies
 
     def step(carry, key):
         state, obs, reset, (hidden, frozen_hidden), tstate = carry
@@ -85,23 +101,27 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
         if combine:
             frozen_hidden, (frozen_logits, _) = jax.vmap(
                 lambda p, h: apply_fn({"params": p}, h, obs_in, reset[None]))(frozen.params, frozen_hidden)
-            acting = combined_logits(tstate.match, frozen_logits[:, 0], logits)
+            matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, copies, capacity)
+            acting = combined_logits(matched, frozen_logits[:, 0], logits)
         action = jax.random.categorical(k_act, acting)
         log_prob = jnp.take_along_axis(jax.nn.log_softmax(logits), action[:, None], axis=-1)[:, 0]
         env_keys = jax.random.split(k_env, num_envs)
         next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
             env_keys, state, action, env_params)
-        if tstate is not None:
+        if candidates:
+            tstate = jax.vmap(trk.candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
+                tracker_env, env_params, env_keys, tstate, action, next_obs, done)
+        elif tstate is not None:
             tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
                 tracker_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
+        overflow = tstate.overflow if candidates else jnp.zeros((num_envs,), jnp.int32)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
-                            reward=reward.astype(jnp.float32), done=done, indist=indist)
+                            reward=reward.astype(jnp.float32), done=done, indist=indist, overflow=overflow)
         return (state, next_obs, done, (hidden, frozen_hidden), tstate), record
 
     first = jnp.ones((num_envs,), bool)
     frozen_carry = None
     if combine:
-        copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), init_carry)
     carry = (state, obs, first, (init_carry, frozen_carry), tstate)
     (state, obs, reset, (hidden, _), _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
@@ -109,15 +129,13 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     return traj, last_value[0]
 
 
-def combined_logits(match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:
+def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:
     """ReMiDi's ``Combine``: f32[N, A], the logits of the policy that acts on each env.
 
-    ``match`` bool[N, F] (frozen level f produced env n's whole prefix; buffer-major, F = B·C),
+    ``buffer_match`` bool[N, B] (some level of frozen buffer b produced env n's whole prefix),
     ``frozen_logits`` f32[B, N, A] (each frozen buffer's policy), ``logits`` f32[N, A] (current).
     The earliest buffer with a matching level acts; the current policy where none matches.
     """
-    copies = frozen_logits.shape[0]
-    buffer_match = match.reshape(match.shape[0], copies, -1).any(axis=-1)  # [N, B]
     earliest = jnp.argmax(buffer_match, axis=-1)  # first True (0 if none)
     chosen = jnp.take_along_axis(jnp.moveaxis(frozen_logits, 0, 1), earliest[:, None, None], axis=1)[:, 0]
     return jnp.where(buffer_match.any(axis=-1)[:, None], chosen, logits)

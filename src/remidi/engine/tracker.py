@@ -1,18 +1,34 @@
 """The distinguishability tracker ("parallel step") of ReMiDi.
 
-While the agent acts on its own level, the tracker steps the agent's *same actions* on every
-level of the frozen buffers, in lock-step, and remembers per frozen level whether it has
-produced exactly the agent's observations (and episode ends) so far. Environments are
-deterministic given the level, so the agent's current trajectory prefix is *indistinguishable*
-from the earlier adversaries iff ONE frozen level produced the entire prefix:
-``any_f(match[f])`` with ``match[f]`` AND-ed every step (mode ``"prefix"``, the definition).
+While the agent acts on its own level, the tracker steps the agent's *same actions* on frozen
+levels in lock-step and remembers, per frozen level, whether it has produced exactly the agent's
+observations (and episode ends) so far. Environments are deterministic given the level, so the
+agent's current trajectory prefix is *indistinguishable* from the earlier adversaries iff ONE
+frozen level produced the entire prefix: ``any(match)``, with each ``match`` AND-ed every step
+(mode ``"prefix"``, the definition).
+
+Two trackers compute that, over *slots* (each slot follows one frozen level, ``index``):
+
+* the **reference** tracker (:func:`tracker_reset`, :func:`tracker_step`) has one slot per
+  frozen level and steps all F of them beside every rollout env at every step, restarting all
+  of them at each episode start. Exact for any environment; its cost grows with F.
+* the **candidate** tracker (:func:`candidates_reset`, :func:`candidates_step`) needs a
+  deterministic reset (``reset_to_level`` ignores its key, as in every UED environment whose
+  level fixes the start). It computes the frozen levels' first observations once per rollout;
+  a rollout env (whose restarts replay the same level, so every episode starts alike) keeps as
+  slots only the first ``budget`` frozen levels whose first observation equals its own, and
+  steps those. Its per-step cost is ``budget`` environment steps, whatever F. A frozen level
+  that diverged never matches again within the episode, so this equals the reference whenever
+  no more than ``budget`` frozen levels share the env's first observation; ``overflow`` counts
+  those that did not fit (then a prefix might be judged distinguishable although a dropped
+  level would still match it).
 
 Mode ``"per_step"`` reproduces the authors' looser rule, one boolean AND-ed with "some frozen
 level matches *this* step" — a prefix can pass that test although no single frozen level
-produced it. Both are kept so the difference can be measured and tested.
+produced it. It needs every frozen level stepped: the reference tracker only.
 
 All functions act on ONE rollout environment; the rollout vmaps them over its N envs.
-Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``).
+Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``), S = slots.
 """
 
 from __future__ import annotations
@@ -30,9 +46,13 @@ MODES = ("prefix", "per_step")
 
 @struct.dataclass
 class TrackerState:
-    env_states: Any  # frozen envs' states, leaves [F, ...]
-    match: jax.Array  # bool[F]: frozen level f produced this whole prefix
-    every_step: jax.Array  # bool[]: every step so far was matched by SOME frozen level
+    index: jax.Array  # i32[S]: the frozen level each slot follows (−1: empty slot)
+    env_states: Any  # the slots' environment states, leaves [S, ...]
+    match: jax.Array  # bool[S]: the slot's frozen level produced this whole prefix
+    every_step: jax.Array  # bool[]: every step so far was matched by SOME frozen level (per_step)
+    start_states: Any = None  # candidate tracker: the slots' first states (leaves [S, ...]) ...
+    start_match: Any = None  # ... and matches (bool[S]), restored when the agent's episode restarts
+    overflow: Any = None  # candidate tracker: i32[], frozen levels matching the first observation that did not fit
 
 
 def _compare(obs_f, obs) -> jax.Array:
@@ -40,6 +60,7 @@ def _compare(obs_f, obs) -> jax.Array:
     return jax.vmap(tree_equal, in_axes=(0, None))(obs_f, obs)
 
 
+# ---------------------------------------------------------------------- the reference tracker
 def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs) -> TrackerState:
     """Start a new episode on every frozen level and compare first observations.
 
@@ -48,7 +69,8 @@ def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs) -> TrackerS
     """
     obs_f, states = jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(rng, frozen_levels, params)
     match = valid & _compare(obs_f, agent_obs)
-    return TrackerState(env_states=states, match=match, every_step=jnp.any(match))
+    return TrackerState(index=jnp.arange(valid.shape[0]), env_states=states, match=match,
+                        every_step=jnp.any(match))
 
 
 def tracker_step(env, params, rng, state: TrackerState, frozen_levels, valid, action, agent_obs, agent_done) -> TrackerState:
@@ -62,12 +84,45 @@ def tracker_step(env, params, rng, state: TrackerState, frozen_levels, valid, ac
     obs_f, states, _, done_f, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
         rng_step, state.env_states, action, params)
     same = _compare(obs_f, agent_obs) & (done_f == agent_done)
-    stepped = TrackerState(env_states=states, match=state.match & same,
-                           every_step=state.every_step & jnp.any(valid & same))
+    stepped = state.replace(env_states=states, match=state.match & same,
+                            every_step=state.every_step & jnp.any(valid & same))
     restarted = tracker_reset(env, params, rng_reset, frozen_levels, valid, agent_obs)
     return tree_select(agent_done, restarted, stepped)
 
 
+# ---------------------------------------------------------------------- the candidate tracker
+def frozen_starts(env, params, frozen_levels):
+    """``(first observations, first states)`` of the F frozen levels (leaves [F, ...]); once per
+    rollout, for the candidate tracker (a deterministic reset: any key gives the same start)."""
+    return jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(jax.random.PRNGKey(0), frozen_levels, params)
+
+
+def candidates_reset(starts, valid, agent_obs, budget: int) -> TrackerState:
+    """Slots for the first ``budget`` valid frozen levels (in index order: earlier buffers first)
+    whose first observation equals ``agent_obs``, the env's first observation."""
+    first_obs, first_states = starts
+    matches = valid & _compare(first_obs, agent_obs)  # bool[F]
+    index = jnp.nonzero(matches, size=budget, fill_value=-1)[0]
+    match = index >= 0
+    states = jax.tree.map(lambda x: x[jnp.maximum(index, 0)], first_states)
+    overflow = jnp.maximum(jnp.sum(matches) - budget, 0).astype(jnp.int32)
+    return TrackerState(index=index, env_states=states, match=match, every_step=jnp.any(match),
+                        start_states=states, start_match=match, overflow=overflow)
+
+
+def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done) -> TrackerState:
+    """Advance the slots as :func:`tracker_step` does (same keys); a restart restores the slots'
+    first states, since the env's restart replays the same level from the same start."""
+    rng_step, _ = jax.random.split(rng)
+    obs_s, states, _, done_s, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
+        rng_step, state.env_states, action, params)
+    same = _compare(obs_s, agent_obs) & (done_s == agent_done)
+    stepped = state.replace(env_states=states, match=state.match & same)
+    restarted = state.replace(env_states=state.start_states, match=state.start_match)
+    return tree_select(agent_done, restarted, stepped)
+
+
+# ---------------------------------------------------------------------- reading a tracker
 def indistinguishable(state: TrackerState, mode: str = "prefix") -> jax.Array:
     """bool[]: the current prefix could have come from a frozen level."""
     if mode == "prefix":
@@ -75,3 +130,10 @@ def indistinguishable(state: TrackerState, mode: str = "prefix") -> jax.Array:
     if mode == "per_step":
         return state.every_step
     raise ValueError(f"tracker mode must be one of {MODES}, got {mode!r}")
+
+
+def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
+    """bool[B]: some level of frozen buffer b produced the whole prefix (frozen levels are
+    buffer-major: level f belongs to buffer f // capacity)."""
+    owner = jnp.where(state.match, state.index // capacity, -1)  # [S]
+    return jnp.any(owner[None, :] == jnp.arange(num_buffers)[:, None], axis=1)

@@ -48,6 +48,10 @@ class ReMiDiConfig:
     steps_per_buffer: int = 1000  # switching rule: stay this long on a buffer, then freeze it
     count: str = "updates"  # what steps_per_buffer counts: "updates" or "replays"
     tracker: str = "prefix"  # "prefix" (one frozen level matches the whole prefix) or "per_step"
+    # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
+    # env's first observation are stepped, at most this many; 0 steps every frozen level (the
+    # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
+    tracker_budget: int = 16
     # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
     # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
     # buffer acts on the trajectories realisable under that buffer's levels
@@ -150,7 +154,15 @@ def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
     k = earlier.valid.shape[0]
     valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
-    return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params)
+    return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params, budget=tracker_budget(setup))
+
+
+def tracker_budget(setup: Setup) -> int:
+    """Slots per env of the candidate tracker, or 0 for the reference tracker (see ReMiDiConfig)."""
+    r = setup.cfg.remidi
+    if r.tracker != "prefix" or not setup.task.deterministic_reset:
+        return 0
+    return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
 
 
 def collect(setup: Setup, runner: Runner, rng, levels, frozen):
@@ -242,6 +254,8 @@ def train_step(setup: Setup, runner: Runner):
         train_state = jax.lax.cond(replay, lambda ts: learn(setup, ts, k_learn, traj, adv, targets),
                                    lambda ts: ts, runner.train_state)
     extra = {"rejected": jnp.sum(overlap).astype(jnp.float32), "inserted": jnp.sum(inserted).astype(jnp.float32)}
+    if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
+        extra["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
 
     # ReMiDi's switching rule (a no-op with one buffer).
     count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
@@ -324,9 +338,11 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
         frozen = frozen_levels(setup, runner)
         tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
             task.env, task.params, keys, frozen.levels, frozen.valid, obs)
+        r = setup.cfg.remidi
+        matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, r.num_buffers - 1, r.buffer_capacity)
         _, (frozen_logits, _) = jax.vmap(lambda p: net.apply({"params": p}, net.initialize_carry(n), obs_in, reset))(
             frozen.params)
-        logits = combined_logits(tstate.match, frozen_logits[:, 0], logits)
+        logits = combined_logits(matched, frozen_logits[:, 0], logits)
     return jax.nn.softmax(logits, axis=-1)
 
 
@@ -412,7 +428,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     choice("--algo", algo, ALGORITHMS)
     for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
         positive_int(key, getattr(cfg, key))
-    require(cfg.eval_every <= cfg.num_updates, "eval_every", f"≤ num_updates ({cfg.num_updates})", cfg.eval_every)
+    if cfg.eval_every > cfg.num_updates:
+        raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
+                          f"lower eval_every or raise num_updates")
     choice("score", cfg.score, sc.SCORES)
     if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
@@ -422,6 +440,8 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     positive_int("remidi.num_buffers", r.num_buffers)
     positive_int("remidi.buffer_capacity", r.buffer_capacity)
     positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
+    require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
+            "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
     choice("remidi.count", r.count, ("updates", "replays"))
     choice("remidi.tracker", r.tracker, MODES)
     choice("remidi.policy", r.policy, POLICIES)

@@ -93,6 +93,10 @@ class UEDTask:
         expected_return: for a one-step task, ``(level, probs f32[num_actions]) -> f32[]``, the
             exact expected return of a policy with those action probabilities; makes the
             evaluation's regret exact (instead of sampled) and adds the policy's entropy.
+        deterministic_reset: ``env.reset_to_level`` ignores its key (the level fixes the start,
+            as in every environment of this package). Lets ReMiDi use the candidate tracker,
+            whose cost per step does not grow with the number of frozen levels; leave False for
+            an environment that draws its start at random (the reference tracker then runs).
     """
 
     env: UnderspecifiedEnv
@@ -106,3 +110,4 @@ class UEDTask:
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
     solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
+    deterministic_reset: bool = False

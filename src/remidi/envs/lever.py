@@ -95,4 +95,5 @@ def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplie
         eval_sets={"visible": env.all_levels(True), "hidden": env.all_levels(False)},
         level_tags=lambda level: {"hidden": ~level.visible},
         expected_return=lambda level, probs: env.expected_return(level, probs, params),
+        deterministic_reset=True,
     )

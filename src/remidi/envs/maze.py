@@ -330,4 +330,5 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
         eval_sets={name: levels for name, (_, levels) in sets.items()},
         eval_envs={name: envs[size] for name, (size, _) in sets.items() if size != TRAIN_SIZE},
         level_tags=(lambda level: {tag: getattr(level, tag)}) if tag else (lambda level: {}),
+        deterministic_reset=True,
     )

@@ -240,3 +240,116 @@ def test_resume_of_a_file_names_resume(tmp_path, capsys):
     file.write_text("x")
     code, _, err = run_cli(capsys, "run", "--resume", str(file))
     assert code == 2 and err.startswith("remidi: error: --resume:") and file.read_text() == "x"
+
+
+# ------------------------------------------------------------------ num_updates and its dependants
+def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import resolve_config
+
+    lever = get_experiment("lever")
+    notes = []
+    cfg = resolve_config(lever, "smoke", {"num_updates": "20"}, notes)  # smoke: 300 updates, 50 / 100 / 100
+    assert (cfg.num_updates, cfg.eval_every, cfg.checkpoint_every, cfg.remidi.steps_per_buffer) == (20, 3, 7, 7)
+    assert cfg.ppo.total_updates == 20
+    assert notes == ["num_updates 300 → 20, so scaled eval_every 50 → 3, checkpoint_every 100 → 7, "
+                     "remidi.steps_per_buffer 100 → 7 (set them with --set to choose other values)"]
+    for algo in lever.algorithms:
+        lever.validate(cfg, algo)
+    # keys the user set are kept; every scaled key stays ≥ 1
+    cfg = resolve_config(lever, "paper", {"num_updates": "2", "eval_every": "2"})
+    assert (cfg.eval_every, cfg.checkpoint_every, cfg.remidi.steps_per_buffer) == (2, 1, 1)
+    # the preset's own length: nothing to scale
+    notes = []
+    assert resolve_config(lever, "smoke", {"num_updates": "300"}, notes) == resolve_config(lever, "smoke", {})
+    assert notes == []
+    tab = resolve_config(get_experiment("tabular-shared"), "smoke", {"iterations": "150"})
+    assert (tab.log_every, tab.iters_per_adversary) == (1, 50)
+
+
+def test_scaling_note_is_one_line_on_stderr_and_recorded_in_config(tmp_path, capsys):
+    out = tmp_path / "run"
+    code, _, err = run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--quiet",
+                           "--set", "iterations=60", "--out", str(out))
+    assert code == 0, err
+    assert err == "remidi: iterations 1500 → 60, so scaled log_every 10 → 1, iters_per_adversary 500 → 20 " \
+                  "(set them with --set to choose other values)\n"
+    config = json.loads((out / "config.json").read_text())["config"]
+    assert (config["iterations"], config["log_every"], config["iters_per_adversary"]) == (60, 1, 20)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--set", "num_updates=20", "--set", "eval_every=50"],
+     "eval_every: must be ≤ num_updates (20), got 50; lower eval_every or raise num_updates"),
+    (["--set", "num_updates=20", "--set", "remidi.steps_per_buffer=100"],
+     "(num_buffers − 1) × steps_per_buffer = (2 − 1) × 100 = 100 is not below num_updates = 20; "
+     "lower remidi.num_buffers or remidi.steps_per_buffer, or raise num_updates"),
+    (["--set", "num_updates=1"],  # scaled to 1, still breaks the rule: the error is the only line
+     "is not below num_updates = 1; lower remidi.num_buffers or remidi.steps_per_buffer, or raise num_updates"),
+])
+def test_broken_rule_names_the_rule_and_the_fix(tmp_path, capsys, argv, needle):
+    out = tmp_path / "never"
+    code, stdout, err = run_cli(capsys, "run", "lever", "--algo", "remidi", *argv, "--out", str(out))
+    assert code == 2 and needle in err and err.startswith("remidi: error: ") and err.count("\n") == 1, err
+    assert not out.exists() and stdout == ""
+
+
+def test_tabular_rule_names_the_fix(tmp_path, capsys):
+    code, _, err = run_cli(capsys, "run", "tabular-shared", "--algo", "remidi", "--set", "iterations=100",
+                           "--set", "iters_per_adversary=60", "--out", str(tmp_path / "never"))
+    assert code == 2 and err.count("\n") == 1
+    assert ("(num_adversaries − 1) × iters_per_adversary = (3 − 1) × 60 = 120 is not below iterations = 100; "
+            "lower num_adversaries or iters_per_adversary, or raise iterations") in err
+    assert not (tmp_path / "never").exists()
+
+
+def test_python_api_applies_the_same_validation(tmp_path):
+    from remidi.errors import ConfigError
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import RunContext, resolve_config, run_experiment
+
+    lever = get_experiment("lever")
+    bad = {"num_updates": 6, "eval_every": 2, "remidi.steps_per_buffer": 1000}
+    with pytest.raises(ConfigError, match="remidi.num_buffers: must be small enough"):
+        run_experiment(lever, algos=["remidi"], preset="smoke", seeds=[0], overrides=bad, out=tmp_path / "a")
+    assert not (tmp_path / "a").exists()
+    # an experiment's train function, called directly, checks too (before any training)
+    ctx = RunContext("lever", "remidi", "smoke", [0], resolve_config(lever, "smoke", bad), tmp_path / "b")
+    with pytest.raises(ConfigError, match="remidi.num_buffers: must be small enough"):
+        lever.train(ctx)
+    tab = get_experiment("tabular-shared")
+    ctx = RunContext("tabular-shared", "remidi", "smoke", [0],
+                     resolve_config(tab, "smoke", {"iterations": 10, "iters_per_adversary": 10}), tmp_path / "c")
+    with pytest.raises(ConfigError, match="num_adversaries: must be small enough"):
+        tab.train(ctx)
+    assert not (tmp_path / "b").exists() and not (tmp_path / "c").exists()
+
+
+# ------------------------------------------------------------------------------- remidi list
+def test_list_shows_every_key_with_its_default_and_meaning(capsys):
+    from remidi.experiments import all_experiments
+    from remidi.experiments.config import field_names
+
+    code, out, _ = run_cli(capsys, "list")
+    assert code == 0
+    for exp in all_experiments().values():
+        assert f"{exp.name}: {exp.description}" in out
+    lines = out.splitlines()
+    for key in field_names(all_experiments()["lever"].config_factory()):
+        row = next(line for line in lines if line.split()[:1] == [key])
+        assert len(row.split()) >= 3, row  # key, default, a description
+    assert any(line.split()[:4] == ["num_updates", "300", "[paper:", "2500]"] for line in lines)
+    assert any(line.split()[:2] == ["ppo.anneal_lr", "true"] for line in lines)
+    code, out, _ = run_cli(capsys, "list", "tabular-shared")
+    assert code == 0 and out.startswith("tabular-shared: ") and "lever" not in out
+    assert any(line.split()[:2] == ["log_every", "10"] for line in out.splitlines())
+
+
+def test_every_settable_key_has_a_description():
+    from remidi.experiments import all_experiments
+    from remidi.experiments.config import field_names, key_help
+
+    for exp in all_experiments().values():
+        cfg = exp.config_factory()
+        missing = [key for key in field_names(cfg) if not key_help(cfg, key)]
+        assert not missing, f"{exp.name}: add these keys to remidi.experiments.config.HELP: {missing}"

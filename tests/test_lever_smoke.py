@@ -8,6 +8,8 @@ import pytest
 
 from remidi.cli import main
 
+pytestmark = pytest.mark.slow  # end-to-end runs: `pytest -m "not slow"` skips them
+
 CHANCE = 1 / 64
 MMR_HIDDEN = 20 * (1 - CHANCE)  # minimax regret on hidden levels (uniform lever choice)
 BLIND_VISIBLE = 2 * (1 - CHANCE)  # regret on a visible level of a policy that ignores the answer

@@ -45,6 +45,7 @@ def tmaze_remidi(tmp_path_factory):
                "--set", "num_updates=60", "--set", "remidi.steps_per_buffer=20")
 
 
+@pytest.mark.slow  # end-to-end run: `pytest -m "not slow"` skips it
 def test_plr_replay_fills_with_tmazes(tmp_path):
     m, summary, _ = run(tmp_path / "plr", "tmaze", "plr")
     assert m["replay_fraction/tmaze"] > 0.75  # half of the generated levels are T-mazes
@@ -53,6 +54,7 @@ def test_plr_replay_fills_with_tmazes(tmp_path):
     check_held_out_metrics(summary)
 
 
+@pytest.mark.slow  # end-to-end run: `pytest -m "not slow"` skips it
 def test_remidi_later_buffers_hold_no_tmazes(tmaze_remidi):
     m, summary, history = tmaze_remidi
     assert m["active_buffer"] == 2
@@ -64,6 +66,7 @@ def test_remidi_later_buffers_hold_no_tmazes(tmaze_remidi):
     assert all(x < 0.1 for x in summary["metrics"]["buffer_fraction/tmaze/b1"]["per_seed"])
 
 
+@pytest.mark.slow  # end-to-end run: `pytest -m "not slow"` skips it
 def test_blindfold_remidi_rejects_blind_levels(tmp_path):
     m, summary, _ = run(tmp_path / "remidi", "blindfold", "remidi")
     assert m["buffer_fraction/blind/b0"] > 0.2  # PLR⊥'s buffer takes blind levels too

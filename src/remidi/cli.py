@@ -7,7 +7,10 @@ Bad input never reaches JAX: every argument is validated first and reported as o
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -21,6 +24,57 @@ class _Parser(argparse.ArgumentParser):
         raise RemidiError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
+_RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume hint
+
+
+def _interrupted_message() -> str:
+    """``remidi: interrupted`` and, once the run folder holds a resumable run, how to resume it."""
+    message = "remidi: interrupted"
+    if _RUN_DIR:
+        folder = _RUN_DIR[-1]
+        try:
+            resumable = (folder / "config.json").exists() or any((sub / "config.json").exists()
+                                                                 for sub in folder.iterdir() if sub.is_dir())
+        except OSError:
+            resumable = False
+        if resumable:
+            message += f"; continue with: remidi run --resume {folder}"
+    return message
+
+
+def _exit_on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
+    """Ctrl-C: print one line and exit with status 130 at once, wherever the interrupt lands.
+
+    Raising KeyboardInterrupt (Python's default) is not safe while JAX imports, traces, compiles or
+    runs: the exception can land in a callback that jaxlib calls (garbage-collection hooks: it is
+    printed as "Exception ignored" and the run goes on) or unwind while XLA's threads still run
+    (the interpreter then aborts at exit with "pure virtual method called", exit 134, or a
+    segfault). Exiting at once is safe because every file a run writes is written atomically
+    (temporary file, then rename): an interrupted run keeps its last complete checkpoint and
+    ``remidi run --resume DIR`` continues from it.
+    """
+    try:
+        sys.stdout.flush()
+    except Exception:  # a print the interrupt cut short
+        pass
+    line = ("\n" if sys.stderr.isatty() else "") + _interrupted_message() + "\n"  # after a progress bar
+    os.write(2, line.encode())
+    os._exit(130)
+
+
+def _install_sigint_handler():
+    """Install :func:`_exit_on_sigint` when this process runs the command line (not when a host
+    such as pytest or a notebook has its own Ctrl-C handling, or ignores SIGINT); returns the
+    handler to restore, or None."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is not signal.default_int_handler:
+        return None
+    signal.signal(signal.SIGINT, _exit_on_sigint)
+    return previous
+
+
 def _cmd_solve(args) -> int:
     from remidi.solvers.report import solve_command
 
@@ -28,17 +82,43 @@ def _cmd_solve(args) -> int:
     return 0
 
 
-def _cmd_list(args) -> int:
-    from remidi.experiments import all_experiments
-    from remidi.experiments.config import field_names
+def _format_value(value) -> str:
+    """A configuration value as it would be written after ``--set key=``."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
 
-    for exp in all_experiments().values():
+
+def _cmd_list(args) -> int:
+    from remidi.experiments import all_experiments, get_experiment
+    from remidi.experiments.base import resolve_config
+    from remidi.experiments.config import field_names, get_value, key_help
+
+    experiments = [get_experiment(args.experiment)] if args.experiment else list(all_experiments().values())
+    for i, exp in enumerate(experiments):
+        if i:
+            print()
         print(f"{exp.name}: {exp.description}")
         print(f"  algorithms: {', '.join(exp.algorithms)}")
         presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                             for p in exp.presets)
         print(f"  presets:    {presets}")
-        print(f"  --set keys: {', '.join(field_names(exp.config_factory()))}")
+        default = "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
+        configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
+        print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
+              f"differs) and meaning:")
+        rows = []
+        for key in field_names(exp.config_factory()):
+            value = get_value(configs[default], key)
+            others = [f"{name}: {_format_value(get_value(cfg, key))}" for name, cfg in configs.items()
+                      if name != default and get_value(cfg, key) != value]
+            rows.append((key, _format_value(value) + (f" [{', '.join(others)}]" if others else ""),
+                         key_help(configs[default], key)))
+        widths = [max(len(row[c]) for row in rows) for c in (0, 1)]
+        for key, shown, meaning in rows:
+            print(f"    {key:<{widths[0]}}  {shown:<{widths[1]}}  {meaning}".rstrip())
     return 0
 
 
@@ -60,8 +140,10 @@ def _cmd_run(args) -> int:
     from remidi.experiments.config import parse_set_items
 
     if args.resume is not None:
-        if args.experiment is not None or args.algo or args.out or args.sets or args.seeds is not None:
+        if (args.experiment is not None or args.algo or args.out or args.sets or args.seeds is not None
+                or args.devices is not None):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
+        _RUN_DIR.append(Path(args.resume))
         summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)
         _print_summaries(summaries, Path(args.resume))
         return 0
@@ -80,9 +162,10 @@ def _cmd_run(args) -> int:
         raise RemidiError(f"--seed: must be an integer ≥ 0, got {args.seed}")
     seeds = list(range(args.seed, args.seed + num_seeds))
     out = Path(args.out) if args.out else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
+    _RUN_DIR.append(out)
     summaries = run_experiment(exp, algos=algos, preset=args.preset, seeds=seeds,
                                overrides=parse_set_items(args.sets), out=out, progress=not args.quiet,
-                               argv=sys.argv[1:])
+                               argv=sys.argv[1:], devices=1 if args.devices is None else args.devices)
     _print_summaries(summaries, out)
     return 0
 
@@ -101,6 +184,29 @@ def _cmd_render(args) -> int:
         print(episode.line())
     else:
         raise RemidiError("remidi render: say what to draw: maze, buffers or episode (see remidi render --help)")
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    import json
+
+    from remidi.bench import BENCHMARKS, DEFAULT, format_table, run_benchmarks
+
+    names = args.names or list(DEFAULT)
+    for name in names:
+        if name not in BENCHMARKS:
+            from remidi.errors import one_of
+
+            raise one_of("remidi bench: NAME", name, list(BENCHMARKS))
+    if args.repeats < 1:
+        raise RemidiError(f"--repeats: must be an integer ≥ 1, got {args.repeats}")
+    from remidi.bench import check_overrides
+    from remidi.experiments.config import parse_set_items
+
+    overrides = parse_set_items(args.sets)
+    check_overrides(overrides)
+    doc = run_benchmarks(names, args.repeats, log=sys.stderr, tiny=args.tiny, overrides=overrides)
+    print(json.dumps(doc, indent=2) if args.json else format_table(doc))
     return 0
 
 
@@ -129,12 +235,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="output folder (default: runs/EXPERIMENT/TIMESTAMP); must not hold a run")
     run.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                      help="override a configuration value (repeatable; keys: `remidi list`)")
+    run.add_argument("--devices", type=int, metavar="N",
+                     help="shard the seeds over N devices (default 1; N must divide the number of seeds; "
+                          "see docs/devices.md)")
     run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_run)
 
     lst = sub.add_parser("list", help="list experiments, algorithms, presets and config keys",
-                         description="List experiments with their algorithms, presets and --set keys.")
+                         description="List experiments with their algorithms, presets and --set keys (each "
+                                     "with its default and what it means).")
+    lst.add_argument("experiment", nargs="?", help="only this experiment")
     lst.set_defaults(func=_cmd_list)
 
     render = sub.add_parser("render", help="draw held-out mazes, a run's level buffers, or an episode",
@@ -171,11 +282,30 @@ def build_parser() -> argparse.ArgumentParser:
     episode.add_argument("--out", metavar="FILE.gif", help="output file (default: RUN_DIR/episode_<NAME>_seed<S>.gif)")
     episode.add_argument("--tile", **tile)
     render.set_defaults(func=_cmd_render)
+
+    bench = sub.add_parser("bench", help="throughput benchmarks (env-steps/s, compile time, memory)",
+                           description="Time named workloads, each in a fresh process after compiling and "
+                                       "warming up (median of --repeats calls), and the ratios between them. "
+                                       "Benchmarks: maze-plr, maze-remidi, maze-env, lever-plr (the default "
+                                       "set), maze-remidi-reference.")
+    bench.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: the default set)")
+    bench.add_argument("--json", action="store_true", help="print only the JSON document (progress on stderr)")
+    bench.add_argument("--repeats", type=int, default=3, help="timed calls per benchmark (default 3)")
+    bench.add_argument("--tiny", action="store_true", help="toy sizes: checks the tool in seconds, figures meaningless")
+    bench.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a UED config key in every training workload (e.g. num_envs=64, "
+                            "remidi.buffer_capacity=64; num_envs and num_steps also apply to maze-env)")
+    bench.set_defaults(func=_cmd_bench)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line. Run as a program (``argv`` None: the ``remidi`` script, ``python -m
+    remidi``), Ctrl-C exits at once with status 130 (:func:`_exit_on_sigint`); called with an
+    ``argv`` list, KeyboardInterrupt is caught and 130 returned."""
+    previous = _install_sigint_handler() if argv is None else None
     parser = build_parser()
+    _RUN_DIR.clear()
     try:
         args = parser.parse_args(argv)
         if args.command is None:
@@ -186,8 +316,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"remidi: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("remidi: interrupted", file=sys.stderr)
+        print(_interrupted_message(), file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `remidi list | head`: the reader has gone, which is no error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,20 @@ the driver evaluates, records the block's metrics, updates the progress bar and,
 ``checkpoint_every`` updates, writes a checkpoint atomically (temporary file, then rename), so a
 killed run never leaves a corrupt checkpoint. ``resume`` continues from the last checkpoint and
 ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
+
+``devices=N`` shards the seeds over N devices: a 1-D :class:`~jax.sharding.Mesh` with axis
+``"seed"``, the runner's leading (seed) axis and the per-seed keys placed with
+``NamedSharding(mesh, P("seed"))``, and each compiled program run under :func:`jax.shard_map`,
+so every device runs the unchanged per-seed program on its own S/N seeds with no communication.
+
+Results match the one-device run's to floating-point rounding, not bit for bit, and only for a
+while: XLA compiles the vmapped program for S/N seeds per device instead of S, and the rounding
+of some reductions depends on that batch size (the same happens between CPU and GPU, or between
+jaxlib versions). Seeds, keys and programs are otherwise the same, so early updates agree to
+rounding (``tests/test_sharding.py``), but training turns a rounding difference into a different
+sampled action or buffer decision after a few updates, and from then on a seed's run differs as
+runs on different hardware do. A sharded run is itself deterministic and resumes exactly.
+``docs/devices.md`` has the multi-host set-up.
 """
 
 from __future__ import annotations
@@ -19,12 +33,16 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import NamedSharding
+from jax.sharding import PartitionSpec as P
 
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
+from remidi.errors import ConfigError
 from remidi.experiments.outputs import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
+SEED_AXIS = "seed"
 
 
 def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
@@ -43,7 +61,7 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
     for name, values in step_metrics.items():
         if name.startswith("replayed/"):
             continue
-        if name in ("rejected", "inserted"):
+        if name in ("rejected", "inserted", "tracker_overflow"):
             out[name] = values.sum(axis=1)
         elif name == "active_buffer":
             out[name] = values[:, -1]
@@ -86,15 +104,95 @@ def _evaluate(setup: tr.Setup, runner, keys):
     return jax.vmap(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
 
 
+def check_devices(devices: int, num_seeds: int) -> None:
+    """Raise :class:`ConfigError` unless ``devices`` is ≥ 1, at most ``jax.device_count()`` (all
+    hosts' devices) and divides ``num_seeds``; the message names the allowed values."""
+    if devices == 1 and not isinstance(devices, bool):
+        return  # today's path: every machine has one device
+    available = jax.device_count()
+    allowed = ", ".join(str(d) for d in range(1, min(available, num_seeds) + 1) if num_seeds % d == 0)
+    if isinstance(devices, bool) or not isinstance(devices, (int, np.integer)) or devices < 1:
+        problem = f"must be an integer ≥ 1, got {devices!r}"
+    elif devices > available:
+        problem = f"{devices} is more than the {available} device{'s' if available != 1 else ''} JAX sees"
+    elif num_seeds % devices:
+        problem = f"{devices} does not divide the {num_seeds} seed{'s' if num_seeds != 1 else ''}"
+    else:
+        return
+    raise ConfigError(f"--devices: {problem}; allowed: {allowed}")
+
+
+def seed_mesh(devices: int) -> jax.sharding.Mesh:
+    """A 1-D mesh of the first ``devices`` of ``jax.devices()`` (every host's) with axis ``"seed"``."""
+    return jax.make_mesh((devices,), (SEED_AXIS,), axis_types=(jax.sharding.AxisType.Auto,),
+                         devices=jax.devices()[:devices])
+
+
+def _per_shard(mesh, fn):
+    # every input and output is split along its leading (seed) axis; the per-shard program is the
+    # unsharded one on S/N seeds and has no collectives, so replication checking is not needed
+    return jax.shard_map(fn, mesh=mesh, in_specs=P(SEED_AXIS), out_specs=P(SEED_AXIS), check_vma=False)
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _init_sharded(mesh, setup: tr.Setup, keys):
+    return _per_shard(mesh, lambda k: _init(setup, k))(keys)
+
+
+@partial(jax.jit, static_argnums=(0, 1, 3))
+def _run_block_sharded(mesh, setup: tr.Setup, runner, length: int):
+    return _per_shard(mesh, lambda r: _run_block(setup, r, length))(runner)
+
+
+@partial(jax.jit, static_argnums=(0, 1))
+def _evaluate_sharded(mesh, setup: tr.Setup, runner, keys):
+    return _per_shard(mesh, lambda r, k: _evaluate(setup, r, k))(runner, keys)
+
+
+def _put(tree, sharding):
+    """Place host (or single-device) arrays on ``sharding``; works across hosts, where every
+    process holds the same full values and supplies the shards of its own devices."""
+    def one(x):
+        host = np.asarray(x)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+    return jax.tree.map(one, tree)
+
+
+def _to_host(tree):
+    """NumPy copies of ``tree``'s arrays; arrays spread over several hosts are gathered first
+    (a collective: every process must call it)."""
+    if all(getattr(x, "is_fully_addressable", True) for x in jax.tree.leaves(tree)):
+        return jax.tree.map(np.asarray, tree)
+    from jax.experimental import multihost_utils
+
+    return jax.tree.map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
+
+
 def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], out: Path | None = None,
-                resume: bool = False, progress: bool = True, on_block: Callable[[int, dict], None] | None = None):
+                resume: bool = False, progress: bool = True, on_block: Callable[[int, dict], None] | None = None,
+                devices: int = 1):
     """Train ``algo`` for every seed. Returns ``(steps i[T], history {name: f[S, T]}, per_step
     {name: f[S, num_updates]}, runner)``: ``history`` holds block aggregates and evaluations at
     the end of each block; ``per_step`` the raw per-update replay counters. ``on_block(updates
-    done, block metrics)`` is called after each block, once its checkpoint is written."""
+    done, block metrics)`` is called after each block, once its checkpoint is written.
+
+    ``devices=N`` shards the seeds over the first N of ``jax.devices()`` (N must divide the
+    number of seeds; :func:`check_devices`); the returned runner's leaves are then sharded along
+    their seed axis. In a multi-process run (``jax.distributed``) every process calls this with
+    the same arguments, all get the full results, and only process 0 writes checkpoints."""
+    check_devices(devices, len(seeds))
     setup = tr.make_setup(task, cfg, algo)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    runner = _init(setup, keys)
+    if devices == 1:
+        mesh = sharding = None
+        init, run_block, evaluate = _init, _run_block, _evaluate
+    else:
+        mesh = seed_mesh(devices)
+        sharding = NamedSharding(mesh, P(SEED_AXIS))
+        init, run_block, evaluate = (partial(_init_sharded, mesh), partial(_run_block_sharded, mesh),
+                                     partial(_evaluate_sharded, mesh))
+    writer = mesh is None or jax.process_index() == 0
+    runner = init(setup, keys if sharding is None else _put(keys, sharding))
     steps: list[int] = []
     history: list[dict[str, np.ndarray]] = []
     per_step: list[dict[str, np.ndarray]] = []
@@ -104,18 +202,22 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         ckpt.parent.mkdir(parents=True, exist_ok=True)
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
+        if sharding is not None:
+            runner = _put(runner, sharding)
         done, steps = meta["done"], meta["steps"]
         with np.load(ckpt.with_suffix(".history.npz")) as saved:
             history = _unstack(saved, "h", len(steps))
             per_step = _unstack(saved, "p", meta["num_blocks"])
 
-    bar = _progress(cfg.num_updates, done, f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}", progress)
+    desc = f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + (f" on {devices} devices" if mesh else "")
+    bar = _progress(cfg.num_updates, done, desc, progress and writer)
     while done < cfg.num_updates:
         length = min(cfg.eval_every, cfg.num_updates - done)
         start = time.perf_counter()
-        runner, step_metrics = _run_block(setup, runner, length)
-        step_metrics = jax.tree.map(np.asarray, step_metrics)
-        evals = jax.tree.map(np.asarray, _evaluate(setup, runner, jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)))
+        runner, step_metrics = run_block(setup, runner, length)
+        step_metrics = _to_host(step_metrics)
+        eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
+        evals = _to_host(evaluate(setup, runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
         done += length
         steps.append(done)
         history.append({**_block_metrics(step_metrics, cfg.num_envs), **evals})
@@ -124,7 +226,9 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
             bar.update(length)
             bar.set_postfix_str(f"{length / (time.perf_counter() - start):.1f} updates/s")
         if ckpt is not None and (done % cfg.checkpoint_every < length or done == cfg.num_updates):
-            _save_all(ckpt, runner, done, steps, history, per_step)
+            host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
+            if writer:  # process 0 writes
+                _save_all(ckpt, host_runner, done, steps, history, per_step)
         if on_block is not None:
             on_block(done, history[-1])
     if bar is not None:

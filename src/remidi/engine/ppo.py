@@ -106,7 +106,9 @@ def create_train_state(rng: jax.Array, net, example_obs: Any, num_envs: int, cfg
         n = 1
     reset = jnp.ones((1, n), bool)
     params = net.init(rng, net.initialize_carry(n), example_obs, reset)["params"]
-    return TrainState.create(apply_fn=net.apply, params=params, tx=make_optimizer(cfg))
+    state = TrainState.create(apply_fn=net.apply, params=params, tx=make_optimizer(cfg))
+    # a strongly typed step: a checkpoint restores it as such, so a resumed run reuses the compiled program
+    return state.replace(step=jnp.zeros((), jnp.int32))
 
 
 def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):

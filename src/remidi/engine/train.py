@@ -51,7 +51,7 @@ class ReMiDiConfig:
     # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
     # env's first observation are stepped, at most this many; 0 steps every frozen level (the
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
-    tracker_budget: int = 16
+    tracker_budget: int = 64
     # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
     # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
     # buffer acts on the trajectories realisable under that buffer's levels

@@ -7,12 +7,19 @@ validate everything before writing anything, write ``config.json`` first (so a k
 be resumed), then ``metrics.csv``, ``summary.json`` and the plots.
 
 With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
-panel per algorithm) go to ``OUT/``; with one, everything goes to ``OUT/`` directly.
+panel per metric, one curve per algorithm, in the order given; tabular: one panel per algorithm)
+go to ``OUT/``; with one, everything goes to ``OUT/`` directly.
+
+``devices`` (``remidi run --devices N``, recorded in ``config.json`` and reused by ``--resume``)
+shards the seeds over N devices for the experiments that support it (``Experiment.shards_seeds``;
+``docs/devices.md``). In a multi-process JAX run only process 0 writes the run folder.
 """
 
 from __future__ import annotations
 
+import shutil
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -22,7 +29,7 @@ import numpy as np
 from remidi import __version__
 from remidi.errors import ConfigError, one_of
 from remidi.experiments import outputs
-from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict
+from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict, scale_dependents
 
 
 @dataclass
@@ -54,6 +61,7 @@ class RunContext:
     out: Path
     resume: bool = False
     progress: bool = True
+    devices: int = 1  # devices the seeds are sharded over (experiments with shards_seeds)
 
 
 @dataclass(frozen=True)
@@ -67,13 +75,23 @@ class Experiment:
     validate: Callable[[Any, str], None]  # (config, algo) → raise ConfigError
     train: Callable[[RunContext], RunResult]
     plot: Callable[[Path, dict[str, RunResult], Any], None]  # (folder, {algo: result}, config)
+    # length key → keys measured against it, scaled in proportion when only the length is set
+    # (config.scale_dependents), e.g. {"num_updates": ("eval_every", ...)}
+    scaled_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
 
 
-def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any]):
+def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None):
+    """The preset's configuration with ``overrides`` on top; keys that depend on a length the
+    overrides change (``exp.scaled_keys``) and that they leave alone are scaled in proportion,
+    and a line saying so is appended to ``notes``."""
     if preset not in exp.presets:
         raise one_of("--preset", preset, exp.presets)
-    config = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
-    return apply_overrides(config, overrides)
+    base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
+    config, note = scale_dependents(apply_overrides(base, overrides), base, overrides, exp.scaled_keys)
+    if note is not None and notes is not None:
+        notes.append(note)
+    return config
 
 
 def parse_algos(exp: Experiment, text: str | None) -> list[str]:
@@ -92,21 +110,34 @@ def parse_algos(exp: Experiment, text: str | None) -> list[str]:
 
 def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: list[int],
                    overrides: dict[str, Any], out: Path, progress: bool = True,
-                   argv: list[str] | None = None) -> dict[str, dict]:
-    """Validate, train every algorithm, write all outputs; return ``{algo: summary}``."""
-    config = resolve_config(exp, preset, overrides)
+                   argv: list[str] | None = None, devices: int = 1) -> dict[str, dict]:
+    """Validate, train every algorithm, write all outputs; return ``{algo: summary}``.
+
+    ``devices``: shard the seeds over that many devices (:func:`_check_devices`)."""
+    notes: list[str] = []
+    config = resolve_config(exp, preset, overrides, notes)
     for algo in algos:
         exp.validate(config, algo)
     if not seeds:
         raise ConfigError("--seeds: must be an integer ≥ 1")
-    out = Path(out)
+    _check_devices(exp, devices, len(seeds))
+    if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
+        with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch
+            return _write_and_train(exp, algos, preset, seeds, config, Path(scratch) / "run", [], False, argv, devices)
+    return _write_and_train(exp, algos, preset, seeds, config, Path(out), notes, progress, argv, devices)
+
+
+def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progress, argv, devices) -> dict[str, dict]:
     folders = {algo: (out / algo if len(algos) > 1 else out) for algo in algos}
     for folder in dict.fromkeys([out, *folders.values()]):  # check every folder before writing anything
         outputs.prepare_out_dir(folder, create=False)
+    for note in notes:  # only once the run is known to be valid: an error stays the only line
+        print(f"remidi: {note}", file=sys.stderr, flush=True)
     for algo, folder in folders.items():
         outputs.prepare_out_dir(folder)
-        write_run_config(folder, exp, algo, preset, seeds, config, argv)
-    return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress)
+        write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders))
+    return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
+                            devices=devices)
 
 
 def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
@@ -114,16 +145,27 @@ def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, pro
 
     ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
     run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
-    are redrawn.
+    are redrawn. The run keeps its recorded ``devices``.
     """
     folder = Path(folder)
+    if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
+        with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # resume a scratch copy of it
+            shutil.copytree(folder, Path(scratch) / "run")
+            return _resume(exp_lookup, Path(scratch) / "run", progress=False)
+    return _resume(exp_lookup, folder, progress)
+
+
+def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
         if subs:
             return _resume_several(exp_lookup, folder, subs, progress)
     folder = outputs.prepare_out_dir(folder, resume=True)
     exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)
-    return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress)
+    devices = _saved_devices(folder)
+    _check_devices(exp, devices, len(seeds))
+    return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
+                            devices=devices)
 
 
 def _saved_run(exp_lookup, folder: Path):
@@ -134,15 +176,61 @@ def _saved_run(exp_lookup, folder: Path):
     return exp, saved["algo"], saved["preset"], saved["seeds"], config
 
 
+def _saved_devices(folder: Path):
+    """``devices`` of the run in ``folder`` (1 for runs recorded before ``--devices`` existed); of a
+    several-algorithm folder, the largest of its runs'; 1 where nothing is readable (resuming then
+    reports what is wrong)."""
+    folder = Path(folder)
+    try:
+        paths = [folder / "config.json"] if (folder / "config.json").exists() else sorted(folder.glob("*/config.json"))
+        return max((outputs.read_json(path).get("devices", 1) for path in paths), default=1)
+    except (OSError, ValueError, AttributeError, TypeError):
+        return 1
+
+
+def _check_devices(exp: Experiment, devices, num_seeds: int) -> None:
+    """``--devices``: 1 always; more only for an experiment that shards its seeds, and then at most
+    the devices JAX sees and a divisor of the number of seeds (``driver.check_devices``)."""
+    if devices == 1 and not isinstance(devices, bool):
+        return  # today's path, without asking JAX anything
+    if not exp.shards_seeds:
+        raise ConfigError(f"--devices: {exp.name} trains on one device; allowed: 1")
+    from remidi.engine.driver import check_devices
+
+    check_devices(devices, num_seeds)
+
+
+def _secondary_process(devices) -> bool:
+    """True in a process other than 0 of a multi-process JAX run (``jax.distributed``); only asked
+    of sharded runs, so a one-device run never touches JAX here."""
+    if devices == 1:
+        return False
+    import jax
+
+    return jax.process_index() != 0
+
+
+def _run_order(sub: Path, exp: Experiment, algo: str) -> tuple[int, int]:
+    """Where ``algo`` stands in its several-algorithm run: the order the user gave (``algos`` in
+    config.json), then the experiment's own order, so a resumed run plots like a fresh one."""
+    saved = outputs.read_json(sub / "config.json").get("algos") or []
+    given = saved.index(algo) if algo in saved else len(saved)
+    return given, exp.algorithms.index(algo) if algo in exp.algorithms else len(exp.algorithms)
+
+
 def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) -> dict[str, dict]:
     runs = [(sub, *_saved_run(exp_lookup, sub)) for sub in subs]
+    runs.sort(key=lambda run: _run_order(run[0], run[1], run[2]))
+    devices = {sub: _saved_devices(sub) for sub in subs}
+    for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
+        _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
     for sub, exp, algo, preset, seeds, config in runs:
         if (sub / "summary.json").exists():
             summaries[algo] = outputs.read_json(sub / "summary.json")
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
-                                              progress=progress))
+                                              progress=progress, devices=devices[sub]))
     exp, config = runs[0][1], runs[0][5]
     results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
     exp.plot(folder, results, config)
@@ -164,23 +252,28 @@ def result_from_files(folder: Path) -> RunResult:
     return RunResult(steps=np.asarray(steps), history=history, extra=extra)
 
 
-def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seeds: list[int], config, argv) -> None:
+def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seeds: list[int], config, argv,
+                     devices: int = 1, algos: list[str] | None = None) -> None:
+    """``algos``: every algorithm of the run, in the order the user gave (plots keep it on resume)."""
     outputs.write_json(folder / "config.json", {
         "experiment": exp.name,
         "algo": algo,
+        "algos": list(algos) if algos else [algo],
         "preset": preset,
         "seeds": seeds,
+        "devices": devices,
         "config": config_to_dict(config),
         "command": ["remidi", *(argv if argv is not None else sys.argv[1:])],
         "remidi_version": __version__,
     })
 
 
-def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress):
+def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress, devices=1):
     results: dict[str, RunResult] = {}
     summaries: dict[str, dict] = {}
     for algo, folder in folders.items():
-        ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress)
+        ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress,
+                         devices=devices)
         result = exp.train(ctx)
         results[algo] = result
         outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(result.steps, result.history, seeds))

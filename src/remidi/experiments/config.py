@@ -48,6 +48,81 @@ def field_names(config) -> list[str]:
     return names
 
 
+# One line per settable key, shown by `remidi list`. A config dataclass may instead carry its own
+# text as ``dataclasses.field(metadata={"help": ...})``, which takes precedence.
+HELP = {
+    # tabular UED (tabular-distinct, tabular-shared)
+    "iterations": "training iterations (each: adversary updates, then agent updates)",
+    "adversary_updates": "adversary (level distribution) gradient steps per iteration",
+    "agent_updates": "agent (policy) gradient steps per iteration",
+    "policy_lr": "learning rate of both players' logits",
+    "value_lr": "learning rate of the critics (SGD), in (0, 1]",
+    "agent_entropy": "agent's entropy bonus (coefficient × entropy averaged over observations)",
+    "adversary_entropy": "adversary's entropy bonus",
+    "gamma": "discount (one-step episodes: has no effect)",
+    "optimizer": "optimizer of the logits: adam or sgd",
+    "adam_b1": "Adam's β1 (0: no momentum; 0.9 makes the players cycle)",
+    "init_scale": "std of the initial logits (the only source of seed variation)",
+    "num_adversaries": "remidi: number of (policy, adversary) pairs; mmr uses 1",
+    "iters_per_adversary": "remidi: iterations before the next adversary takes over",
+    "support_threshold": "remidi: a level is in an adversary's support at ≥ this × its largest probability",
+    "log_every": "iterations between logged points",
+    # the UED engine (lever, tmaze, blindfold)
+    "num_updates": "train steps (one rollout + one PPO update or buffer insertion each)",
+    "num_envs": "parallel environments (levels) per train step",
+    "num_steps": "environment steps per env per rollout",
+    "score": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return",
+    "network": "actor-critic: mlp or maze_lstm",
+    "eval_every": "updates between evaluations (and logged points)",
+    "eval_attempts": "sampled attempts per evaluation level",
+    "checkpoint_every": "updates between checkpoints (checkpoint.npz in the run folder)",
+    "ppo.gamma": "discount factor",
+    "ppo.gae_lambda": "GAE λ",
+    "ppo.clip_eps": "PPO ratio clipping ε",
+    "ppo.clip_value": "clip the value loss like the policy ratio",
+    "ppo.vf_coef": "value-loss coefficient",
+    "ppo.ent_coef": "entropy-bonus coefficient",
+    "ppo.epochs": "PPO epochs per update",
+    "ppo.minibatches": "minibatches per epoch (must divide num_envs)",
+    "ppo.lr": "Adam learning rate",
+    "ppo.anneal_lr": "decay the learning rate linearly to 0 over the run",
+    "ppo.adam_eps": "Adam ε",
+    "ppo.max_grad_norm": "global gradient-norm clipping",
+    "buffer.capacity": "PLR level buffer size (plr, minimax-return)",
+    "buffer.prioritization": "replay sampling: rank or topk",
+    "buffer.temperature": "β of rank prioritisation",
+    "buffer.topk_k": "k of top-k prioritisation",
+    "buffer.staleness_coef": "ρ: weight of staleness in the replay distribution",
+    "buffer.replay_prob": "probability that a train step replays buffer levels",
+    "buffer.min_fill": "fraction of the buffer that must be filled before replay",
+    "buffer.duplicate_check": "re-inserting a level already in the buffer updates it",
+    "remidi.num_buffers": "ReMiDi: number of level buffers (adversaries) in sequence",
+    "remidi.buffer_capacity": "ReMiDi: size of each buffer",
+    "remidi.steps_per_buffer": "ReMiDi: updates (or replays) on a buffer before it is frozen",
+    "remidi.count": "ReMiDi: what steps_per_buffer counts: updates or replays",
+    "remidi.tracker": "ReMiDi: prefix (one frozen level made the whole prefix) or per_step (authors' rule)",
+    "remidi.tracker_budget": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)",
+    "remidi.policy": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)",
+    # the maze domain (tmaze, blindfold)
+    "maze.prob": "probability that a generated level is a T-maze (tmaze) or blindfolded (blindfold)",
+    "maze.num_walls": "walls of a random 13×13 maze",
+}
+
+
+def key_help(config, key: str) -> str:
+    """The one-line description of the dotted ``key`` of ``config``: the field's ``help``
+    metadata, else :data:`HELP`, else ``""``."""
+
+    def from_metadata(cfg, dotted: str) -> str:
+        head, _, rest = dotted.partition(".")
+        for f in dataclasses.fields(cfg):
+            if f.name == head:
+                return from_metadata(getattr(cfg, head), rest) if rest else f.metadata.get("help", "")
+        return ""
+
+    return from_metadata(config, key) or HELP.get(key, "")
+
+
 def _convert(key: str, text: Any, kind) -> Any:
     """Convert ``text`` (a string from the command line, or a JSON value) to ``kind``."""
     if kind is bool:
@@ -103,6 +178,48 @@ def apply_overrides(config, overrides: dict[str, Any], *, source: str = "--set",
     for head, sub in nested.items():
         direct[head] = apply_overrides(getattr(config, head), sub, source=source, prefix=f"{prefix}{head}.")
     return dataclasses.replace(config, **direct)
+
+
+def get_value(config, key: str) -> Any:
+    """The value of the dotted ``key`` in ``config`` (``get_value(cfg, "ppo.lr")``)."""
+    for part in key.split("."):
+        config = getattr(config, part)
+    return config
+
+
+def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]]):
+    """Scale the keys that depend on a length the user changed, in proportion.
+
+    ``rules`` maps a length (``num_updates``) to the keys measured against it (``eval_every``,
+    ``checkpoint_every``, ``remidi.steps_per_buffer``). When ``overrides`` set the length but not
+    a dependent key, that key becomes ``max(1, round(base value × new length / base length))``,
+    ``base`` being the preset's configuration, so that ``--set num_updates=20`` alone gives a
+    run with the preset's proportions. Returns ``(config, note)``, ``note`` one line saying what
+    was scaled (``None`` if nothing was).
+    """
+    scaled: dict[str, int] = {}
+    parts = []
+    for length, dependents in rules.items():
+        if length not in overrides:
+            continue
+        old, new = get_value(base, length), get_value(config, length)
+        if not (isinstance(old, int) and isinstance(new, int)) or old < 1 or new < 1 or old == new:
+            continue
+        changes = []
+        for key in dependents:
+            if key in overrides:
+                continue
+            value = get_value(base, key)
+            target = max(1, int(math.floor(value * new / old + 0.5)))
+            if target != value:
+                scaled[key] = target
+                changes.append(f"{key} {value} → {target}")
+        if changes:
+            parts.append(f"{length} {old} → {new}, so scaled {', '.join(changes)}")
+    if not scaled:
+        return config, None
+    config = apply_overrides(config, scaled, source="scaling")
+    return config, f"{'; '.join(parts)} (set them with --set to choose other values)"
 
 
 def config_to_dict(config) -> dict[str, Any]:

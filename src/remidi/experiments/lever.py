@@ -15,6 +15,9 @@ from remidi.envs.lever import lever_task
 from remidi.experiments.ued import make_ued_experiment
 
 NUM_LEVERS = 64
+# minimax regret on hidden levels: the uniform lever choice, 20 × 63/64 (±10 rewards)
+MMR_HIDDEN = 20 * (1 - 1 / NUM_LEVERS)
+IGNORE_VISIBLE = 2 * (1 - 1 / NUM_LEVERS)  # regret on a visible level of the uniform lever choice (±1)
 
 
 def paper_config() -> UEDConfig:
@@ -48,8 +51,13 @@ EXPERIMENTS = [make_ued_experiment(
     summary_metrics=("solve_rate/visible", "solve_rate/hidden", "regret/visible/mean", "regret/hidden/worst",
                      "entropy/hidden", "replay_fraction/hidden", "buffer_fraction/hidden"),
     plot_panels_spec=(("solve_rate/visible", "solve rate, visible answer"),
-                      ("solve_rate/hidden", "solve rate, hidden answer"),
-                      ("regret/visible/mean", "mean regret, visible answer"),
-                      ("regret/hidden/worst", "worst-case regret, hidden answer (MMR: 19.69)"),
-                      ("replay_fraction/hidden", "share of hidden levels among replayed")),
+                      ("solve_rate/hidden", "solve rate, hidden answer",
+                       {"references": [(1 / NUM_LEVERS, f"chance (1/{NUM_LEVERS})")]}),
+                      ("regret/visible/mean", "mean regret over visible levels",
+                       {"ylim": (0.0, None),
+                        "references": [(IGNORE_VISIBLE, f"ignoring the answer ({IGNORE_VISIBLE:g})")]}),
+                      ("regret/hidden/worst", "worst-case regret over hidden levels",
+                       {"references": [(MMR_HIDDEN, f"minimax regret ({MMR_HIDDEN:g})")]}),
+                      ("replay_fraction/hidden", "share of hidden levels among replayed"),
+                      ("buffer_fraction/hidden", "share of hidden levels in the active buffer")),
 )]

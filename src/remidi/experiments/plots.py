@@ -1,7 +1,15 @@
-"""Plots: panels of training curves, mean ± std over seeds."""
+"""Plots: panels of training curves, mean ± std over seeds.
+
+Every algorithm keeps one colour, line style and marker in every plot of every experiment
+(:func:`algorithm_style`), and the algorithms appear in the order the run was given them, so a
+resumed run draws exactly what a fresh one does and two identical curves stay visible (different
+dashes, markers at different positions).
+"""
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,14 +19,36 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+# one style per algorithm name: (colour, line style, marker)
+ALGORITHM_STYLES = {
+    "dr": ("#7f7f7f", "-", "o"),
+    "plr": ("#1f77b4", "--", "s"),
+    "minimax-return": ("#ff7f0e", ":", "^"),
+    "remidi": ("#d62728", "-", "D"),
+    "mmr": ("#9467bd", "--", "v"),
+}
+_SPARE = [("#2ca02c", "-.", "P"), ("#8c564b", "-", "X"), ("#e377c2", "--", "*"), ("#17becf", ":", "h")]
+
+
+def algorithm_style(name: str) -> dict:
+    """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``: fixed per name."""
+    if name in ALGORITHM_STYLES:
+        color, linestyle, marker = ALGORITHM_STYLES[name]
+    else:  # an algorithm this module does not know: a spare style chosen by the name alone
+        color, linestyle, marker = _SPARE[sum(map(ord, name)) % len(_SPARE)]
+    return {"color": color, "linestyle": linestyle, "marker": marker}
+
 
 @dataclass
 class Curve:
-    """One line: ``values`` f[S, T] over seeds and log points, drawn as mean ± std."""
+    """One line: ``values`` f[S, T] over seeds and log points, drawn as mean ± std. ``style``:
+    matplotlib keywords (``color``, ``linestyle``, ``marker``); default: the colour cycle by
+    position, solid, no marker."""
 
     label: str
     steps: np.ndarray
     values: np.ndarray
+    style: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -27,29 +57,85 @@ class Panel:
     curves: list[Curve]
     ylabel: str = ""
     xlabel: str = "step"
-    references: list[tuple[float, str]] = field(default_factory=list)  # dashed horizontal lines
+    references: list[tuple[float, str]] = field(default_factory=list)  # dashed horizontal lines, in the legend
+    ylim: tuple[float, float] | None = None
+    # draw curves whose means coincide (root-mean-square gap under 2% of the panel's range) once,
+    # labelled "a, b"
+    merge_coinciding: bool = False
 
 
-def plot_panels(path: Path, panels: list[Panel], title: str = "") -> None:
-    """Save ``panels`` side by side into the PNG ``path``."""
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.0), squeeze=False)
+def algorithm_curves(results: dict, metric: str) -> list[Curve]:
+    """One styled curve of ``metric`` per algorithm of ``results`` ({algo: RunResult}, in order),
+    leaving out algorithms without the metric or without a single defined value of it (DR's
+    replay share: it never replays)."""
+    curves = []
+    for algo, result in results.items():
+        values = result.history.get(metric)
+        if values is None or not np.isfinite(np.asarray(values, dtype=float)).any():
+            continue
+        curves.append(Curve(algo, result.steps, values, algorithm_style(algo)))
+    return curves
+
+
+def _merge(curves: list[Curve], colors: list[str]) -> list[Curve]:
+    """Curves with default styles get their colour by position first (so a curve keeps its colour
+    whatever it is merged with); then each curve whose mean is within 2% of the panel's range of an
+    earlier one (root mean square over the log points) is folded into it, its label appended."""
+    means = [np.nanmean(np.asarray(c.values, dtype=float), axis=0) for c in curves]
+    finite = np.concatenate([m[np.isfinite(m)] for m in means]) if means else np.zeros(0)
+    span = float(finite.max() - finite.min()) if finite.size else 0.0
+    tol = max(0.02 * span, 1e-9)
+    groups: list[tuple[Curve, np.ndarray, list[str]]] = []
+    for i, (curve, mean) in enumerate(zip(curves, means)):
+        style = curve.style or {"color": colors[i % len(colors)]}
+        for first, first_mean, labels in groups:
+            gap = mean - first_mean
+            if (np.array_equal(first.steps, curve.steps) and np.array_equal(np.isnan(mean), np.isnan(first_mean))
+                    and np.sqrt(np.nanmean(gap ** 2) if np.isfinite(gap).any() else 0.0) <= tol):
+                labels.append(curve.label)
+                break
+        else:
+            groups.append((Curve(curve.label, curve.steps, curve.values, style), mean, [curve.label]))
+    return [Curve(", ".join(labels), first.steps, first.values, first.style) for first, _, labels in groups]
+
+
+def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int = 3) -> None:
+    """Save ``panels`` into the PNG ``path``, at most ``columns`` per row."""
+    cols = min(columns, len(panels))
+    rows = math.ceil(len(panels) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.0 * rows), squeeze=False)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for ax, panel in zip(axes[0], panels):
-        for i, curve in enumerate(panel.curves):
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
+    for ax, panel in zip(axes.flat, panels):
+        curves = (_merge(panel.curves, colors) if panel.merge_coinciding else
+                  [Curve(c.label, c.steps, c.values, c.style or {"color": colors[i % len(colors)]})
+                   for i, c in enumerate(panel.curves)])
+        for i, curve in enumerate(curves):
             values = np.asarray(curve.values, dtype=float)
-            mean, std = values.mean(axis=0), values.std(axis=0)
-            color = colors[i % len(colors)]
-            ax.plot(curve.steps, mean, label=curve.label, color=color)
-            ax.fill_between(curve.steps, mean - std, mean + std, color=color, alpha=0.2, linewidth=0)
+            with warnings.catch_warnings():  # "mean of empty slice" where every seed is NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean, std = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+            style = dict(curve.style)
+            if style.get("marker"):  # at most ~8 markers, shifted per curve so coinciding curves show both
+                every = max(1, len(mean) // 8)
+                style["markevery"] = (i % every, every) if every > 1 else 1
+                style.setdefault("markersize", 4)
+            ax.plot(curve.steps, mean, label=curve.label, linewidth=1.6, **style)
+            ax.fill_between(curve.steps, mean - std, mean + std, color=style.get("color"), alpha=0.15, linewidth=0)
+        seen = set()
         for y, label in panel.references:
-            ax.axhline(y, linestyle="--", color="grey", linewidth=1)
-            ax.annotate(label, (1.0, y), xycoords=("axes fraction", "data"), ha="right", va="bottom",
-                        fontsize=8, color="grey")
+            ax.axhline(y, linestyle=(0, (4, 3)), color="black", linewidth=1, alpha=0.6,
+                       label=None if label in seen else label)
+            seen.add(label)
+        if panel.ylim is not None:
+            ax.set_ylim(*panel.ylim)
         ax.set_title(panel.title)
         ax.set_xlabel(panel.xlabel)
         ax.set_ylabel(panel.ylabel)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     if title:
         fig.suptitle(title)
     _save(fig, path)
@@ -57,16 +143,16 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "") -> None:
 
 def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
               ylim: tuple[float, float] | None = None) -> None:
-    """Grouped bar chart into the PNG ``path``: one group per label, one bar per series;
-    ``series[name]`` f[len(labels), S] over seeds, drawn as mean with a ± std error bar."""
+    """Grouped bar chart into the PNG ``path``: one group per label, one bar per series (an
+    algorithm, in its fixed colour); ``series[name]`` f[len(labels), S] over seeds, drawn as mean
+    with a ± std error bar."""
     fig, ax = plt.subplots(figsize=(min(14.0, max(6.0, 0.55 * len(labels) * max(1, len(series)) ** 0.5 + 2)), 4.2))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     width = 0.8 / max(1, len(series))
     x = np.arange(len(labels))
     for i, (name, values) in enumerate(series.items()):
         values = np.asarray(values, dtype=float)
         ax.bar(x + (i - (len(series) - 1) / 2) * width, values.mean(axis=1), width, yerr=values.std(axis=1),
-               label=name, color=colors[i % len(colors)], capsize=2)
+               label=name, color=algorithm_style(name)["color"], capsize=2)
     ax.set_xticks(x, labels, rotation=35, ha="right", fontsize=8)
     ax.set_title(title)
     ax.set_ylabel(ylabel)

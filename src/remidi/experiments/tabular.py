@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from remidi.envs.tabular import TabularGame, paper_game
+from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.config import choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.plots import Curve, Panel, plot_panels
@@ -29,7 +30,9 @@ def validate(cfg: TabularUEDConfig, algo: str) -> None:
     choice("--algo", algo, ALGORITHMS)
     positive_int("iterations", cfg.iterations)
     positive_int("log_every", cfg.log_every)
-    require(cfg.log_every <= cfg.iterations, "log_every", f"≤ iterations ({cfg.iterations})", cfg.log_every)
+    if cfg.log_every > cfg.iterations:
+        raise ConfigError(f"log_every: must be ≤ iterations ({cfg.iterations}), got {cfg.log_every}; "
+                          f"lower log_every or raise iterations")
     require(cfg.adversary_updates >= 0, "adversary_updates", "an integer ≥ 0", cfg.adversary_updates)
     require(cfg.agent_updates >= 0, "agent_updates", "an integer ≥ 0", cfg.agent_updates)
     positive("policy_lr", cfg.policy_lr)
@@ -45,10 +48,12 @@ def validate(cfg: TabularUEDConfig, algo: str) -> None:
     require(0 < cfg.support_threshold <= 1, "support_threshold", "in (0, 1]", cfg.support_threshold)
     if algo == "remidi":
         needed = (cfg.num_adversaries - 1) * cfg.iters_per_adversary
-        require(needed < cfg.iterations, "num_adversaries",
-                f"small enough that every adversary gets iterations "
-                f"((num_adversaries − 1) × iters_per_adversary = {needed} < iterations = {cfg.iterations})",
-                cfg.num_adversaries)
+        if needed >= cfg.iterations:
+            raise ConfigError(
+                f"num_adversaries: must be small enough that the last adversary gets iterations, but "
+                f"(num_adversaries − 1) × iters_per_adversary = ({cfg.num_adversaries} − 1) × "
+                f"{cfg.iters_per_adversary} = {needed} is not below iterations = {cfg.iterations}; lower "
+                f"num_adversaries or iters_per_adversary, or raise iterations")
 
 
 def reference(game: TabularGame) -> dict:
@@ -71,6 +76,7 @@ def make_train(setting: str):
     def train_tabular(ctx: RunContext) -> RunResult:
         game = paper_game(setting)
         cfg: TabularUEDConfig = ctx.config
+        validate(cfg, ctx.algo)  # the same rules as run_experiment, for direct callers
         num_pairs = 1 if ctx.algo == "mmr" else cfg.num_adversaries
         _, hist = train(ctx.seeds, game, cfg, num_pairs)
         history: dict[str, np.ndarray] = {}
@@ -90,22 +96,28 @@ def make_train(setting: str):
 
 
 def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig) -> None:
-    """``regret.png`` (greatest regret per observation) and ``adversary.png`` (level
-    probabilities), one panel per algorithm, mean ± std over seeds."""
+    """``regret.png`` (greatest regret per observation, with the exact BLP regrets as dashed
+    lines) and ``adversary.png`` (level probabilities), one panel per algorithm in the run's
+    order, mean ± std over seeds; curves that coincide are drawn once, labelled together."""
     any_result = next(iter(results.values()))
     blp = any_result.extra["reference"]["blp_regret"]
+    by_value: dict[float, list[str]] = {}
+    for obs, value in blp.items():
+        by_value.setdefault(round(value, 6), []).append(obs)
+    label = "exact BLP: " + ", ".join(f"{v:g} ({', '.join(obs)})" for v, obs in sorted(by_value.items()))
+    refs = [(v, label) for v in sorted(by_value)]  # one legend entry for all of them
     regret_panels, adversary_panels = [], []
     for algo, result in results.items():
         regret_curves = [Curve(name.split("/", 1)[1], result.steps, values)
                          for name, values in result.history.items()
                          if name.startswith("regret/") and name != "regret/max"]
-        refs = sorted({round(v, 6) for v in blp.values()})
-        regret_panels.append(Panel(f"{algo}: greatest regret per observation", regret_curves, "regret",
-                                   "iteration", [(v, f"exact BLP {v:g}") for v in refs]))
+        regret_panels.append(Panel(f"{algo}: greatest regret per observation", regret_curves,
+                                   "regret/<observation>", "iteration", refs))
         adversary_curves = [Curve(name.split("/", 1)[1], result.steps, values)
                             for name, values in result.history.items() if name.startswith("adversary_prob/")]
         adversary_panels.append(Panel(f"{algo}: adversary level probabilities", adversary_curves,
-                                      "probability", "iteration"))
+                                      "adversary_prob/<level>", "iteration", ylim=(-0.02, 1.02),
+                                      merge_coinciding=True))
     plot_panels(folder / "regret.png", regret_panels)
     plot_panels(folder / "adversary.png", adversary_panels)
 
@@ -121,6 +133,7 @@ def _experiment(setting: str) -> Experiment:
         validate=validate,
         train=make_train(setting),
         plot=plot,
+        scaled_keys={"iterations": ("log_every", "iters_per_adversary")},
     )
 
 

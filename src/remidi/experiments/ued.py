@@ -16,7 +16,11 @@ from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.train import ALGORITHMS, UEDConfig, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import Curve, Panel, plot_bars, plot_panels
+from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels
+
+
+# measured in updates: scaled with num_updates when only num_updates is set (config.scale_dependents)
+SCALED_KEYS = {"num_updates": ("eval_every", "checkpoint_every", "remidi.steps_per_buffer")}
 
 
 def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: float = 0.1) -> dict[str, np.ndarray]:
@@ -34,8 +38,9 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
+        validate_ued_config(cfg, ctx.algo, task)  # the same rules as run_experiment, for direct callers
         steps, history, raw, _ = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
-                                             progress=ctx.progress)
+                                             progress=ctx.progress, devices=ctx.devices)
         if derive is not None:
             history.update(derive(history))
         final = {name: history[name][:, -1] for name in history}
@@ -47,16 +52,25 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
     return train
 
 
-def make_plot(panels: tuple[tuple[str, str], ...], bars: tuple[str, tuple[str, ...]] | None = None):
-    """``panels``: (metric, title) pairs; one panel per metric, one curve per algorithm, saved as
-    ``training.png``. ``bars``: (title, metrics): a bar chart of those metrics' final values per
-    algorithm (mean ± std over seeds), saved as ``final.png``."""
+UNIT_INTERVAL = ("solve_rate", "replay_fraction", "buffer_fraction")  # metrics in [0, 1]: fixed y-range
+
+
+def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | None = None):
+    """``panels``: (metric, title) or (metric, title, options) tuples; one panel per metric, one
+    curve per algorithm (fixed style per algorithm, in the run's order; algorithms without the
+    metric, or that never define it, left out), saved as ``training.png``. ``options``:
+    ``references`` [(y, label)] dashed lines, ``ylim``; metrics of a share or rate are drawn on
+    [0, 1]. ``bars``: (title, metrics): a bar chart of those metrics' final values per algorithm
+    (mean ± std over seeds), saved as ``final.png``."""
 
     def plot(folder: Path, results: dict[str, RunResult], cfg) -> None:
         figure = []
-        for metric, title in panels:
-            curves = [Curve(algo, r.steps, r.history[metric]) for algo, r in results.items() if metric in r.history]
-            figure.append(Panel(title, curves, metric.split("/")[0].replace("_", " "), "update"))
+        for metric, title, *more in panels:
+            options = more[0] if more else {}
+            kind = metric.split("/")[0]
+            ylim = options.get("ylim", (-0.03, 1.03) if kind in UNIT_INTERVAL else None)
+            figure.append(Panel(title, algorithm_curves(results, metric), metric, "update",
+                                references=list(options.get("references", ())), ylim=ylim))
         plot_panels(folder / "training.png", figure)
         if bars is not None:
             title, metrics = bars
@@ -65,8 +79,8 @@ def make_plot(panels: tuple[tuple[str, str], ...], bars: tuple[str, tuple[str, .
                       if all(m in f for m in metrics)}  # [M, S] per algorithm
             labels = [m.split("/", 1)[-1] for m in metrics]
             kind = metrics[0].split("/")[0]
-            plot_bars(folder / "final.png", title, labels, series, kind.replace("_", " "),
-                      ylim=(0.0, 1.0) if kind == "solve_rate" else None)
+            plot_bars(folder / "final.png", title, labels, series, kind,
+                      ylim=(0.0, 1.0) if kind in UNIT_INTERVAL else None)
 
     return plot
 
@@ -80,4 +94,6 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         name=name, description=description, algorithms=ALGORITHMS, config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_factory, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
+        scaled_keys=SCALED_KEYS,
+        shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
     )

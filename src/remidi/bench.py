@@ -1,0 +1,316 @@
+"""``remidi bench``: named, rerunnable throughput benchmarks.
+
+Each benchmark builds one compiled program, times its compilation (``compile_s``), warms it up,
+then times ``repeats`` calls (``block_until_ready``) and reports the median
+(``env_steps_per_s``, ``seconds_per_call``) and the process's peak resident memory
+(``peak_rss_mb``). Every benchmark runs in a fresh Python process, so its memory and compile
+time are its own; ratios are taken between benchmarks of one ``remidi bench`` invocation (same
+machine, same moment).
+
+Workloads (one seed, the shapes of the paper's maze preset; the train steps are the engine's own
+``train_step`` inside the driver's compiled block, vmapped over a seed axis of size 1):
+
+* ``maze-plr``: PLR⊥ on the T-maze task, 32 envs × 256 steps, the paper's maze agent (conv +
+  LSTM), PPO 5 epochs × 1 minibatch; the buffer (4000) is full and every update replays, so
+  every update is one rollout plus a gradient update (as in jaxued's maze PLR example).
+* ``maze-remidi``: the same for ReMiDi in its last buffer, three full frozen buffers of 256
+  task levels (half of them T-mazes) tracked by the candidate tracker; reports the tracker's
+  overflow.
+* ``maze-remidi-reference``: ``maze-remidi`` with the reference tracker (every frozen level
+  stepped beside every env), for the ratio of the two trackers (not run by default: slow).
+* ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
+  restarts): the ceiling training cannot beat.
+* ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+BENCHMARKS: dict[str, "Benchmark"] = {}
+DEFAULT = ("maze-plr", "maze-remidi", "maze-env", "lever-plr")
+TINY_ENV = "REMIDI_BENCH_TINY"  # set (by --tiny): every workload at toy sizes, to check the tool in seconds
+SET_ENV = "REMIDI_BENCH_SET"  # JSON {key: value} (by --set): overrides of the train workloads' UED config
+
+
+def _overrides() -> dict:
+    import os
+
+    return json.loads(os.environ.get(SET_ENV) or "{}")
+
+
+def check_overrides(overrides: dict) -> None:
+    """Raise ConfigError for a ``--set`` key that is no UED config key or a value of the wrong type."""
+    from remidi.engine.train import UEDConfig
+    from remidi.experiments.config import apply_overrides
+
+    apply_overrides(UEDConfig(), overrides)
+
+
+def _tiny() -> bool:
+    import os
+
+    return os.environ.get(TINY_ENV, "") not in ("", "0")
+
+
+def _shrink(cfg):
+    """``--tiny``: 4 envs × 16 steps, one epoch, small buffers (same code paths)."""
+    if not _tiny():
+        return cfg
+    return dataclasses.replace(cfg, num_envs=4, num_steps=16, ppo=dataclasses.replace(cfg.ppo, epochs=1, minibatches=1),
+                               buffer=dataclasses.replace(cfg.buffer, capacity=32, topk_k=8),
+                               remidi=dataclasses.replace(cfg.remidi, buffer_capacity=16))
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    name: str
+    description: str
+    build: Callable[[], "Workload"]
+
+
+@dataclass
+class Workload:
+    fn: Callable  # jitted
+    args: tuple
+    env_steps_per_call: int
+    extras: Callable[[object], dict] = lambda out: {}  # reported values read off a call's output
+    chain: bool = False  # fn returns (new first argument, ...): feed it to the next call
+
+
+def register(name: str, description: str):
+    def wrap(build):
+        BENCHMARKS[name] = Benchmark(name, description, build)
+        return build
+
+    return wrap
+
+
+# ----------------------------------------------------------------------------- workloads
+def _filled_runner(setup, updates_per_call: int, active: int):
+    """A one-seed runner (leaves [1, ...]) whose every buffer is full of the task's random levels
+    (random scores), on buffer ``active``."""
+    import jax
+    import jax.numpy as jnp
+
+    from remidi.engine import driver
+
+    runner = driver._init(setup, jax.random.PRNGKey(0)[None])
+    bufs = runner.buffers  # leaves [1, K, C, ...]
+    k, c = bufs.valid.shape[1:]
+    keys = jax.random.split(jax.random.PRNGKey(1), k * c)
+    levels = jax.vmap(setup.task.sample_level)(keys)
+    levels = jax.tree.map(lambda x: x.reshape((1, k, c) + x.shape[1:]), levels)
+    scores = jax.random.uniform(jax.random.PRNGKey(2), (1, k, c))
+    bufs = bufs.replace(levels=levels, valid=jnp.ones_like(bufs.valid), scores=scores)
+    return runner.replace(buffers=bufs, active=jnp.full_like(runner.active, active))
+
+
+def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2):
+    from functools import partial
+
+    import jax
+
+    from remidi.engine import train as tr
+
+    from remidi.experiments.config import apply_overrides
+
+    cfg = apply_overrides(_shrink(cfg), _overrides())
+    setup = tr.make_setup(task, cfg, algo)
+    runner = _filled_runner(setup, updates_per_call, active)
+
+    @partial(jax.jit, donate_argnums=0)
+    def block(runner):
+        return jax.vmap(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None,
+                                               length=updates_per_call))(runner)
+
+    def extras(out):
+        _, metrics = out
+        return {name: float(metrics[name].mean()) for name in ("replay", "tracker_overflow", "rejected")
+                if name in metrics}
+
+    return Workload(block, (runner,), updates_per_call * cfg.num_envs * cfg.num_steps, extras, chain=True)
+
+
+def _maze_config(algo: str, budget: int | None = None):
+    from remidi.experiments.maze import paper_config
+
+    cfg = paper_config()
+    cfg = dataclasses.replace(cfg, buffer=dataclasses.replace(cfg.buffer, replay_prob=1.0))
+    if algo == "remidi":  # stay on the last buffer: no switch during the benchmark
+        remidi = dataclasses.replace(cfg.remidi, steps_per_buffer=10**9, count="updates")
+        if budget is not None:
+            remidi = dataclasses.replace(remidi, tracker_budget=budget)
+        cfg = dataclasses.replace(cfg, remidi=remidi)
+    return cfg
+
+
+@register("maze-plr", "PLR⊥ update on the T-maze task: 32 envs × 256 steps, maze agent, PPO 5×1")
+def _maze_plr():
+    from remidi.envs.maze import maze_task
+
+    return _train_workload(maze_task("tmaze"), _maze_config("plr"), "plr", active=0)
+
+
+@register("maze-remidi", "ReMiDi update in its last buffer, three full frozen buffers of 256 levels")
+def _maze_remidi():
+    from remidi.envs.maze import maze_task
+
+    cfg = _maze_config("remidi")
+    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
+
+
+@register("maze-remidi-reference", "maze-remidi with the reference tracker (every frozen level stepped)")
+def _maze_remidi_reference():
+    from remidi.envs.maze import maze_task
+
+    cfg = _maze_config("remidi", budget=0)
+    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1, updates_per_call=1)
+
+
+@register("maze-env", "the maze environment alone: random actions, 32 envs × 256 steps")
+def _maze_env():
+    import jax
+
+    from remidi.envs.interface import AutoReplay
+    from remidi.envs.maze import maze_task
+
+    task = maze_task("tmaze")
+    env, params = AutoReplay(task.env), task.params
+    num_envs, num_steps = (4, 16) if _tiny() else (32, 256)
+    num_envs = int(_overrides().get("num_envs", num_envs))
+    num_steps = int(_overrides().get("num_steps", num_steps))
+    levels = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), num_envs))
+
+    @jax.jit
+    def block(rng):
+        obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(
+            jax.random.split(rng, num_envs), levels, params)
+
+        def step(state, key):
+            k_act, k_env = jax.random.split(key)
+            action = jax.random.randint(k_act, (num_envs,), 0, task.num_actions)
+            obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, num_envs), state, action, params)
+            # the observations are an output, or XLA would drop their computation
+            return state, (jax.tree.map(lambda x: x.reshape(num_envs, -1).sum(axis=1), obs), reward, done)
+
+        _, out = jax.lax.scan(step, state, jax.random.split(rng, num_steps))
+        return out
+
+    return Workload(block, (jax.random.PRNGKey(1),), num_envs * num_steps)
+
+
+@register("lever-plr", "PLR⊥ update on the lever game's paper preset")
+def _lever_plr():
+    from remidi.envs.lever import lever_task
+    from remidi.experiments.lever import paper_config
+
+    cfg = paper_config()
+    cfg = dataclasses.replace(cfg, buffer=dataclasses.replace(cfg.buffer, replay_prob=1.0))
+    return _train_workload(lever_task(), cfg, "plr", active=0, updates_per_call=20)
+
+
+# ----------------------------------------------------------------------------- timing
+def run_one(name: str, repeats: int) -> dict:
+    """Compile, warm up and time benchmark ``name`` in this process."""
+    import jax
+
+    work = BENCHMARKS[name].build()
+    args = work.args
+    start = time.perf_counter()
+    compiled = work.fn.lower(*args).compile()
+    compile_s = time.perf_counter() - start
+
+    def call(args):
+        out = compiled(*args)
+        jax.block_until_ready(out)
+        return out
+
+    out = call(args)  # warm-up
+    times = []
+    for _ in range(repeats):
+        if work.chain:
+            args = (out[0],) + args[1:]
+        start = time.perf_counter()
+        out = call(args)
+        times.append(time.perf_counter() - start)
+    seconds = statistics.median(times)
+    steps = work.env_steps_per_call
+    return {"env_steps_per_s": steps / seconds, "seconds_per_call": seconds, "env_steps_per_call": steps,
+            "compile_s": compile_s, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "repeats": repeats, "times_s": times, **work.extras(out)}
+
+
+def device_description() -> str:
+    import jax
+
+    d = jax.devices()[0]
+    kind = getattr(d, "device_kind", d.platform)
+    cores = len(__import__("os").sched_getaffinity(0))
+    return f"{d.platform}: {kind} ({jax.device_count()} device{'s' if jax.device_count() != 1 else ''}), " \
+           f"{cores} CPU cores, {platform.machine()}, jax {jax.__version__}"
+
+
+def ratios(results: dict[str, dict]) -> dict[str, float]:
+    out = {}
+
+    def per_call(name):
+        return results[name]["seconds_per_call"] / results[name]["env_steps_per_call"]
+
+    if "maze-remidi" in results and "maze-plr" in results:
+        out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
+    if "maze-remidi-reference" in results and "maze-plr" in results:
+        out["remidi_reference_step_over_plr_step"] = per_call("maze-remidi-reference") / per_call("maze-plr")
+    if "maze-plr" in results and "maze-env" in results:
+        out["maze_plr_over_env"] = results["maze-plr"]["env_steps_per_s"] / results["maze-env"]["env_steps_per_s"]
+    return out
+
+
+def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = False,
+                   overrides: dict | None = None) -> dict:
+    """Run each benchmark in its own process; return the JSON document ``remidi bench --json``
+    prints. ``tiny``: toy sizes (checks the tool; the figures mean nothing). ``overrides``: UED
+    config keys set in every train workload (``num_envs`` and ``num_steps`` also in ``maze-env``)."""
+    import os
+
+    overrides = overrides or {}
+    env = {**os.environ, TINY_ENV: "1" if tiny else "", SET_ENV: json.dumps(overrides)}
+    results = {}
+    for name in names:
+        print(f"bench {name}: {BENCHMARKS[name].description} ...", file=log, flush=True)
+        proc = subprocess.run([sys.executable, "-m", "remidi.bench", name, str(repeats)],
+                              capture_output=True, text=True, env=env)
+        if proc.returncode != 0:
+            raise RuntimeError(f"benchmark {name} failed:\n{proc.stderr[-3000:]}")
+        results[name] = json.loads(proc.stdout.strip().splitlines()[-1])
+        r = results[name]
+        print(f"  {r['env_steps_per_s']:,.0f} env-steps/s, {r['seconds_per_call']:.3f} s per call, "
+              f"compile {r['compile_s']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MB", file=log, flush=True)
+    return {"benchmarks": results, "ratios": ratios(results), "device": device_description(), "tiny": tiny,
+            "set": overrides}
+
+
+def format_table(doc: dict) -> str:
+    lines = [f"device: {doc['device']}", "",
+             f"{'benchmark':24s} {'env-steps/s':>12s} {'s/call':>8s} {'compile s':>9s} {'peak MB':>8s}"]
+    for name, r in doc["benchmarks"].items():
+        lines.append(f"{name:24s} {r['env_steps_per_s']:12,.0f} {r['seconds_per_call']:8.3f} "
+                     f"{r['compile_s']:9.1f} {r['peak_rss_mb']:8.0f}")
+    if doc["ratios"]:
+        lines.append("")
+        lines += [f"{k}: {v:.3f}" for k, v in doc["ratios"].items()]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # one benchmark in this process: python -m remidi.bench NAME REPEATS
+    print(json.dumps(run_one(sys.argv[1], int(sys.argv[2]))))

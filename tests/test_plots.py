@@ -1,0 +1,106 @@
+"""Plots: one style and one order per algorithm everywhere, no legend entry for a curve that is not
+drawn, reference lines in the legend, coinciding curves drawn once (no training: made-up results)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from remidi.experiments import get_experiment, plots
+from remidi.experiments.base import RunResult, _run_order, write_run_config
+
+STEPS = np.array([10, 20, 30, 40])
+
+
+@pytest.fixture
+def figures(monkeypatch):
+    """The figures the plot functions would save, {file name: figure}, instead of PNGs."""
+    saved = {}
+
+    def keep(fig, path):
+        saved[path.name] = fig
+
+    monkeypatch.setattr(plots, "_save", keep)
+    yield saved
+    import matplotlib.pyplot as plt
+
+    for fig in saved.values():
+        plt.close(fig)
+
+
+def legend(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def lever_result(algo, seed_values):
+    rng = np.random.default_rng(0)
+    history = {m: rng.uniform(0, 1, (2, len(STEPS))) for m in
+               ("solve_rate/visible", "solve_rate/hidden", "regret/visible/mean", "buffer_fraction/hidden")}
+    history["regret/hidden/worst"] = np.full((2, len(STEPS)), 20.0)
+    history["replay_fraction/hidden"] = np.full((2, len(STEPS)), seed_values)
+    return RunResult(steps=STEPS, history=history)
+
+
+def test_fixed_style_per_algorithm():
+    styles = [plots.algorithm_style(a) for a in ("dr", "plr", "minimax-return", "remidi")]
+    assert len({s["color"] for s in styles}) == 4
+    assert len({(s["linestyle"], s["marker"]) for s in styles}) == 4  # identical curves stay visible
+    assert plots.algorithm_style("plr") == plots.algorithm_style("plr")
+    assert plots.algorithm_style("my-algo") == plots.algorithm_style("my-algo")
+
+
+def test_lever_plot(figures, tmp_path):
+    lever = get_experiment("lever")
+    results = {"remidi": lever_result("remidi", 0.0), "dr": lever_result("dr", np.nan),
+               "plr": lever_result("plr", 1.0)}
+    lever.plot(tmp_path, results, lever.config_factory())
+    axes = {ax.get_title(): ax for ax in figures["training.png"].axes if ax.get_visible()}
+    hidden = axes["solve rate, hidden answer"]
+    assert legend(hidden) == ["remidi", "dr", "plr", "chance (1/64)"]  # the run's order, then the reference
+    assert hidden.get_ylim()[0] <= 0 and hidden.get_ylim()[1] >= 1
+    chance = [line for line in hidden.get_lines() if line.get_label() == "chance (1/64)"]
+    assert chance and chance[0].get_ydata()[0] == pytest.approx(1 / 64) and chance[0].get_linestyle() == "--"
+    assert hidden.get_ylabel() == "solve_rate/hidden"
+    replay = axes["share of hidden levels among replayed"]
+    assert legend(replay) == ["remidi", "plr"]  # dr never replays
+    colours = {line.get_label(): line.get_color() for ax in axes.values() for line in ax.get_lines()}
+    for algo in results:
+        assert colours[algo] == plots.algorithm_style(algo)["color"]
+    worst = axes["worst-case regret over hidden levels"]
+    assert "minimax regret (19.6875)" in legend(worst)
+
+
+def test_tabular_plot_reference_in_legend_and_coinciding_curves_once(figures, tmp_path):
+    exp = get_experiment("tabular-shared")
+    same = np.tile(np.linspace(0.1, 0.5, len(STEPS)), (3, 1))
+    history = {"regret/h1": same + 0.1, "regret/h3": same + 0.3, "regret/h5": same + 0.9,
+               **{f"adversary_prob/theta{i}": same * (0.1 if i <= 4 else 1.0) for i in range(1, 7)}}
+    history["adversary_prob/theta2"] = same * 0.5
+    reference = {"blp_regret": {"h1": 0.175, "h3": 0.175, "h5": 1.0}}
+    results = {algo: RunResult(steps=STEPS, history=history, extra={"reference": reference})
+               for algo in ("mmr", "remidi")}
+    exp.plot(tmp_path, results, exp.config_factory())
+    regret = figures["regret.png"].axes[0]
+    assert legend(regret) == ["h1", "h3", "h5", "exact BLP: 0.175 (h1, h3), 1 (h5)"]
+    assert not regret.texts  # no text drawn over the curves
+    adversary = figures["adversary.png"].axes[0]
+    assert legend(adversary) == ["theta1, theta3, theta4", "theta2", "theta5, theta6"]
+    assert [ax.get_title() for ax in figures["adversary.png"].axes] == [
+        "mmr: adversary level probabilities", "remidi: adversary level probabilities"]
+
+
+def test_several_algorithm_run_records_and_keeps_the_given_order(tmp_path):
+    lever = get_experiment("lever")
+    for algo in ("remidi", "dr", "plr"):
+        (tmp_path / algo).mkdir()
+        write_run_config(tmp_path / algo, lever, algo, "smoke", [0], lever.config_factory(), ["run"],
+                         algos=["remidi", "dr", "plr"])
+    assert json.loads((tmp_path / "dr" / "config.json").read_text())["algos"] == ["remidi", "dr", "plr"]
+    order = sorted(("dr", "plr", "remidi"), key=lambda a: _run_order(tmp_path / a, lever, a))
+    assert order == ["remidi", "dr", "plr"]  # not alphabetical
+    # runs recorded before config.json had "algos": the experiment's order
+    for algo in ("remidi", "dr", "plr"):
+        path = tmp_path / algo / "config.json"
+        path.write_text(json.dumps({k: v for k, v in json.loads(path.read_text()).items() if k != "algos"}))
+    order = sorted(("remidi", "plr", "dr"), key=lambda a: _run_order(tmp_path / a, lever, a))
+    assert order == ["dr", "plr", "remidi"]

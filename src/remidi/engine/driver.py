@@ -180,6 +180,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     number of seeds; :func:`check_devices`); the returned runner's leaves are then sharded along
     their seed axis. In a multi-process run (``jax.distributed``) every process calls this with
     the same arguments, all get the full results, and only process 0 writes checkpoints."""
+    tr.validate_ued_config(cfg, algo, task)  # the CLI's checks, for Python callers too
     check_devices(devices, len(seeds))
     setup = tr.make_setup(task, cfg, algo)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import platform
 import resource
 import statistics
@@ -43,8 +44,6 @@ SET_ENV = "REMIDI_BENCH_SET"  # JSON {key: value} (by --set): overrides of the t
 
 
 def _overrides() -> dict:
-    import os
-
     return json.loads(os.environ.get(SET_ENV) or "{}")
 
 
@@ -57,8 +56,6 @@ def check_overrides(overrides: dict) -> None:
 
 
 def _tiny() -> bool:
-    import os
-
     return os.environ.get(TINY_ENV, "") not in ("", "0")
 
 
@@ -96,7 +93,7 @@ def register(name: str, description: str):
 
 
 # ----------------------------------------------------------------------------- workloads
-def _filled_runner(setup, updates_per_call: int, active: int):
+def _filled_runner(setup, active: int):
     """A one-seed runner (leaves [1, ...]) whose every buffer is full of the task's random levels
     (random scores), on buffer ``active``."""
     import jax
@@ -126,7 +123,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     cfg = apply_overrides(_shrink(cfg), _overrides())
     setup = tr.make_setup(task, cfg, algo)
-    runner = _filled_runner(setup, updates_per_call, active)
+    runner = _filled_runner(setup, active)
 
     @partial(jax.jit, donate_argnums=0)
     def block(runner):
@@ -256,7 +253,7 @@ def device_description() -> str:
 
     d = jax.devices()[0]
     kind = getattr(d, "device_kind", d.platform)
-    cores = len(__import__("os").sched_getaffinity(0))
+    cores = len(os.sched_getaffinity(0))
     return f"{d.platform}: {kind} ({jax.device_count()} device{'s' if jax.device_count() != 1 else ''}), " \
            f"{cores} CPU cores, {platform.machine()}, jax {jax.__version__}"
 
@@ -281,8 +278,6 @@ def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = 
     """Run each benchmark in its own process; return the JSON document ``remidi bench --json``
     prints. ``tiny``: toy sizes (checks the tool; the figures mean nothing). ``overrides``: UED
     config keys set in every train workload (``num_envs`` and ``num_steps`` also in ``maze-env``)."""
-    import os
-
     overrides = overrides or {}
     env = {**os.environ, TINY_ENV: "1" if tiny else "", SET_ENV: json.dumps(overrides)}
     results = {}

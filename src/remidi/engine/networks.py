@@ -7,7 +7,10 @@ Every network is a :class:`flax.linen.Module` applied to a whole rollout at once
 - ``obs``: an observation pytree whose leaves are shaped ``[T, N, ...]`` (time, envs).
 - ``reset``: ``bool[T, N]``, True where a new episode starts at that step; a recurrent net
   re-initialises its carry *before* processing such a step.
-- ``logits``: ``f32[T, N, num_actions]``; ``value``: ``f32[T, N]``.
+- ``logits``: the policy output (:mod:`remidi.engine.distributions`), ``f32[T, N, num_actions]``
+  logits, or with ``continuous=True`` ``f32[T, N, 2·num_actions]``, the mean and log standard
+  deviation of a diagonal Gaussian (the log-std is a state-independent parameter, zeros
+  initially); ``value``: ``f32[T, N]``.
 - ``carry``: the recurrent state for the ``N`` envs after the last step. Every carry leaf has the
   env axis first, so a PPO minibatch of envs is ``jax.tree.map(lambda x: x[ids], carry)``.
 
@@ -65,18 +68,24 @@ def flatten_obs(obs: Any) -> jax.Array:
 class ActorCriticHeads(nn.Module):
     """Separate policy and value heads: ``Dense(hidden) -> act -> Dense(out)`` each.
 
-    ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``.
+    ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``; with
+    ``continuous`` the policy output is ``f32[..., 2·num_actions]``: the Gaussian mean (the
+    Dense output) then a state-independent log-std parameter ``log_std`` (zeros initially).
     """
 
     num_actions: int
     hidden: int = 32
     activation: str = "relu"
+    continuous: bool = False
 
     @nn.compact
     def __call__(self, x):
         act = _activation(self.activation)
         pi = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="policy_hidden")(x))
         logits = nn.Dense(self.num_actions, kernel_init=_POLICY_INIT, bias_init=_ZEROS, name="policy_out")(pi)
+        if self.continuous:
+            log_std = self.param("log_std", _ZEROS, (self.num_actions,))
+            logits = jnp.concatenate([logits, jnp.broadcast_to(log_std, logits.shape)], axis=-1)
         v = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="value_hidden")(x))
         value = nn.Dense(1, kernel_init=_VALUE_INIT, bias_init=_ZEROS, name="value_out")(v)
         return logits, jnp.squeeze(value, axis=-1)
@@ -102,6 +111,7 @@ class FeedForwardActorCritic(nn.Module):
     hidden: tuple[int, ...] = (256, 256)
     head_hidden: int = 32
     activation: str = "tanh"
+    continuous: bool = False
 
     @nn.nowrap
     def initialize_carry(self, batch_size: int) -> jax.Array:
@@ -115,7 +125,8 @@ class FeedForwardActorCritic(nn.Module):
         x = flatten_obs(obs)
         for i, width in enumerate(self.hidden):
             x = act(nn.Dense(width, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name=f"trunk_{i}")(x))
-        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, self.activation, name="heads")(x)
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, self.activation, self.continuous,
+                                         name="heads")(x)
         return carry, (logits, value)
 
 
@@ -155,6 +166,7 @@ class MazeLSTMActorCritic(nn.Module):
     conv_features: int = 16
     dir_embed: int = 5
     head_hidden: int = 32
+    continuous: bool = False
 
     @nn.nowrap
     def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
@@ -176,15 +188,50 @@ class MazeLSTMActorCritic(nn.Module):
         )
         x = jnp.concatenate([image_embed, dir_embed], axis=-1)
         carry, y = ResetLSTM(self.lstm_size, name="lstm")(carry, (x, reset))
-        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, "relu", name="heads")(y)
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, "relu", self.continuous, name="heads")(y)
         return carry, (logits, value)
 
 
-NETWORKS = {"mlp": FeedForwardActorCritic, "maze_lstm": MazeLSTMActorCritic}
+class MLPLSTMActorCritic(nn.Module):
+    """A recurrent agent for vector observations (the Brax agent): flattened obs -> ``hidden``
+    fully-connected layers -> LSTM(``lstm_size``) -> ``head_hidden``-unit policy and value heads.
+
+    Default: one 256-unit tanh layer, a 256-unit LSTM, 64-unit tanh heads; with ``continuous``
+    a Gaussian policy with a state-independent log-std (PureJaxRL's continuous PPO agent, with
+    a recurrent cell between trunk and heads). Carry: ``(c, h)`` each ``f32[N, lstm_size]``.
+    """
+
+    num_actions: int
+    hidden: tuple[int, ...] = (256,)
+    lstm_size: int = 256
+    head_hidden: int = 64
+    activation: str = "tanh"
+    continuous: bool = False
+
+    @nn.nowrap
+    def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
+        """Zero LSTM state ``(c, h)``, each ``f32[batch_size, lstm_size]``."""
+        zeros = jnp.zeros((batch_size, self.lstm_size), jnp.float32)
+        return zeros, zeros
+
+    @nn.compact
+    def __call__(self, carry, obs, reset):
+        act = _activation(self.activation)
+        x = flatten_obs(obs)
+        for i, width in enumerate(self.hidden):
+            x = act(nn.Dense(width, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name=f"trunk_{i}")(x))
+        carry, y = ResetLSTM(self.lstm_size, name="lstm")(carry, (x, reset))
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, self.activation, self.continuous,
+                                         name="heads")(y)
+        return carry, (logits, value)
 
 
-def make_network(kind: str, num_actions: int, **kwargs) -> nn.Module:
-    """Build the network registered as ``kind`` (``"mlp"`` or ``"maze_lstm"``).
+NETWORKS = {"mlp": FeedForwardActorCritic, "maze_lstm": MazeLSTMActorCritic, "mlp_lstm": MLPLSTMActorCritic}
+
+
+def make_network(kind: str, num_actions: int, continuous: bool = False, **kwargs) -> nn.Module:
+    """Build the network registered as ``kind`` (``"mlp"``, ``"maze_lstm"`` or ``"mlp_lstm"``),
+    with a Gaussian policy output if ``continuous`` (``num_actions`` = action dimensions).
 
     ``kwargs`` are module fields (e.g. ``hidden=(64, 64)`` for ``"mlp"``); lists become tuples.
     Raises :class:`remidi.errors.ConfigError` for an unknown kind, option or activation.
@@ -192,11 +239,12 @@ def make_network(kind: str, num_actions: int, **kwargs) -> nn.Module:
     if kind not in NETWORKS:
         raise one_of("network", kind, sorted(NETWORKS))
     cls = NETWORKS[kind]
-    allowed = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in ("num_actions", "parent", "name")]
+    allowed = [f.name for f in dataclasses.fields(cls)
+               if f.init and f.name not in ("num_actions", "continuous", "parent", "name")]
     for key in kwargs:
         if key not in allowed:
             raise one_of(f"network.{kind} option", key, allowed)
     if "activation" in kwargs:
         _activation(kwargs["activation"])
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
-    return cls(num_actions=num_actions, **kwargs)
+    return cls(num_actions=num_actions, continuous=continuous, **kwargs)

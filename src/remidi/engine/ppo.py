@@ -13,7 +13,9 @@ recurrent net needs them as inputs) and must be finite. A minibatch with no unma
 leaves params, optimiser state and step count unchanged.
 
 Networks follow :mod:`remidi.engine.networks`:
-``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``.
+``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``; a ``dist`` from
+:mod:`remidi.engine.distributions` reads ``logits`` (categorical logits, or a Gaussian's mean
+and log-std for continuous actions ``f32[T, N, A]``).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import jax.numpy as jnp
 import optax
 from flax.training.train_state import TrainState
 
+from remidi.engine.distributions import CATEGORICAL
 from remidi.errors import ConfigError
 
 
@@ -81,11 +84,14 @@ def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
 
     Cached per config: train states built from equal configs then share one ``tx`` object, which
     is part of the :class:`TrainState` pytree structure, so jitted updates are not recompiled.
+    The optimiser runs on all parameters as one flat vector (``optax.flatten``): the same
+    arithmetic, but XLA compiles a few fused loops instead of several per parameter array
+    (measured on the lever agent: a PPO minibatch step compiles in 1.7 s instead of 2.7 s).
     """
     lr = cfg.lr
     if cfg.anneal_lr:
         lr = optax.linear_schedule(cfg.lr, 0.0, cfg.total_updates * cfg.epochs * cfg.minibatches)
-    return optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(lr, eps=cfg.adam_eps))
+    return optax.flatten(optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(lr, eps=cfg.adam_eps)))
 
 
 def _is_rollout_shaped(example_obs: Any, num_envs: int) -> bool:
@@ -135,7 +141,8 @@ def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
 class Batch:
     """A rollout for PPO; every field is ``[T, N, ...]``.
 
-    ``obs`` pytree; ``reset`` bool (new episode starts at this step); ``actions`` i32;
+    ``obs`` pytree; ``reset`` bool (new episode starts at this step); ``actions`` i32 (or
+    ``f32[T, N, A]``, continuous);
     ``log_probs``, ``values``, ``advantages``, ``targets`` f32; ``mask`` bool (train on this step).
     """
 
@@ -167,7 +174,10 @@ def normalize_advantages(adv, mask):
 
 def _zero_masked(batch: Batch) -> Batch:
     """Replace the per-step training targets at masked steps by zeros (obs and reset are kept)."""
-    zero = lambda x: jnp.where(batch.mask, x, jnp.zeros_like(x))  # noqa: E731
+    def zero(x):
+        mask = batch.mask.reshape(batch.mask.shape + (1,) * (x.ndim - batch.mask.ndim))
+        return jnp.where(mask, x, jnp.zeros_like(x))
+
     return batch.replace(
         actions=zero(batch.actions),
         log_probs=zero(batch.log_probs),
@@ -177,7 +187,7 @@ def _zero_masked(batch: Batch) -> Batch:
     )
 
 
-def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig):
+def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig, dist=CATEGORICAL):
     """Masked PPO loss on one minibatch (envs ``M``): returns ``(total_loss, metrics dict)``.
 
     ``carry``: the net's carry for the ``M`` envs at the first step of ``batch``. Clipped
@@ -187,8 +197,7 @@ def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig):
     mask = batch.mask
     batch = _zero_masked(batch)
     _, (logits, value) = apply_fn({"params": params}, carry, batch.obs, batch.reset)
-    log_pi = jax.nn.log_softmax(logits)
-    log_prob = jnp.take_along_axis(log_pi, batch.actions[..., None].astype(jnp.int32), axis=-1)[..., 0]
+    log_prob = dist.log_prob(logits, batch.actions)
     log_ratio = jnp.where(mask, log_prob - batch.log_probs, 0.0)
     ratio = jnp.exp(log_ratio)
 
@@ -202,7 +211,7 @@ def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig):
         value_sq = jnp.maximum(value_sq, jnp.square(clipped - batch.targets))
     value_loss = 0.5 * masked_mean(value_sq, mask)
 
-    entropy = masked_mean(-jnp.sum(jnp.exp(log_pi) * log_pi, axis=-1), mask)
+    entropy = masked_mean(dist.entropy(logits), mask)
     total = policy_loss + cfg.vf_coef * value_loss - cfg.ent_coef * entropy
     metrics = {
         "total_loss": total,
@@ -216,10 +225,10 @@ def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig):
     return total, metrics
 
 
-def _minibatch_step(state: TrainState, carry, batch: Batch, cfg: PPOConfig, apply_fn: Callable):
+def _minibatch_step(state: TrainState, carry, batch: Batch, cfg: PPOConfig, apply_fn: Callable, dist):
     """One optimiser step on a minibatch; a no-op (state returned bit-identical) if all masked."""
     grad_fn = jax.value_and_grad(ppo_loss, has_aux=True)
-    (_, metrics), grads = grad_fn(state.params, apply_fn, carry, batch, cfg)
+    (_, metrics), grads = grad_fn(state.params, apply_fn, carry, batch, cfg, dist)
     stepped = state.apply_gradients(grads=grads)
     any_unmasked = jnp.any(batch.mask)
     state = jax.tree.map(lambda new, old: jnp.where(any_unmasked, new, old), stepped, state)
@@ -234,13 +243,15 @@ def ppo_update(
     rng: jax.Array,
     cfg: PPOConfig,
     apply_fn: Callable | None = None,
+    dist=CATEGORICAL,
 ):
     """Run ``cfg.epochs`` x ``cfg.minibatches`` masked PPO steps on a rollout.
 
     ``init_carry``: the net's carry for the ``N`` envs at the rollout's first step (env axis
     first in every leaf). Minibatches are shuffled groups of ``N / minibatches`` envs with their
-    whole ``T``-step sequences. ``apply_fn`` defaults to ``train_state.apply_fn``. Jit-able with
-    ``cfg`` and ``apply_fn`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
+    whole ``T``-step sequences. ``apply_fn`` defaults to ``train_state.apply_fn``; ``dist`` is
+    the action distribution (:mod:`remidi.engine.distributions`). Jit-able with ``cfg``,
+    ``apply_fn`` and ``dist`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
     policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm, masked_fraction) are
     averaged over all minibatch steps. Raises :class:`ConfigError` if ``cfg`` is invalid for N.
     """
@@ -252,7 +263,7 @@ def ppo_update(
     def minibatch(state, ids):
         carry = jax.tree.map(lambda x: x[ids], init_carry)
         sub = jax.tree.map(lambda x: x[:, ids], batch)
-        return _minibatch_step(state, carry, sub, cfg, apply_fn)
+        return _minibatch_step(state, carry, sub, cfg, apply_fn, dist)
 
     def epoch(state, key):
         groups = jax.random.permutation(key, num_envs).reshape(cfg.minibatches, size)

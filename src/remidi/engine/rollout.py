@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from remidi.engine import tracker as trk
+from remidi.engine.distributions import CATEGORICAL
 from remidi.envs.interface import AutoReplay, UnderspecifiedEnv
 
 
@@ -22,7 +23,7 @@ class Trajectory:
 
     obs: Any  # observation pytree, leaves [T, N, ...]
     reset: jax.Array  # bool: step t is the first of an episode
-    action: jax.Array  # i32
+    action: jax.Array  # i32, or f32[T, N, A] for continuous actions
     log_prob: jax.Array  # f32
     value: jax.Array  # f32
     reward: jax.Array  # f32
@@ -51,7 +52,7 @@ class Frozen:
 
 def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
             num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix",
-            tracker_env: UnderspecifiedEnv | None = None):
+            tracker_env: UnderspecifiedEnv | None = None, dist=CATEGORICAL):
     """Roll out the policy on ``levels`` (leaves [N, ...]) of ``env`` for ``num_steps`` steps.
 
     The tracker plays the frozen levels in ``tracker_env`` (default ``env``; they are training
@@ -61,8 +62,10 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     current policy's (PPO trains only on the steps it acted on, ``~indist``).
 
     ``apply_fn({"params": params}, carry, obs[1, N, ...], reset bool[1, N]) -> carry,
-    (logits [1, N, A], value [1, N])`` (a flax module's ``apply``). With ``frozen`` the tracker runs beside every env; without it ``indist``
-    is all False. Returns ``(trajectory, last_value f32[N])``.
+    (logits [1, N, P], value [1, N])`` (a flax module's ``apply``); ``dist``
+    (:mod:`remidi.engine.distributions`) reads the policy output ``logits`` and samples the
+    actions. With ``frozen`` the tracker runs beside every env; without it ``indist`` is all
+    False. Returns ``(trajectory, last_value f32[N])``.
     """
     tracker_env = tracker_env if tracker_env is not None else env
     env = AutoReplay(env)
@@ -103,8 +106,8 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
                 lambda p, h: apply_fn({"params": p}, h, obs_in, reset[None]))(frozen.params, frozen_hidden)
             matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, copies, capacity)
             acting = combined_logits(matched, frozen_logits[:, 0], logits)
-        action = jax.random.categorical(k_act, acting)
-        log_prob = jnp.take_along_axis(jax.nn.log_softmax(logits), action[:, None], axis=-1)[:, 0]
+        action = dist.sample(k_act, acting)
+        log_prob = dist.log_prob(logits, action)
         env_keys = jax.random.split(k_env, num_envs)
         next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
             env_keys, state, action, env_params)
@@ -130,10 +133,10 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
 
 
 def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:
-    """ReMiDi's ``Combine``: f32[N, A], the logits of the policy that acts on each env.
+    """ReMiDi's ``Combine``: f32[N, P], the policy output of the policy that acts on each env.
 
     ``buffer_match`` bool[N, B] (some level of frozen buffer b produced env n's whole prefix),
-    ``frozen_logits`` f32[B, N, A] (each frozen buffer's policy), ``logits`` f32[N, A] (current).
+    ``frozen_logits`` f32[B, N, P] (each frozen buffer's policy), ``logits`` f32[N, P] (current).
     The earliest buffer with a matching level acts; the current policy where none matches.
     """
     earliest = jnp.argmax(buffer_match, axis=-1)  # first True (0 if none)

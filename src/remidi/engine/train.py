@@ -30,8 +30,10 @@ from flax import struct
 from flax.training.train_state import TrainState
 
 from remidi.engine import buffer as buf
+from remidi.engine import normalize as nrm
 from remidi.engine import scores as sc
-from remidi.engine.networks import make_network
+from remidi.engine.distributions import for_task
+from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, PPOConfig, compute_gae, create_train_state, ppo_update
 from remidi.engine import tracker as trk
 from remidi.engine.rollout import Frozen, Trajectory, combined_logits, rollout
@@ -67,6 +69,11 @@ class UEDConfig:
     num_steps: int = 16
     score: str = "perfect_regret"  # one of scores.SCORES; minimax-return always uses neg_return
     network: str = "mlp"
+    hidden_size: int = 0  # width of every fully-connected trunk layer of the network (0: its default)
+    lstm_size: int = 0  # units of the network's LSTM (0: its default)
+    # PPO learns from rewards × reward_scale (returns, scores and metrics stay unscaled)
+    reward_scale: float = 1.0
+    normalize_obs: bool = False  # running mean/std normalisation of the observations the agent reads
     eval_every: int = 100
     eval_attempts: int = 10
     checkpoint_every: int = 500
@@ -107,6 +114,7 @@ class Runner:
     count: jax.Array  # i32[], updates (or replays) spent on the active buffer
     update: jax.Array  # i32[], train steps done
     frozen_params: object = None  # remidi.policy=combine: the policy frozen with each buffer, leaves [K−1, ...]
+    obs_stats: object = None  # normalize_obs: running observation statistics (engine/normalize.py)
 
 
 @dataclass(frozen=True)
@@ -121,7 +129,32 @@ class Setup:
 
 
 def make_setup(task: UEDTask, cfg: UEDConfig, algo: str) -> Setup:
-    return Setup(task=task, cfg=cfg, algo=algo, net=make_network(cfg.network, task.num_actions))
+    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task))
+
+
+def network_for(cfg: UEDConfig, task: UEDTask):
+    """The network ``cfg.network`` for the task's actions, with ``hidden_size``/``lstm_size``
+    where set (ConfigError if that network has no such layer)."""
+    from remidi.engine.networks import NETWORKS
+    from remidi.errors import ConfigError
+
+    options = {}
+    cls = NETWORKS.get(cfg.network)
+    fields = {f.name: f.default for f in dataclasses.fields(cls)} if cls is not None else {}
+    for key, option, value in (("hidden_size", "hidden", cfg.hidden_size), ("lstm_size", "lstm_size", cfg.lstm_size)):
+        if value == 0:
+            continue
+        if option not in fields:
+            raise ConfigError(f"{key}: the network {cfg.network} has no such layer; leave it 0 or pick a network "
+                              f"that has one")
+        options[option] = (value,) * len(fields[option]) if option == "hidden" else value
+    return make_network(cfg.network, task.num_actions, task.continuous, **options)
+
+
+def policy_apply(setup: Setup, runner: Runner):
+    """The network's ``apply`` reading observations as the agent sees them (normalised with the
+    runner's running statistics under ``normalize_obs``)."""
+    return nrm.normalizing_apply(setup.net.apply, runner.obs_stats)
 
 
 def init_runner(setup: Setup, rng) -> Runner:
@@ -136,8 +169,11 @@ def init_runner(setup: Setup, rng) -> Runner:
     frozen_params = None
     if combines(setup):  # filled in at each buffer switch
         frozen_params = jax.tree.map(lambda x: jnp.stack([x] * (cfg.remidi.num_buffers - 1)), train_state.params)
+    obs_stats = None
+    if cfg.normalize_obs:
+        obs_stats = nrm.init_stats(flatten_obs(jax.tree.map(lambda x: x[None, None], example_obs)).shape[-1])
     return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
-                  frozen_params=frozen_params)
+                  frozen_params=frozen_params, obs_stats=obs_stats)
 
 
 def combines(setup: Setup) -> bool:
@@ -168,15 +204,17 @@ def tracker_budget(setup: Setup) -> int:
 def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     """Roll out on ``levels`` [N] and compute GAE and scores.
 
-    Returns ``(traj, advantages f32[T, N], targets f32[T, N], scores f32[N], mean_return f32[N],
+    Returns ``(traj, advantages f32[T, N], targets f32[T, N], mean_return f32[N],
     max_return f32[N])``; ``max_return`` is this rollout's best episode (the caller combines it
-    with the buffer's record for MaxMC).
+    with the buffer's record for MaxMC). Advantages and targets are in units of
+    ``reward × reward_scale``, returns in the environment's.
     """
     cfg, task = setup.cfg, setup.task
     carry = setup.net.initialize_carry(cfg.num_envs)
-    traj, last_value = rollout(rng, task.env, task.params, setup.net.apply, runner.train_state.params, carry,
-                               levels, cfg.num_steps, frozen, cfg.remidi.tracker)
-    adv, targets = compute_gae(traj.reward, traj.value, traj.done, last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+    traj, last_value = rollout(rng, task.env, task.params, policy_apply(setup, runner), runner.train_state.params,
+                               carry, levels, cfg.num_steps, frozen, cfg.remidi.tracker, dist=for_task(task.continuous))
+    adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
+                               cfg.ppo.gae_lambda)
     mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
     return traj, adv, targets, mean_return, best_return
 
@@ -187,12 +225,14 @@ def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
                            advantages=adv, max_return=max_return, done=traj.done, optimal_return=optimal)
 
 
-def learn(setup: Setup, train_state: TrainState, rng, traj: Trajectory, adv, targets):
-    """Masked PPO on a rollout: only the distinguishable steps (``~indist``) are trained on."""
+def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> TrainState:
+    """Masked PPO on a rollout of ``runner``'s policy: only the distinguishable steps
+    (``~indist``) are trained on. Returns the new train state."""
     batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
                   values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
-    train_state, _ = ppo_update(train_state, carry, batch, rng, setup.cfg.ppo, setup.net.apply)
+    train_state, _ = ppo_update(runner.train_state, carry, batch, rng, setup.cfg.ppo, policy_apply(setup, runner),
+                                for_task(setup.task.continuous))
     return train_state
 
 
@@ -249,10 +289,13 @@ def train_step(setup: Setup, runner: Runner):
 
     # 4. train (masked PPO) on replayed levels, and on every level for DR
     if algo == "dr":
-        train_state = learn(setup, runner.train_state, k_learn, traj, adv, targets)
+        train_state = learn(setup, runner, k_learn, traj, adv, targets)
     else:
-        train_state = jax.lax.cond(replay, lambda ts: learn(setup, ts, k_learn, traj, adv, targets),
-                                   lambda ts: ts, runner.train_state)
+        train_state = jax.lax.cond(replay, lambda r: learn(setup, r, k_learn, traj, adv, targets),
+                                   lambda r: r.train_state, runner)
+    obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
+    if obs_stats is not None:
+        obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
     extra = {"rejected": jnp.sum(overlap).astype(jnp.float32), "inserted": jnp.sum(inserted).astype(jnp.float32)}
     if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
         extra["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
@@ -268,7 +311,8 @@ def train_step(setup: Setup, runner: Runner):
             frozen_params, train_state.params)
     runner = Runner(rng=rng, train_state=train_state, buffers=buffers,
                     active=jnp.where(switch, runner.active + 1, runner.active),
-                    count=jnp.where(switch, 0, count), update=runner.update + 1, frozen_params=frozen_params)
+                    count=jnp.where(switch, 0, count), update=runner.update + 1, frozen_params=frozen_params,
+                    obs_stats=obs_stats)
 
     trained = replay | (algo == "dr")
     metrics = {
@@ -332,7 +376,8 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
     keys = jax.random.split(jax.random.PRNGKey(0), n)
     obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(keys, levels, task.params)
     obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool)
-    _, (logits, _) = net.apply({"params": runner.train_state.params}, net.initialize_carry(n), obs_in, reset)
+    _, (logits, _) = policy_apply(setup, runner)({"params": runner.train_state.params}, net.initialize_carry(n),
+                                                 obs_in, reset)
     logits = logits[0]
     if combines(setup):
         frozen = frozen_levels(setup, runner)
@@ -364,8 +409,9 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         sizes = [jax.tree.leaves(t)[0].shape[0] for t in tiled]
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
         carry = setup.net.initialize_carry(sum(sizes))
-        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, setup.net.apply, params, carry, levels,
-                          task.max_episode_steps, frozen, tracker_env=task.env)
+        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, policy_apply(setup, runner), params, carry,
+                          levels, task.max_episode_steps, frozen, tracker_env=task.env,
+                          dist=for_task(task.continuous))
         returns = first_episode_return(traj.reward, traj.done)
         start = 0
         for name, size in zip(names, sizes):
@@ -390,9 +436,10 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
 
 
 # ---------------------------------------------------------------------------- validation
-def check_network_reads_observations(net, name: str, task: UEDTask) -> None:
-    """Raise ConfigError unless ``net`` can be applied to the task's observations (traced
-    abstractly: nothing is compiled or run)."""
+def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
+    """Raise ConfigError unless ``net`` can be applied to the task's observations (flattened to
+    one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
+    run)."""
     from remidi.engine.networks import NETWORKS
     from remidi.errors import ConfigError
 
@@ -400,6 +447,8 @@ def check_network_reads_observations(net, name: str, task: UEDTask) -> None:
         level = task.sample_level(jax.random.PRNGKey(0))
         obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
         obs = jax.tree.map(lambda x: x[None, None], obs)
+        if flat:
+            obs = flatten_obs(obs)
         return net.init(jax.random.PRNGKey(0), net.initialize_carry(1), obs, jnp.ones((1, 1), bool))
 
     try:
@@ -409,11 +458,13 @@ def check_network_reads_observations(net, name: str, task: UEDTask) -> None:
         for other in sorted(NETWORKS):
             if other != name:
                 try:
-                    check_network_reads_observations(make_network(other, task.num_actions), other, task)
+                    check_network_reads_observations(make_network(other, task.num_actions, task.continuous), other,
+                                                     task, flat)
                     fits.append(other)
                 except ConfigError:
                     pass
-        raise ConfigError(f"network: {name} cannot read this task's observations ({type(err).__name__}); "
+        what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
+        raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
                           f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}") from None
 
 
@@ -435,7 +486,11 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
-    check_network_reads_observations(make_network(cfg.network, task.num_actions), cfg.network, task)
+    for key in ("hidden_size", "lstm_size"):
+        require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
+                "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
+    require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
+    check_network_reads_observations(network_for(cfg, task), cfg.network, task, cfg.normalize_obs)
     r = cfg.remidi
     positive_int("remidi.num_buffers", r.num_buffers)
     positive_int("remidi.buffer_capacity", r.buffer_capacity)
@@ -446,6 +501,8 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     choice("remidi.tracker", r.tracker, MODES)
     choice("remidi.policy", r.policy, POLICIES)
     if r.policy == "combine":
+        require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
+                "observations normalised by statistics gathered after they were frozen)", r.policy)
         require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
                 "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
     for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),

@@ -80,7 +80,8 @@ class UEDTask:
         env: the (non-resetting) environment.
         params: its ``EnvParams``.
         sample_level: ``rng -> level``, the random level generator (domain randomisation).
-        num_actions: size of the discrete action space.
+        num_actions: size of the discrete action space, or with ``continuous`` the number of
+            action dimensions (actions ``f32[num_actions]``, unbounded: the environment clips).
         max_episode_steps: an upper bound on an episode's length (evaluation rolls this long).
         optimal_return: ``level -> f32[]`` best achievable return, or None if unknown (then the
             perfect-regret score is unavailable).
@@ -111,3 +112,4 @@ class UEDTask:
     solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
     deterministic_reset: bool = False
+    continuous: bool = False

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from remidi.engine.rollout import Frozen, rollout
 from remidi.envs.interface import AutoReplay
@@ -67,10 +68,13 @@ def test_tracker_restarts_with_each_episode():
     np.testing.assert_array_equal(run_tracker(agent, frozen, steps=4), [True, False, True, False])
 
 
-def test_autoreplay_restarts_the_same_level():
-    env = AutoReplay(ENV)
+@pytest.mark.parametrize("deterministic_reset", [False, True])
+def test_autoreplay_restarts_the_same_level(deterministic_reset):
+    # True: the first state is kept and restored instead of resetting again (same result)
+    env = AutoReplay(ENV, deterministic_reset)
     lv = level([5, 6], reward=2.0)
     obs, state = env.reset_to_level(jax.random.PRNGKey(0), lv, None)
+    assert (state.start is not None) == deterministic_reset
     seen = [int(obs)]
     rewards, dones = [], []
     for i in range(4):

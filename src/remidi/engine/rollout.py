@@ -52,7 +52,7 @@ class Frozen:
 
 def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
             num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix",
-            tracker_env: UnderspecifiedEnv | None = None, dist=CATEGORICAL):
+            tracker_env: UnderspecifiedEnv | None = None, dist=CATEGORICAL, deterministic_reset: bool = False):
     """Roll out the policy on ``levels`` (leaves [N, ...]) of ``env`` for ``num_steps`` steps.
 
     The tracker plays the frozen levels in ``tracker_env`` (default ``env``; they are training
@@ -65,19 +65,31 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     (logits [1, N, P], value [1, N])`` (a flax module's ``apply``); ``dist``
     (:mod:`remidi.engine.distributions`) reads the policy output ``logits`` and samples the
     actions. With ``frozen`` the tracker runs beside every env; without it ``indist`` is all
-    False. Returns ``(trajectory, last_value f32[N])``.
+    False. ``deterministic_reset``: the environment's reset ignores its key, so a restart
+    restores the episode's first state instead of resetting (:class:`AutoReplay`). Returns
+    ``(trajectory, last_value f32[N])``.
     """
     tracker_env = tracker_env if tracker_env is not None else env
-    env = AutoReplay(env)
+    raw_env, env = env, AutoReplay(env, deterministic_reset)
     num_envs = jax.tree.leaves(levels)[0].shape[0]
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
-    obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
     candidates = frozen is not None and frozen.budget > 0
+    if candidates and deterministic_reset and tracker_env is raw_env:
+        # one reset for the envs' levels and the frozen ones (a second copy of the environment's
+        # reset in the program costs compile time: seconds for Brax); keys are ignored
+        both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
+        keys = jnp.concatenate([reset_keys, jax.random.split(rng_reset, frozen.valid.shape[0])])
+        obs_all, states_all = jax.vmap(raw_env.reset_to_level, in_axes=(0, 0, None))(keys, both, env_params)
+        obs, raw_state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
+        state = jax.vmap(env.start_state)(obs, raw_state, levels)
+        starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
+    else:
+        obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
+        starts = trk.frozen_starts(tracker_env, env_params, frozen.levels) if candidates else None
     if candidates:
         if tracker_mode != "prefix":
             raise ValueError("the candidate tracker (budget > 0) computes the prefix mode only")
-        starts = trk.frozen_starts(tracker_env, env_params, frozen.levels)
         tstate = jax.vmap(trk.candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, frozen.budget)
     elif frozen is not None:
         tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(

@@ -212,7 +212,8 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     cfg, task = setup.cfg, setup.task
     carry = setup.net.initialize_carry(cfg.num_envs)
     traj, last_value = rollout(rng, task.env, task.params, policy_apply(setup, runner), runner.train_state.params,
-                               carry, levels, cfg.num_steps, frozen, cfg.remidi.tracker, dist=for_task(task.continuous))
+                               carry, levels, cfg.num_steps, frozen, cfg.remidi.tracker, dist=for_task(task.continuous),
+                               deterministic_reset=task.deterministic_reset)
     adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
                                cfg.ppo.gae_lambda)
     mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
@@ -411,7 +412,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         carry = setup.net.initialize_carry(sum(sizes))
         traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, policy_apply(setup, runner), params, carry,
                           levels, task.max_episode_steps, frozen, tracker_env=task.env,
-                          dist=for_task(task.continuous))
+                          dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
         returns = first_episode_return(traj.reward, traj.done)
         start = 0
         for name, size in zip(names, sizes):

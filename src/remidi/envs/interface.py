@@ -27,6 +27,7 @@ __all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "U
 class AutoReplayState:
     env_state: Any
     level: Any
+    start: Any = None  # (first observation, first state) when the reset is deterministic
 
 
 class AutoReplay(UnderspecifiedEnv):
@@ -34,10 +35,17 @@ class AutoReplay(UnderspecifiedEnv):
 
     On a terminal step the returned observation and state are those of the fresh episode on the
     same level; ``done`` is still True for that step, and the reward is the terminal reward.
+
+    With ``deterministic_reset`` (the wrapped ``reset_to_level`` ignores its key, as
+    ``UEDTask.deterministic_reset`` promises) the first observation and state are kept from the
+    reset and restored on restart, instead of resetting again at every step: the same result,
+    without a reset in the step's program (for Brax, a forward-kinematics pass per step and
+    several seconds of compilation).
     """
 
-    def __init__(self, env: UnderspecifiedEnv):
+    def __init__(self, env: UnderspecifiedEnv, deterministic_reset: bool = False):
         self._env = env
+        self._deterministic_reset = deterministic_reset
 
     @property
     def default_params(self):
@@ -48,15 +56,24 @@ class AutoReplay(UnderspecifiedEnv):
 
     def reset_env_to_level(self, rng, level, params):
         obs, state = self._env.reset_to_level(rng, level, params)
-        return obs, AutoReplayState(env_state=state, level=level)
+        return obs, self.start_state(obs, state, level)
+
+    def start_state(self, obs, state, level) -> AutoReplayState:
+        """The wrapper's state at the start of an episode whose first observation and state the
+        wrapped environment's reset returned."""
+        start = (obs, state) if self._deterministic_reset else None
+        return AutoReplayState(env_state=state, level=level, start=start)
 
     def step_env(self, rng, state: AutoReplayState, action, params):
         rng_step, rng_reset = jax.random.split(rng)
         obs, env_state, reward, done, info = self._env.step(rng_step, state.env_state, action, params)
-        obs_re, env_state_re = self._env.reset_to_level(rng_reset, state.level, params)
+        if self._deterministic_reset:
+            obs_re, env_state_re = state.start
+        else:
+            obs_re, env_state_re = self._env.reset_to_level(rng_reset, state.level, params)
         obs = tree_select(done, obs_re, obs)
         env_state = tree_select(done, env_state_re, env_state)
-        return obs, AutoReplayState(env_state=env_state, level=state.level), reward, done, info
+        return obs, state.replace(env_state=env_state), reward, done, info
 
 
 def tree_select(pred, on_true, on_false):

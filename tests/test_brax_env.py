@@ -1,0 +1,189 @@
+"""The Brax UED environment (remidi.envs.brax): level semantics, determinism, bit-identity.
+
+Most tests use hopper (the cheapest morphology to compile) with the default backend, and share
+a few jitted batch functions (batch 4, plus batch 64 for the batch-size bit-identity check).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from remidi.envs.brax import (BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES, NUM_EXCLUDED_POSITIONS, NUM_POSITIONS,
+                              BraxLevel, brax_task, seed_data)
+from remidi.errors import ConfigError
+
+MORPH = "hopper"
+
+
+@pytest.fixture(scope="module")
+def task():
+    return brax_task(MORPH)
+
+
+@pytest.fixture(scope="module")
+def env(task):
+    return task.env
+
+
+@pytest.fixture(scope="module")
+def fns(task):
+    env, params = task.env, task.params
+    reset = jax.jit(jax.vmap(env.reset_env_to_level, (0, 0, None)))
+    step = jax.jit(jax.vmap(env.step_env, (None, 0, 0, None)))
+    return reset, step, params
+
+
+def levels(env, theta, type_b=False, sign=False, seed=0):
+    """A batch of levels; each argument is a scalar/row (broadcast) or a list (one per level)."""
+    n = max(len(x) if isinstance(x, list) else 1 for x in (theta, type_b, sign, seed))
+    b = lambda x: x if isinstance(x, list) else [x] * n  # noqa: E731
+    return BraxLevel(
+        theta=jnp.stack([jnp.broadcast_to(jnp.asarray(t, jnp.float32), (env.num_actions,)) for t in b(theta)]),
+        type_b=jnp.asarray(b(type_b)), sign=jnp.asarray(b(sign)),
+        seed=jnp.stack([seed_data(s) for s in b(seed)]))
+
+
+def keys(n, i=0):
+    return jax.random.split(jax.random.PRNGKey(i), n)
+
+
+def test_action_multiplier_reaches_the_simulator(env, fns):
+    reset, step, params = fns
+    lv = levels(env, theta=[2.0, 0.0, 1.0, 1.0], seed=[3, 4, 4, 5])
+    obs, state = reset(keys(4), lv, params)
+    a = jax.random.uniform(jax.random.PRNGKey(7), (4, env.num_actions), minval=-0.5, maxval=0.5)
+    obs1, state1, reward, done, _ = step(jax.random.PRNGKey(0), state, a, params)
+    # Brax's own step of the underlying environment with theta * a, same batch layout.
+    ref = jax.jit(jax.vmap(env.brax_env.step))(state.brax_state, lv.theta * a)
+    np.testing.assert_array_equal(np.asarray(obs1[0, :-2]), np.asarray(ref.obs[0]))
+    for mine, theirs in zip(jax.tree.leaves(state1.brax_state.pipeline_state), jax.tree.leaves(ref.pipeline_state)):
+        np.testing.assert_array_equal(np.asarray(mine[0]), np.asarray(theirs[0]))
+    np.testing.assert_array_equal(np.asarray(reward[0]), np.asarray(ref.reward[0]))
+    # theta = 0 and theta = 1 on the same seed and action: different next observations.
+    np.testing.assert_array_equal(np.asarray(obs[1]), np.asarray(obs[2]))
+    assert not np.array_equal(np.asarray(obs1[1]), np.asarray(obs1[2]))
+
+
+def test_type_b_is_a_one_step_sign_game_with_one_observation(env, fns):
+    reset, step, params = fns
+    sign = [True, True, False, False]
+    lv = levels(env, theta=[1.0, 0.5, 2.0, 1.0], type_b=True, sign=sign, seed=[0, 1, 2, 3])
+    obs0, state = reset(keys(4), lv, params)
+    a = jax.random.normal(jax.random.PRNGKey(1), (4, env.num_actions))
+    a = a.at[:, -1].set(jnp.asarray([0.3, -2.0, -0.1, 5.0]))  # matches, misses, matches, misses
+    obs1, state1, reward, done, _ = step(jax.random.PRNGKey(0), state, a, params)
+    np.testing.assert_array_equal(np.asarray(reward), [10000.0, -10000.0, 10000.0, -10000.0])
+    assert bool(jnp.all(done))
+    expected = np.zeros(env.obs_size, np.float32)
+    expected[: NUM_POSITIONS[MORPH]] = -1.0
+    expected[-2:] = [0.0, 1.0]
+    for o in (obs0, obs1):
+        np.testing.assert_array_equal(np.asarray(o), np.broadcast_to(expected, o.shape))
+
+
+def test_type_a_flag_size_and_time_limit(env, fns):
+    reset, step, params = fns
+    assert env.obs_size == env.brax_obs_size + 2
+    # theta = 0: the hopper gets no torque and stays healthy for the 100 steps (checked below).
+    lv = levels(env, theta=[0.0, 0.0, 1.0, 1.0], seed=[0, 1, 2, 3])
+    obs, state = reset(keys(4), lv, params)
+    np.testing.assert_array_equal(np.asarray(obs[:, -2:]), np.broadcast_to([1.0, 0.0], (4, 2)))
+    a = jnp.ones((4, env.num_actions))
+    first_done, brax_done = np.full(4, -1), np.full(4, -1)
+    for t in range(100):
+        obs, state, reward, done, _ = step(jax.random.PRNGKey(t), state, a, params)
+        np.testing.assert_array_equal(np.asarray(obs[:, -2:]), np.broadcast_to([1.0, 0.0], (4, 2)))
+        brax_done[(brax_done < 0) & (np.asarray(state.brax_state.done) > 0)] = t
+        first_done[(first_done < 0) & np.asarray(done)] = t
+    assert np.all(brax_done[:2] < 0), "the unactuated hopper should survive 100 steps"
+    np.testing.assert_array_equal(first_done[:2], [99, 99])  # the time limit
+    assert np.all((brax_done[2:] >= 0) & (brax_done[2:] < 99)), "full torque should topple the hopper early"
+    np.testing.assert_array_equal(first_done[2:], brax_done[2:])  # Brax's own termination
+
+
+def test_deterministic_given_the_level(env, fns):
+    reset, _, params = fns
+    lv = levels(env, theta=1.0, seed=[0, 0, 1, 1])
+    obs_a, _ = reset(keys(4, 0), lv, params)
+    obs_b, _ = reset(keys(4, 1), lv, params)
+    np.testing.assert_array_equal(np.asarray(obs_a), np.asarray(obs_b))
+    np.testing.assert_array_equal(np.asarray(obs_a[0]), np.asarray(obs_a[1]))  # same level, other key
+    assert not np.array_equal(np.asarray(obs_a[0]), np.asarray(obs_a[2]))  # only the seed differs
+    # The seed is the key of Brax's own reset noise (another program, hence not bit for bit).
+    brax_obs = jax.jit(lambda k: env.brax_env.reset(k).obs)(jax.random.PRNGKey(1))
+    np.testing.assert_allclose(np.asarray(obs_a[2, :-2]), np.asarray(brax_obs), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.xfail(reason="XLA:CPU rounds the batched physics differently for different batch sizes: on the "
+                          "development CPU, hopper obs differ by up to ~2e-6 (mjx), ~2e-5 (generalized), ~6e-6 "
+                          "(spring), ~5e-4 (positional) within 20 steps, from the first steps on", strict=False)
+def test_bit_identical_across_batch_sizes(task, env, fns):
+    """ReMiDi's tracker compares observations exactly, and steps its frozen levels in another
+    batch layout than the agent's envs: the same level and actions should give the same bits."""
+    reset, step, params = fns
+    small = jax.vmap(task.sample_level)(keys(4, 11))
+    small = small.replace(type_b=jnp.asarray([False, False, False, True]))
+    big = jax.vmap(task.sample_level)(keys(64, 12))
+    where = np.array([5, 17, 40, 63])  # the 4 levels inside the batch of 64
+    big = jax.tree.map(lambda b, s: b.at[where].set(s), big, small)
+    actions = jax.random.normal(jax.random.PRNGKey(3), (20, 64, env.num_actions))
+    obs_s, st_s = reset(keys(4, 1), small, params)
+    obs_b, st_b = reset(keys(64, 2), big, params)
+    diffs = [float(jnp.max(jnp.abs(obs_s - obs_b[where])))]
+    for t in range(20):
+        obs_s, st_s, r_s, d_s, _ = step(jax.random.PRNGKey(t), st_s, actions[t, where], params)
+        obs_b, st_b, r_b, d_b, _ = step(jax.random.PRNGKey(t), st_b, actions[t], params)
+        diffs.append(float(jnp.max(jnp.abs(obs_s - obs_b[where]))))
+    np.testing.assert_array_equal(np.asarray(obs_s[3]), np.asarray(obs_b[63]))  # type B: always
+    first = next((t for t, d in enumerate(diffs) if d != 0.0), None)
+    assert max(diffs) == 0.0, (f"batch 4 vs 64: observations differ from step {first} on, "
+                               f"by up to {max(diffs):.3g} over 20 steps")
+
+
+def test_sample_level_and_task_fields(task, env):
+    lv = jax.vmap(task.sample_level)(keys(256, 5))
+    type_b = np.asarray(lv.type_b)
+    assert 0.3 < type_b.mean() < 0.7
+    theta = np.asarray(lv.theta)
+    assert np.all(theta[type_b] == 1.0)
+    assert theta[~type_b].min() >= 0.5 and theta[~type_b].max() <= 1.5 and theta[~type_b].std() > 0.2
+    assert lv.seed.dtype == jnp.uint32 and lv.seed.shape == (256, 2)
+    assert 0.3 < np.asarray(lv.sign)[type_b].mean() < 0.7
+    assert task.continuous and task.deterministic_reset and task.max_episode_steps == 100
+    assert task.optimal_return is None
+    ref = brax_task(MORPH, reference_return=123.0)
+    np.testing.assert_array_equal(np.asarray(jax.vmap(ref.optimal_return)(lv)),
+                                  np.where(type_b, 10000.0, 123.0).astype(np.float32))
+    ev = task.eval_sets["undisturbed"]
+    assert ev.theta.shape == (16, env.num_actions) and not np.any(np.asarray(ev.type_b))
+    np.testing.assert_array_equal(np.asarray(ev.seed[3]), np.asarray(jax.random.PRNGKey(3)))
+    np.testing.assert_array_equal(np.asarray(task.level_tags(lv)["type_b"]), type_b)
+
+
+@pytest.mark.parametrize("morphology", MORPHOLOGIES)
+def test_every_morphology_builds(morphology):
+    task = brax_task(morphology)
+    env = task.env
+    sys = env.brax_env.sys
+    assert env.num_actions == task.num_actions == sys.act_size()
+    assert NUM_POSITIONS[morphology] == sys.q_size() - NUM_EXCLUDED_POSITIONS[morphology]
+    assert env.brax_obs_size == NUM_POSITIONS[morphology] + sys.qd_size()
+    assert env.action_space(task.params).shape == (env.num_actions,)
+    np.testing.assert_array_equal(np.asarray(sys.actuator.ctrl_range), [[-1.0, 1.0]] * env.num_actions)
+    level = jax.tree.map(lambda x: x[0], task.eval_sets["undisturbed"])
+    obs, state = jax.eval_shape(env.reset_env_to_level, jax.random.PRNGKey(0), level, task.params)
+    assert obs.shape == (env.obs_size,)
+    out = jax.eval_shape(env.step_env, jax.random.PRNGKey(0), state, jnp.zeros(env.num_actions), task.params)
+    assert out[0].shape == (env.obs_size,) and out[2].shape == () and out[3].dtype == jnp.bool_
+    # The step keeps the state's structure and dtypes (a scan carry, AutoReplay's select).
+    assert jax.tree.structure(out[1]) == jax.tree.structure(state)
+    assert [(x.shape, x.dtype) for x in jax.tree.leaves(out[1])] == [(x.shape, x.dtype) for x in jax.tree.leaves(state)]
+
+
+def test_unknown_morphology_or_backend_is_a_config_error():
+    with pytest.raises(ConfigError, match=r"morphology.*'humanoid'.*ant, halfcheetah, hopper, walker2d"):
+        brax_task("humanoid")
+    with pytest.raises(ConfigError, match=r"backend.*'warp'.*" + ", ".join(BACKENDS)):
+        brax_task("hopper", backend="warp")
+    assert DEFAULT_BACKEND in BACKENDS

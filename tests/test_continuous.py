@@ -157,8 +157,9 @@ TINY = tr.UEDConfig(num_updates=6, num_envs=8, num_steps=4, network="mlp", hidde
                     remidi=tr.ReMiDiConfig(num_buffers=2, buffer_capacity=8, steps_per_buffer=3, tracker_budget=2))
 
 
-@pytest.mark.parametrize("algo", tr.ALGORITHMS)
-def test_every_algorithm_trains_on_continuous_actions(algo):
+# DR trains on fresh levels; ReMiDi's first buffer is PLR⊥ (minimax return differs only in its score)
+@pytest.mark.parametrize("algo", ["dr", "remidi"])
+def test_algorithms_train_on_continuous_actions(algo):
     tr.validate_ued_config(TINY, algo, TASK)
     setup = tr.make_setup(TASK, TINY, algo)
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))

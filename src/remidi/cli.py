@@ -187,6 +187,14 @@ def _cmd_render(args) -> int:
     return 0
 
 
+def _cmd_table(args) -> int:
+    from remidi.experiments.table import markdown_table, summaries
+
+    metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
+    print(markdown_table(summaries(args.runs), metrics))
+    return 0
+
+
 def _cmd_bench(args) -> int:
     import json
 
@@ -282,6 +290,14 @@ def build_parser() -> argparse.ArgumentParser:
     episode.add_argument("--out", metavar="FILE.gif", help="output file (default: RUN_DIR/episode_<NAME>_seed<S>.gif)")
     episode.add_argument("--tile", **tile)
     render.set_defaults(func=_cmd_render)
+
+    table = sub.add_parser("table", help="a Markdown table of finished runs (mean ± std over seeds, wall time)",
+                           description="One row per experiment × algorithm of the given run folders (each "
+                                       "with summary.json, or with one sub-folder per algorithm).")
+    table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
+    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: the first three of the "
+                                                         "first run's summary)")
+    table.set_defaults(func=_cmd_table)
 
     bench = sub.add_parser("bench", help="throughput benchmarks (env-steps/s, compile time, memory)",
                            description="Time named workloads, each in a fresh process after compiling and "

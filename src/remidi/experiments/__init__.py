@@ -7,10 +7,10 @@ from remidi.experiments.base import Experiment
 
 
 def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import lever, maze, tabular
+    from remidi.experiments import brax, lever, maze, tabular
 
     found: dict[str, Experiment] = {}
-    for module in (tabular, lever, maze):
+    for module in (tabular, lever, maze, brax):
         for exp in module.EXPERIMENTS:
             found[exp.name] = exp
     return found

@@ -20,6 +20,7 @@ from __future__ import annotations
 import shutil
 import sys
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -274,12 +275,15 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
     for algo, folder in folders.items():
         ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress,
                          devices=devices)
+        started = time.perf_counter()
         result = exp.train(ctx)
+        # wall time of the training (compilation included) in this invocation: a resumed run counts its last part
+        timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}
         results[algo] = result
         outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(result.steps, result.history, seeds))
         summaries[algo] = outputs.write_summary(
             folder / "summary.json", experiment=exp.name, algo=algo, preset=preset, seeds=seeds,
-            final=result.final_metrics(), **result.extra)
+            final=result.final_metrics(), **timing, **result.extra)
         exp.plot(folder, {algo: result}, config)
     if len(folders) > 1:
         exp.plot(out, results, config)

@@ -1,0 +1,135 @@
+"""The robotics experiments (paper §6.5, Table 1): ``remidi run brax-ant|brax-halfcheetah|brax-hopper|brax-walker2d``.
+
+Training levels are Brax morphologies whose actions are scaled per dimension (type A) mixed with
+one-step guessing games of ±10000 (type B, irreducible regret), each type B with probability
+``brax.type_b_prob`` (:mod:`remidi.envs.brax`). PLR⊥ and minimax return fill their buffers and
+their replay with type B levels and never learn to walk; ReMiDi's second buffer rejects them
+(every type B level plays like the frozen ones) and trains on type A levels. Evaluation:
+``return/undisturbed``, the mean return on type A levels with θ = 1.
+
+The optimal return of a type A level (for the perfect-regret score) is the return of a reference
+policy trained to convergence without disturbance, cached per morphology in
+``brax_reference.json`` beside this module with the command that produced it
+(``remidi run brax-<m> --algo dr --preset reference``); ``--set brax.reference_return=R`` uses
+another value.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from remidi.engine.buffer import BufferConfig
+from remidi.engine.ppo import PPOConfig
+from remidi.engine.train import ReMiDiConfig, UEDConfig
+from remidi.envs.brax import BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES
+from remidi.errors import ConfigError
+from remidi.experiments.config import choice, probability, require
+from remidi.experiments.ued import make_ued_experiment
+
+REFERENCE_FILE = Path(__file__).with_name("brax_reference.json")
+
+
+@dataclass(frozen=True)
+class BraxLevelsConfig:
+    type_b_prob: float = field(default=0.5, metadata={"help": "probability that a generated level is type B"})
+    theta_low: float = field(default=0.5, metadata={"help": "type A: lowest action multiplier θ (per dimension)"})
+    theta_high: float = field(default=1.5, metadata={"help": "type A: highest action multiplier θ"})
+    backend: str = field(default=DEFAULT_BACKEND, metadata={"help": f"Brax physics: {', '.join(BACKENDS)}"})
+    reference_return: float = field(default=0.0, metadata={
+        "help": "optimal return of a type A level (0: the cached reference value of the morphology)"})
+
+
+@dataclass(frozen=True)
+class BraxUEDConfig(UEDConfig):
+    """A UED run on a Brax morphology: the engine's :class:`UEDConfig` plus the level generator's."""
+
+    brax: BraxLevelsConfig = field(default_factory=BraxLevelsConfig)
+
+
+def paper_config() -> BraxUEDConfig:
+    """Paper §6.5 / appendix: 200 updates of PPO on 256 envs × 100 steps (4 epochs, 32
+    minibatches, γ 0.99, λ 0.95, lr 1e-4), rewards ÷ 10 and running observation normalisation,
+    perfect regret, PLR⊥ rank prioritisation (β 1.0) over a buffer of 512, replay 0.8; ReMiDi 2
+    buffers of 512, the first used for 25 replays. The agent: a 256-unit tanh layer, a 256-unit
+    LSTM, 64-unit heads, a Gaussian policy with a state-independent log-std."""
+    return BraxUEDConfig(
+        num_updates=200, num_envs=256, num_steps=100, score="perfect_regret", network="mlp_lstm",
+        reward_scale=0.1, normalize_obs=True, eval_every=10, eval_attempts=2, checkpoint_every=20,
+        ppo=PPOConfig(gamma=0.99, gae_lambda=0.95, clip_eps=0.2, clip_value=True, vf_coef=0.5, ent_coef=0.0,
+                      epochs=4, minibatches=32, lr=1e-4, anneal_lr=False, adam_eps=1e-5, max_grad_norm=0.5),
+        buffer=BufferConfig(capacity=512, prioritization="rank", temperature=1.0, staleness_coef=0.3,
+                            replay_prob=0.8, min_fill=0.5, duplicate_check=True),
+        # one tracker slot: every type B level shows the same first observation and ends after one
+        # step, so one frozen type B level matches them all; no two type A levels share a start
+        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=512, steps_per_buffer=25, count="replays",
+                            tracker_budget=1),
+    )
+
+
+# smoke: the same algorithm on a smaller agent, 64 envs and 40 updates; a few minutes per
+# algorithm for 2 seeds on a 2-core CPU (hopper); the type B pattern shows, walking barely starts
+SMOKE = {
+    "num_updates": 40, "num_envs": 64, "eval_every": 10, "checkpoint_every": 10, "hidden_size": 64,
+    "lstm_size": 64, "ppo.minibatches": 4, "ppo.lr": 3e-4, "buffer.capacity": 128,
+    "remidi.buffer_capacity": 128, "remidi.steps_per_buffer": 8,
+}
+# the reference policy for the optimal return of type A levels: DR on undisturbed type A levels only
+REFERENCE = {
+    "num_updates": 400, "eval_every": 20, "checkpoint_every": 20, "score": "pvl", "ppo.lr": 3e-4,
+    "brax.type_b_prob": 0.0, "brax.theta_low": 1.0, "brax.theta_high": 1.0,
+}
+PRESETS = {"paper": {}, "smoke": SMOKE, "reference": REFERENCE}
+
+
+@lru_cache(maxsize=None)
+def cached_references() -> dict:
+    """``{morphology: {"return": R, "command": ..., ...}}`` from ``brax_reference.json``."""
+    return json.loads(REFERENCE_FILE.read_text()) if REFERENCE_FILE.exists() else {}
+
+
+def reference_return(morphology: str, cfg: BraxUEDConfig) -> float | None:
+    """``brax.reference_return`` if set, else the cached value (None if there is none)."""
+    if cfg.brax.reference_return:
+        return float(cfg.brax.reference_return)
+    entry = cached_references().get(morphology)
+    return float(entry["return"]) if entry else None
+
+
+def task_factory(morphology: str):
+    def factory(cfg: BraxUEDConfig):
+        from remidi.envs.brax import brax_task
+
+        b = cfg.brax
+        probability("brax.type_b_prob", b.type_b_prob)
+        require(b.theta_low <= b.theta_high, "brax.theta_low", f"≤ brax.theta_high ({b.theta_high})", b.theta_low)
+        choice("brax.backend", b.backend, BACKENDS)
+        ref = reference_return(morphology, cfg)
+        if ref is None and cfg.score == "perfect_regret":
+            raise ConfigError(f"brax.reference_return: no cached reference return for {morphology}; compute one "
+                              f"with `remidi run brax-{morphology} --algo dr --preset reference` and pass it as "
+                              f"--set brax.reference_return=R (or choose another score)")
+        return brax_task(morphology, b.backend, float(b.theta_low), float(b.theta_high), float(b.type_b_prob), ref)
+
+    return factory
+
+
+def _experiment(morphology: str):
+    return make_ued_experiment(
+        name=f"brax-{morphology}",
+        description=f"paper §6.5, Table 1: Brax {morphology}, action-scaled levels mixed with ±10000 guessing games",
+        task_factory=task_factory(morphology),
+        config_factory=paper_config,
+        presets=PRESETS,
+        preset_seeds={"paper": 5, "smoke": 2, "reference": 1},
+        summary_metrics=("return/undisturbed", "replay_fraction/type_b", "buffer_fraction/type_b",
+                         "regret/undisturbed/mean"),
+        plot_panels_spec=(("return/undisturbed", "return on undisturbed type A levels (θ = 1)"),
+                          ("replay_fraction/type_b", "share of type B among replayed levels"),
+                          ("buffer_fraction/type_b", "share of type B in the active buffer")),
+    )
+
+
+EXPERIMENTS = [_experiment(m) for m in MORPHOLOGIES]

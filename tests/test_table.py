@@ -1,0 +1,34 @@
+"""`remidi table`: finished runs as one Markdown table, in the run's algorithm order."""
+
+import json
+
+from remidi.cli import main
+
+
+def write_run(folder, experiment, algo, values, wall=75.0, algos=None):
+    folder.mkdir(parents=True)
+    metrics = {name: {"mean": sum(v) / len(v), "std": 0.5, "per_seed": v} if v is not None
+               else {"mean": None, "std": None, "per_seed": [None]} for name, v in values.items()}
+    (folder / "summary.json").write_text(json.dumps({"experiment": experiment, "algo": algo, "preset": "smoke",
+                                                     "seeds": [0, 1], "metrics": metrics, "wall_s": wall,
+                                                     "resumed": False}))
+    (folder / "config.json").write_text(json.dumps({"algo": algo, "algos": algos or [algo]}))
+
+
+def test_table_rows_follow_the_run_order_and_show_mean_and_std(tmp_path, capsys):
+    order = ["remidi", "plr"]  # as the user gave them: not alphabetical
+    write_run(tmp_path / "hop" / "plr", "brax-hopper", "plr", {"return/undisturbed": [1.0, 2.0],
+                                                              "replay_fraction/type_b": [0.9, 1.0]}, algos=order)
+    write_run(tmp_path / "hop" / "remidi", "brax-hopper", "remidi", {"return/undisturbed": [10.0, 20.0],
+                                                                    "replay_fraction/type_b": None}, 30.0, order)
+    assert main(["table", str(tmp_path / "hop"), "--metrics", "return/undisturbed,replay_fraction/type_b"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0] == "| experiment | algorithm | return/undisturbed | replay_fraction/type_b | seeds | preset | wall time |"
+    assert lines[2] == "| brax-hopper | remidi | 15.0 ± 0.5 | n/a | 2 | smoke | 30 s |"
+    assert lines[3] == "| brax-hopper | plr | 1.5 ± 0.5 | 0.95 ± 0.50 | 2 | smoke | 1.2 min |"
+
+
+def test_a_folder_without_runs_is_one_line_exit_2(tmp_path, capsys):
+    assert main(["table", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "RUN: no summary.json in" in err

@@ -130,6 +130,12 @@ class FeedForwardActorCritic(nn.Module):
         return carry, (logits, value)
 
 
+def zero_lstm_carry(batch_size: int, features: int) -> tuple[jax.Array, jax.Array]:
+    """The initial ``(c, h)`` of :class:`ResetLSTM`, each ``f32[batch_size, features]`` zeros."""
+    zeros = jnp.zeros((batch_size, features), jnp.float32)
+    return zeros, zeros
+
+
 class ResetLSTM(nn.Module):
     """An LSTM scanned over time whose carry is zeroed at steps where ``reset`` is True.
 
@@ -171,8 +177,7 @@ class MazeLSTMActorCritic(nn.Module):
     @nn.nowrap
     def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
         """Zero LSTM state ``(c, h)``, each ``f32[batch_size, lstm_size]``."""
-        zeros = jnp.zeros((batch_size, self.lstm_size), jnp.float32)
-        return zeros, zeros
+        return zero_lstm_carry(batch_size, self.lstm_size)
 
     @nn.compact
     def __call__(self, carry, obs, reset):
@@ -211,8 +216,7 @@ class MLPLSTMActorCritic(nn.Module):
     @nn.nowrap
     def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
         """Zero LSTM state ``(c, h)``, each ``f32[batch_size, lstm_size]``."""
-        zeros = jnp.zeros((batch_size, self.lstm_size), jnp.float32)
-        return zeros, zeros
+        return zero_lstm_carry(batch_size, self.lstm_size)
 
     @nn.compact
     def __call__(self, carry, obs, reset):

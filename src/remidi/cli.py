@@ -303,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Time named workloads, each in a fresh process after compiling and "
                                        "warming up (median of --repeats calls), and the ratios between them. "
                                        "Benchmarks: maze-plr, maze-remidi, maze-env, lever-plr (the default "
-                                       "set), maze-remidi-reference.")
+                                       "set), maze-remidi-reference, brax-plr.")
     bench.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: the default set)")
     bench.add_argument("--json", action="store_true", help="print only the JSON document (progress on stderr)")
     bench.add_argument("--repeats", type=int, default=3, help="timed calls per benchmark (default 3)")

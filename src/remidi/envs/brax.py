@@ -72,13 +72,16 @@ ReMiDi's tracker compares observations exactly, so a type A level replayed besid
 copy in another batch layout may be judged distinguishable after a few steps. Type B levels
 (constant observation) and the type A/B flag are unaffected.
 
-Brax is imported lazily (``import brax`` takes ~1.5 s and prints "Failed to import warp" to
-stdout, harmless), so importing this module is cheap.
+Brax is imported lazily (``import brax`` takes ~1.5 s), so importing this module is cheap; its
+harmless "Failed to import warp" notice is kept off stdout.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
+import warnings
 from typing import Any
 
 import jax
@@ -141,9 +144,12 @@ def make_brax_env(morphology: str, backend: str):
     for ``mjx`` the fast solver options of Brax's MJX ant (Newton, 1 iteration, 4 line-search
     iterations, no Euler damping)."""
     _check(morphology, backend)
-    import brax.envs  # lazy: slow to import, prints a harmless warp notice
+    with contextlib.redirect_stdout(io.StringIO()):  # lazy: slow to import; keep its warp notice off stdout
+        import brax.envs
 
-    env = brax.envs.get_environment(morphology, backend=backend)
+    with warnings.catch_warnings():  # Brax's notice that its own pipelines are unmaintained (mjx is what we use)
+        warnings.filterwarnings("ignore", message="Brax System, piplines and environments")
+        env = brax.envs.get_environment(morphology, backend=backend)
     if backend == "mjx":
         # Brax's own MJX settings for ant, for every morphology (see the module docstring).
         import mujoco

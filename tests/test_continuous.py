@@ -191,3 +191,40 @@ def test_normalize_obs_rules_are_one_line_errors():
         tr.validate_ued_config(dataclasses.replace(TINY, reward_scale=0.0), "plr", TASK)
     with pytest.raises(ConfigError, match="^lstm_size: the network mlp has no such layer"):
         tr.validate_ued_config(dataclasses.replace(TINY, lstm_size=8), "plr", TASK)
+
+
+@pytest.mark.parametrize("score", ["pvl", "maxmc"])
+def test_scores_are_in_the_environments_units_whatever_the_reward_scale(score):
+    """The critic learns reward × reward_scale; a level's score must not depend on that scale."""
+    plain = dataclasses.replace(TINY, score=score, reward_scale=1.0, normalize_obs=False)
+    setup = tr.make_setup(TASK, plain, "plr")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(1), TINY.num_envs))
+    traj, adv, _, mean_ret, best_ret = tr.collect(setup, runner, jax.random.PRNGKey(2), levels, None)
+    scaled = tr.make_setup(TASK, dataclasses.replace(plain, reward_scale=0.1), "plr")
+    expected = tr.score(setup, levels, traj, adv, mean_ret, best_ret)
+    got = tr.score(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
+    np.testing.assert_allclose(got, expected, rtol=1e-5)
+    assert np.all(np.isfinite(np.asarray(expected)))
+
+
+def test_observation_statistics_survive_a_resume(tmp_path):
+    from remidi.engine import driver
+
+    class Crash(Exception):
+        pass
+
+    def crash(done, metrics):
+        if done == 3:
+            raise Crash
+
+    _, full, _, runner = driver.train_seeds(TASK, TINY, "remidi", [0], progress=False)
+    with pytest.raises(Crash):
+        driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, progress=False, on_block=crash)
+    _, resumed, _, runner_b = driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, resume=True,
+                                                 progress=False)
+    assert float(runner.obs_stats.count[0]) == TINY.num_updates * TINY.num_envs * TINY.num_steps
+    for a, b in zip(jax.tree.leaves(runner), jax.tree.leaves(runner_b)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    for name in full:
+        np.testing.assert_array_equal(full[name], resumed[name], err_msg=name)

@@ -221,9 +221,12 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
 
 
 def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
+    """f32[N]: each level's score, in the environment's reward units (the critic's values and
+    the advantages, learnt on ``reward × reward_scale``, are scaled back)."""
     optimal = jax.vmap(setup.task.optimal_return)(levels) if setup.task.optimal_return is not None else None
-    return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value,
-                           advantages=adv, max_return=max_return, done=traj.done, optimal_return=optimal)
+    unscale = 1.0 / setup.cfg.reward_scale
+    return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value * unscale,
+                           advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal)
 
 
 def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> TrainState:

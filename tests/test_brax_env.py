@@ -188,3 +188,20 @@ def test_unknown_morphology_or_backend_is_a_config_error():
     with pytest.raises(ConfigError, match=r"backend.*'warp'.*" + ", ".join(BACKENDS)):
         brax_task("hopper", backend="warp")
     assert DEFAULT_BACKEND in BACKENDS
+
+
+@pytest.mark.parametrize("setting, needle", [
+    ("brax.backend=foo", "brax.backend: unknown value 'foo'; allowed: generalized, positional, spring, mjx"),
+    ("brax.type_b_prob=2", "brax.type_b_prob: must be in [0, 1], got 2.0"),
+    ("brax.theta_low=3", "brax.theta_low: must be ≤ brax.theta_high (1.5), got 3.0"),
+    ("reward_scale=0", "reward_scale: must be > 0"),
+    ("remidi.policy=combine", "remidi.policy: must be masked with normalize_obs"),
+])
+def test_bad_brax_settings_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, setting, needle):
+    from remidi.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", "brax-hopper", "--algo", "remidi", "--set", setting, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err
+    assert not out.exists()

@@ -5,8 +5,9 @@ A level (:class:`BraxLevel`) is one of
 - **type A**: a per-action-dimension multiplier ``theta f32[A]``. The agent's action is clipped
   to Brax's action range ``[-1, 1]`` (the policy is an unbounded Gaussian), multiplied by
   ``theta`` and handed to the simulator: ``brax_env.step(state, theta * clip(action))``. The
-  reward is Brax's own reward, so its control cost is computed on ``theta · a`` (as in the
-  paper's code, which multiplies the action before the simulator); the simulator itself clips
+  reward is Brax's own reward, so its control cost is computed on ``theta · a``: the
+  disturbance acts on the motor and the cost is what the motor spends (a choice: the paper
+  does not say, and its Brax code is not published); the simulator itself clips
   the control to the actuator range ``[-1, 1]``, so ``theta > 1`` saturates. The episode ends on
   Brax's own termination (unhealthy hopper/walker/ant; halfcheetah never terminates) or at the
   time limit (``t + 1 >= 100``). Observation: Brax's observation followed by the flag ``[1, 0]``.

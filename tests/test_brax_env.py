@@ -116,12 +116,13 @@ def test_deterministic_given_the_level(env, fns):
     np.testing.assert_allclose(np.asarray(obs_a[2, :-2]), np.asarray(brax_obs), rtol=1e-6, atol=1e-7)
 
 
-@pytest.mark.xfail(reason="XLA:CPU rounds the batched physics differently for different batch sizes: on the "
-                          "development CPU, hopper obs differ by up to ~2e-6 (mjx), ~2e-5 (generalized), ~6e-6 "
-                          "(spring), ~5e-4 (positional) within 20 steps, from the first steps on", strict=False)
-def test_bit_identical_across_batch_sizes(task, env, fns):
-    """ReMiDi's tracker compares observations exactly, and steps its frozen levels in another
-    batch layout than the agent's envs: the same level and actions should give the same bits."""
+def test_batch_size_changes_type_a_physics_by_rounding_only(task, env, fns):
+    """ReMiDi's tracker compares observations exactly and steps its frozen levels in another batch
+    layout than the agent's envs. XLA:CPU rounds the batched physics differently for different
+    batch sizes (measured on the development CPU: hopper observations differ by up to ~2e-6 with
+    mjx, ~2e-5 generalized, ~6e-6 spring, ~5e-4 positional within 20 steps), so a type A level
+    and its frozen copy may be judged distinguishable after a few steps; type B observations are
+    constant, hence always bit-identical (the matches ReMiDi needs)."""
     reset, step, params = fns
     small = jax.vmap(task.sample_level)(keys(4, 11))
     small = small.replace(type_b=jnp.asarray([False, False, False, True]))
@@ -131,15 +132,16 @@ def test_bit_identical_across_batch_sizes(task, env, fns):
     actions = jax.random.normal(jax.random.PRNGKey(3), (20, 16, env.num_actions))
     obs_s, st_s = reset(keys(4, 1), small, params)
     obs_b, st_b = reset(keys(16, 2), big, params)
-    diffs = [float(jnp.max(jnp.abs(obs_s - obs_b[where])))]
+    np.testing.assert_array_equal(np.asarray(obs_s[3]), np.asarray(obs_b[15]))  # type B: bit for bit
+    diffs = [float(jnp.max(jnp.abs(obs_s[:3] - obs_b[where[:3]])))]
     for t in range(20):
         obs_s, st_s, r_s, d_s, _ = step(jax.random.PRNGKey(t), st_s, actions[t, where], params)
         obs_b, st_b, r_b, d_b, _ = step(jax.random.PRNGKey(t), st_b, actions[t], params)
-        diffs.append(float(jnp.max(jnp.abs(obs_s - obs_b[where]))))
-    np.testing.assert_array_equal(np.asarray(obs_s[3]), np.asarray(obs_b[15]))  # type B: always
-    first = next((t for t, d in enumerate(diffs) if d != 0.0), None)
-    assert max(diffs) == 0.0, (f"batch 4 vs 16: observations differ from step {first} on, "
-                               f"by up to {max(diffs):.3g} over 20 steps")
+        if t == 0:  # the type B episode: one step, same observation, same reward
+            np.testing.assert_array_equal(np.asarray(obs_s[3]), np.asarray(obs_b[15]))
+            assert float(r_s[3]) == float(r_b[15]) and bool(d_s[3]) and bool(d_b[15])
+        diffs.append(float(jnp.max(jnp.abs(obs_s[:3] - obs_b[where[:3]]))))
+    assert max(diffs) < 1e-4, f"batch 4 vs 16: type A observations differ by up to {max(diffs):.3g} in 20 steps"
 
 
 def test_sample_level_and_task_fields(task, env):

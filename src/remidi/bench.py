@@ -22,7 +22,7 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
 * ``brax-plr``: PLR⊥ on ``brax-hopper``'s paper preset (256 envs × 100 steps, PPO 4 epochs × 32
-  minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 20 s
+  minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 8 s
   per update on a 2-core CPU).
 """
 

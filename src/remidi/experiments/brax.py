@@ -69,8 +69,10 @@ def paper_config() -> BraxUEDConfig:
     )
 
 
-# smoke: the same algorithm on a smaller agent, 64 envs and 40 updates; a few minutes per
-# algorithm for 2 seeds on a 2-core CPU (hopper); the type B pattern shows, walking barely starts
+# smoke: the same algorithm on a smaller agent, 64 envs and 40 updates; 1–2.5 minutes per
+# algorithm for 2 seeds on a 2-core CPU. Measured (README): PLR⊥ and minimax return replay type B
+# 74–95% of the time; ReMiDi none, and it walks on hopper (202 vs 15) and walker2d (117 vs −0.4);
+# the ant needs about 120 updates to separate (−7 vs −23)
 SMOKE = {
     "num_updates": 40, "num_envs": 64, "eval_every": 10, "checkpoint_every": 10, "hidden_size": 64,
     "lstm_size": 64, "ppo.minibatches": 4, "ppo.lr": 3e-4, "buffer.capacity": 128,

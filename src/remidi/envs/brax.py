@@ -148,13 +148,21 @@ def make_brax_env(morphology: str, backend: str):
     with contextlib.redirect_stdout(io.StringIO()):  # lazy: slow to import; keep its warp notice off stdout
         import brax.envs
 
-    with warnings.catch_warnings():  # Brax's notice that its own pipelines are unmaintained (mjx is what we use)
-        warnings.filterwarnings("ignore", message="Brax System, piplines and environments")
-        env = brax.envs.get_environment(morphology, backend=backend)
+    import mujoco
+
+    # MuJoCo's warnings while Brax loads its model files would go to MUJOCO_LOG.TXT in the user's
+    # working directory; route them to Python's warnings instead, except the deprecation notice
+    # about Brax's own files ('settotalmass'), which users cannot act on
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda msg: None if "settotalmass" in msg else warnings.warn(f"MuJoCo: {msg}"))
+    try:
+        with warnings.catch_warnings():  # Brax's notice that its own pipelines are unmaintained (mjx is what we use)
+            warnings.filterwarnings("ignore", message="Brax System, piplines and environments")
+            env = brax.envs.get_environment(morphology, backend=backend)
+    finally:
+        mujoco.set_mju_user_warning(previous)
     if backend == "mjx":
         # Brax's own MJX settings for ant, for every morphology (see the module docstring).
-        import mujoco
-
         env.sys = env.sys.tree_replace({
             "opt.solver": mujoco.mjtSolver.mjSOL_NEWTON,
             "opt.iterations": 1,

@@ -126,12 +126,13 @@ def test_batch_size_changes_type_a_physics_by_rounding_only(task, env, fns):
     reset, step, params = fns
     small = jax.vmap(task.sample_level)(keys(4, 11))
     small = small.replace(type_b=jnp.asarray([False, False, False, True]))
-    big = jax.vmap(task.sample_level)(keys(16, 12))
-    where = np.array([5, 7, 11, 15])  # the 4 levels inside the batch of 16
-    big = jax.tree.map(lambda b, s: b.at[where].set(s), big, small)
-    actions = jax.random.normal(jax.random.PRNGKey(3), (20, 16, env.num_actions))
+    others = [jax.vmap(task.sample_level)(keys(4, 12 + i)) for i in range(3)]
+    where = np.array([12, 13, 14, 15])  # the 4 levels inside the batch of 16
     obs_s, st_s = reset(keys(4, 1), small, params)
-    obs_b, st_b = reset(keys(16, 2), big, params)
+    # the batch of 16 starts from batches of 4 (one reset program; the reset ignores its key)
+    starts = [reset(keys(4, 2 + i), lv, params) for i, lv in enumerate(others)] + [(obs_s, st_s)]
+    obs_b, st_b = jax.tree.map(lambda *xs: jnp.concatenate(xs), *starts)
+    actions = jax.random.normal(jax.random.PRNGKey(3), (20, 16, env.num_actions))
     np.testing.assert_array_equal(np.asarray(obs_s[3]), np.asarray(obs_b[15]))  # type B: bit for bit
     diffs = [float(jnp.max(jnp.abs(obs_s[:3] - obs_b[where[:3]])))]
     for t in range(20):

@@ -79,7 +79,7 @@ SMOKE = {
     "remidi.buffer_capacity": 128, "remidi.steps_per_buffer": 8,
 }
 # the reference policy for the optimal return of type A levels: DR on undisturbed type A levels
-# only, with the smoke agent trained 5× longer (about 5 minutes on a 2-core CPU); on a GPU, rerun
+# only, with the smoke agent trained 5× longer (2–3 minutes on a 2-core CPU); on a GPU, rerun
 # it with the paper's agent and sizes (--set num_envs=256 --set hidden_size=256 ...) for a
 # better-converged reference
 REFERENCE = {

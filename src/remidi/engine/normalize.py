@@ -16,6 +16,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.engine.networks import flatten_obs
+
 CLIP = 10.0  # normalised observations are clipped to [−CLIP, CLIP]
 EPS = 1e-8
 
@@ -60,7 +62,6 @@ def normalizing_apply(apply_fn, stats: ObsStats | None):
     observation pytree (leaves ``[T, N, ...]``) is flattened to ``f32[T, N, D]`` first."""
     if stats is None:
         return apply_fn
-    from remidi.engine.networks import flatten_obs
 
     def apply(variables, carry, obs, reset):
         return apply_fn(variables, carry, normalize(stats, flatten_obs(obs)), reset)

@@ -79,7 +79,8 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
         # one reset for the envs' levels and the frozen ones (a second copy of the environment's
         # reset in the program costs compile time: seconds for Brax); keys are ignored
         both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
-        keys = jnp.concatenate([reset_keys, jax.random.split(rng_reset, frozen.valid.shape[0])])
+        frozen_keys = jnp.broadcast_to(reset_keys[:1], (frozen.valid.shape[0],) + reset_keys.shape[1:])
+        keys = jnp.concatenate([reset_keys, frozen_keys])
         obs_all, states_all = jax.vmap(raw_env.reset_to_level, in_axes=(0, 0, None))(keys, both, env_params)
         obs, raw_state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
         state = jax.vmap(env.start_state)(obs, raw_state, levels)

@@ -90,7 +90,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv, tree_select
 from remidi.errors import one_of
 
 MORPHOLOGIES = ("ant", "halfcheetah", "hopper", "walker2d")
@@ -234,7 +234,7 @@ class BraxUED(UnderspecifiedEnv):
         # type B: one step, the sign of the last action dimension against the hidden sign.
         reward_b = jnp.where((action[-1] > 0) == level.sign, TYPE_B_REWARD, -TYPE_B_REWARD)
         # A type B level keeps its (valid, never stepped) reset state.
-        brax_state = jax.tree.map(lambda old, new: jnp.where(level.type_b, old, new), state.brax_state, stepped)
+        brax_state = tree_select(level.type_b, state.brax_state, stepped)
         reward = jnp.where(level.type_b, reward_b, stepped.reward).astype(jnp.float32)
         done = level.type_b | done_a
         obs = self._observe(level, stepped.obs)

@@ -88,8 +88,8 @@ def test_help_for_every_subcommand(capsys):
         assert "usage: remidi" in capsys.readouterr().out
 
 
-# the same configuration as tests/test_ued_engine.py's TINY, so the compiled programs are shared
-# (through the persistent compilation cache) instead of compiled again
+# with the default preset (smoke), the same configuration as tests/test_ued_engine.py's TINY, so the
+# compiled programs are shared (through the persistent compilation cache) instead of compiled again
 LEVER_TINY = ["--set", "num_updates=40", "--set", "eval_every=10", "--set", "checkpoint_every=10",
               "--set", "num_envs=8", "--set", "num_steps=4", "--set", "eval_attempts=2", "--set", "ppo.epochs=1",
               "--set", "buffer.capacity=16", "--set", "buffer.topk_k=8", "--set", "buffer.min_fill=0.25",
@@ -353,3 +353,14 @@ def test_every_settable_key_has_a_description():
         cfg = exp.config_factory()
         missing = [key for key in field_names(cfg) if not key_help(cfg, key)]
         assert not missing, f"{exp.name}: add these keys to remidi.experiments.config.HELP: {missing}"
+
+
+def test_lever_tiny_is_the_engine_tests_tiny_configuration():
+    # the suite's time depends on it: identical configurations compile to one shared program
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import resolve_config
+    from remidi.experiments.config import parse_set_items
+    from test_ued_engine import TINY
+
+    overrides = parse_set_items(LEVER_TINY[1::2])
+    assert resolve_config(get_experiment("lever"), "smoke", overrides) == TINY

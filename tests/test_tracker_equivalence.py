@@ -34,8 +34,11 @@ def run(env, params, agents, frozen_levels, valid, budget, num_actions, combine,
     if combine:  # buffer b's policy prefers action b + 1
         frozen_params = {"bias": 2.0 * jax.nn.one_hot(jnp.arange(copies) + 1, num_actions)}
     frozen = Frozen(levels=frozen_levels, valid=valid, params=frozen_params, budget=budget)
+    # the candidate tracker as the engine runs it (these environments reset deterministically):
+    # its slots share the envs' reset and environment step; the reference as plainly as it gets
     traj, _ = rollout(jax.random.PRNGKey(seed), env, params, policy(num_actions),
-                      {"bias": jnp.zeros(num_actions)}, jnp.zeros(n), agents, STEPS, frozen)
+                      {"bias": jnp.zeros(num_actions)}, jnp.zeros(n), agents, STEPS, frozen,
+                      deterministic_reset=budget > 0)
     return jax.device_get(traj)
 
 

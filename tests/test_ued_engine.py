@@ -17,7 +17,10 @@ from remidi.experiments.lever import paper_config
 
 R = dataclasses.replace
 BASE = paper_config()
-TINY = R(BASE, num_updates=40, num_envs=8, num_steps=4, eval_every=10, eval_attempts=2, checkpoint_every=10,
+# tests/test_cli.py's LEVER_TINY (the CLI's default preset, smoke, with its 64-unit agent): the same
+# configuration, so the compiled programs are shared through the persistent compilation cache
+TINY = R(BASE, hidden_size=64, num_updates=40, num_envs=8, num_steps=4, eval_every=10, eval_attempts=2,
+         checkpoint_every=10,
          ppo=R(BASE.ppo, epochs=1),
          buffer=R(BASE.buffer, capacity=16, topk_k=8, min_fill=0.25),
          remidi=R(BASE.remidi, buffer_capacity=8, steps_per_buffer=8))
@@ -120,7 +123,7 @@ def test_jaxued_maze_trains_through_our_interface():
     env = Maze(max_height=13, max_width=13, agent_view_size=5, normalize_obs=True)
     task = UEDTask(env=env, params=env.default_params, sample_level=make_level_generator(13, 13, 25),
                    num_actions=env.action_space(env.default_params).n, max_episode_steps=6)
-    cfg = R(TINY, num_updates=4, num_envs=4, num_steps=6, eval_every=2, score="pvl", network="maze_lstm",
+    cfg = R(TINY, num_updates=4, num_envs=4, num_steps=6, eval_every=2, score="pvl", network="maze_lstm", hidden_size=0,
             remidi=R(TINY.remidi, steps_per_buffer=2, buffer_capacity=4),
             buffer=R(TINY.buffer, capacity=4, topk_k=2, min_fill=0.25))
     validate_ued_config(cfg, "remidi", task)

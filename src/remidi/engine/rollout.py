@@ -75,9 +75,11 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
     candidates = frozen is not None and frozen.budget > 0
-    if candidates and deterministic_reset and tracker_env is raw_env:
-        # one reset for the envs' levels and the frozen ones (a second copy of the environment's
-        # reset in the program costs compile time: seconds for Brax); keys are ignored
+    # the candidate tracker's slots and the envs share one reset and one environment step per
+    # rollout step (each further copy of the environment's reset or step in the program costs
+    # compile time: seconds for Brax); the reset ignores its keys
+    shared = candidates and deterministic_reset and tracker_env is raw_env
+    if shared:
         both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
         frozen_keys = jnp.broadcast_to(reset_keys[:1], (frozen.valid.shape[0],) + reset_keys.shape[1:])
         keys = jnp.concatenate([reset_keys, frozen_keys])
@@ -122,14 +124,18 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
         action = dist.sample(k_act, acting)
         log_prob = dist.log_prob(logits, action)
         env_keys = jax.random.split(k_env, num_envs)
-        next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-            env_keys, state, action, env_params)
-        if candidates:
-            tstate = jax.vmap(trk.candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
-                tracker_env, env_params, env_keys, tstate, action, next_obs, done)
-        elif tstate is not None:
-            tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
-                tracker_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
+        if shared:
+            next_obs, state, reward, done, tstate = step_with_slots(raw_env, env, env_params, env_keys, state, tstate,
+                                                                    action)
+        else:
+            next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                env_keys, state, action, env_params)
+            if candidates:
+                tstate = jax.vmap(trk.candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
+                    tracker_env, env_params, env_keys, tstate, action, next_obs, done)
+            elif tstate is not None:
+                tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
+                    tracker_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
         overflow = tstate.overflow if candidates else jnp.zeros((num_envs,), jnp.int32)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
                             reward=reward.astype(jnp.float32), done=done, indist=indist, overflow=overflow)
@@ -143,6 +149,24 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     (state, obs, reset, (hidden, _), _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
     _, (_, last_value) = apply_fn({"params": params}, hidden, jax.tree.map(lambda x: x[None], obs), reset[None])
     return traj, last_value[0]
+
+
+def step_with_slots(raw_env, env: AutoReplay, env_params, env_keys, state, tstate, action):
+    """One environment step of the N envs and of their candidate tracker slots together, as one
+    batch [N, 1 + S]: each env's slots take its action and the key its own step takes (the first
+    half of ``split(env_key)``, as in :meth:`AutoReplay.step_env` and
+    :func:`~remidi.engine.tracker.candidates_step`), so the results are theirs. Returns
+    ``(next_obs, state, reward, done, tstate)``, leaves [N, ...]."""
+    step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
+    both = jax.tree.map(lambda e, s: jnp.concatenate([e[:, None], s], axis=1), state.env_state, tstate.env_states)
+    slots = tstate.index.shape[1]
+    actions = jnp.broadcast_to(action[:, None], (action.shape[0], 1 + slots) + action.shape[1:])
+    stepped = jax.vmap(jax.vmap(raw_env.step, in_axes=(None, 0, 0, None)), in_axes=(0, 0, 0, None))(
+        step_keys, both, actions, env_params)
+    own = jax.tree.map(lambda x: x[:, 0], stepped)
+    next_obs, state, reward, done, _ = jax.vmap(env.restart_where_done, in_axes=(0, 0, None))(state, own, env_params)
+    tstate = jax.vmap(trk.candidates_advance)(tstate, jax.tree.map(lambda x: x[:, 1:], stepped), next_obs, done)
+    return next_obs, state, reward, done, tstate
 
 
 def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:

@@ -114,12 +114,18 @@ def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, ag
     """Advance the slots as :func:`tracker_step` does (same keys); a restart restores the slots'
     first states, since the env's restart replays the same level from the same start."""
     rng_step, _ = jax.random.split(rng)
-    obs_s, states, _, done_s, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
-        rng_step, state.env_states, action, params)
+    stepped = jax.vmap(env.step, in_axes=(None, 0, None, None))(rng_step, state.env_states, action, params)
+    return candidates_advance(state, stepped, agent_obs, agent_done)
+
+
+def candidates_advance(state: TrackerState, stepped, agent_obs, agent_done) -> TrackerState:
+    """The second half of :func:`candidates_step`, given the slots' environment step ``stepped =
+    (obs, env_states, reward, done, info)`` (leaves [S, ...]): compare, or restart the slots."""
+    obs_s, states, _, done_s, _ = stepped
     same = _compare(obs_s, agent_obs) & (done_s == agent_done)
-    stepped = state.replace(env_states=states, match=state.match & same)
+    advanced = state.replace(env_states=states, match=state.match & same)
     restarted = state.replace(env_states=state.start_states, match=state.start_match)
-    return tree_select(agent_done, restarted, stepped)
+    return tree_select(agent_done, restarted, advanced)
 
 
 # ---------------------------------------------------------------------- reading a tracker

@@ -494,7 +494,11 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
         require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
                 "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
     require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
-    check_network_reads_observations(network_for(cfg, task), cfg.network, task, cfg.normalize_obs)
+    # the network kind first (at its default sizes), then the sizes: a preset's hidden_size must not
+    # hide that the network picked cannot read the task's observations
+    check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
+                                     cfg.network, task, cfg.normalize_obs)
+    network_for(cfg, task)
     r = cfg.remidi
     positive_int("remidi.num_buffers", r.num_buffers)
     positive_int("remidi.buffer_capacity", r.buffer_capacity)

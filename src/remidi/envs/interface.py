@@ -66,7 +66,15 @@ class AutoReplay(UnderspecifiedEnv):
 
     def step_env(self, rng, state: AutoReplayState, action, params):
         rng_step, rng_reset = jax.random.split(rng)
-        obs, env_state, reward, done, info = self._env.step(rng_step, state.env_state, action, params)
+        stepped = self._env.step(rng_step, state.env_state, action, params)
+        return self.restart_where_done(state, stepped, params, rng_reset)
+
+    def restart_where_done(self, state: AutoReplayState, stepped, params, rng_reset=None):
+        """The second half of :meth:`step_env`: given the wrapped environment's ``stepped =
+        (obs, env_state, reward, done, info)`` (from ``state.env_state``, with the first half of
+        ``split(rng)``), restart the level where the episode ended. ``rng_reset`` (the second
+        half) is unused with ``deterministic_reset``."""
+        obs, env_state, reward, done, info = stepped
         if self._deterministic_reset:
             obs_re, env_state_re = state.start
         else:

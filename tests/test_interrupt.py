@@ -30,7 +30,8 @@ def _started(path):
 ])
 def test_ctrl_c_exits_130_with_one_line(tmp_path, when):
     out = tmp_path / "run"
-    argv = ["run", "lever", "--algo", "dr", "--seeds", "1", "--quiet", *LEVER_TINY, "--out", str(out)]
+    # ReMiDi on 2 seeds: tests/test_cli.py's programs, from the suite's compilation cache when they are there
+    argv = ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]
     env = dict(os.environ)
     cache = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
     if cache and when == "training":  # the suite's compilation cache (tests/conftest.py): faster to the first block
@@ -56,7 +57,7 @@ def test_ctrl_c_exits_130_with_one_line(tmp_path, when):
     assert "Traceback" not in err and "Exception ignored" not in err
     if when != "start-up":
         assert f"continue with: remidi run --resume {out}" in err
-        assert json.loads((out / "config.json").read_text())["algo"] == "dr"  # complete, never half-written
+        assert json.loads((out / "config.json").read_text())["algo"] == "remidi"  # complete, never half-written
     if when == "training":
         import numpy as np
 

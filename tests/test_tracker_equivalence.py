@@ -4,6 +4,8 @@ indistinguishable steps and, under ``remidi.policy=combine``, the same per-buffe
 frozen buffer's policy prefers its own action, so the actions taken reveal which buffer matched).
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -68,6 +70,7 @@ def wall_behind(level):
     return level.replace(wall_map=level.wall_map.at[cell[1], cell[0]].set(~level.wall_map[cell[1], cell[0]]))
 
 
+@functools.lru_cache(maxsize=1)  # three tests use it; building it runs many small programs
 def maze_case():
     """16 agent levels and 3 frozen buffers of 24 (shuffled, 8 invalid): copies and one-wall
     perturbations of agent levels, T-mazes, blind mazes, unrelated random mazes."""

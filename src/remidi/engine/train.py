@@ -417,10 +417,17 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
                           levels, task.max_episode_steps, frozen, tracker_env=task.env,
                           dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
         returns = first_episode_return(traj.reward, traj.done)
-        start = 0
+        optimal = None
+        if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
+            optimal = jax.vmap(task.optimal_return)(jax.tree.map(lambda *xs: jnp.concatenate(xs),
+                                                                 *(task.eval_sets[name] for name in names)))
+        start = first = 0
         for name, size in zip(names, sizes):
             ret = returns[start:start + size]
             start += size
+            count = size // cfg.eval_attempts
+            set_optimal = None if optimal is None else optimal[first:first + count]
+            first += count
             out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
             if task.optimal_return is None:
@@ -433,7 +440,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
                 out[f"entropy/{name}"] = jnp.mean(entropy)
             else:
                 expected = ret.reshape(-1, cfg.eval_attempts).mean(axis=1)  # levels were repeated in place
-            regret = jax.vmap(task.optimal_return)(set_levels) - expected
+            regret = set_optimal - expected
             out[f"regret/{name}/mean"] = jnp.mean(regret)
             out[f"regret/{name}/worst"] = jnp.max(regret)
     return out

@@ -5,6 +5,11 @@ program compiled once (in an earlier run of the suite, or by another xdist worke
 instead of compiled again. The cache lives outside the checkout (``REMIDI_TEST_JAX_CACHE``,
 default ``~/.cache/remidi/jax-test-cache``; set it to an empty string to disable), so a fresh
 clone on the same machine reuses it; results do not depend on it.
+
+Scheduling (``pyproject.toml``: ``--dist loadfile --no-loadscope-reorder``): each test file runs
+on one pytest-xdist worker, so a file's tests share its compiled programs and module fixtures
+instead of compiling them on both workers, and the files start heaviest first (:data:`HEAVY_FIRST`,
+measured), so that both workers finish at about the same time.
 """
 
 import os
@@ -17,3 +22,15 @@ if _CACHE:
     jax.config.update("jax_compilation_cache_dir", _CACHE)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+# the files that take longest on a cold cache (worker-seconds, 2-core CPU), heaviest first; the
+# others follow in their usual order
+HEAVY_FIRST = ("test_brax_env", "test_maze_smoke", "test_brax_smoke", "test_lever_smoke", "test_cli",
+               "test_continuous", "test_maze_env", "test_sharding", "test_examples", "test_tracker_equivalence",
+               "test_tabular_ued", "test_ued_engine", "test_combine", "test_bench", "test_ppo", "test_buffer",
+               "test_render", "test_interrupt", "test_seed_init", "test_tracker")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+    items.sort(key=lambda item: rank.get(item.module.__name__, len(rank)))  # stable: file order kept within

@@ -33,4 +33,8 @@ HEAVY_FIRST = ("test_brax_env", "test_maze_smoke", "test_brax_smoke", "test_leve
 
 def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
-    items.sort(key=lambda item: rank.get(item.module.__name__, len(rank)))  # stable: file order kept within
+    def key(item):
+        module = getattr(item, "module", None)
+        return rank.get(getattr(module, "__name__", ""), len(rank))
+
+    items.sort(key=key)  # stable: the order within a file, and of the other files, is kept

@@ -22,9 +22,9 @@ def check_hidden_regret(m):
     assert abs(m["regret/hidden/mean"] - MMR_HIDDEN) < 1e-3
 
 
-def run(tmp_path, algo):
+def run(tmp_path, algo, *more):
     out = tmp_path / algo
-    assert main(["run", "lever", "--algo", algo, "--preset", "smoke", "--out", str(out), "--quiet"]) == 0
+    assert main(["run", "lever", "--algo", algo, "--preset", "smoke", "--out", str(out), "--quiet", *more]) == 0
     for name in ("config.json", "metrics.csv", "summary.json", "training.png", "checkpoint.npz"):
         assert (out / name).exists(), name
     metrics = json.loads((out / "summary.json").read_text())["metrics"]
@@ -50,14 +50,15 @@ def test_plr_replays_hidden_levels_and_fails_visible_ones(plr_visible):
     check_hidden_regret(m)
 
 
+# one seed where the pattern is a property of every run (and a second would cost the suite time)
 def test_minimax_return_also_prefers_hidden_levels(tmp_path):
-    m, _ = run(tmp_path, "minimax-return")
+    m, _ = run(tmp_path, "minimax-return", "--seeds", "1")
     assert m["replay_fraction/hidden"] > 0.9
     check_hidden_regret(m)
 
 
 def test_dr_trains_on_fresh_levels_only(tmp_path):
-    m, metrics = run(tmp_path, "dr")
+    m, metrics = run(tmp_path, "dr", "--seeds", "1")
     assert m["replay"] == 0
     assert not any(k.startswith(("buffer_size", "buffer_fraction")) for k in m)  # no buffer: nothing reported
     assert metrics["replay_fraction/hidden"]["mean"] is None  # nothing replayed: undefined, not 0

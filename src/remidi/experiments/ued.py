@@ -87,13 +87,23 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
                         summary_metrics, plot_panels_spec, derive=None, bar_chart=None) -> Experiment:
+    tasks: dict[UEDConfig, UEDTask] = {}
+
+    def task_for(cfg: UEDConfig) -> UEDTask:
+        # one task per configuration in a process: building one costs seconds for Brax (a physics
+        # model), and the engine reuses compiled programs per task object (UEDTask compares by
+        # identity), so validating, training and training again with one configuration share them
+        if cfg not in tasks:
+            tasks[cfg] = task_factory(cfg)
+        return tasks[cfg]
+
     def validate(cfg: UEDConfig, algo: str) -> None:
-        validate_ued_config(cfg, algo, task_factory(cfg))
+        validate_ued_config(cfg, algo, task_for(cfg))
 
     return Experiment(
         name=name, description=description, algorithms=ALGORITHMS, config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_factory, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
+        train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
         scaled_keys=SCALED_KEYS,
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
     )

@@ -33,6 +33,7 @@ HEAVY_FIRST = ("test_brax_env", "test_maze_smoke", "test_brax_smoke", "test_leve
 
 def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+
     def key(item):
         module = getattr(item, "module", None)
         return rank.get(getattr(module, "__name__", ""), len(rank))

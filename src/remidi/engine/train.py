@@ -421,13 +421,12 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
         if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
             optimal = jax.vmap(task.optimal_return)(jax.tree.map(lambda *xs: jnp.concatenate(xs),
                                                                  *(task.eval_sets[name] for name in names)))
-        start = first = 0
+        start = 0
         for name, size in zip(names, sizes):
             ret = returns[start:start + size]
-            start += size
-            count = size // cfg.eval_attempts
+            first, count = start // cfg.eval_attempts, size // cfg.eval_attempts  # the set's untiled levels
             set_optimal = None if optimal is None else optimal[first:first + count]
-            first += count
+            start += size
             out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
             if task.optimal_return is None:
@@ -505,7 +504,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     # hide that the network picked cannot read the task's observations
     check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
                                      cfg.network, task, cfg.normalize_obs)
-    network_for(cfg, task)
+    network_for(cfg, task)  # ConfigError if the network has no layer for hidden_size / lstm_size
     r = cfg.remidi
     positive_int("remidi.num_buffers", r.num_buffers)
     positive_int("remidi.buffer_capacity", r.buffer_capacity)

@@ -6,7 +6,8 @@ import sys
 
 from remidi.bench import BENCHMARKS, DEFAULT, format_table, ratios
 
-FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "compile_s", "peak_rss_mb", "repeats", "times_s"}
+FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_per_s", "compile_s", "peak_rss_mb",
+          "repeats", "times_s"}
 
 
 def test_bench_json_has_only_the_document_on_stdout():
@@ -19,6 +20,7 @@ def test_bench_json_has_only_the_document_on_stdout():
     assert FIELDS <= set(result) and result["repeats"] == 2 and len(result["times_s"]) == 2
     assert result["env_steps_per_s"] > 0 and result["compile_s"] > 0 and result["peak_rss_mb"] > 100
     assert result["env_steps_per_s"] == result["env_steps_per_call"] / result["seconds_per_call"]
+    assert result["gflops_per_s"] is None  # the environment alone: no network
     assert "cpu" in doc["device"]
     assert "bench maze-env" in proc.stderr  # progress goes to stderr
 
@@ -31,6 +33,8 @@ def test_ratios_compare_time_per_env_step():
     assert abs(r["remidi_step_over_plr_step"] - 1.2) < 1e-12
     assert abs(r["maze_plr_over_env"] - 0.01) < 1e-12
     assert ratios({"maze-env": results["maze-env"]}) == {}
+    flops = ratios({"maze-plr": {**results["maze-plr"], "gflops_per_s": 60.0}, "lstm-matmul": {"gflops_per_s": 150.0}})
+    assert flops == {"maze_plr_flops_over_matmul": 0.4}
     table = format_table({"benchmarks": {k: {**v, "compile_s": 1.0, "peak_rss_mb": 500.0} for k, v in results.items()},
                           "ratios": r, "device": "cpu"})
     assert "remidi_step_over_plr_step: 1.200" in table
@@ -41,3 +45,40 @@ def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors
     proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-fast"], capture_output=True, text=True)
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.count("\n") == 1 and "maze-fast" in proc.stderr and "maze-plr" in proc.stderr
+
+
+def test_lstm_matmul_reports_a_flop_rate_and_no_env_steps():
+    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "lstm-matmul", "--tiny", "--repeats", "1", "--json"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)["benchmarks"]["lstm-matmul"]
+    assert result["env_steps_per_s"] is None and result["gflops_per_s"] > 0
+    assert abs(result["gflops_per_s"] * 1e9 * result["seconds_per_call"] - 2 * 4 * 405 * 1024 * 64) < 1e3
+
+
+def test_network_flops_match_a_count_by_hand():
+    """XLA's count for the maze agent (conv + LSTM 256 + heads) against the layers' products:
+    forward 2·(multiply-adds); a PPO epoch's forward and backward pass ≈ 3 forwards."""
+    import dataclasses
+
+    import jax
+    import jax.numpy as jnp
+
+    from remidi.bench import network_flops_per_step
+    from remidi.engine import train as tr
+    from remidi.envs.maze import maze_task
+    from remidi.experiments.maze import paper_config
+
+    cfg = paper_config()
+    cfg = dataclasses.replace(cfg, num_envs=4, ppo=dataclasses.replace(cfg.ppo, epochs=2))
+    task = maze_task("tmaze")
+    setup = tr.make_setup(task, cfg, "plr")
+    obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), task.sample_level(jax.random.PRNGKey(0)), task.params)
+    obs = jax.tree.map(lambda x: x[None, None], obs)
+    shapes = jax.eval_shape(setup.net.init, jax.random.PRNGKey(0), setup.net.initialize_carry(1), obs,
+                            jnp.zeros((1, 1), bool))
+    params = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes["params"])
+    lstm_in, hidden = 3 * 3 * 16 + 5, 256
+    multiply_adds = (lstm_in + hidden) * 4 * hidden + 3 * 3 * 27 * 16 + 4 * 5 + 2 * hidden * 32 + 32 * 3 + 32
+    by_hand = (1 + 3 * cfg.ppo.epochs) * 2 * multiply_adds
+    assert abs(network_flops_per_step(setup, params) / by_hand - 1) < 0.03

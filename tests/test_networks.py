@@ -2,6 +2,7 @@
 
 import functools
 
+import flax.linen
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -120,6 +121,64 @@ def test_lstm_reset_at_first_step_ignores_incoming_carry():
     np.testing.assert_allclose(logits_a, logits_b, rtol=1e-6, atol=1e-6)
     _, (logits_c, _) = apply_small(variables, junk, obs, jnp.zeros((T, N), bool))
     assert not np.allclose(logits_a, logits_c, atol=1e-6)
+
+
+class ScannedFlaxLSTM(flax.linen.Module):
+    """flax's ``OptimizedLSTMCell`` scanned over time (without resets)."""
+
+    features: int
+
+    @flax.linen.compact
+    def __call__(self, carry, x):
+        scan = flax.linen.scan(flax.linen.OptimizedLSTMCell, variable_broadcast="params", split_rngs={"params": False})
+        return scan(self.features, name="cell")(carry, x)
+
+
+def test_reset_lstm_is_flax_optimized_lstm_cell():
+    """Our LSTM (one joined kernel, one product per step) against flax's ``OptimizedLSTMCell``
+    applied step by step with the same parameters: same parameter tree and initial values, same
+    outputs and carries, same gradients (to float rounding)."""
+    from remidi.engine.networks import ResetLSTM, zero_lstm_carry
+
+    t, n, d, h = 5, 3, 7, 8
+    rng = np.random.default_rng(0)
+    x = jnp.asarray(rng.normal(size=(t, n, d)), jnp.float32)
+    reset = jnp.asarray(rng.random((t, n)) < 0.3)
+    carry0 = jax.tree.map(lambda c: jnp.asarray(rng.normal(size=c.shape), jnp.float32), zero_lstm_carry(n, h))
+    cell = flax.linen.OptimizedLSTMCell(h)
+    ours = ResetLSTM(h)
+    variables = ours.init(jax.random.key(1), carry0, (x, reset))
+    flax_params = cell.init(jax.random.key(2), carry0, x[0])["params"]
+    assert jax.tree.structure(variables["params"]["cell"]) == jax.tree.structure(flax_params)
+    # the initialisers are flax's: one key gives the values flax's cell (scanned) starts from
+    flax_init = ScannedFlaxLSTM(h).init(jax.random.key(1), carry0, x)["params"]["cell"]
+    for a, b in zip(jax.tree.leaves(variables["params"]["cell"]), jax.tree.leaves(flax_init)):
+        np.testing.assert_array_equal(a, b)
+    variables = jax.tree.map(lambda v: v + jnp.asarray(0.2 * rng.normal(size=v.shape), jnp.float32), variables)
+
+    def reference(params, carry):
+        ys = []
+        for k in range(t):
+            carry = jax.tree.map(lambda c: jnp.where(reset[k][:, None], 0.0, c), carry)
+            carry, y = cell.apply({"params": params["cell"]}, carry, x[k])
+            ys.append(y)
+        return carry, jnp.stack(ys)
+
+    def loss(apply, params, carry):
+        (c, hh), ys = apply(params, carry)
+        return jnp.sum(ys ** 2) + jnp.sum(c * hh)
+
+    def apply_ours(params, carry):
+        return ours.apply({"params": params}, carry, (x, reset))
+
+    (c_a, h_a), y_a = apply_ours(variables["params"], carry0)
+    (c_b, h_b), y_b = reference(variables["params"], carry0)
+    for a, b in ((y_a, y_b), (c_a, c_b), (h_a, h_b)):
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    grads_a = jax.grad(functools.partial(loss, apply_ours), argnums=(0, 1))(variables["params"], carry0)
+    grads_b = jax.grad(functools.partial(loss, reference), argnums=(0, 1))(variables["params"], carry0)
+    for a, b in zip(jax.tree.leaves(grads_a), jax.tree.leaves(grads_b)):
+        np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 
 
 def test_make_network_errors():

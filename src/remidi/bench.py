@@ -8,7 +8,7 @@ time are its own; ratios are taken between benchmarks of one ``remidi bench`` in
 machine, same moment).
 
 Workloads (one seed, the shapes of the paper's maze preset; the train steps are the engine's own
-``train_step`` inside the driver's compiled block, vmapped over a seed axis of size 1):
+``train_step`` inside the driver's compiled block, with a seed axis of size 1, ``driver.run_steps``):
 
 * ``maze-plr``: PLR⊥ on the T-maze task, 32 envs × 256 steps, the paper's maze agent (conv +
   LSTM), PPO 5 epochs × 1 minibatch; the buffer (4000) is full and every update replays, so
@@ -85,6 +85,7 @@ class Workload:
     env_steps_per_call: int
     extras: Callable[[object], dict] = lambda out: {}  # reported values read off a call's output
     chain: bool = False  # fn returns (new first argument, ...): feed it to the next call
+    flops_per_call: float | None = None  # floating-point operations of the agent's network per call (XLA's count)
 
 
 def register(name: str, description: str):
@@ -120,8 +121,8 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     import jax
 
+    from remidi.engine import driver
     from remidi.engine import train as tr
-
     from remidi.experiments.config import apply_overrides
 
     cfg = apply_overrides(_shrink(cfg), _overrides())
@@ -130,15 +131,45 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     @partial(jax.jit, donate_argnums=0)
     def block(runner):
-        return jax.vmap(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None,
-                                               length=updates_per_call))(runner)
+        return driver.run_steps(setup, runner, updates_per_call)
 
     def extras(out):
         _, metrics = out
         return {name: float(metrics[name].mean()) for name in ("replay", "tracker_overflow", "rejected")
                 if name in metrics}
 
-    return Workload(block, (runner,), updates_per_call * cfg.num_envs * cfg.num_steps, extras, chain=True)
+    steps = updates_per_call * cfg.num_envs * cfg.num_steps
+    return Workload(block, (runner,), steps, extras, chain=True,
+                    flops_per_call=steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params)))
+
+
+def network_flops_per_step(setup, params) -> float:
+    """Floating-point operations the agent's network costs per environment step of a replay
+    update: one forward pass in the rollout, plus a forward and backward pass per PPO epoch.
+    Counted by XLA (``cost_analysis``) on the network applied to one time step of ``num_envs``
+    envs, so the count is the compiled program's, not a formula's. ``params``: one seed's."""
+    import jax
+    import jax.numpy as jnp
+
+    task, cfg, net = setup.task, setup.cfg, setup.net
+    n = cfg.num_envs
+    obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), task.sample_level(jax.random.PRNGKey(0)), task.params)
+    obs = jax.tree.map(lambda x: jnp.broadcast_to(x, (1, n) + jnp.shape(x)), obs)
+    reset = jnp.zeros((1, n), bool)
+    carry = net.initialize_carry(n)
+
+    def forward(params):
+        _, (logits, value) = net.apply({"params": params}, carry, obs, reset)
+        return jnp.sum(logits) + jnp.sum(value)
+
+    def flops(fn):
+        cost = jax.jit(fn).lower(params).compile().cost_analysis()
+        cost = cost[0] if isinstance(cost, list) else cost
+        return float(cost["flops"])
+
+    forward_flops = flops(forward)
+    backward_flops = flops(jax.grad(forward))  # forward + backward
+    return (forward_flops + cfg.ppo.epochs * backward_flops) / n
 
 
 def _maze_config(algo: str, budget: int | None = None):
@@ -230,6 +261,31 @@ def _lever_plr():
     return _train_workload(lever_task(), cfg, "plr", active=0, updates_per_call=20)
 
 
+@register("lstm-matmul", "the maze LSTM's matrix product alone: [32, 405] × [405, 1024], 1280 in a loop")
+def _lstm_matmul():
+    """The rate this machine multiplies matrices of the shape that dominates maze training: the
+    LSTM's gate product for 32 envs (input 144 conv features + 5 direction + 256 hidden = 405,
+    4 × 256 gates), chained so that each product depends on the one before (as in the LSTM's
+    loop over time). 1280 products: the forward passes of one rollout and five epochs."""
+    import jax
+    import jax.numpy as jnp
+
+    n, d, g = (4, 405, 1024) if _tiny() else (32, 405, 1024)
+    length = 64 if _tiny() else 1280
+    w = jax.random.normal(jax.random.PRNGKey(0), (d, g)) / jnp.sqrt(d)
+
+    @jax.jit
+    def block(x, w):
+        def step(x, _):
+            gates = x @ w
+            return jnp.tanh(gates[:, :d]), None  # the next step's input, as the LSTM's h feeds back
+
+        return jax.lax.scan(step, x, None, length=length)[0]
+
+    x = jax.random.normal(jax.random.PRNGKey(1), (n, d))
+    return Workload(block, (x, w), None, flops_per_call=2.0 * n * d * g * length)
+
+
 # ----------------------------------------------------------------------------- timing
 def run_one(name: str, repeats: int) -> dict:
     """Compile, warm up and time benchmark ``name`` in this process."""
@@ -256,7 +312,9 @@ def run_one(name: str, repeats: int) -> dict:
         times.append(time.perf_counter() - start)
     seconds = statistics.median(times)
     steps = work.env_steps_per_call
-    return {"env_steps_per_s": steps / seconds, "seconds_per_call": seconds, "env_steps_per_call": steps,
+    flops = work.flops_per_call
+    return {"env_steps_per_s": steps / seconds if steps else None, "seconds_per_call": seconds,
+            "env_steps_per_call": steps, "gflops_per_s": flops / seconds / 1e9 if flops else None,
             "compile_s": compile_s, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "repeats": repeats, "times_s": times, **work.extras(out)}
 
@@ -283,6 +341,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
         out["remidi_reference_step_over_plr_step"] = per_call("maze-remidi-reference") / per_call("maze-plr")
     if "maze-plr" in results and "maze-env" in results:
         out["maze_plr_over_env"] = results["maze-plr"]["env_steps_per_s"] / results["maze-env"]["env_steps_per_s"]
+    if results.get("maze-plr", {}).get("gflops_per_s") and "lstm-matmul" in results:
+        out["maze_plr_flops_over_matmul"] = results["maze-plr"]["gflops_per_s"] / results["lstm-matmul"]["gflops_per_s"]
     return out
 
 
@@ -302,17 +362,23 @@ def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = 
             raise RuntimeError(f"benchmark {name} failed:\n{proc.stderr[-3000:]}")
         results[name] = json.loads(proc.stdout.strip().splitlines()[-1])
         r = results[name]
-        print(f"  {r['env_steps_per_s']:,.0f} env-steps/s, {r['seconds_per_call']:.3f} s per call, "
-              f"compile {r['compile_s']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MB", file=log, flush=True)
+        print(f"  {_num(r['env_steps_per_s'])} env-steps/s, {_num(r['gflops_per_s'], 1)} GFLOP/s, "
+              f"{r['seconds_per_call']:.3f} s per call, compile {r['compile_s']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MB", file=log, flush=True)
     return {"benchmarks": results, "ratios": ratios(results), "device": device_description(), "tiny": tiny,
             "set": overrides}
 
 
+def _num(value, digits: int = 0) -> str:
+    """``1,234`` (or ``12.3`` with ``digits``), ``-`` where a benchmark has no such figure."""
+    return "-" if value is None else f"{value:,.{digits}f}"
+
+
 def format_table(doc: dict) -> str:
     lines = [f"device: {doc['device']}", "",
-             f"{'benchmark':24s} {'env-steps/s':>12s} {'s/call':>8s} {'compile s':>9s} {'peak MB':>8s}"]
+             f"{'benchmark':24s} {'env-steps/s':>12s} {'GFLOP/s':>8s} {'s/call':>8s} {'compile s':>9s} {'peak MB':>8s}"]
     for name, r in doc["benchmarks"].items():
-        lines.append(f"{name:24s} {r['env_steps_per_s']:12,.0f} {r['seconds_per_call']:8.3f} "
+        lines.append(f"{name:24s} {_num(r['env_steps_per_s']):>12s} {_num(r.get('gflops_per_s'), 1):>8s} "
+                     f"{r['seconds_per_call']:8.3f} "
                      f"{r['compile_s']:9.1f} {r['peak_rss_mb']:8.0f}")
     if doc["ratios"]:
         lines.append("")

@@ -1,7 +1,7 @@
 """Driving a UED run: all seeds in one compiled program, evaluation, progress and checkpoints.
 
 The run is cut into blocks of ``eval_every`` updates. One block is a single jit-compiled
-``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds. After each block
+``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds (:func:`over_seeds`). After each block
 the driver evaluates, records the block's metrics, updates the progress bar and, every
 ``checkpoint_every`` updates, writes a checkpoint atomically (temporary file, then rename), so a
 killed run never leaves a corrupt checkpoint. ``resume`` continues from the last checkpoint and
@@ -93,15 +93,37 @@ def _init(setup: tr.Setup, keys):
     return jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
 
 
+def over_seeds(fn):
+    """``fn`` (one seed's arguments -> its results) over the arguments' leading seed axis ``S``:
+    vmapped, or for ``S = 1`` called on the arguments without that axis (results given it back).
+
+    A vmapped axis of size 1 is not free: XLA keeps it in the batched matrix products of the
+    network, and on a CPU a maze PLR⊥ update took ≈ 20% longer with it. ``S`` is the axis's
+    size where ``fn`` runs: under ``shard_map`` it is a device's share of the seeds."""
+
+    def mapped(*args):
+        if jax.tree.leaves(args)[0].shape[0] != 1:
+            return jax.vmap(fn)(*args)
+        out = fn(*jax.tree.map(lambda x: x[0], args))
+        return jax.tree.map(lambda x: x[None], out)
+
+    return mapped
+
+
+def run_steps(setup: tr.Setup, runner, length: int):
+    """``length`` train steps for every seed of ``runner`` (leaves ``[S, ...]``):
+    ``(runner, per-step metrics f[S, length])``."""
+    return over_seeds(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
+
+
 @partial(jax.jit, static_argnums=(0, 2))
 def _run_block(setup: tr.Setup, runner, length: int):
-    """``length`` train steps for every seed: ``(runner, per-step metrics f[S, length])``."""
-    return jax.vmap(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
+    return run_steps(setup, runner, length)
 
 
 @partial(jax.jit, static_argnums=0)
 def _evaluate(setup: tr.Setup, runner, keys):
-    return jax.vmap(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
+    return over_seeds(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
 
 
 def check_devices(devices: int, num_seeds: int) -> None:

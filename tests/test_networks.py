@@ -181,6 +181,19 @@ def test_reset_lstm_is_flax_optimized_lstm_cell():
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 
 
+def test_patch_conv_is_flax_conv():
+    from remidi.engine.networks import PatchConv
+
+    x = jnp.asarray(np.random.default_rng(0).normal(size=(2, 3, 5, 6, 4)), jnp.float32)
+    ours, theirs = PatchConv(8, (3, 2)), flax.linen.Conv(8, (3, 2), padding="VALID",
+                                                         kernel_init=flax.linen.initializers.orthogonal(np.sqrt(2.0)))
+    variables = ours.init(jax.random.key(0), x)
+    for a, b in zip(jax.tree.leaves(variables), jax.tree.leaves(theirs.init(jax.random.key(0), x))):
+        np.testing.assert_array_equal(a, b)  # same parameters, same initial values
+    variables = jax.tree.map(lambda v: v + 0.5, variables)  # a nonzero bias too
+    np.testing.assert_allclose(ours.apply(variables, x), theirs.apply(variables, x), rtol=1e-5, atol=1e-5)
+
+
 def test_make_network_errors():
     with pytest.raises(ConfigError, match="maze_lstm, mlp"):
         make_network("transformer", 3)

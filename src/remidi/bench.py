@@ -21,6 +21,10 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
+* ``lstm-matmul``: the maze LSTM's gate product alone, chained: the rate (``gflops_per_s``)
+  this machine reaches on the shape that dominates maze training. Training workloads report
+  their network's ``gflops_per_s`` too (XLA's operation count), so ``maze_plr_flops_over_matmul``
+  says how far ``maze-plr`` is from it.
 * ``brax-plr``: PLR⊥ on ``brax-hopper``'s paper preset (256 envs × 100 steps, PPO 4 epochs × 32
   minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 8 s
   per update on a 2-core CPU).
@@ -41,7 +45,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 BENCHMARKS: dict[str, "Benchmark"] = {}
-DEFAULT = ("maze-plr", "maze-remidi", "maze-env", "lever-plr")
+DEFAULT = ("maze-plr", "maze-remidi", "maze-env", "lever-plr", "lstm-matmul")
 TINY_ENV = "REMIDI_BENCH_TINY"  # set (by --tiny): every workload at toy sizes, to check the tool in seconds
 SET_ENV = "REMIDI_BENCH_SET"  # JSON {key: value} (by --set): overrides of the train workloads' UED config
 

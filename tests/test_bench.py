@@ -57,8 +57,8 @@ def test_lstm_matmul_reports_a_flop_rate_and_no_env_steps():
 
 
 def test_network_flops_match_a_count_by_hand():
-    """XLA's count for the maze agent (conv + LSTM 256 + heads) against the layers' products:
-    forward 2·(multiply-adds); a PPO epoch's forward and backward pass ≈ 3 forwards."""
+    """XLA's count of the maze agent's forward pass (conv + LSTM 256 + heads) against the
+    layers' products, 2·(multiply-adds); a PPO epoch's forward and backward pass = 3 forwards."""
     import dataclasses
 
     import jax

@@ -82,7 +82,7 @@ def _lstm_bwd(residuals, cotangents):
     (dc0, dh0), d_gates = jax.lax.scan(step, (dc_last, dh_last), (dy, c_in, c_out, gates, reset), reverse=True)
     flat_gates = d_gates.reshape(-1, d_gates.shape[-1])  # [T·N, 4H]
     d_kernel = xh.reshape(-1, xh.shape[-1]).T @ flat_gates
-    d_x = (d_gates @ kernel[:d].T)
+    d_x = d_gates @ kernel[:d].T  # [T, N, D]
     return d_kernel, flat_gates.sum(axis=0), d_x, None, (dc0, dh0)
 
 

@@ -74,16 +74,19 @@ def wall_behind(level):
 def maze_case():
     """16 agent levels and 3 frozen buffers of 24 (shuffled, 8 invalid): copies and one-wall
     perturbations of agent levels, T-mazes, blind mazes, unrelated random mazes."""
+    # each level-making function compiled once (run op by op, they dispatch hundreds of programs)
+    random_maze = jax.jit(M.random_maze, static_argnums=(1, 2))
+    tmaze, near, perturb, behind = (jax.jit(f) for f in (M.tmaze_level, near_goal, perturbed, wall_behind))
     keys = iter(jax.random.split(jax.random.PRNGKey(7), 200))
-    rand = [M.random_maze(next(keys), M.TRAIN_SIZE, 25) for _ in range(4)]
-    short = [near_goal(M.random_maze(next(keys), M.TRAIN_SIZE, 10)) for _ in range(4)]
-    tm = [M.tmaze_level(next(keys)) for _ in range(4)]
-    blind = [near_goal(M.random_maze(next(keys), M.TRAIN_SIZE, 25)).replace(blind=jnp.asarray(True)) for _ in range(4)]
+    rand = [random_maze(next(keys), M.TRAIN_SIZE, 25) for _ in range(4)]
+    short = [near(random_maze(next(keys), M.TRAIN_SIZE, 10)) for _ in range(4)]
+    tm = [tmaze(next(keys)) for _ in range(4)]
+    blind = [near(random_maze(next(keys), M.TRAIN_SIZE, 25)).replace(blind=jnp.asarray(True)) for _ in range(4)]
     agents = rand + short + tm + blind
-    frozen = (agents[::2] + [perturbed(a, next(keys)) for a in rand + tm + blind for _ in range(2)]
-              + [wall_behind(a) for a in short] + [M.tmaze_level(next(keys)) for _ in range(4)]
-              + [M.random_maze(next(keys), M.TRAIN_SIZE, 25).replace(blind=jnp.asarray(True)) for _ in range(4)]
-              + [M.random_maze(next(keys), M.TRAIN_SIZE, 25) for _ in range(72 - 8 - 24 - 4 - 4 - 4)])
+    frozen = (agents[::2] + [perturb(a, next(keys)) for a in rand + tm + blind for _ in range(2)]
+              + [behind(a) for a in short] + [tmaze(next(keys)) for _ in range(4)]
+              + [random_maze(next(keys), M.TRAIN_SIZE, 25).replace(blind=jnp.asarray(True)) for _ in range(4)]
+              + [random_maze(next(keys), M.TRAIN_SIZE, 25) for _ in range(72 - 8 - 24 - 4 - 4 - 4)])
     order = np.random.default_rng(0).permutation(len(frozen))
     frozen = [frozen[i] for i in order]
     valid = np.ones(len(frozen), bool)

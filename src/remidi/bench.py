@@ -157,10 +157,11 @@ def network_flops_per_step(setup, params) -> float:
     import jax
     import jax.numpy as jnp
 
-    task, cfg, net = setup.task, setup.cfg, setup.net
+    from remidi.engine.train import example_observation
+
+    cfg, net = setup.cfg, setup.net
     n = cfg.num_envs
-    obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), task.sample_level(jax.random.PRNGKey(0)), task.params)
-    obs = jax.tree.map(lambda x: jnp.broadcast_to(x, (1, n) + jnp.shape(x)), obs)
+    obs = jax.tree.map(lambda x: jnp.broadcast_to(x, (1, n) + jnp.shape(x)), example_observation(setup.task)[0])
     reset = jnp.zeros((1, n), bool)
     carry = net.initialize_carry(n)
 

@@ -188,7 +188,8 @@ class _Kernel(nn.Module):
     @nn.compact
     def __call__(self):
         kernel = self.param("kernel", self.initializer, self.shape)
-        return kernel, self.param("bias", nn.initializers.zeros_init(), self.shape[-1:]) if self.use_bias else None
+        bias = self.param("bias", nn.initializers.zeros_init(), self.shape[-1:]) if self.use_bias else None
+        return kernel, bias
 
 
 class PatchConv(nn.Module):

@@ -157,11 +157,18 @@ def policy_apply(setup: Setup, runner: Runner):
     return nrm.normalizing_apply(setup.net.apply, runner.obs_stats)
 
 
+def example_observation(task: UEDTask, key=None):
+    """One observation (unbatched leaves): the first of a level the task samples with ``key``
+    (``PRNGKey(0)`` if None), reset with the same key. Returns ``(obs, level)``."""
+    key = jax.random.PRNGKey(0) if key is None else key
+    level = task.sample_level(key)
+    return task.env.reset_to_level(key, level, task.params)[0], level
+
+
 def init_runner(setup: Setup, rng) -> Runner:
     task, cfg = setup.task, setup.cfg
     rng, k_net, k_level = jax.random.split(rng, 3)
-    example_level = task.sample_level(k_level)
-    example_obs, _ = task.env.reset_to_level(k_level, example_level, task.params)
+    example_obs, example_level = example_observation(task, k_level)
     train_state = create_train_state(k_net, setup.net, example_obs, cfg.num_envs, cfg.ppo)
     one = buf.init_buffer(buffer_config(cfg, setup.algo), example_level, extra_names=("max_return",))
     buffers = buf.stack_buffers([one] * num_buffers(cfg, setup.algo))
@@ -454,9 +461,7 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
     from remidi.errors import ConfigError
 
     def init():
-        level = task.sample_level(jax.random.PRNGKey(0))
-        obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
-        obs = jax.tree.map(lambda x: x[None, None], obs)
+        obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
         if flat:
             obs = flatten_obs(obs)
         return net.init(jax.random.PRNGKey(0), net.initialize_carry(1), obs, jnp.ones((1, 1), bool))

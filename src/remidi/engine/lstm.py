@@ -12,13 +12,21 @@ Why a hand-written backward pass: differentiating the plain ``lax.scan`` makes X
 the kernel's gradient inside the reversed loop, one ``[D + H, 32] × [32, 4H]`` product and a
 ``[D + H, 4H]`` addition per step (for the maze agent's 32 envs ≈ 20% of a PLR⊥ update on a
 CPU, ``jax.profiler``: small products run far below the machine's rate and the addition is
-memory-bound). Here
-the reversed loop carries only what is sequential, the cotangents of ``(c, h)``; it stores each
-step's gate gradients and computes the kernel's, bias's and inputs' gradients after the loop as
-single large products over all ``T·N`` steps. Same mathematics as autodiff
-(``tests/test_networks.py`` checks values and gradients against flax's cell). The inputs'
-share of the gates stays inside the loop, as part of one ``[x, h]`` product: computing it for
-all steps before the loop (one large product) measured slower on a CPU.
+memory-bound). Here the reversed loop carries only what is sequential, the cotangents of
+``(c, h)``, and the kernel's, bias's and inputs' gradients are single large products over all
+``T·N`` steps after it. Same mathematics as autodiff (``tests/test_networks.py`` checks values
+and gradients against flax's cell).
+
+What keeps the loops short (each measured on a CPU, where every operation inside a loop over
+time costs microseconds of its own):
+
+- the bias is a row of the kernel, multiplied by a column of ones in ``[x_t, 1, h]``: no
+  addition in the forward loop, and the bias's gradient is a row of the kernel's;
+- the forward pass stores, per step, the factors that turn the cotangents of ``c`` and ``h``
+  into the gates' (pre-activation) cotangents, so the reversed loop is two multiply-adds and
+  one product instead of recomputing the gates' derivatives (``_lstm_bwd``);
+- the inputs' share of the gates stays inside the loop, as part of one ``[x, 1, h]`` product:
+  computing it for all steps before the loop (one large product) measured no faster.
 """
 
 from __future__ import annotations
@@ -27,24 +35,37 @@ import jax
 import jax.numpy as jnp
 
 
-def _cell(kernel, bias, carry, x_t, reset_t):
-    """One step: ``(new carry, (xh, c_in, gates))``, ``gates`` = ``σ(i) σ(f) tanh(g) σ(o)``."""
-    c, h = (jnp.where(reset_t[:, None], 0.0, v) for v in carry)
-    xh = jnp.concatenate([x_t, h], axis=-1)
-    i, f, g, o = jnp.split(xh @ kernel + bias, 4, axis=-1)
-    i, f, g, o = jax.nn.sigmoid(i), jax.nn.sigmoid(f), jnp.tanh(g), jax.nn.sigmoid(o)
-    c_new = f * c + i * g
-    h_new = o * jnp.tanh(c_new)
-    return (c_new, h_new), (xh, c, jnp.concatenate([i, f, g, o], axis=-1))
+def _joined(kernel, bias, d: int):
+    """``[kernel's input rows; bias; kernel's recurrent rows]``: f32[D + 1 + H, 4H]."""
+    return jnp.concatenate([kernel[:d], bias[None], kernel[d:]], axis=0)
 
 
 def _forward(kernel, bias, x, reset, carry, keep: bool):
-    def step(carry, inputs):
-        carry, saved = _cell(kernel, bias, carry, *inputs)
-        return carry, (carry, saved if keep else None)
+    """Run the cell over time. Returns ``((carry, y), saved)``; ``saved`` (with ``keep``) holds
+    per step ``xh f32[T, N, D + 1 + H]`` (the product's input), ``factors f32[T, N, 4H]``,
+    ``dc_dh f32[T, N, H]`` and ``forget f32[T, N, H]`` (see ``_lstm_bwd``)."""
+    w = _joined(kernel, bias, x.shape[-1])
+    ones = jnp.ones(x.shape[1:-1] + (1,), x.dtype)
 
-    carry, (per_step, saved) = jax.lax.scan(step, carry, (x, reset))
-    return (carry, per_step[1]), (per_step[0], saved)
+    def step(carry, inputs):
+        x_t, reset_t = inputs
+        c, h = (jnp.where(reset_t[:, None], 0.0, v) for v in carry)
+        xh = jnp.concatenate([x_t, ones, h], axis=-1)
+        i, f, g, o = jnp.split(xh @ w, 4, axis=-1)
+        i, f, g, o = jax.nn.sigmoid(i), jax.nn.sigmoid(f), jnp.tanh(g), jax.nn.sigmoid(o)
+        c_new = f * c + i * g
+        tanh_c = jnp.tanh(c_new)
+        h_new = o * tanh_c
+        if not keep:
+            return (c_new, h_new), h_new
+        # the gates' pre-activation cotangents are [dc, dc, dc, dh] · factors, where dc is the
+        # cotangent of c_new including h_new's share: dc_next + dh · dc_dh
+        factors = jnp.concatenate([g * i * (1.0 - i), c * f * (1.0 - f), i * (1.0 - g * g),
+                                   tanh_c * o * (1.0 - o)], axis=-1)
+        return (c_new, h_new), (h_new, (xh, factors, o * (1.0 - tanh_c * tanh_c), f))
+
+    carry, out = jax.lax.scan(step, carry, (x, reset))
+    return (carry, out[0]) if keep else (carry, out), out[1] if keep else None
 
 
 @jax.custom_vjp
@@ -55,35 +76,34 @@ def lstm_over_time(kernel, bias, x, reset, carry):
 
 
 def _lstm_fwd(kernel, bias, x, reset, carry):
-    out, (c_out, saved) = _forward(kernel, bias, x, reset, carry, keep=True)
-    return out, (kernel, reset, c_out, saved)
+    out, saved = _forward(kernel, bias, x, reset, carry, keep=True)
+    return out, (kernel, reset, saved)
 
 
 def _lstm_bwd(residuals, cotangents):
-    kernel, reset, c_out, (xh, c_in, gates) = residuals  # [T, N, ...] each
+    kernel, reset, (xh, factors, dc_dh, forget) = residuals  # [T, N, ...] each
     (dc_last, dh_last), dy = cotangents
-    d = xh.shape[-1] - c_in.shape[-1]
+    d = xh.shape[-1] - 1 - dc_dh.shape[-1]
     recurrent_t = kernel[d:].T  # [4H, H]
 
     def step(carry, inputs):
         dc, dh = carry  # cotangents of the carry leaving this step
-        dy_t, c_in_t, c_out_t, gates_t, reset_t = inputs
-        i, f, g, o = jnp.split(gates_t, 4, axis=-1)
+        dy_t, factors_t, dc_dh_t, forget_t, reset_t = inputs
         dh = dh + dy_t
-        tanh_c = jnp.tanh(c_out_t)
-        dc = dc + dh * o * (1.0 - tanh_c * tanh_c)
-        d_gates = jnp.concatenate([dc * g * i * (1.0 - i), dc * c_in_t * f * (1.0 - f), dc * i * (1.0 - g * g),
-                                   dh * tanh_c * o * (1.0 - o)], axis=-1)  # pre-activation, [N, 4H]
-        dc_in, dh_in = dc * f, d_gates @ recurrent_t
+        dc = dc + dh * dc_dh_t
+        d_gates = jnp.concatenate([dc, dc, dc, dh], axis=-1) * factors_t  # pre-activation, [N, 4H]
+        dc_in, dh_in = dc * forget_t, d_gates @ recurrent_t
         # the carry entering this step was zeroed where the env restarted: no gradient flows back
         dc_in, dh_in = (jnp.where(reset_t[:, None], 0.0, v) for v in (dc_in, dh_in))
         return (dc_in, dh_in), d_gates
 
-    (dc0, dh0), d_gates = jax.lax.scan(step, (dc_last, dh_last), (dy, c_in, c_out, gates, reset), reverse=True)
+    (dc0, dh0), d_gates = jax.lax.scan(step, (dc_last, dh_last), (dy, factors, dc_dh, forget, reset),
+                                       reverse=True)
     flat_gates = d_gates.reshape(-1, d_gates.shape[-1])  # [T·N, 4H]
-    d_kernel = xh.reshape(-1, xh.shape[-1]).T @ flat_gates
+    d_joined = xh.reshape(-1, xh.shape[-1]).T @ flat_gates  # [D + 1 + H, 4H]
     d_x = d_gates @ kernel[:d].T  # [T, N, D]
-    return d_kernel, flat_gates.sum(axis=0), d_x, None, (dc0, dh0)
+    d_kernel = jnp.concatenate([d_joined[:d], d_joined[d + 1:]], axis=0)
+    return d_kernel, d_joined[d], d_x, None, (dc0, dh0)
 
 
 lstm_over_time.defvjp(_lstm_fwd, _lstm_bwd)

@@ -249,7 +249,7 @@ def ppo_update(
 
     ``init_carry``: the net's carry for the ``N`` envs at the rollout's first step (env axis
     first in every leaf). Minibatches are shuffled groups of ``N / minibatches`` envs with their
-    whole ``T``-step sequences. ``apply_fn`` defaults to ``train_state.apply_fn``; ``dist`` is
+    whole ``T``-step sequences (with one minibatch, all envs in their order). ``apply_fn`` defaults to ``train_state.apply_fn``; ``dist`` is
     the action distribution (:mod:`remidi.engine.distributions`). Jit-able with ``cfg``,
     ``apply_fn`` and ``dist`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
     policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm, masked_fraction) are
@@ -266,6 +266,9 @@ def ppo_update(
         return _minibatch_step(state, carry, sub, cfg, apply_fn, dist)
 
     def epoch(state, key):
+        if cfg.minibatches == 1:  # every env in the one minibatch: shuffling would only reorder sums
+            state, metrics = _minibatch_step(state, init_carry, batch, cfg, apply_fn, dist)
+            return state, jax.tree.map(lambda x: x[None], metrics)
         groups = jax.random.permutation(key, num_envs).reshape(cfg.minibatches, size)
         return jax.lax.scan(minibatch, state, groups)
 

@@ -203,3 +203,38 @@ def test_make_network_errors():
         make_network("mlp", 3, widths=(4,))
     assert make_network("mlp", 3, hidden=[8, 8]).hidden == (8, 8)
     assert isinstance(make_network("maze_lstm", 7), MazeLSTMActorCritic)
+
+
+class _DenseHeads(flax.linen.Module):
+    """The heads written with four flax ``Dense`` layers, the reference for ActorCriticHeads."""
+
+    num_actions: int
+    continuous: bool
+
+    @flax.linen.compact
+    def __call__(self, x):
+        dense = lambda n, init, name: flax.linen.Dense(n, kernel_init=init, name=name)  # noqa: E731
+        hidden = flax.linen.initializers.orthogonal(np.sqrt(2.0))
+        pi = jnp.tanh(dense(32, hidden, "policy_hidden")(x))
+        logits = dense(self.num_actions, flax.linen.initializers.orthogonal(0.01), "policy_out")(pi)
+        if self.continuous:
+            log_std = self.param("log_std", flax.linen.initializers.zeros, (self.num_actions,))
+            logits = jnp.concatenate([logits, jnp.broadcast_to(log_std, logits.shape)], axis=-1)
+        v = jnp.tanh(dense(32, hidden, "value_hidden")(x))
+        return logits, dense(1, flax.linen.initializers.orthogonal(1.0), "value_out")(v)[..., 0]
+
+
+@pytest.mark.parametrize("continuous", [False, True])
+def test_heads_are_flax_dense_layers(continuous):
+    """The heads' joined hidden product: same parameters, initial values and outputs as Dense layers."""
+    from remidi.engine.networks import ActorCriticHeads
+
+    x = jax.random.normal(jax.random.key(3), (7, 5, 48))
+    ours, ref = ActorCriticHeads(6, 32, "tanh", continuous), _DenseHeads(6, continuous)
+    params = ours.init(jax.random.key(0), x)
+    ref_params = ref.init(jax.random.key(0), x)
+    assert jax.tree.structure(params) == jax.tree.structure(ref_params)
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(ref_params), strict=True):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(ours.apply(params, x), ref.apply(params, x), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)

@@ -72,6 +72,11 @@ class ActorCriticHeads(nn.Module):
     ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``; with
     ``continuous`` the policy output is ``f32[..., 2·num_actions]``: the Gaussian mean (the
     Dense output) then a state-independent log-std parameter ``log_std`` (zeros initially).
+
+    The parameters are those of ``nn.Dense`` layers named ``policy_hidden``, ``policy_out``,
+    ``value_hidden`` and ``value_out`` (same names, shapes, initialisers and so initial values);
+    the two hidden layers are computed as one product with their kernels side by side
+    (``[D, 2·hidden]``): one product forward and one backward instead of two each plus a sum.
     """
 
     num_actions: int
@@ -82,12 +87,15 @@ class ActorCriticHeads(nn.Module):
     @nn.compact
     def __call__(self, x):
         act = _activation(self.activation)
-        pi = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="policy_hidden")(x))
+        d = x.shape[-1]
+        (pk, pb), (vk, vb) = (_Kernel((d, self.hidden), _HIDDEN_INIT, True, name=f"{head}_hidden")()
+                              for head in ("policy", "value"))
+        both = act(x @ jnp.concatenate([pk, vk], axis=-1) + jnp.concatenate([pb, vb]))
+        pi, v = both[..., :self.hidden], both[..., self.hidden:]
         logits = nn.Dense(self.num_actions, kernel_init=_POLICY_INIT, bias_init=_ZEROS, name="policy_out")(pi)
         if self.continuous:
             log_std = self.param("log_std", _ZEROS, (self.num_actions,))
             logits = jnp.concatenate([logits, jnp.broadcast_to(log_std, logits.shape)], axis=-1)
-        v = act(nn.Dense(self.hidden, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="value_hidden")(x))
         value = nn.Dense(1, kernel_init=_VALUE_INIT, bias_init=_ZEROS, name="value_out")(v)
         return logits, jnp.squeeze(value, axis=-1)
 

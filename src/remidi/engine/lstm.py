@@ -86,19 +86,21 @@ def _lstm_bwd(residuals, cotangents):
     d = xh.shape[-1] - 1 - dc_dh.shape[-1]
     recurrent_t = kernel[d:].T  # [4H, H]
 
-    def step(carry, inputs):
-        dc, dh = carry  # cotangents of the carry leaving this step
-        dy_t, factors_t, dc_dh_t, forget_t, reset_t = inputs
-        dh = dh + dy_t
-        dc = dc + dh * dc_dh_t
-        d_gates = jnp.concatenate([dc, dc, dc, dh], axis=-1) * factors_t  # pre-activation, [N, 4H]
-        dc_in, dh_in = dc * forget_t, d_gates @ recurrent_t
-        # the carry entering this step was zeroed where the env restarted: no gradient flows back
-        dc_in, dh_in = (jnp.where(reset_t[:, None], 0.0, v) for v in (dc_in, dh_in))
-        return (dc_in, dh_in), d_gates
+    num_steps = xh.shape[0]
 
-    (dc0, dh0), d_gates = jax.lax.scan(step, (dc_last, dh_last), (dy, factors, dc_dh, forget, reset),
-                                       reverse=True)
+    def step(s, carry):
+        dc, dh, buffer = carry  # cotangents of the carry leaving step t; buffer: factors, then d_gates
+        t = num_steps - 1 - s
+        dh = dh + dy[t]
+        dc = dc + dh * dc_dh[t]
+        d_gates = jnp.concatenate([dc, dc, dc, dh], axis=-1) * buffer[t]  # pre-activation, [N, 4H]
+        dc_in, dh_in = dc * forget[t], d_gates @ recurrent_t
+        # the carry entering this step was zeroed where the env restarted: no gradient flows back
+        dc_in, dh_in = (jnp.where(reset[t][:, None], 0.0, v) for v in (dc_in, dh_in))
+        return dc_in, dh_in, buffer.at[t].set(d_gates)
+
+    # each step's gate cotangents overwrite its factors, read just before: one [T, N, 4H] buffer
+    dc0, dh0, d_gates = jax.lax.fori_loop(0, num_steps, step, (dc_last, dh_last, factors))
     flat_gates = d_gates.reshape(-1, d_gates.shape[-1])  # [T·N, 4H]
     d_joined = xh.reshape(-1, xh.shape[-1]).T @ flat_gates  # [D + 1 + H, 4H]
     d_x = d_gates @ kernel[:d].T  # [T, N, D]

@@ -262,16 +262,16 @@ def _lever_plr():
     return _train_workload(lever_task(), cfg, "plr", active=0, updates_per_call=20)
 
 
-@register("lstm-matmul", "the maze LSTM's matrix product alone: [32, 405] × [405, 1024], 1280 in a loop")
+@register("lstm-matmul", "the maze LSTM's matrix product alone: [32, 406] × [406, 1024], 1280 in a loop")
 def _lstm_matmul():
     """The rate this machine multiplies matrices of the shape that dominates maze training: the
-    LSTM's gate product for 32 envs (input 144 conv features + 5 direction + 256 hidden = 405,
-    4 × 256 gates), chained so that each product depends on the one before (as in the LSTM's
+    LSTM's gate product for 32 envs (input 144 conv features + 5 direction + 1 for the bias +
+    256 hidden = 406, 4 × 256 gates), chained so that each product depends on the one before (as in the LSTM's
     loop over time). 1280 products: the forward passes of one rollout and five epochs."""
     import jax
     import jax.numpy as jnp
 
-    n, d, g = (4, 405, 1024) if _tiny() else (32, 405, 1024)
+    n, d, g = (4, 406, 1024) if _tiny() else (32, 406, 1024)
     length = 64 if _tiny() else 1280
     w = jax.random.normal(jax.random.PRNGKey(0), (d, g)) / jnp.sqrt(d)
 

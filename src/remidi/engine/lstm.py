@@ -24,7 +24,8 @@ time costs microseconds of its own):
   addition in the forward loop, and the bias's gradient is a row of the kernel's;
 - the forward pass stores, per step, the factors that turn the cotangents of ``c`` and ``h``
   into the gates' (pre-activation) cotangents, so the reversed loop is two multiply-adds and
-  one product instead of recomputing the gates' derivatives (``_lstm_bwd``);
+  one product instead of recomputing the gates' derivatives (``_lstm_bwd``), and it writes
+  each step's gate cotangents over that step's factors (one ``[T, N, 4H]`` buffer, not two);
 - the inputs' share of the gates stays inside the loop, as part of one ``[x, 1, h]`` product:
   computing it for all steps before the loop (one large product) measured no faster.
 """
@@ -85,7 +86,6 @@ def _lstm_bwd(residuals, cotangents):
     (dc_last, dh_last), dy = cotangents
     d = xh.shape[-1] - 1 - dc_dh.shape[-1]
     recurrent_t = kernel[d:].T  # [4H, H]
-
     num_steps = xh.shape[0]
 
     def step(s, carry):

@@ -58,15 +58,15 @@ def _forward(kernel, bias, x, reset, carry, keep: bool):
         tanh_c = jnp.tanh(c_new)
         h_new = o * tanh_c
         if not keep:
-            return (c_new, h_new), h_new
+            return (c_new, h_new), (h_new, None)
         # the gates' pre-activation cotangents are [dc, dc, dc, dh] · factors, where dc is the
         # cotangent of c_new including h_new's share: dc_next + dh · dc_dh
         factors = jnp.concatenate([g * i * (1.0 - i), c * f * (1.0 - f), i * (1.0 - g * g),
                                    tanh_c * o * (1.0 - o)], axis=-1)
         return (c_new, h_new), (h_new, (xh, factors, o * (1.0 - tanh_c * tanh_c), f))
 
-    carry, out = jax.lax.scan(step, carry, (x, reset))
-    return (carry, out[0]) if keep else (carry, out), out[1] if keep else None
+    carry, (y, saved) = jax.lax.scan(step, carry, (x, reset))
+    return (carry, y), saved
 
 
 @jax.custom_vjp

@@ -153,10 +153,10 @@ class ResetLSTM(nn.Module):
 
     The parameters are those of :class:`flax.linen.OptimizedLSTMCell` (submodule ``cell``: input
     kernels ``ii if ig io`` ``[D, features]``, recurrent kernels and biases ``hi hf hg ho``, the
-    same initialisers), and so is the arithmetic (:mod:`remidi.engine.lstm`). The kernels are
-    joined once, outside the loop over time, into one ``[D + features, 4·features]`` matrix
-    that multiplies ``[x, h]`` at each step, and the backward pass computes the weight gradients
-    after the loop, as single large products.
+    same initialisers), and so is the arithmetic (:mod:`remidi.engine.lstm`). The kernels and
+    the bias are joined once, outside the loop over time, into one ``[D + 1 + features,
+    4·features]`` matrix that multiplies ``[x, 1, h]`` at each step, and the backward pass
+    computes the weight gradients after the loop, as single large products.
     """
 
     features: int

@@ -50,11 +50,14 @@ def keys(n, i=0):
 
 def test_action_multiplier_reaches_the_simulator(env, fns):
     reset, step, params = fns
-    # theta = 2 with action a steps exactly like theta = 1 with action 2a (|2a| ≤ 1: no clipping)
-    lv = levels(env, theta=[2.0, 1.0, 0.0, 1.0], seed=[3, 3, 4, 4])
+    # theta multiplies the action before anything clips it (the paper: the agent can correct for
+    # theta, so the optimum is the same on every type A level): theta = 0.5 with action 2a steps
+    # exactly like theta = 1 with action a, also where |2a| > 1 (clipping 2a first would not)
+    lv = levels(env, theta=[0.5, 1.0, 0.0, 1.0], seed=[3, 3, 4, 4])
     obs, state = reset(keys(4), lv, params)
-    a = jax.random.uniform(jax.random.PRNGKey(7), (env.num_actions,), minval=-0.5, maxval=0.5)
-    actions = jnp.stack([a, 2 * a, a, a])
+    a = jax.random.uniform(jax.random.PRNGKey(7), (env.num_actions,), minval=-0.9, maxval=0.9)
+    assert np.any(np.abs(np.asarray(2 * a)) > 1)
+    actions = jnp.stack([2 * a, a, a, a])
     obs1, state1, reward, done, _ = step(jax.random.PRNGKey(0), state, actions, params)
     np.testing.assert_array_equal(np.asarray(obs1[0]), np.asarray(obs1[1]))
     for leaf in jax.tree.leaves(state1.brax_state.pipeline_state):

@@ -17,6 +17,7 @@ ENV = M.MazeEnv()
 PARAMS = ENV.default_params
 KEY = jax.random.PRNGKey(0)
 OPTIMAL = jax.jit(jax.vmap(M.optimal_return))
+GAMMA = 0.995  # the maze experiments' ppo.gamma
 
 
 def stack(levels):
@@ -181,7 +182,7 @@ def test_optimal_return_is_what_a_shortest_path_agent_earns():
         n = float(cost[int(level.agent_dir), int(level.agent_pos[1]), int(level.agent_pos[0])])
         assert np.isfinite(n), name
         _, state = ENV.reset_to_level(KEY, level, PARAMS)
-        total, t, done = 0.0, 0, False
+        total, discounted, t, done = 0.0, 0.0, 0, False
         while not done:
             x, y = np.asarray(state.inner.agent_pos).tolist()
             here = cost[int(state.inner.agent_dir), y, x]
@@ -190,10 +191,15 @@ def test_optimal_return_is_what_a_shortest_path_agent_earns():
                 nx, ny = np.asarray(nxt.inner.agent_pos).tolist()
                 if (bool(d) and float(r) > 0) or cost[int(nxt.inner.agent_dir), ny, nx] == here - 1:
                     break
+            discounted += GAMMA ** t * float(r)
             state, total, t, done = nxt, total + float(r), t + 1, bool(d)
         assert t == n, name
         assert total > 0, name
         np.testing.assert_allclose(total, float(optimal(level)), rtol=1e-6, err_msg=name)
+        # the discounted optimum is what the shortest-path agent earns under Σ_t γ^t r_t
+        np.testing.assert_allclose(discounted, float(M.optimal_discounted_return(level, GAMMA)), rtol=1e-5,
+                                   err_msg=name)
+        assert discounted < total
         sstate = solved_init(level)
         assert float(solved.min_steps_to_goal(sstate)) == n
         assert float(solved.optimal_value(sstate, 1.0, PARAMS)) < total

@@ -1,6 +1,8 @@
 """Tests for remidi.engine.networks: shapes, carry semantics, registry errors."""
 
+import dataclasses
 import functools
+from types import SimpleNamespace
 
 import flax.linen
 import jax
@@ -238,3 +240,21 @@ def test_heads_are_flax_dense_layers(continuous):
         np.testing.assert_array_equal(a, b)
     for a, b in zip(ours.apply(params, x), ref.apply(params, x), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
+
+
+def test_brax_agent_has_two_trunk_layers_before_its_lstm():
+    """The paper's Brax agent (appendix): two fully-connected layers, then the recurrent cell;
+    ``hidden_size`` sets the width of both."""
+    from remidi.engine.train import network_for
+    from remidi.experiments.brax import paper_config
+
+    obs = jnp.zeros((1, 2, 13), jnp.float32)
+    for hidden_size, width in ((0, 256), (64, 64)):
+        cfg = dataclasses.replace(paper_config(), hidden_size=hidden_size)
+        task = SimpleNamespace(num_actions=3, continuous=True)
+        net = network_for(cfg, task)
+        shapes = jax.eval_shape(lambda: net.init(jax.random.PRNGKey(0), net.initialize_carry(2), obs,
+                                                 jnp.ones((1, 2), bool)))["params"]
+        assert shapes["trunk_0"]["kernel"].shape == (13, width)
+        assert shapes["trunk_1"]["kernel"].shape == (width, width)
+        assert "trunk_2" not in shapes and "lstm" in shapes

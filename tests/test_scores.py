@@ -1,5 +1,6 @@
 """Level scores on hand-computed rollouts."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -23,6 +24,21 @@ def test_episode_returns():
 
 def test_first_episode_return():
     np.testing.assert_allclose(first_episode_return(REWARD, DONE), [2.0, 1.0])
+    # discounted from the rollout's first step: env 0 γ·2, env 1 1 (its first episode is one step)
+    np.testing.assert_allclose(first_episode_return(REWARD, DONE, 0.5), [1.0, 1.0])
+
+
+def test_discounted_episode_returns_count_t_from_each_episode_start():
+    """Σ_k γ^k r_k with k restarting at 0 after every done (the paper's U_θ per episode)."""
+    g = 0.5
+    mean, best, count = sc.episode_returns(REWARD, DONE, g)
+    # env 0: episode (0, 2) → 0 + g·2 = 1; env 1: episodes (1) → 1 and (0, 3, 0) → g·3 = 1.5
+    np.testing.assert_allclose(mean, [1.0, 1.25])
+    np.testing.assert_allclose(best, [1.0, 1.5])
+    np.testing.assert_array_equal(count, [1, 2])
+    # the unfinished tail is discounted from its own start: (1, 2) → 1 + g·2
+    mean, _, _ = sc.episode_returns(jnp.array([[1.0], [2.0]]), jnp.array([[False], [False]]), g)
+    assert float(mean[0]) == 2.0
 
 
 def test_score_formulas():
@@ -78,3 +94,36 @@ def test_pvl_and_maxmc_agree_with_jaxued(monkeypatch):
     max_return = jax.random.normal(k_max, (6,))
     np.testing.assert_allclose(sc.positive_value_loss(x, done), ref.positive_value_loss(done, x), rtol=1e-5)
     np.testing.assert_allclose(sc.max_mc(x, max_return, done), ref.max_mc(done, x, max_return), rtol=1e-5)
+
+
+def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
+    """The paper's utility is discounted: a level solved in 2n actions whose shortest path is n
+    scores γ^(n−1)·R(n) − γ^(2n−1)·R(2n) by default, R(n) − R(2n) with discounted_regret off."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from remidi.engine.train import make_setup, score
+    from remidi.envs import maze as M
+    from remidi.experiments.maze import paper_config
+
+    cfg = paper_config()
+    task = M.maze_task("tmaze")
+    level = jax.tree.map(lambda x: x[None], M.prefab_level("StandardMaze"))
+    n = int(M.shortest_path_steps(jax.tree.map(lambda x: x[0], level)))
+    g, steps = cfg.ppo.gamma, 2 * n
+    reward = np.zeros((steps, 1), np.float32)
+    reward[-1] = 1 - 0.9 * steps / M.MAX_STEPS
+    done = np.zeros((steps, 1), bool)
+    done[-1] = True
+    traj = SimpleNamespace(reward=jnp.asarray(reward), done=jnp.asarray(done), value=jnp.zeros((steps, 1)))
+    mean_return = jnp.asarray(reward.sum(0))
+
+    def level_score(c):
+        return float(score(make_setup(task, c, "plr"), level, traj, jnp.zeros((steps, 1)), mean_return,
+                           mean_return)[0])
+
+    discounted = g ** (n - 1) * (1 - 0.9 * n / 250) - g ** (steps - 1) * (1 - 0.9 * steps / 250)
+    np.testing.assert_allclose(level_score(cfg), discounted, rtol=1e-4)
+    np.testing.assert_allclose(level_score(dataclasses.replace(cfg, discounted_regret=False)), 0.9 * n / 250,
+                               rtol=1e-4)
+    assert abs(discounted - 0.9 * n / 250) > 0.05  # the two forms really differ on this level

@@ -105,6 +105,12 @@ def _cmd_list(args) -> int:
         presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                             for p in exp.presets)
         print(f"  presets:    {presets}")
+        for name, reasons in exp.preset_reasons.items():
+            print(f"  {name}: deviates from paper in")
+            width = max(len(key) for key in reasons)
+            cfg = resolve_config(exp, name, {})
+            for key, why in reasons.items():
+                print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
         default = "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
         configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
         print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "

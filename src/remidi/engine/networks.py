@@ -268,13 +268,14 @@ class MLPLSTMActorCritic(nn.Module):
     """A recurrent agent for vector observations (the Brax agent): flattened obs -> ``hidden``
     fully-connected layers -> LSTM(``lstm_size``) -> ``head_hidden``-unit policy and value heads.
 
-    Default: one 256-unit tanh layer, a 256-unit LSTM, 64-unit tanh heads; with ``continuous``
+    Default (the paper's Brax agent, appendix): two 256-unit tanh layers, a 256-unit LSTM, 64-unit
+    tanh heads; with ``continuous``
     a Gaussian policy with a state-independent log-std (PureJaxRL's continuous PPO agent, with
     a recurrent cell between trunk and heads). Carry: ``(c, h)`` each ``f32[N, lstm_size]``.
     """
 
     num_actions: int
-    hidden: tuple[int, ...] = (256,)
+    hidden: tuple[int, ...] = (256, 256)
     lstm_size: int = 256
     head_hidden: int = 64
     activation: str = "tanh"

@@ -4,7 +4,12 @@ Every function maps rollout arrays with leading dims [T, N] to one score per lev
 Higher = replayed more.
 
 * ``perfect_regret``: optimal return − the agent's mean episodic return (exact regret when
-  the environment knows its optimal return).
+  the environment knows its optimal return). The paper's utility is discounted,
+  U_θ(π) = E[Σ_t γ^t r_t] with t counted from the episode's first step, so by default both
+  sides are discounted (``UEDConfig.discounted_regret``): the agent's episodes by γ^t, the
+  optimum by the discount of the step its rewards come at (the task's
+  ``optimal_discounted_return``; mazes: γ^(n−1) for a goal reached with the n-th action, so
+  an agent following a shortest path has regret exactly 0).
 * ``pvl`` (positive value loss): per finished episode, the mean over its steps of
   max(GAE advantage, 0); then the mean over the finished episodes.
 * ``maxmc``: per finished episode, the mean over its steps of (highest return ever achieved on
@@ -34,9 +39,11 @@ import jax.numpy as jnp
 SCORES = ("perfect_regret", "pvl", "maxmc", "neg_return")
 
 
-def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool):
+def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
     """Per env, over the episodes that ended: the sum and the max of each episode's total of ``x``
-    (its per-step mean with ``time_average``), their count, and the same for the unfinished tail.
+    (its per-step mean with ``time_average``; with ``gamma`` < 1 the discounted total
+    Σ_k γ^k x_k, k counted from the episode's first step), their count, and the same for the
+    unfinished tail.
 
     ``x`` f32[T, N], ``done`` bool[T, N] (the episode ended at step t) →
     ``(sum f32[N], max f32[N] (-inf if none), count i32[N], tail f32[N] (0 if no step))``.
@@ -45,7 +52,8 @@ def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool):
     def step(carry, inp):
         running, steps, total, best, count = carry
         xt, d = inp
-        running, steps = running + xt, steps + 1
+        weight = 1.0 if gamma == 1.0 else jnp.power(jnp.float32(gamma), steps.astype(jnp.float32))
+        running, steps = running + weight * xt, steps + 1
         value = running / steps if time_average else running
         total = total + jnp.where(d, value, 0.0)
         best = jnp.where(d, jnp.maximum(best, value), best)
@@ -60,13 +68,14 @@ def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool):
     return total, best, count, tail
 
 
-def episode_returns(reward: jax.Array, done: jax.Array):
-    """Mean and max return of the episodes that ended, per env.
+def episode_returns(reward: jax.Array, done: jax.Array, gamma: float = 1.0):
+    """Mean and max return of the episodes that ended, per env (discounted, Σ_k γ^k r_k with k
+    counted from each episode's first step, for ``gamma`` < 1; static).
 
     ``reward`` f32[T, N], ``done`` bool[T, N] → ``(mean f32[N], max f32[N], count i32[N])``;
     with no finished episode, mean = max = the partial return and count = 0.
     """
-    total, best, count, partial = _episode_stats(reward, done, time_average=False)
+    total, best, count, partial = _episode_stats(reward, done, time_average=False, gamma=gamma)
     mean = jnp.where(count > 0, total / jnp.maximum(count, 1), partial)
     best = jnp.where(count > 0, best, partial)
     return mean, best, count
@@ -80,6 +89,7 @@ def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float = -jnp.i
 
 
 def perfect_regret(mean_return: jax.Array, optimal_return: jax.Array) -> jax.Array:
+    """Both in the same units: discounted (the paper's U_θ) or undiscounted returns."""
     return optimal_return - mean_return
 
 

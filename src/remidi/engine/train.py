@@ -48,7 +48,11 @@ class ReMiDiConfig:
     num_buffers: int = 2  # the sequence of adversaries (level buffers)
     buffer_capacity: int = 32  # capacity of each buffer
     steps_per_buffer: int = 1000  # switching rule: stay this long on a buffer, then freeze it
-    count: str = "updates"  # what steps_per_buffer counts: "updates" or "replays"
+    # what steps_per_buffer counts. Every preset counts "updates" (train steps, replay or not): the
+    # paper's text switches adversaries "every N iterations" and the authors' code counts every
+    # train step; the switch then falls on the same update for every seed and does not move with
+    # buffer.replay_prob. "replays" (only replay steps count) is kept for experimentation.
+    count: str = "updates"
     tracker: str = "prefix"  # "prefix" (one frozen level matches the whole prefix) or "per_step"
     # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
     # env's first observation are stepped, at most this many; 0 steps every frozen level (the
@@ -68,6 +72,9 @@ class UEDConfig:
     num_envs: int = 32
     num_steps: int = 16
     score: str = "perfect_regret"  # one of scores.SCORES; minimax-return always uses neg_return
+    # perfect_regret against the paper's discounted utility U = E[Σ_t γ^t r_t] (γ = ppo.gamma) on
+    # both sides; False: undiscounted returns on both sides
+    discounted_regret: bool = True
     network: str = "mlp"
     hidden_size: int = 0  # width of every fully-connected trunk layer of the network (0: its default)
     lstm_size: int = 0  # units of the network's LSTM (0: its default)
@@ -227,10 +234,24 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     return traj, adv, targets, mean_return, best_return
 
 
+def regret_gamma(cfg: UEDConfig) -> float:
+    """The discount of the perfect-regret score's returns: ``ppo.gamma``, or 1 (undiscounted)."""
+    return cfg.ppo.gamma if cfg.discounted_regret else 1.0
+
+
 def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
     """f32[N]: each level's score, in the environment's reward units (the critic's values and
-    the advantages, learnt on ``reward × reward_scale``, are scaled back)."""
-    optimal = jax.vmap(setup.task.optimal_return)(levels) if setup.task.optimal_return is not None else None
+    the advantages, learnt on ``reward × reward_scale``, are scaled back). Perfect regret compares
+    the optimum and the agent's mean episodic return in the same units: both discounted by
+    :func:`regret_gamma` (the paper's utility) unless ``discounted_regret`` is off."""
+    optimal = None
+    if score_name(setup.cfg, setup.algo) == "perfect_regret":
+        gamma = regret_gamma(setup.cfg)
+        if setup.cfg.discounted_regret:
+            optimal = jax.vmap(lambda level: setup.task.optimal_discounted_return(level, gamma))(levels)
+        else:
+            optimal = jax.vmap(setup.task.optimal_return)(levels)
+        mean_return, _, _ = sc.episode_returns(traj.reward, traj.done, gamma)
     unscale = 1.0 / setup.cfg.reward_scale
     return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value * unscale,
                            advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal)
@@ -358,10 +379,12 @@ def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
 
 
 # ---------------------------------------------------------------------------- evaluation
-def first_episode_return(reward: jax.Array, done: jax.Array) -> jax.Array:
-    """f32[N]: return of the first episode of each env (``reward``, ``done``: [T, N])."""
+def first_episode_return(reward: jax.Array, done: jax.Array, gamma: float = 1.0) -> jax.Array:
+    """f32[N]: return of the first episode of each env (``reward``, ``done``: [T, N]; the rollout
+    starts the episode), discounted Σ_t γ^t r_t for ``gamma`` < 1."""
     ended_before = jnp.cumsum(done, axis=0) - done  # episodes finished before step t
-    return jnp.sum(jnp.where(ended_before == 0, reward, 0.0), axis=0)
+    discount = jnp.power(jnp.float32(gamma), jnp.arange(reward.shape[0], dtype=jnp.float32))[:, None]
+    return jnp.sum(jnp.where(ended_before == 0, discount * reward, 0.0), axis=0)
 
 
 def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
@@ -405,7 +428,8 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
 def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     """Metrics on each evaluation set ``<set>``: ``eval_attempts`` sampled episodes per level (the
     first episode of each; the sets one environment plays are rolled out together) give
-    ``solve_rate/<set>`` and ``return/<set>``. With the task's optimal return, the regret per level
+    ``solve_rate/<set>``, ``return/<set>`` and ``discounted_return/<set>`` (Σ_t γ^t r_t, γ =
+    ``ppo.gamma``). With the task's optimal return, the regret per level
     gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's levels): the *expected*
     regret ``optimal − E[return]``, exact for a one-step task that knows its ``expected_return``
     (which adds ``entropy/<set>``, the mean entropy of the policy over the set's levels), estimated
@@ -424,6 +448,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
                           levels, task.max_episode_steps, frozen, tracker_env=task.env,
                           dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
         returns = first_episode_return(traj.reward, traj.done)
+        discounted = first_episode_return(traj.reward, traj.done, cfg.ppo.gamma)
         optimal = None
         if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
             optimal = jax.vmap(task.optimal_return)(jax.tree.map(lambda *xs: jnp.concatenate(xs),
@@ -436,6 +461,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
             start += size
             out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
+            out[f"discounted_return/{name}"] = jnp.mean(discounted[start - size:start])
             if task.optimal_return is None:
                 continue
             set_levels = task.eval_sets[name]
@@ -501,6 +527,12 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
+    require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
+    if (score_name(cfg, algo) == "perfect_regret" and cfg.discounted_regret
+            and task.optimal_discounted_return is None):
+        raise ConfigError("discounted_regret: this task gives no discounted optimal return "
+                          "(UEDTask.optimal_discounted_return), so perfect_regret cannot use the discounted utility; "
+                          "allowed: false (undiscounted returns on both sides)")
     for key in ("hidden_size", "lstm_size"):
         require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
                 "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))

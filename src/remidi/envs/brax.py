@@ -2,13 +2,16 @@
 
 A level (:class:`BraxLevel`) is one of
 
-- **type A**: a per-action-dimension multiplier ``theta f32[A]``. The agent's action is clipped
-  to Brax's action range ``[-1, 1]`` (the policy is an unbounded Gaussian), multiplied by
-  ``theta`` and handed to the simulator: ``brax_env.step(state, theta * clip(action))``. The
+- **type A**: a per-action-dimension multiplier ``theta f32[A]``. The agent's action (from an
+  unbounded Gaussian policy) is multiplied by ``theta`` and handed to the simulator:
+  ``brax_env.step(state, theta * action)``, as the paper does; nothing clips it before the
+  multiplication, so for ``theta < 1`` the agent can still reach full torque by acting larger
+  (the paper's argument that the optimum is the same on every type A level). The
   reward is Brax's own reward, so its control cost is computed on ``theta · a``: the
   disturbance acts on the motor and the cost is what the motor spends (a choice: the paper
   does not say, and its Brax code is not published); the simulator itself clips
-  the control to the actuator range ``[-1, 1]``, so ``theta > 1`` saturates. The episode ends on
+  the control ``theta · a`` to the actuator range ``[-1, 1]`` (MuJoCo's ``ctrlrange``), so
+  torque saturates there while the control cost keeps growing. The episode ends on
   Brax's own termination (unhealthy hopper/walker/ant; halfcheetah never terminates) or at the
   time limit (``t + 1 >= 100``). Observation: Brax's observation followed by the flag ``[1, 0]``.
 - **type B**: a one-step guessing game. The first action ends the episode with reward
@@ -228,10 +231,10 @@ class BraxUED(UnderspecifiedEnv):
     def step_env(self, rng, state: BraxEnvState, action, params):
         level = state.level
         action = jnp.asarray(action, jnp.float32)
-        # type A: the multiplier acts on the clipped action before the simulator.
-        # (Brax's step updates ``state.metrics`` in place: give it a copy, not ours.)
+        # type A: the multiplier acts on the agent's action before the simulator, whose own control
+        # limits then apply. (Brax's step updates ``state.metrics`` in place: give it a copy.)
         current = state.brax_state.replace(metrics=dict(state.brax_state.metrics))
-        stepped = self.brax_env.step(current, level.theta * jnp.clip(action, -1.0, 1.0))
+        stepped = self.brax_env.step(current, level.theta * action)
         time = state.time + 1
         done_a = (stepped.done > 0.5) | (time >= params.max_steps_in_episode)
         # type B: one step, the sign of the last action dimension against the hidden sign.
@@ -266,19 +269,25 @@ class BraxUED(UnderspecifiedEnv):
 @functools.lru_cache(maxsize=None)
 def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float = 0.5,
               theta_high: float = 1.5, type_b_prob: float = 0.5, reference_return: float | None = None,
-              num_eval_levels: int = 16) -> UEDTask:
+              num_eval_levels: int = 16, reference_discounted_return: float | None = None) -> UEDTask:
     """A Brax morphology as a UED task. Cached: the same arguments give the same task.
 
     ``reference_return``: the return of a policy trained to convergence without disturbance (the
     optimal return of a type A level); without it the perfect-regret score is unavailable.
+    ``reference_discounted_return``: that policy's discounted return Σ_t γ^t r_t (the optimum of
+    the paper's utility, for the default discounted perfect regret; measured at the γ the
+    reference was trained with, the experiments' ``ppo.gamma``).
     Raises ``ConfigError`` for an unknown morphology or backend.
     """
     _check(morphology, backend)
     env = BraxUED(morphology, backend)
-    optimal_return = None
+    optimal_return = optimal_discounted = None
     if reference_return is not None:
         ref = float(reference_return)
         optimal_return = lambda level: jnp.where(level.type_b, TYPE_B_REWARD, ref)  # noqa: E731
+    if reference_discounted_return is not None:  # type B pays once, at t = 0: undiscounted
+        dref = float(reference_discounted_return)
+        optimal_discounted = lambda level, gamma: jnp.where(level.type_b, TYPE_B_REWARD, dref)  # noqa: E731
     return UEDTask(
         env=env,
         params=env.default_params,
@@ -286,6 +295,7 @@ def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float 
         num_actions=env.num_actions,
         max_episode_steps=EPISODE_LENGTH,
         optimal_return=optimal_return,
+        optimal_discounted_return=optimal_discounted,
         eval_sets={"undisturbed": env.undisturbed_levels(num_eval_levels)},
         level_tags=lambda level: {"type_b": level.type_b},
         solved=lambda ret: ret > 0,

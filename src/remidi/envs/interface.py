@@ -20,7 +20,8 @@ import jax.numpy as jnp
 from flax import struct
 from jaxued.environments.underspecified_env import EnvParams, UnderspecifiedEnv
 
-__all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal"]
+__all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal",
+           "one_step_discounted"]
 
 
 @struct.dataclass
@@ -108,8 +109,13 @@ class UEDTask:
         num_actions: size of the discrete action space, or with ``continuous`` the number of
             action dimensions (actions ``f32[num_actions]``, unbounded: the environment clips).
         max_episode_steps: an upper bound on an episode's length (evaluation rolls this long).
-        optimal_return: ``level -> f32[]`` best achievable return, or None if unknown (then the
-            perfect-regret score is unavailable).
+        optimal_return: ``level -> f32[]`` best achievable (undiscounted) return, or None if
+            unknown (then the perfect-regret score is unavailable).
+        optimal_discounted_return: ``(level, gamma) -> f32[]``, the best achievable discounted
+            return E[Σ_t γ^t r_t] (t counted from the episode's first step, ``gamma`` a static
+            float): the optimum of the paper's utility, which the default perfect-regret score
+            uses (``UEDConfig.discounted_regret``). For a one-step task it is ``optimal_return``
+            (:func:`one_step_discounted`).
         eval_sets: name → level batch (leading dim = number of levels) to report solve rates on.
         eval_envs: name → the environment that plays that evaluation set, where it is not ``env``
             (e.g. a held-out maze larger than the training grid); same ``params``.
@@ -131,6 +137,7 @@ class UEDTask:
     num_actions: int
     max_episode_steps: int
     optimal_return: Callable[[Any], jax.Array] | None = None
+    optimal_discounted_return: Callable[[Any, float], jax.Array] | None = None
     eval_sets: dict[str, Any] = field(default_factory=dict)
     eval_envs: dict[str, UnderspecifiedEnv] = field(default_factory=dict)
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
@@ -138,3 +145,9 @@ class UEDTask:
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
     deterministic_reset: bool = False
     continuous: bool = False
+
+
+def one_step_discounted(optimal_return: Callable[[Any], jax.Array]) -> Callable[[Any, float], jax.Array]:
+    """``UEDTask.optimal_discounted_return`` of a task whose episodes last one step: its reward
+    comes at t = 0, undiscounted (γ^0 = 1), so the discounted optimum is the optimum."""
+    return lambda level, gamma: optimal_return(level)

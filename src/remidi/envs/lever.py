@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
 
 
 @struct.dataclass
@@ -85,13 +85,15 @@ def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplie
     so runs in one process reuse its compiled train steps."""
     env = LeverGame(num_levers)
     params = LeverParams(hidden_multiplier=hidden_multiplier)
+    optimal = lambda level: jnp.where(level.visible, 1.0, hidden_multiplier)  # noqa: E731
     return UEDTask(
         env=env,
         params=params,
         sample_level=lambda rng: env.sample_level(rng, visible_prob),
         num_actions=num_levers,
         max_episode_steps=1,
-        optimal_return=lambda level: jnp.where(level.visible, 1.0, hidden_multiplier),
+        optimal_return=optimal,
+        optimal_discounted_return=one_step_discounted(optimal),
         eval_sets={"visible": env.all_levels(True), "hidden": env.all_levels(False)},
         level_tags=lambda level: {"hidden": ~level.visible},
         expected_return=lambda level, probs: env.expected_return(level, probs, params),

@@ -47,7 +47,7 @@ from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 __all__ = [
     "MazeLevel", "MazeState", "MazeEnv", "MAX_STEPS", "TRAIN_SIZE", "NUM_WALLS", "PREFAB_NAMES", "HELD_OUT_NAMES",
     "random_maze", "tmaze_level", "prefab_level", "corridor_levels", "held_out_sets", "cost_to_go", "shortest_path_steps",
-    "optimal_return", "maze_task", "from_jaxued",
+    "optimal_return", "optimal_discounted_return", "maze_task", "from_jaxued",
 ]
 
 MAX_STEPS = 250
@@ -286,8 +286,22 @@ def optimal_return(level: MazeLevel, max_steps: int = MAX_STEPS) -> jax.Array:
     too many.) A T-maze's optimal return is ``1``: an agent that could see the goal would step
     towards it at once. Blindness does not change the level's optimum.
     """
+    return optimal_discounted_return(level, 1.0, max_steps)
+
+
+def optimal_discounted_return(level: MazeLevel, gamma: float, max_steps: int = MAX_STEPS) -> jax.Array:
+    """f32[]: the best discounted return E[Σ_t γ^t r_t] on ``level`` (t = 0 at the first action).
+
+    The goal reached with the ``n``-th action pays ``1 − 0.9·n/T`` at ``t = n − 1``, so the
+    optimum is ``γ^(n−1)·(1 − 0.9·n/T)`` for ``n`` = :func:`shortest_path_steps` (a shorter path
+    is both discounted less and paid more, so the shortest path is optimal for every γ), and
+    ``0`` when the goal is unreachable or ``n > T``. A T-maze pays ``1`` at ``t = 0``, so its
+    optimum is ``1``. ``gamma = 1`` gives :func:`optimal_return`.
+    """
     n = shortest_path_steps(level)
-    maze = jnp.where(n <= max_steps, 1.0 - 0.9 * n / max_steps, 0.0)
+    reachable = n <= max_steps
+    steps = jnp.where(reachable, n, 1.0)
+    maze = jnp.where(reachable, jnp.power(jnp.float32(gamma), steps - 1.0) * (1.0 - 0.9 * steps / max_steps), 0.0)
     return jnp.where(level.tmaze, 1.0, maze).astype(jnp.float32)
 
 
@@ -327,6 +341,7 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
         num_actions=env.action_space(env.default_params).n,
         max_episode_steps=MAX_STEPS,
         optimal_return=optimal_return,
+        optimal_discounted_return=optimal_discounted_return,
         eval_sets={name: levels for name, (_, levels) in sets.items()},
         eval_envs={name: envs[size] for name, (size, _) in sets.items() if size != TRAIN_SIZE},
         level_tags=(lambda level: {tag: getattr(level, tag)}) if tag else (lambda level: {}),

@@ -80,6 +80,9 @@ class Experiment:
     # (config.scale_dependents), e.g. {"num_updates": ("eval_every", ...)}
     scaled_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
     shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
+    # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
+    # in for the paper's at a smaller scale (e.g. cpu)
+    preset_reasons: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
 def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None):

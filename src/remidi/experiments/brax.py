@@ -40,6 +40,9 @@ class BraxLevelsConfig:
     backend: str = field(default=DEFAULT_BACKEND, metadata={"help": f"Brax physics: {', '.join(BACKENDS)}"})
     reference_return: float = field(default=0.0, metadata={
         "help": "optimal return of a type A level (0: the cached reference value of the morphology)"})
+    reference_discounted_return: float = field(default=0.0, metadata={
+        "help": "optimal discounted return Σ γ^t r_t of a type A level, for discounted_regret (0: the cached "
+                "reference value)"})
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,7 @@ def paper_config() -> BraxUEDConfig:
     """Paper §6.5 / appendix: 200 updates of PPO on 256 envs × 100 steps (4 epochs, 32
     minibatches, γ 0.99, λ 0.95, lr 1e-4), rewards ÷ 10 and running observation normalisation,
     perfect regret, PLR⊥ rank prioritisation (β 1.0) over a buffer of 512, replay 0.8; ReMiDi 2
-    buffers of 512, the first used for 25 replays. The agent: a 256-unit tanh layer, a 256-unit
+    buffers of 512, the first used for 25 updates. The agent: a 256-unit tanh layer, a 256-unit
     LSTM, 64-unit heads, a Gaussian policy with a state-independent log-std."""
     return BraxUEDConfig(
         num_updates=200, num_envs=256, num_steps=100, score="perfect_regret", network="mlp_lstm",
@@ -64,7 +67,7 @@ def paper_config() -> BraxUEDConfig:
                             replay_prob=0.8, min_fill=0.5, duplicate_check=True),
         # one tracker slot: every type B level shows the same first observation and ends after one
         # step, so one frozen type B level matches them all; no two type A levels share a start
-        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=512, steps_per_buffer=25, count="replays",
+        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=512, steps_per_buffer=25,
                             tracker_budget=1),
     )
 
@@ -95,12 +98,14 @@ def cached_references() -> dict:
     return json.loads(REFERENCE_FILE.read_text()) if REFERENCE_FILE.exists() else {}
 
 
-def reference_return(morphology: str, cfg: BraxUEDConfig) -> float | None:
-    """``brax.reference_return`` if set, else the cached value (None if there is none)."""
-    if cfg.brax.reference_return:
-        return float(cfg.brax.reference_return)
-    entry = cached_references().get(morphology)
-    return float(entry["return"]) if entry else None
+def reference_return(morphology: str, cfg: BraxUEDConfig, key: str = "return") -> float | None:
+    """``brax.reference_return`` (``key="discounted_return"``: ``brax.reference_discounted_return``)
+    if set, else the cached value (None if there is none)."""
+    given = cfg.brax.reference_return if key == "return" else cfg.brax.reference_discounted_return
+    if given:
+        return float(given)
+    entry = cached_references().get(morphology, {})
+    return float(entry[key]) if key in entry else None
 
 
 def task_factory(morphology: str):
@@ -112,11 +117,17 @@ def task_factory(morphology: str):
         require(b.theta_low <= b.theta_high, "brax.theta_low", f"≤ brax.theta_high ({b.theta_high})", b.theta_low)
         choice("brax.backend", b.backend, BACKENDS)
         ref = reference_return(morphology, cfg)
-        if ref is None and cfg.score == "perfect_regret":
-            raise ConfigError(f"brax.reference_return: no cached reference return for {morphology}; compute one "
-                              f"with `remidi run brax-{morphology} --algo dr --preset reference` and pass it as "
-                              f"--set brax.reference_return=R (or choose another score)")
-        return brax_task(morphology, b.backend, float(b.theta_low), float(b.theta_high), float(b.type_b_prob), ref)
+        dref = reference_return(morphology, cfg, "discounted_return")
+        for key, value in (("reference_return", ref), ("reference_discounted_return", dref)):
+            if key == "reference_discounted_return" and not cfg.discounted_regret:
+                continue
+            if value is None and cfg.score == "perfect_regret":
+                metric = "return/undisturbed" if key == "reference_return" else "discounted_return/undisturbed"
+                raise ConfigError(f"brax.{key}: no cached reference value for {morphology}; compute one with "
+                                  f"`remidi run brax-{morphology} --algo dr --preset reference` and pass its final "
+                                  f"{metric} as --set brax.{key}=R (or choose another score)")
+        return brax_task(morphology, b.backend, float(b.theta_low), float(b.theta_high), float(b.type_b_prob), ref,
+                         reference_discounted_return=dref)
 
     return factory
 
@@ -128,7 +139,7 @@ def _experiment(morphology: str):
         task_factory=task_factory(morphology),
         config_factory=paper_config,
         presets=PRESETS,
-        preset_seeds={"paper": 5, "smoke": 2, "reference": 1},
+        preset_seeds={"paper": 10, "smoke": 2, "reference": 1},
         summary_metrics=("return/undisturbed", "replay_fraction/type_b", "buffer_fraction/type_b",
                          "regret/undisturbed/mean"),
         plot_panels_spec=(("return/undisturbed", "return on undisturbed type A levels (θ = 1)"),

@@ -86,7 +86,8 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
-                        summary_metrics, plot_panels_spec, derive=None, bar_chart=None) -> Experiment:
+                        summary_metrics, plot_panels_spec, derive=None, bar_chart=None,
+                        preset_reasons=None) -> Experiment:
     tasks: dict[UEDConfig, UEDTask] = {}
 
     def task_for(cfg: UEDConfig) -> UEDTask:
@@ -106,4 +107,5 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
         scaled_keys=SCALED_KEYS,
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
+        preset_reasons=preset_reasons or {},
     )

@@ -17,7 +17,7 @@ TINY = ["--set", "num_updates=24", "--set", "num_envs=16", "--set", "num_steps=2
         "--set", "lstm_size=16", "--set", "ppo.minibatches=2", "--set", "ppo.epochs=2", "--set", "eval_every=8",
         "--set", "checkpoint_every=8", "--set", "eval_attempts=1", "--set", "buffer.capacity=32",
         "--set", "remidi.buffer_capacity=32", "--set", "remidi.steps_per_buffer=8", "--set", "buffer.min_fill=0.5",
-        "--set", "brax.reference_return=250"]
+        "--set", "brax.reference_return=250", "--set", "brax.reference_discounted_return=200"]
 
 
 @pytest.fixture(scope="module")

@@ -40,12 +40,12 @@ def check_held_out_metrics(summary):
 
 @pytest.fixture(scope="module")
 def tmaze_remidi(tmp_path_factory):
-    # buffer 0 lasts 30 replays (about 40 updates), long enough for PLR⊥'s preference to show
+    # buffer 0 lasts 39 updates (nearly the first two blocks), long enough for PLR⊥'s preference to show
     # in it; buffers 1 and 2 follow. One run serves both the PLR⊥ and the ReMiDi checks: ReMiDi's
     # first stage is PLR⊥ (nothing frozen yet), and a second compiled program for `--algo plr`
     # would cost the suite about 30 s
     return run(tmp_path_factory.mktemp("tmaze") / "remidi", "tmaze", "remidi",
-               "--set", "num_updates=80", "--set", "remidi.steps_per_buffer=30")
+               "--set", "num_updates=80", "--set", "remidi.steps_per_buffer=39")
 
 
 @pytest.mark.slow  # end-to-end run: `pytest -m "not slow"` skips it

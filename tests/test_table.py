@@ -32,3 +32,18 @@ def test_a_folder_without_runs_is_one_line_exit_2(tmp_path, capsys):
     assert main(["table", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "RUN: no summary.json in" in err
+
+
+def test_last_k_averages_each_seeds_last_logged_points(tmp_path, capsys):
+    folder = tmp_path / "run"
+    write_run(folder, "tmaze", "plr", {"solve_rate/mean": [0.0, 1.0]})
+    rows = ["seed,step,metric,value"]
+    for seed, values in ((0, [0.9, 0.1, 0.2, 0.3]), (1, [0.0, 0.5, float("nan"), 0.7])):
+        rows += [f"{seed},{10 * (t + 1)},solve_rate/mean,{v}" for t, v in enumerate(values)]
+    (folder / "metrics.csv").write_text("\n".join(rows) + "\n")
+    assert main(["table", str(folder), "--metrics", "solve_rate/mean", "--last", "3"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[2]
+    # seed 0: mean(0.1, 0.2, 0.3) = 0.2; seed 1: mean(0.5, 0.7) = 0.6 (NaN left out) → 0.40 ± 0.20
+    assert line.startswith("| tmaze | plr | 0.40 ± 0.20 | 2 |"), line
+    assert main(["table", str(folder), "--last", "0"]) == 2
+    assert "--last: must be an integer ≥ 1" in capsys.readouterr().err

@@ -197,7 +197,7 @@ def _cmd_table(args) -> int:
     from remidi.experiments.table import markdown_table, summaries
 
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
-    print(markdown_table(summaries(args.runs), metrics))
+    print(markdown_table(summaries(args.runs), metrics, args.last))
     return 0
 
 
@@ -303,6 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
     table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
     table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: the first three of the "
                                                          "first run's summary)")
+    table.add_argument("--last", type=int, metavar="K", help="per seed, the mean of each metric's last K logged "
+                                                            "points (metrics.csv) instead of its final value")
     table.set_defaults(func=_cmd_table)
 
     bench = sub.add_parser("bench", help="throughput benchmarks (env-steps/s, compile time, memory)",

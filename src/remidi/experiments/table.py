@@ -3,6 +3,10 @@
 A run folder holds ``summary.json`` (one algorithm) or sub-folders that do (several algorithms
 of one ``remidi run``). Each row is one experiment × algorithm: the chosen metrics as
 mean ± std over seeds, then the seeds, the preset and the training wall time.
+
+``last=K`` (``--last K``) replaces each seed's final value by its mean over the last K logged
+points of ``metrics.csv`` (for evaluation metrics whose single last point is noisy, such as a
+held-out solve rate); points where a metric is undefined (NaN) are left out of that mean.
 """
 
 from __future__ import annotations
@@ -20,12 +24,12 @@ def summaries(folders: list[Path]) -> list[dict]:
     found = []
     for folder in map(Path, folders):
         if (folder / "summary.json").is_file():
-            found.append(outputs.read_json(folder / "summary.json"))
+            found.append({**outputs.read_json(folder / "summary.json"), "folder": str(folder)})
             continue
         subs = sorted(folder.glob("*/summary.json")) if folder.is_dir() else []
         if not subs:
             raise ConfigError(f"RUN: no summary.json in {folder} (give finished run folders, or folders of them)")
-        docs = [outputs.read_json(p) for p in subs]
+        docs = [{**outputs.read_json(p), "folder": str(p.parent)} for p in subs]
         config = subs[0].parent / "config.json"  # each algorithm's config.json records the run's order
         order = outputs.read_json(config).get("algos", []) if config.is_file() else []
         docs.sort(key=lambda d: (order.index(d["algo"]) if d["algo"] in order else len(order), d["algo"]))
@@ -46,10 +50,39 @@ def _digits(metric: str) -> int:
     return 2 if metric.split("/")[0] in ("replay_fraction", "buffer_fraction", "solve_rate") else 1
 
 
-def markdown_table(docs: list[dict], metrics: list[str] | None = None) -> str:
-    """The table as Markdown; ``metrics`` default to the first three of the first summary."""
+def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
+    """``{metric: {"mean", "std", "per_seed"}}``: per seed, the mean of the metric's last ``last``
+    logged points in the run's ``metrics.csv`` (NaN points left out); then mean and std over seeds."""
+    path = Path(doc["folder"]) / "metrics.csv"
+    if not path.is_file():
+        raise ConfigError(f"--last: no metrics.csv in {doc['folder']}")
+    series: dict[tuple[str, int], list[tuple[int, float]]] = {}
+    for seed, step, name, value in outputs.read_metrics_csv(path):
+        if name in metrics:
+            series.setdefault((name, seed), []).append((step, value))
+    out = {}
+    for name in metrics:
+        per_seed = []
+        for seed in doc["seeds"]:
+            points = [v for _, v in sorted(series.get((name, seed), []))[-last:] if math.isfinite(v)]
+            per_seed.append(sum(points) / len(points) if points else math.nan)
+        finite = [v for v in per_seed if math.isfinite(v)]
+        if len(finite) < len(per_seed) or not finite:
+            out[name] = {"mean": None, "std": None, "per_seed": per_seed}
+            continue
+        mean = sum(finite) / len(finite)
+        std = math.sqrt(sum((v - mean) ** 2 for v in finite) / len(finite))
+        out[name] = {"mean": mean, "std": std, "per_seed": per_seed}
+    return out
+
+
+def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int | None = None) -> str:
+    """The table as Markdown; ``metrics`` default to the first three of the first summary; with
+    ``last``, each metric is the mean of its last ``last`` logged points (:func:`windowed`)."""
     if not docs:
         raise ConfigError("RUN: no finished runs given")
+    if last is not None and (not isinstance(last, int) or last < 1):
+        raise ConfigError(f"--last: must be an integer ≥ 1, got {last!r}")
     metrics = metrics or list(docs[0]["metrics"])[:3]
     head = ["experiment", "algorithm", *metrics, "seeds", "preset", "wall time"]
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
@@ -58,7 +91,8 @@ def markdown_table(docs: list[dict], metrics: list[str] | None = None) -> str:
         wall = "n/a" if wall is None else (f"{wall / 60:.1f} min" if wall >= 60 else f"{wall:.0f} s")
         if d.get("resumed"):
             wall += " (last part)"
-        cells = [d["experiment"], d["algo"], *(_cell(d["metrics"].get(m), _digits(m)) for m in metrics),
+        values = windowed(d, metrics, last) if last is not None else d["metrics"]
+        cells = [d["experiment"], d["algo"], *(_cell(values.get(m), _digits(m)) for m in metrics),
                  str(len(d["seeds"])), d["preset"], wall]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -47,7 +47,10 @@ def _cell(entry: dict | None, digits: int) -> str:
 
 
 def _digits(metric: str) -> int:
-    return 2 if metric.split("/")[0] in ("replay_fraction", "buffer_fraction", "solve_rate") else 1
+    kind = metric.split("/")[0]
+    if kind in ("regret", "adversary_prob", "policy"):  # the tabular games' values near 0.175, 1/64
+        return 3
+    return 2 if kind in ("replay_fraction", "buffer_fraction", "solve_rate") else 1
 
 
 def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:

@@ -116,6 +116,36 @@ def test_unknown_algorithm_and_missing_optimal_return():
     validate_ued_config(BASE, "minimax-return", no_optimum)  # scores by return: fine
 
 
+def test_discounted_regret_needs_the_tasks_discounted_optimum():
+    no_discounted = dataclasses.replace(TASK, optimal_discounted_return=None)
+    with pytest.raises(ConfigError, match="discounted_regret: this task gives no discounted optimal return"):
+        validate_ued_config(BASE, "plr", no_discounted)
+    validate_ued_config(R(BASE, discounted_regret=False), "plr", no_discounted)
+
+
+def test_an_environment_that_fails_is_reported_once_not_once_per_network():
+    """A user's environment whose reset raises (or a level generator that gives no level): its
+    own error, once, in one line; never a recursion through every network."""
+
+    class Broken(type(TASK.env)):
+        def reset_env_to_level(self, rng, level, params):
+            raise ValueError("boom: no such level\nsecond line")
+
+    broken = dataclasses.replace(TASK, env=Broken(64))
+    with pytest.raises(ConfigError) as err:
+        validate_ued_config(BASE, "plr", broken)
+    text = str(err.value)
+    assert "\n" not in text and text.count("boom") == 1 and "ValueError: boom: no such level" in text
+    assert text.startswith("task: sampling a level and resetting the environment to it failed")
+    # not an UnderspecifiedEnv at all (gymnax's CartPole with its params as the level)
+    import gymnax
+
+    env, params = gymnax.make("CartPole-v1")
+    raw = UEDTask(env=env, params=params, sample_level=lambda rng: params, num_actions=2, max_episode_steps=10)
+    with pytest.raises(ConfigError, match="^task: sampling a level and resetting"):
+        validate_ued_config(R(BASE, score="pvl"), "plr", raw)
+
+
 def test_jaxued_maze_trains_through_our_interface():
     from jaxued.environments import Maze
     from jaxued.environments.maze import make_level_generator

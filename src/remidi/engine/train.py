@@ -479,34 +479,53 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
 
 
 # ---------------------------------------------------------------------------- validation
+def _observation_batch(task: UEDTask, flat: bool):
+    """The task's first observation as a ``[1, 1, ...]`` batch (flattened to one vector if
+    ``flat``), shapes only. Raises ConfigError, once, with the environment's own error when its
+    level generator or reset fails (a network cannot be judged on an environment that does not run)."""
+    from remidi.errors import ConfigError
+
+    def first():
+        obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
+        return flatten_obs(obs) if flat else obs
+
+    try:
+        return jax.eval_shape(first)
+    except Exception as err:  # the user's environment: report its own error, once
+        message = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise ConfigError(f"task: sampling a level and resetting the environment to it failed: "
+                          f"{type(err).__name__}{': ' + message if message else ''} (the environment must be a "
+                          f"jaxued UnderspecifiedEnv and sample_level must return one of its levels)") from None
+
+
+def _read_error(net, obs) -> Exception | None:
+    """None if ``net`` can be initialised on the observation batch ``obs`` (traced abstractly),
+    else the error it raised."""
+    try:
+        jax.eval_shape(lambda o: net.init(jax.random.PRNGKey(0), net.initialize_carry(1), o, jnp.ones((1, 1), bool)),
+                       obs)
+        return None
+    except Exception as err:  # any failure to read the observation is the choice of network
+        return err
+
+
 def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
     """Raise ConfigError unless ``net`` can be applied to the task's observations (flattened to
     one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
-    run)."""
+    run). The error names the networks that can; an environment that fails to produce an
+    observation gets its own one-line error instead (:func:`_observation_batch`)."""
     from remidi.engine.networks import NETWORKS
     from remidi.errors import ConfigError
 
-    def init():
-        obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
-        if flat:
-            obs = flatten_obs(obs)
-        return net.init(jax.random.PRNGKey(0), net.initialize_carry(1), obs, jnp.ones((1, 1), bool))
-
-    try:
-        jax.eval_shape(init)
-    except Exception as err:  # any failure to read the observation is the user's choice of network
-        fits = []
-        for other in sorted(NETWORKS):
-            if other != name:
-                try:
-                    check_network_reads_observations(make_network(other, task.num_actions, task.continuous), other,
-                                                     task, flat)
-                    fits.append(other)
-                except ConfigError:
-                    pass
-        what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
-        raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
-                          f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}") from None
+    obs = _observation_batch(task, flat)
+    err = _read_error(net, obs)
+    if err is None:
+        return
+    fits = [other for other in sorted(NETWORKS)
+            if other != name and _read_error(make_network(other, task.num_actions, task.continuous), obs) is None]
+    what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
+    raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
+                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
 
 
 def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:

@@ -137,6 +137,11 @@ def test_resume_errors_are_one_line(tmp_path, capsys):
     (["run", "lever", "--set", "remidi.num_buffers=9"], "remidi.num_buffers: must be small enough"),
     (["run", "lever", "--set", "ppo.nope=1"], "--set: unknown key 'ppo.nope'; allowed:"),
     (["run", "lever", "--set", "score=regret"], "score: unknown value 'regret'"),
+    # numbers that would overflow after config.json was written
+    (["run", "lever", "--set", "num_updates=99999999999999999999"], "num_updates: must keep num_updates × ppo."),
+    (["run", "lever", "--set", "num_updates=3000000000"], "below 2^31"),
+    (["run", "lever", "--seed", "1099511627776"], "--seed: every seed must be in [0, 4294967295]"),
+    (["run", "lever", "--seed", "4294967295", "--seeds", "2"], "--seed: every seed must be in [0, 4294967295]"),
 ])
 def test_lever_bad_config_is_one_line_and_writes_nothing(tmp_path, capsys, argv, needle):
     out = tmp_path / "never"

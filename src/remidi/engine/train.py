@@ -539,6 +539,11 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     choice("--algo", algo, ALGORITHMS)
     for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
         positive_int(key, getattr(cfg, key))
+    steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count
+    if steps >= 2**31:
+        raise ConfigError(f"num_updates: must keep num_updates × ppo.epochs × ppo.minibatches below 2^31 "
+                          f"(the optimiser counts its steps in 32 bits), got {cfg.num_updates} × {cfg.ppo.epochs} × "
+                          f"{cfg.ppo.minibatches} = {steps}; lower num_updates")
     if cfg.eval_every > cfg.num_updates:
         raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
                           f"lower eval_every or raise num_updates")

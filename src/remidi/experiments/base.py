@@ -112,6 +112,9 @@ def parse_algos(exp: Experiment, text: str | None) -> list[str]:
     return algos
 
 
+MAX_SEED = 2**32 - 1  # jax.random.PRNGKey takes 32-bit seeds
+
+
 def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: list[int],
                    overrides: dict[str, Any], out: Path, progress: bool = True,
                    argv: list[str] | None = None, devices: int = 1) -> dict[str, dict]:
@@ -124,6 +127,9 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
         exp.validate(config, algo)
     if not seeds:
         raise ConfigError("--seeds: must be an integer ≥ 1")
+    if min(seeds) < 0 or max(seeds) > MAX_SEED:
+        raise ConfigError(f"--seed: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
+                          f"{min(seeds)}..{max(seeds)}; lower --seed or --seeds")
     _check_devices(exp, devices, len(seeds))
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch

@@ -80,6 +80,17 @@ def test_existing_run_is_never_overwritten(tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+def test_one_algorithm_into_a_finished_several_algorithm_run_writes_nothing(tmp_path, capsys):
+    """A several-algorithm run keeps config.json in each algorithm's sub-folder, none at the top:
+    a later single-algorithm run into the same folder must be refused, not added beside them."""
+    out = tmp_path / "both"
+    assert run_cli(capsys, "run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    code, _, err = run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--out", str(out), *FAST)
+    assert code == 2 and "already holds a run" in err and err.count("\n") == 1
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
 def test_help_for_every_subcommand(capsys):
     for sub in ([], ["solve"], ["run"], ["list"]):
         with pytest.raises(SystemExit) as exc:

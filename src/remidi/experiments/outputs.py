@@ -37,6 +37,8 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
     holds_run = (out / "config.json").exists()
     if resume and not holds_run:
         raise ConfigError(f"--resume: {out} holds no run (no config.json)")
+    if not resume and out.is_dir() and not holds_run:  # a several-algorithm run: one sub-folder per algorithm
+        holds_run = any((sub / "config.json").exists() for sub in out.iterdir() if sub.is_dir())
     if not resume and holds_run:
         raise ConfigError(f"--out: {out} already holds a run; choose another folder or pass --resume {out}")
     if not resume:

@@ -61,6 +61,9 @@ def test_several_algorithms_get_subfolders_and_comparison_plots(tmp_path, capsys
     (["run", "tabular-shared", "--seeds", "0"], "--seeds: must be an integer ≥ 1"),
     (["run", "tabular-shared", "--set", "iterations"], "--set: expected key=value"),
     (["run", "tabular-shared", "--seeds", "two"], "invalid int value"),
+    (["run", "tabular-shared", "--algo", "mmr,"], "--algo: 'mmr,' has an empty name"),
+    (["run", "tabular-shared", "--algo", "mmr,,remidi"], "--algo: 'mmr,,remidi' has an empty name"),
+    (["run", "tabular-shared", "--no-such-flag"], "remidi: error: unrecognized arguments: --no-such-flag"),
 ])
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv, needle):
     out = tmp_path / "never"

@@ -47,3 +47,10 @@ def test_last_k_averages_each_seeds_last_logged_points(tmp_path, capsys):
     assert line.startswith("| tmaze | plr | 0.40 ± 0.20 | 2 |"), line
     assert main(["table", str(folder), "--last", "0"]) == 2
     assert "--last: must be an integer ≥ 1" in capsys.readouterr().err
+
+
+def test_a_metric_no_run_has_is_one_line_exit_2(tmp_path, capsys):
+    write_run(tmp_path / "run", "tmaze", "plr", {"solve_rate/mean": [0.0, 1.0]})
+    assert main(["table", str(tmp_path / "run"), "--metrics", "solve_rate/mean,nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--metrics: no run has 'nosuch'; allowed: solve_rate/mean" in err

@@ -21,7 +21,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but usage errors are one line and exit 2."""
 
     def error(self, message: str):  # noqa: D401
-        raise RemidiError(f"{self.prog}: {message} (see {self.prog} --help)")
+        command = self.prog.removeprefix("remidi").strip()  # "run" for `remidi run`; "" for `remidi` itself
+        raise RemidiError(f"{command + ': ' if command else ''}{message} (see {self.prog} --help)")
 
 
 _RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume hint
@@ -243,7 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "write config.json, metrics.csv, summary.json and plots.")
     run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`)")
     run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
-    run.add_argument("--preset", default="smoke", help="smoke (minutes on a CPU) or paper (default: smoke)")
+    run.add_argument("--preset", default="smoke", help="smoke (minutes on a CPU), paper, or another of the "
+                                                      "experiment's presets (cpu, reference: remidi list EXPERIMENT); "
+                                                      "default: smoke")
     run.add_argument("--seeds", type=int, help="number of seeds (default: the preset's)")
     run.add_argument("--seed", type=int, default=0, help="first seed (default 0): seeds are SEED … SEED+N−1")
     run.add_argument("--out", help="output folder (default: runs/EXPERIMENT/TIMESTAMP); must not hold a run")

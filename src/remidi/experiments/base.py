@@ -101,9 +101,12 @@ def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], note
 def parse_algos(exp: Experiment, text: str | None) -> list[str]:
     if text is None or text == "all":
         return list(exp.algorithms)
-    algos = [a.strip() for a in text.split(",") if a.strip()]
-    if not algos:
+    algos = [a.strip() for a in text.split(",")]
+    if not any(algos):
         raise one_of("--algo", text, exp.algorithms)
+    if not all(algos):
+        raise ConfigError(f"--algo: {text!r} has an empty name; give algorithms separated by single commas "
+                          f"(allowed: {', '.join(exp.algorithms + ('all',))})")
     for algo in algos:
         if algo not in exp.algorithms:
             raise one_of("--algo", algo, exp.algorithms + ("all",))

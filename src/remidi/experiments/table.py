@@ -87,6 +87,10 @@ def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int
     if last is not None and (not isinstance(last, int) or last < 1):
         raise ConfigError(f"--last: must be an integer ≥ 1, got {last!r}")
     metrics = metrics or list(docs[0]["metrics"])[:3]
+    known = {name for d in docs for name in d["metrics"]}
+    unknown = [m for m in metrics if m not in known]
+    if unknown:
+        raise ConfigError(f"--metrics: no run has {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}")
     head = ["experiment", "algorithm", *metrics, "seeds", "preset", "wall time"]
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for d in docs:

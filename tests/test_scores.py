@@ -72,11 +72,12 @@ def test_one_step_episodes_reduce_to_the_mean_over_steps():
 def test_score_levels_dispatches_by_name():
     mean = jnp.array([0.5, -1.0, 2.0])
     optimal = jnp.array([1.0, 10.0, 2.0])
-    expected = {"perfect_regret": [0.5, 11.0, 0.0], "pvl": PVL, "maxmc": MAXMC, "neg_return": [-0.5, 1.0, -2.0]}
+    expected = {"perfect_regret": [0.5, 11.0, 0.0], "pvl": PVL, "maxmc": MAXMC, "neg_return": [-0.5, 1.0, -2.0],
+                "learnability": [0.0, 0.0, -np.inf]}  # X's returns are all positive: p = 1 where an episode ended
     assert set(expected) == set(sc.SCORES)
     for name, want in expected.items():
         got = sc.score_levels(name, mean_return=mean, values=X, advantages=X, max_return=MAX_RETURN,
-                              done=EPISODE_DONE, optimal_return=optimal)
+                              done=EPISODE_DONE, optimal_return=optimal, reward=X, solved=lambda ret: ret > 0)
         np.testing.assert_allclose(got, want, rtol=1e-6, err_msg=name)
 
 
@@ -127,3 +128,40 @@ def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
     np.testing.assert_allclose(level_score(dataclasses.replace(cfg, discounted_regret=False)), 0.9 * n / 250,
                                rtol=1e-4)
     assert abs(discounted - 0.9 * n / 250) > 0.05  # the two forms really differ on this level
+
+
+def test_learnability_is_p_times_one_minus_p_over_finished_episodes():
+    """SFL's score on a hand-built rollout: env 0 solves 1 of 2 finished episodes (p = 1/2: 0.25),
+    env 1 solves 3 of 3 (0), env 2 1 of 4 (3/16), env 3 finishes none (-inf, like PVL/MaxMC); an
+    unfinished trailing episode never counts, solved or not."""
+    solved = lambda ret: ret > 0  # noqa: E731  the maze's criterion
+    r = np.zeros((8, 4), np.float32)
+    d = np.zeros((8, 4), bool)
+    r[1, 0], d[1, 0], d[3, 0], r[5, 0] = 1.0, True, True, 1.0  # solved, failed, then an unfinished solve
+    r[[0, 2, 4], 1], d[[0, 2, 4], 1] = 0.5, True
+    r[0, 2], d[[0, 1, 2, 3], 2] = 0.8, True
+    r[:, 3] = 1.0
+    got = np.asarray(sc.learnability(jnp.asarray(r), jnp.asarray(d), solved))
+    np.testing.assert_allclose(got, [0.25, 0.0, 3 / 16, -np.inf])
+    p, count = sc.solve_rate(jnp.asarray(r), jnp.asarray(d), solved)
+    np.testing.assert_allclose(p, [0.5, 1.0, 0.25, 0.0])
+    np.testing.assert_array_equal(count, [2, 3, 4, 0])
+    # a policy that never solves and one that always solves both score 0: nothing left to learn
+    assert float(sc.learnability(jnp.zeros((4, 1)), jnp.ones((4, 1), bool), solved)[0]) == 0.0
+
+
+def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion():
+    import dataclasses
+    from types import SimpleNamespace
+
+    from remidi.engine.train import make_setup, score
+    from remidi.envs.lever import lever_task
+    from remidi.experiments.lever import paper_config
+
+    task = lever_task(64)
+    cfg = dataclasses.replace(paper_config(), score="learnability")
+    reward = jnp.asarray([[1.0, -10.0], [-1.0, -10.0], [1.0, 10.0], [1.0, -10.0]])  # one-step episodes
+    traj = SimpleNamespace(reward=reward, done=jnp.ones((4, 2), bool), value=jnp.zeros((4, 2)))
+    levels = jax.tree.map(lambda x: x[:2], task.eval_sets["visible"])
+    got = score(make_setup(task, cfg, "plr"), levels, traj, jnp.zeros((4, 2)), jnp.zeros(2), jnp.zeros(2))
+    np.testing.assert_allclose(got, [0.75 * 0.25, 0.25 * 0.75])

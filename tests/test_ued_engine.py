@@ -93,7 +93,7 @@ def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
 
 @pytest.mark.parametrize("change, needle", [
     (dict(num_updates=0), "num_updates: must be an integer ≥ 1"),
-    (dict(score="regret"), "score: unknown value 'regret'; allowed: perfect_regret, pvl, maxmc, neg_return"),
+    (dict(score="regret"), "score: unknown value 'regret'; allowed: perfect_regret, pvl, maxmc, neg_return, learnability"),
     (dict(network="transformer"), "transformer"),
     (dict(buffer=R(BASE.buffer, capacity=-3)), "buffer.capacity"),
     (dict(buffer=R(BASE.buffer, replay_prob=1.5)), "buffer.replay_prob"),

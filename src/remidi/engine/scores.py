@@ -15,13 +15,16 @@ Higher = replayed more.
 * ``maxmc``: per finished episode, the mean over its steps of (highest return ever achieved on
   the level − V(s_t)); then the mean over the finished episodes.
 * ``neg_return``: −mean episodic return (minimax return).
+* ``learnability`` (Rutherford et al. 2024, "No Regrets", SFL): p·(1 − p), p the share of the
+  level's episodes that ended inside the rollout and were solved (the task's ``solved`` on the
+  episode's return); highest for levels the agent solves half of the time.
 
 PVL and MaxMC follow Jiang et al. (2021), "Prioritized Level Replay", as its reference
 implementations compute them (minimax's ``ued_scores.py``, and jaxued's ``positive_value_loss``
 and ``max_mc`` derived from it): an episode's score is its per-step average, the level's score
 is the average over the episodes that *ended* inside the rollout, and the steps of an
 unfinished trailing episode are left out. A rollout **without any finished episode** scores
-``-inf`` (the references' ``incomplete_value``): a fresh level scored so is never inserted into
+``-inf`` (PVL, MaxMC and learnability alike) (the references' ``incomplete_value``): a fresh level scored so is never inserted into
 the buffer, and a replayed one ranks last until it is scored again (staleness can still replay
 it). Make the rollout longer than an episode (``num_steps`` ≥ the episode limit) to score
 every level.
@@ -36,7 +39,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-SCORES = ("perfect_regret", "pvl", "maxmc", "neg_return")
+SCORES = ("perfect_regret", "pvl", "maxmc", "neg_return", "learnability")
 
 
 def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
@@ -88,6 +91,30 @@ def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float = -jnp.i
     return jnp.where(count > 0, total / jnp.maximum(count, 1), incomplete_value)
 
 
+def solve_rate(reward: jax.Array, done: jax.Array, solved) -> tuple[jax.Array, jax.Array]:
+    """The share of the episodes that ended inside the rollout whose return ``solved`` (a function
+    ``f32[N] -> bool[N]``) calls solved, and their count: ``(f32[N] (0 if none), i32[N])``."""
+
+    def step(carry, inp):
+        running, wins, count = carry
+        rt, d = inp
+        running = running + rt
+        wins = wins + (d & solved(running))
+        return (jnp.where(d, 0.0, running), wins, count + d), None
+
+    n = reward.shape[1]
+    izeros = jnp.zeros(n, jnp.int32)
+    (_, wins, count), _ = jax.lax.scan(step, (jnp.zeros(n), izeros, izeros), (reward, done))
+    return wins / jnp.maximum(count, 1), count
+
+
+def learnability(reward: jax.Array, done: jax.Array, solved, incomplete_value: float = -jnp.inf) -> jax.Array:
+    """f32[N]: p·(1 − p) with p = :func:`solve_rate`; ``incomplete_value`` for an env with no
+    finished episode (module docstring)."""
+    p, count = solve_rate(reward, done, solved)
+    return jnp.where(count > 0, p * (1.0 - p), incomplete_value)
+
+
 def perfect_regret(mean_return: jax.Array, optimal_return: jax.Array) -> jax.Array:
     """Both in the same units: discounted (the paper's U_θ) or undiscounted returns."""
     return optimal_return - mean_return
@@ -108,8 +135,10 @@ def negative_return(mean_return: jax.Array) -> jax.Array:
     return -mean_return
 
 
-def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None) -> jax.Array:
-    """Dispatch on the score's name (static)."""
+def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None, reward=None,
+                 solved=None) -> jax.Array:
+    """Dispatch on the score's name (static). ``reward`` f32[T, N] and ``solved`` (the task's
+    ``return -> bool``) are needed by ``learnability`` only."""
     if name == "perfect_regret":
         return perfect_regret(mean_return, optimal_return)
     if name == "pvl":
@@ -118,4 +147,6 @@ def score_levels(name: str, *, mean_return, values, advantages, max_return, done
         return max_mc(values, max_return, done)
     if name == "neg_return":
         return negative_return(mean_return)
+    if name == "learnability":
+        return learnability(reward, done, solved)
     raise ValueError(f"score must be one of {SCORES}, got {name!r}")

@@ -254,7 +254,8 @@ def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
         mean_return, _, _ = sc.episode_returns(traj.reward, traj.done, gamma)
     unscale = 1.0 / setup.cfg.reward_scale
     return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value * unscale,
-                           advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal)
+                           advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal,
+                           reward=traj.reward, solved=setup.task.solved)
 
 
 def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> TrainState:

@@ -71,7 +71,8 @@ HELP = {
     "num_updates": "train steps (one rollout + one PPO update or buffer insertion each)",
     "num_envs": "parallel environments (levels) per train step",
     "num_steps": "environment steps per env per rollout",
-    "score": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return",
+    "score": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return, learnability (SFL: p(1 − p), "
+             "p the level's solve rate in the rollout)",
     "discounted_regret": "perfect_regret on the paper's discounted utility Σ γ^t r_t (γ = ppo.gamma), both "
                          "the optimum and the agent's return; false: undiscounted on both sides",
     "network": "actor-critic: mlp, maze_lstm or mlp_lstm",

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import time
+import zipfile
 from functools import partial
 from pathlib import Path
 from typing import Callable
@@ -38,6 +39,7 @@ from jax.sharding import PartitionSpec as P
 
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
+from remidi.errors import ConfigError
 from remidi.errors import ConfigError
 from remidi.experiments.outputs import atomic_write
 
@@ -76,13 +78,59 @@ def save_checkpoint(path: Path, runner, meta: dict) -> None:
     atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
 
 
+# what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
+_UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
+
+
+def _unreadable(path: Path, err: Exception) -> ConfigError:
+    detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
+    return ConfigError(f"--resume: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''}); "
+                       f"it is damaged: delete it (and {CHECKPOINT} beside it) to train the run from the start")
+
+
 def load_checkpoint(path: Path, template):
-    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``."""
-    with np.load(path) as data:
-        meta = json.loads(str(data["meta"]))
-        treedef = jax.tree.structure(template)
-        leaves = [jnp.asarray(data[f"leaf_{i}"]) for i in range(treedef.num_leaves)]
-    return jax.tree.unflatten(treedef, leaves), meta
+    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``.
+
+    Raises ConfigError (one line, naming the file) when the file cannot be read, or when it does
+    not hold a runner of ``template``'s structure, shapes and dtypes (a checkpoint of another run,
+    or a config.json edited since: seeds, algorithm or network sizes)."""
+    treedef = jax.tree.structure(template)
+    wanted = jax.tree.leaves(template)
+    try:
+        with np.load(path) as data:
+            meta = json.loads(str(data["meta"]))
+            count = sum(1 for name in data.files if name.startswith("leaf_"))
+            leaves = [np.asarray(data[f"leaf_{i}"]) for i in range(min(count, treedef.num_leaves))]
+        if not all(key in meta for key in ("done", "steps", "num_blocks")):
+            raise KeyError("meta lacks done, steps or num_blocks")
+    except _UNREADABLE as err:
+        raise _unreadable(path, err) from None
+    mismatch = None
+    if count != treedef.num_leaves:
+        mismatch = f"it holds {count} arrays, this run's state has {treedef.num_leaves}"
+    else:
+        for i, (leaf, want) in enumerate(zip(leaves, wanted)):
+            if leaf.shape != want.shape or leaf.dtype != want.dtype:
+                mismatch = (f"array {i} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
+                            f"{want.dtype}{list(want.shape)}")
+                break
+    if mismatch is not None:
+        raise ConfigError(f"--resume: {path} does not match the run's config.json ({mismatch}): was config.json "
+                          f"edited (seeds, algo, network sizes) or the checkpoint copied from another run?")
+    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
+
+
+def load_history(path: Path, meta: dict):
+    """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
+    per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
+    if not path.exists():
+        raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
+                          f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
+    try:
+        with np.load(path) as saved:
+            return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
+    except _UNREADABLE as err:
+        raise _unreadable(path, err) from None
 
 
 @partial(jax.jit, static_argnums=0)
@@ -232,9 +280,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         if sharding is not None:
             runner = _put(runner, sharding)
         done, steps = meta["done"], meta["steps"]
-        with np.load(ckpt.with_suffix(".history.npz")) as saved:
-            history = _unstack(saved, "h", len(steps))
-            per_step = _unstack(saved, "p", meta["num_blocks"])
+        history, per_step = load_history(ckpt.with_suffix(".history.npz"), meta)
 
     desc = f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + (f" on {devices} devices" if mesh else "")
     bar = _progress(cfg.num_updates, done, desc, progress and writer)

@@ -182,11 +182,23 @@ def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: boo
 
 
 def _saved_run(exp_lookup, folder: Path):
-    saved = outputs.read_json(folder / "config.json")
-    exp = exp_lookup(saved["experiment"])
-    config = config_from_dict(type(exp.config_factory()), saved["config"])
-    exp.validate(config, saved["algo"])
-    return exp, saved["algo"], saved["preset"], saved["seeds"], config
+    """``(experiment, algo, preset, seeds, config)`` of the run recorded in ``folder/config.json``;
+    ConfigError (one line, naming the file) when it is unreadable or incomplete."""
+    path = folder / "config.json"
+    try:
+        saved = outputs.read_json(path)
+        exp = exp_lookup(saved["experiment"])
+        config = config_from_dict(type(exp.config_factory()), saved["config"])
+        algo, preset, seeds = saved["algo"], saved["preset"], saved["seeds"]
+        if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) and s >= 0 for s in seeds)):
+            raise ValueError(f"seeds must be a list of integers ≥ 0, got {seeds!r}")
+    except ConfigError as err:
+        raise ConfigError(f"--resume: {path}: {err}") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        what = f"no {err}" if isinstance(err, KeyError) else (str(err).strip().splitlines() or [""])[0]
+        raise ConfigError(f"--resume: {path} is not a readable run config ({type(err).__name__}: {what})") from None
+    exp.validate(config, algo)
+    return exp, algo, preset, seeds, config
 
 
 def _saved_devices(folder: Path):

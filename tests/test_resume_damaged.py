@@ -1,0 +1,84 @@
+"""`remidi run --resume` on a damaged or mismatched run folder: one line naming the file and what
+is wrong, exit 2, and nothing in the folder changed (never a traceback from numpy, zipfile, json
+or flax)."""
+
+import json
+import shutil
+
+import pytest
+
+from remidi.cli import main
+from test_cli import LEVER_TINY
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """A checkpointed lever run (remidi, 2 seeds) and another run's (plr) checkpoint; both the
+    configurations other tests compile, so their programs come from the compilation cache."""
+    root = tmp_path_factory.mktemp("resume")
+    for algo in ("remidi", "plr"):
+        assert main(["run", "lever", "--algo", algo, "--seeds", "2", "--quiet", *LEVER_TINY,
+                     "--out", str(root / algo)]) == 0
+    return root
+
+
+def _edit_config(key, value):
+    def edit(folder):
+        path = folder / "config.json"
+        doc = json.loads(path.read_text())
+        target = doc
+        *parents, last = key.split(".")
+        for part in parents:
+            target = target[part]
+        target[last] = value
+        path.write_text(json.dumps(doc))
+    return edit
+
+
+def _truncate(name, keep=0.5):
+    def edit(folder):
+        data = (folder / name).read_bytes()
+        (folder / name).write_bytes(data[:int(len(data) * keep)])
+    return edit
+
+
+def _flip(folder):
+    path = folder / "checkpoint.npz"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    path.write_bytes(bytes(data))
+
+
+DAMAGE = {
+    "truncated config.json": (_truncate("config.json"), "config.json is not a readable run config"),
+    "truncated checkpoint": (_truncate("checkpoint.npz"), "checkpoint.npz cannot be read"),
+    "empty checkpoint": (_truncate("checkpoint.npz", 0.0), "checkpoint.npz cannot be read"),
+    "random checkpoint": (lambda f: (f / "checkpoint.npz").write_bytes(bytes(range(256)) * 64),
+                          "checkpoint.npz cannot be read"),
+    "bit-flipped checkpoint": (_flip, "checkpoint.npz cannot be read"),
+    "missing history": (lambda f: (f / "checkpoint.history.npz").unlink(), "checkpoint.history.npz is missing"),
+    "another run's checkpoint": (None, "checkpoint.npz does not match the run's config.json"),
+    "hidden_size edited": (_edit_config("config.hidden_size", 32), "does not match the run's config.json"),
+    "seeds edited": (_edit_config("seeds", [0, 1, 2]), "does not match the run's config.json"),
+    "algo edited": (_edit_config("algo", "plr"), "does not match the run's config.json"),
+    "config.json not an object": (lambda f: (f / "config.json").write_text("[1, 2]"),
+                                  "config.json is not a readable run config"),
+}
+
+
+@pytest.mark.parametrize("case", list(DAMAGE))
+def test_resume_of_a_damaged_run_is_one_line_and_changes_nothing(runs, tmp_path, capsys, case):
+    folder = tmp_path / "run"
+    shutil.copytree(runs / "remidi", folder)
+    damage, needle = DAMAGE[case]
+    if damage is None:
+        shutil.copy(runs / "plr" / "checkpoint.npz", folder / "checkpoint.npz")
+    else:
+        damage(folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    capsys.readouterr()
+    assert main(["run", "--resume", str(folder), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("remidi: error: --resume: ") and err.count("\n") == 1, err
+    assert needle in err and str(folder) in err, err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before

@@ -82,3 +82,17 @@ def test_resume_of_a_damaged_run_is_one_line_and_changes_nothing(runs, tmp_path,
     assert err.startswith("remidi: error: --resume: ") and err.count("\n") == 1, err
     assert needle in err and str(folder) in err, err
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp_path, capsys):
+    """SIGKILL during an atomic checkpoint write leaves ``.checkpoint.npz.<random>.tmp``: the next
+    resume deletes those (and only those) before it writes."""
+    folder = tmp_path / "run"
+    shutil.copytree(runs / "remidi", folder)
+    stale = [folder / ".checkpoint.npz.k1ll3d.tmp", folder / ".checkpoint.history.npz.x9.tmp"]
+    for path in stale:
+        path.write_bytes(b"\0" * 4096)
+    (folder / ".notes.tmp").write_text("mine")
+    assert main(["run", "--resume", str(folder), "--quiet"]) == 0
+    assert not any(path.exists() for path in stale)
+    assert (folder / ".notes.tmp").read_text() == "mine"

@@ -120,6 +120,18 @@ def load_checkpoint(path: Path, template):
     return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
 
 
+def remove_stale_temporaries(ckpt: Path) -> list[Path]:
+    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt`` (atomic
+    writes go through ``.<name>.<random>.tmp``; SIGKILL stops them before the rename or the clean-up).
+    Called when a run starts or resumes, before it writes; returns what was removed."""
+    removed = []
+    for name in (ckpt.name, ckpt.with_suffix(".history.npz").name):
+        for tmp in ckpt.parent.glob(f".{name}.*.tmp"):
+            tmp.unlink(missing_ok=True)
+            removed.append(tmp)
+    return removed
+
+
 def load_history(path: Path, meta: dict):
     """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
     per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
@@ -275,6 +287,8 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     ckpt = Path(out) / CHECKPOINT if out is not None else None
     if ckpt is not None:
         ckpt.parent.mkdir(parents=True, exist_ok=True)
+        if writer:
+            remove_stale_temporaries(ckpt)
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
         if sharding is not None:

@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from remidi.bench import BENCHMARKS, DEFAULT, format_table, ratios
 
 FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_per_s", "compile_s", "peak_rss_mb",
@@ -49,6 +51,20 @@ def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors
     proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-fast"], capture_output=True, text=True)
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.count("\n") == 1 and "maze-fast" in proc.stderr and "maze-plr" in proc.stderr
+
+
+@pytest.mark.parametrize("setting, needle", [
+    ("num_envs=-1", "num_envs: must be an integer ≥ 1, got -1"),
+    ("ppo.minibatches=3", "ppo.minibatches"),
+    ("buffer.replay_prob=2", "buffer.replay_prob"),
+])
+def test_bench_settings_no_workload_can_run_are_one_line_errors(setting, needle):
+    from remidi.bench import check_overrides
+    from remidi.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=needle.replace("(", r"\(").replace(")", r"\)")) as err:
+        check_overrides(dict([setting.split("=")]))
+    assert "\n" not in str(err.value)
 
 
 def test_network_flops_match_a_count_by_hand():

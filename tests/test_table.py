@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from remidi.cli import main
 
 
@@ -54,3 +56,15 @@ def test_a_metric_no_run_has_is_one_line_exit_2(tmp_path, capsys):
     assert main(["table", str(tmp_path / "run"), "--metrics", "solve_rate/mean,nosuch"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--metrics: no run has 'nosuch'; allowed: solve_rate/mean" in err
+
+
+@pytest.mark.parametrize("text, needle", [
+    ('{"experiment": "x"', "cannot be read (JSONDecodeError"),
+    ("[1, 2]", "is not a run summary (a JSON list, not an object)"),
+    ('{"experiment": "x"}', "is not a run summary (no algo, preset, seeds, metrics)"),
+])
+def test_a_malformed_summary_is_one_line_exit_2(tmp_path, capsys, text, needle):
+    (tmp_path / "summary.json").write_text(text)
+    assert main(["table", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err and str(tmp_path / "summary.json") in err, err

@@ -55,11 +55,22 @@ def _overrides() -> dict:
 
 
 def check_overrides(overrides: dict) -> None:
-    """Raise ConfigError for a ``--set`` key that is no UED config key or a value of the wrong type."""
+    """Raise ConfigError for a ``--set`` key that is no UED config key, a value of the wrong type,
+    or a value no workload can run with (sizes below 1, PPO and buffer settings out of range), before
+    any benchmark starts."""
+    from remidi.engine.buffer import validate_buffer_config
+    from remidi.engine.ppo import validate_ppo_config
     from remidi.engine.train import UEDConfig
-    from remidi.experiments.config import apply_overrides
+    from remidi.experiments.config import apply_overrides, positive_int
 
-    apply_overrides(UEDConfig(), overrides)
+    cfg = apply_overrides(UEDConfig(), overrides)
+    for key in ("num_updates", "num_envs", "num_steps"):
+        if key in overrides:
+            positive_int(key, getattr(cfg, key))
+    if any(key.startswith("ppo.") or key == "num_envs" for key in overrides):
+        validate_ppo_config(cfg.ppo, cfg.num_envs)
+    if any(key.startswith("buffer.") for key in overrides):
+        validate_buffer_config(cfg.buffer)
 
 
 def _tiny() -> bool:

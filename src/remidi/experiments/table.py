@@ -18,18 +18,39 @@ from remidi.errors import ConfigError
 from remidi.experiments import outputs
 
 
+def _read_summary(path: Path) -> dict:
+    """One run's ``summary.json``; ConfigError (one line, naming the file) if it is not one."""
+    try:
+        doc = outputs.read_json(path)
+        if not isinstance(doc, dict):
+            raise TypeError(f"a JSON {type(doc).__name__}, not an object")
+        missing = [key for key in ("experiment", "algo", "preset", "seeds", "metrics") if key not in doc]
+        if missing:
+            raise KeyError(", ".join(missing))
+        if not isinstance(doc["metrics"], dict) or not all(isinstance(m, dict) for m in doc["metrics"].values()):
+            raise TypeError("metrics is not an object of {mean, std, per_seed} entries")
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"RUN: {path} cannot be read ({type(err).__name__}: "
+                          f"{(str(err).strip().splitlines() or [''])[0]})") from None
+    except KeyError as err:
+        raise ConfigError(f"RUN: {path} is not a run summary (no {err.args[0]})") from None
+    except TypeError as err:
+        raise ConfigError(f"RUN: {path} is not a run summary ({err})") from None
+    return doc
+
+
 def summaries(folders: list[Path]) -> list[dict]:
     """The ``summary.json`` documents under ``folders``, in the order given (sub-folders sorted
     by the algorithm order recorded in ``config.json``, else by name)."""
     found = []
     for folder in map(Path, folders):
         if (folder / "summary.json").is_file():
-            found.append({**outputs.read_json(folder / "summary.json"), "folder": str(folder)})
+            found.append({**_read_summary(folder / "summary.json"), "folder": str(folder)})
             continue
         subs = sorted(folder.glob("*/summary.json")) if folder.is_dir() else []
         if not subs:
             raise ConfigError(f"RUN: no summary.json in {folder} (give finished run folders, or folders of them)")
-        docs = [{**outputs.read_json(p), "folder": str(p.parent)} for p in subs]
+        docs = [{**_read_summary(p), "folder": str(p.parent)} for p in subs]
         config = subs[0].parent / "config.json"  # each algorithm's config.json records the run's order
         order = outputs.read_json(config).get("algos", []) if config.is_file() else []
         docs.sort(key=lambda d: (order.index(d["algo"]) if d["algo"] in order else len(order), d["algo"]))

@@ -60,7 +60,7 @@ def check_overrides(overrides: dict) -> None:
     any benchmark starts."""
     from remidi.engine.buffer import validate_buffer_config
     from remidi.engine.ppo import validate_ppo_config
-    from remidi.engine.train import UEDConfig
+    from remidi.engine.train import UEDConfig, validate_section
     from remidi.experiments.config import apply_overrides, positive_int
 
     cfg = apply_overrides(UEDConfig(), overrides)
@@ -68,9 +68,9 @@ def check_overrides(overrides: dict) -> None:
         if key in overrides:
             positive_int(key, getattr(cfg, key))
     if any(key.startswith("ppo.") or key == "num_envs" for key in overrides):
-        validate_ppo_config(cfg.ppo, cfg.num_envs)
+        validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     if any(key.startswith("buffer.") for key in overrides):
-        validate_buffer_config(cfg.buffer)
+        validate_section("buffer.", lambda: validate_buffer_config(cfg.buffer))
 
 
 def _tiny() -> bool:

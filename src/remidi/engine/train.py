@@ -529,6 +529,18 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
                       f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
 
 
+def validate_section(prefix: str, validate) -> None:
+    """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
+    section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
+    from remidi.errors import ConfigError
+
+    try:
+        validate()
+    except ConfigError as err:
+        msg = str(err)
+        raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
+
+
 def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
     from remidi.engine.networks import make_network
@@ -581,14 +593,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
                 "observations normalised by statistics gathered after they were frozen)", r.policy)
         require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
                 "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
-    for prefix, validate in (("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs)),
-                             ("buffer.", lambda: buf.validate_buffer_config(cfg.buffer)),
-                             ("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))):
-        try:
-            validate()
-        except ConfigError as err:
-            msg = str(err)
-            raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
+    validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
+    validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
+    validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))
     if algo == "remidi":
         needed = (r.num_buffers - 1) * r.steps_per_buffer
         if needed >= cfg.num_updates:

@@ -269,9 +269,11 @@ def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
     lever = get_experiment("lever")
     notes = []
     cfg = resolve_config(lever, "smoke", {"num_updates": "20"}, notes)  # smoke: 300 updates, 50 / 100 / 100
-    assert (cfg.num_updates, cfg.eval_every, cfg.checkpoint_every, cfg.remidi.steps_per_buffer) == (20, 3, 7, 7)
+    # eval_every, a block length, becomes the divisor of 20 nearest 50·20/300 = 3.3 (no short last
+    # block, which would compile another program and stall the bar at 19/20)
+    assert (cfg.num_updates, cfg.eval_every, cfg.checkpoint_every, cfg.remidi.steps_per_buffer) == (20, 4, 7, 7)
     assert cfg.ppo.total_updates == 20
-    assert notes == ["num_updates 300 → 20, so scaled eval_every 50 → 3, checkpoint_every 100 → 7, "
+    assert notes == ["num_updates 300 → 20, so scaled eval_every 50 → 4, checkpoint_every 100 → 7, "
                      "remidi.steps_per_buffer 100 → 7 (set them with --set to choose other values)"]
     for algo in lever.algorithms:
         lever.validate(cfg, algo)
@@ -282,6 +284,7 @@ def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
     notes = []
     assert resolve_config(lever, "smoke", {"num_updates": "300"}, notes) == resolve_config(lever, "smoke", {})
     assert notes == []
+    assert resolve_config(lever, "smoke", {"num_updates": "97"}).eval_every == 97  # a prime: one block
     tab = resolve_config(get_experiment("tabular-shared"), "smoke", {"iterations": "150"})
     assert (tab.log_every, tab.iters_per_adversary) == (1, 50)
 

@@ -25,7 +25,6 @@ runs on different hardware do. A sharded run is itself deterministic and resumes
 from __future__ import annotations
 
 import json
-import time
 import zipfile
 from functools import partial
 from pathlib import Path
@@ -39,7 +38,6 @@ from jax.sharding import PartitionSpec as P
 
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
-from remidi.errors import ConfigError
 from remidi.errors import ConfigError
 from remidi.experiments.outputs import atomic_write
 
@@ -300,7 +298,6 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     bar = _progress(cfg.num_updates, done, desc, progress and writer)
     while done < cfg.num_updates:
         length = min(cfg.eval_every, cfg.num_updates - done)
-        start = time.perf_counter()
         runner, step_metrics = run_block(setup, runner, length)
         step_metrics = _to_host(step_metrics)
         eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
@@ -311,7 +308,6 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
         if bar is not None:
             bar.update(length)
-            bar.set_postfix_str(f"{length / (time.perf_counter() - start):.1f} updates/s")
         if ckpt is not None and (done % cfg.checkpoint_every < length or done == cfg.num_updates):
             host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
             if writer:  # process 0 writes

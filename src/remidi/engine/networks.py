@@ -24,7 +24,6 @@ layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero bias
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import Any
 
 import flax.linen as nn

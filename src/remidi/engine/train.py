@@ -543,7 +543,6 @@ def validate_section(prefix: str, validate) -> None:
 
 def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
-    from remidi.engine.networks import make_network
     from remidi.engine.ppo import validate_ppo_config
     from remidi.engine.tracker import MODES
     from remidi.errors import ConfigError

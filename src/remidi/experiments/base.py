@@ -79,6 +79,8 @@ class Experiment:
     # length key → keys measured against it, scaled in proportion when only the length is set
     # (config.scale_dependents), e.g. {"num_updates": ("eval_every", ...)}
     scaled_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    # scaled keys that must divide their length (block lengths: a short last block compiles again)
+    divisor_keys: tuple[str, ...] = ()
     shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
@@ -92,7 +94,8 @@ def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], note
     if preset not in exp.presets:
         raise one_of("--preset", preset, exp.presets)
     base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
-    config, note = scale_dependents(apply_overrides(base, overrides), base, overrides, exp.scaled_keys)
+    config, note = scale_dependents(apply_overrides(base, overrides), base, overrides, exp.scaled_keys,
+                                    exp.divisor_keys)
     if note is not None and notes is not None:
         notes.append(note)
     return config

@@ -194,7 +194,15 @@ def get_value(config, key: str) -> Any:
     return config
 
 
-def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]]):
+def nearest_divisor(length: int, target: float) -> int:
+    """The divisor of ``length`` closest to ``target`` in ratio (|log(d / target)|; the larger on
+    a tie): 20 updates at a target of 3.3 give 4; a prime length gives itself or 1."""
+    divisors = [d for d in range(1, length + 1) if length % d == 0]
+    return min(divisors, key=lambda d: (abs(math.log(d / max(target, 1e-9))), -d))
+
+
+def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]],
+                     divisors: tuple[str, ...] = ()):
     """Scale the keys that depend on a length the user changed, in proportion.
 
     ``rules`` maps a length (``num_updates``) to the keys measured against it (``eval_every``,
@@ -202,7 +210,9 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
     a dependent key, that key becomes ``max(1, round(base value × new length / base length))``,
     ``base`` being the preset's configuration, so that ``--set num_updates=20`` alone gives a
     run with the preset's proportions. Returns ``(config, note)``, ``note`` one line saying what
-    was scaled (``None`` if nothing was).
+    was scaled (``None`` if nothing was). A key in ``divisors`` (a block length, e.g. ``eval_every``:
+    a short last block would compile another program) becomes the divisor of the new length
+    nearest to that value instead.
     """
     scaled: dict[str, int] = {}
     parts = []
@@ -218,6 +228,8 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
                 continue
             value = get_value(base, key)
             target = max(1, int(math.floor(value * new / old + 0.5)))
+            if key in divisors:
+                target = nearest_divisor(new, value * new / old)
             if target != value:
                 scaled[key] = target
                 changes.append(f"{key} {value} → {target}")

@@ -106,6 +106,7 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
         scaled_keys=SCALED_KEYS,
+        divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
         preset_reasons=preset_reasons or {},
     )

@@ -180,3 +180,27 @@ def test_one_update_rolls_out_once(algo, monkeypatch):
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     jax.make_jaxpr(lambda r: tr.train_step(setup, r))(runner)
     assert len(calls) == 1
+
+
+def test_degenerate_but_valid_runs_are_warned_about():
+    from remidi.engine.train import run_warnings
+    from remidi.envs.maze import maze_task
+    from remidi.experiments.maze import paper_config as maze_paper
+
+    maze = maze_task("tmaze")
+    (warning,) = run_warnings(R(maze_paper(), score="pvl", num_steps=32), "plr", maze)
+    assert "num_steps (32) is shorter than an episode can last (250)" in warning and "\n" not in warning
+    assert run_warnings(R(maze_paper(), score="pvl"), "plr", maze) == []  # 256 steps ≥ 250
+    assert run_warnings(R(maze_paper(), num_steps=32), "plr", maze) == []  # perfect regret needs no ending
+    assert run_warnings(R(maze_paper(), score="pvl", num_steps=32), "dr", maze) == []  # DR keeps no buffer
+
+    class Noisy(type(TASK.env)):  # a reset that draws from its key, as gymnax's CartPole does
+        def reset_env_to_level(self, rng, level, params):
+            obs, state = super().reset_env_to_level(rng, level, params)
+            return obs + jax.random.uniform(rng, obs.shape), state
+
+    noisy = dataclasses.replace(TASK, env=Noisy(64), deterministic_reset=False)
+    (warning,) = run_warnings(BASE, "remidi", noisy)
+    assert "reset depends on its random key" in warning
+    assert run_warnings(BASE, "plr", noisy) == []  # only ReMiDi's tracker assumes determinism
+    assert run_warnings(BASE, "remidi", dataclasses.replace(TASK, deterministic_reset=False)) == []

@@ -37,7 +37,7 @@ from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, PPOConfig, compute_gae, create_train_state, ppo_update
 from remidi.engine import tracker as trk
 from remidi.engine.rollout import Frozen, Trajectory, combined_logits, rollout
-from remidi.envs.interface import UEDTask
+from remidi.envs.interface import UEDTask, tree_equal
 
 ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 POLICIES = ("masked", "combine")
@@ -527,6 +527,32 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
     what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
     raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
                       f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
+
+
+def run_warnings(cfg: UEDConfig, algo: str, task: UEDTask) -> list[str]:
+    """One-line warnings about a valid run that would train degenerately without saying so:
+
+    * a score that needs finished episodes (``pvl``, ``maxmc``, ``learnability``) on rollouts
+      shorter than the task's episode limit: a level whose episode does not end inside the rollout
+      scores −inf, and with every episode too long the buffer holds one level and replays only it;
+    * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
+      give different first observations): the tracker assumes an episode is a function of the
+      level and the actions, so it may judge identical levels distinguishable.
+    """
+    out = []
+    name = score_name(cfg, algo)
+    if algo != "dr" and name in ("pvl", "maxmc", "learnability") and cfg.num_steps < task.max_episode_steps:
+        out.append(f"score {name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) is "
+                   f"shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not end "
+                   f"score -inf and are never inserted; raise num_steps or use another score")
+    if algo == "remidi" and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
+        level = task.sample_level(jax.random.PRNGKey(0))
+        obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
+        if not bool(tree_equal(obs[0], obs[1])):
+            out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
+                       "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
+                       "actions; put the random seed into the level (UEDTask.deterministic_reset)")
+    return out
 
 
 def validate_section(prefix: str, validate) -> None:

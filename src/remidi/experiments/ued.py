@@ -7,13 +7,14 @@ that into an :class:`~remidi.experiments.base.Experiment`.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from remidi.engine.driver import replay_fractions, train_seeds
-from remidi.engine.train import ALGORITHMS, UEDConfig, validate_ued_config
+from remidi.engine.train import ALGORITHMS, UEDConfig, run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels
@@ -39,6 +40,8 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
         validate_ued_config(cfg, ctx.algo, task)  # the same rules as run_experiment, for direct callers
+        for warning in run_warnings(cfg, ctx.algo, task):
+            print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
         steps, history, raw, _ = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
                                              progress=ctx.progress, devices=ctx.devices)
         if derive is not None:

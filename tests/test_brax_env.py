@@ -161,9 +161,13 @@ def test_sample_level_and_task_fields(task, env):
     assert 0.3 < np.asarray(lv.sign)[type_b].mean() < 0.7
     assert task.continuous and task.deterministic_reset and task.max_episode_steps == 100
     assert task.optimal_return is None
-    ref = brax_task(MORPH, reference_return=123.0)
+    ref = brax_task(MORPH, reference_return=123.0, reference_discounted_return=45.0)
     np.testing.assert_array_equal(np.asarray(jax.vmap(ref.optimal_return)(lv)),
                                   np.where(type_b, 10000.0, 123.0).astype(np.float32))
+    # the discounted optimum: the reference's discounted return; type B pays at t = 0, undiscounted
+    np.testing.assert_array_equal(np.asarray(jax.vmap(lambda v: ref.optimal_discounted_return(v, 0.99))(lv)),
+                                  np.where(type_b, 10000.0, 45.0).astype(np.float32))
+    assert task.solved is None  # a return > 0 is no solve criterion for a walker: no solve_rate
     ev = task.eval_sets["undisturbed"]
     assert ev.theta.shape == (16, env.num_actions) and not np.any(np.asarray(ev.type_b))
     np.testing.assert_array_equal(np.asarray(ev.seed[3]), np.asarray(jax.random.PRNGKey(3)))

@@ -460,7 +460,8 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
             first, count = start // cfg.eval_attempts, size // cfg.eval_attempts  # the set's untiled levels
             set_optimal = None if optimal is None else optimal[first:first + count]
             start += size
-            out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
+            if task.solved is not None:
+                out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
             out[f"discounted_return/{name}"] = jnp.mean(discounted[start - size:start])
             if task.optimal_return is None:
@@ -590,6 +591,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
         raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
                           f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
     require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
+    if score_name(cfg, algo) == "learnability" and task.solved is None:
+        raise ConfigError("score: learnability needs a solve criterion, which this task does not define "
+                          f"(UEDTask.solved); allowed: {', '.join(s for s in sc.SCORES if s != 'learnability')}")
     if (score_name(cfg, algo) == "perfect_regret" and cfg.discounted_regret
             and task.optimal_discounted_return is None):
         raise ConfigError("discounted_regret: this task gives no discounted optimal return "

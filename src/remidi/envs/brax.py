@@ -298,7 +298,7 @@ def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float 
         optimal_discounted_return=optimal_discounted,
         eval_sets={"undisturbed": env.undisturbed_levels(num_eval_levels)},
         level_tags=lambda level: {"type_b": level.type_b},
-        solved=lambda ret: ret > 0,
+        solved=None,  # a return > 0 is no solve criterion for a walker: no solve_rate, no learnability
         deterministic_reset=True,
         continuous=True,
     )

@@ -121,7 +121,8 @@ class UEDTask:
             (e.g. a held-out maze larger than the training grid); same ``params``.
         level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
             fractions (e.g. ``{"hidden": ...}``).
-        solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved.
+        solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved; None
+            for a task without a notion of solving (no ``solve_rate`` metric, no learnability score).
         expected_return: for a one-step task, ``(level, probs f32[num_actions]) -> f32[]``, the
             exact expected return of a policy with those action probabilities; makes the
             evaluation's regret exact (instead of sampled) and adds the policy's entropy.
@@ -141,7 +142,7 @@ class UEDTask:
     eval_sets: dict[str, Any] = field(default_factory=dict)
     eval_envs: dict[str, UnderspecifiedEnv] = field(default_factory=dict)
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
-    solved: Callable[[jax.Array], jax.Array] = lambda ret: ret > 0
+    solved: Callable[[jax.Array], jax.Array] | None = lambda ret: ret > 0
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
     deterministic_reset: bool = False
     continuous: bool = False

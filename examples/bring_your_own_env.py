@@ -118,6 +118,13 @@ def optimal_return(level: Level) -> jax.Array:
     return 1.0 - STEP_COST * steps
 
 
+def optimal_discounted_return(level: Level, gamma: float) -> jax.Array:
+    """The same walk under the paper's discounted utility Σ_t γ^t r_t: the goal's reward comes
+    with the ``steps``-th action, at t = steps − 1."""
+    steps = jnp.where(level.goal_right, LENGTH - 1 - START, START)
+    return gamma ** (steps - 1.0) * (1.0 - STEP_COST * steps)
+
+
 def all_levels(visible: bool) -> Level:
     """Every level with the given signpost, batched: leading dim 2 · DECORATIONS (goal left,
     then right; hidden levels differ only in what the agent cannot see)."""
@@ -132,6 +139,7 @@ def make_task() -> UEDTask:
         env=env, params=env.default_params, sample_level=sample_level, num_actions=2,
         max_episode_steps=MAX_STEPS,
         optimal_return=optimal_return,  # enables the perfect-regret score and regret metrics
+        optimal_discounted_return=optimal_discounted_return,  # the default (discounted) perfect regret
         eval_sets={"visible": all_levels(True), "hidden": all_levels(False)},  # solve_rate/<name>, ...
         level_tags=lambda level: {"hidden": ~level.visible},  # replay_fraction/hidden, buffer_fraction/hidden
         solved=lambda ret: ret > 0,  # reached the goal end

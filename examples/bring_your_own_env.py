@@ -1,11 +1,11 @@
 """Bring your own environment: a tiny custom UED environment trained with PLR⊥ and ReMiDi.
 
-    python examples/bring_your_own_env.py OUT_DIR [--updates 40] [--seeds 2]
+    python examples/bring_your_own_env.py OUT_DIR [--updates 200] [--seeds 2] [--resume]
 
 Runs in well under a minute on a laptop CPU (most of it XLA compiling) and writes to OUT_DIR:
 
-    OUT_DIR/config.json                  the UEDConfig used
     OUT_DIR/training.png                 evaluation curves, one per algorithm
+    OUT_DIR/<algo>/config.json           everything needed to rerun or resume it
     OUT_DIR/<algo>/metrics.csv           every metric at every evaluation (seed, step, metric, value)
     OUT_DIR/<algo>/summary.json          final value of every metric: mean, std, per seed
     OUT_DIR/<algo>/checkpoint.npz        the final training state (and checkpoint.history.npz)
@@ -36,19 +36,14 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from flax import struct
 
+from remidi import run_ued
 from remidi.engine.buffer import BufferConfig
-from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.ppo import PPOConfig
-from remidi.engine.train import ReMiDiConfig, UEDConfig, validate_ued_config
+from remidi.engine.train import ReMiDiConfig, UEDConfig
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.errors import RemidiError
-from remidi.experiments import outputs
-from remidi.experiments.base import RunResult
-from remidi.experiments.config import config_to_dict
-from remidi.experiments.plots import Panel, algorithm_curves, plot_panels
 
 LENGTH = 7  # corridor cells; the ends are 0 and LENGTH − 1
 START = LENGTH // 2
@@ -162,59 +157,44 @@ def make_config(updates: int) -> UEDConfig:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("out", type=Path, help="output folder (must not hold a run)")
+    parser.add_argument("out", type=Path, help="output folder (must not hold a run; with --resume: the run)")
     parser.add_argument("--updates", type=int, default=200, help="train steps per algorithm (default 200)")
     parser.add_argument("--seeds", type=int, default=2, help="number of seeds (default 2)")
+    parser.add_argument("--resume", action="store_true", help="continue the interrupted run in OUT")
     args = parser.parse_args(argv)
 
-    task, cfg, seeds = make_task(), make_config(args.updates), list(range(args.seeds))
-    algos = ["plr", "remidi"]
+    task, cfg = make_task(), make_config(args.updates)
     try:
         if args.seeds < 1:
             raise RemidiError(f"--seeds: must be an integer ≥ 1, got {args.seeds}")
-        for algo in algos:
-            validate_ued_config(cfg, algo, task)  # the checks `remidi run` makes
-        outputs.prepare_out_dir(args.out)
+        # validates everything first (one-line errors, nothing written), then trains each algorithm
+        # and writes config.json, metrics.csv, summary.json, checkpoints and training.png
+        summaries = run_ued(task, cfg, ["plr", "remidi"], seeds=list(range(args.seeds)), out=args.out,
+                            progress=False, resume=args.resume, name="bring_your_own_env")
     except RemidiError as err:  # one line, nothing written
         print(f"bring_your_own_env: error: {err}", file=sys.stderr)
         return 2
-    outputs.write_json(args.out / "config.json", {"example": "bring_your_own_env", "algos": algos,
-                                                  "seeds": seeds, "config": config_to_dict(cfg)})
+    except KeyboardInterrupt:
+        print(f"bring_your_own_env: interrupted; continue with: python {sys.argv[0]} {args.out} --resume",
+              file=sys.stderr)
+        return 130
 
-    results = {}
-    for algo in algos:
-        folder = args.out / algo
-        # out=folder: checkpoints there (resume=True continues an interrupted run)
-        # history: {metric: f[seeds, evaluations]}, per block of eval_every updates; per_step: replay counters
-        steps, history, per_step, _ = train_seeds(task, cfg, algo, seeds, out=folder, progress=False)
-        final = {name: values[:, -1] for name, values in history.items()}
-        window = slice(per_step["replay"].shape[1] * 9 // 10, None)  # the last 10% of training
-        final.update(replay_fractions({k: v[:, window] for k, v in per_step.items()}, cfg.num_envs))
-        outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(steps, history, seeds))
-        outputs.write_summary(folder / "summary.json", experiment="bring_your_own_env", algo=algo, preset="example",
-                              seeds=seeds, final=final)
-        results[algo] = RunResult(steps=steps, history=history, final=final)
-        replayed = final["replay_fraction/hidden"]  # NaN for a seed that replayed nothing
-        replayed = f"{np.mean(replayed[np.isfinite(replayed)]):.2f}" if np.isfinite(replayed).any() else "n/a"
-        print(f"{algo}: solve rate visible {final['solve_rate/visible'].mean():.2f}, "
-              f"hidden {final['solve_rate/hidden'].mean():.2f}; mean regret visible "
-              f"{final['regret/visible/mean'].mean():.3f}; hidden share of replayed levels (last 10%) {replayed}")
-
-    panels = [Panel(title, algorithm_curves(results, metric), metric, "update", ylim=ylim)
-              for metric, title, ylim in (("solve_rate/visible", "solve rate, signpost visible", (-0.03, 1.03)),
-                                          ("solve_rate/hidden", "solve rate, signpost hidden", (-0.03, 1.03)),
-                                          ("regret/visible/mean", "mean regret, signpost visible", None),
-                                          ("replay_fraction/hidden", "share of hidden levels among replayed",
-                                           (-0.03, 1.03)))]
-    plot_panels(args.out / "training.png", panels, columns=2)
-    print(f"\nwrote {args.out}: config.json, training.png, and per algorithm metrics.csv, summary.json, "
+    for algo, summary in summaries.items():
+        m = {name: entry["mean"] for name, entry in summary["metrics"].items()}
+        replayed = m.get("replay_fraction/hidden")
+        replayed = "n/a" if replayed is None or replayed != replayed else f"{replayed:.2f}"  # None/NaN: never replayed
+        print(f"{algo}: solve rate visible {m['solve_rate/visible']:.2f}, hidden {m['solve_rate/hidden']:.2f}; "
+              f"mean regret visible {m['regret/visible/mean']:.3f}; hidden share of replayed levels (last 10%) "
+              f"{replayed}")
+    print(f"\nwrote {args.out}: training.png, and per algorithm config.json, metrics.csv, summary.json, "
           f"checkpoint.npz")
     print("next:")
     print(f"  * look at {args.out / 'training.png'} and {args.out / 'remidi' / 'summary.json'}")
     print("  * train longer: python examples/bring_your_own_env.py OTHER_DIR --updates 2000 --seeds 5 "
           "(a GPU helps: see the README's installation section)")
     print("  * make it yours: replace SignpostCorridor, sample_level, optimal_return and the eval_sets / "
-          "level_tags in make_task(), then tune make_config() (keys as in `remidi list lever`)")
+          "level_tags in make_task(), then tune make_config() (keys as in `remidi list lever`); or run "
+          "your task from the command line: remidi run yourmodule:make_task --algo plr,remidi --set ...")
     return 0
 
 

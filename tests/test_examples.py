@@ -27,11 +27,11 @@ def test_bring_your_own_env_example(tmp_path, capsys):
     assert example.main([str(out)]) == 0
     printed = capsys.readouterr().out
     assert "next:" in printed and str(out / "training.png") in printed
-    assert (out / "config.json").exists() and (out / "training.png").stat().st_size > 10_000
-    assert json.loads((out / "config.json").read_text())["config"]["num_updates"] == 200
+    assert (out / "training.png").stat().st_size > 10_000
+    assert json.loads((out / "plr" / "config.json").read_text())["config"]["num_updates"] == 200
     shares = {}
     for algo in ("plr", "remidi"):
-        for name in ("metrics.csv", "summary.json", "checkpoint.npz", "checkpoint.history.npz"):
+        for name in ("config.json", "metrics.csv", "summary.json", "checkpoint.npz", "checkpoint.history.npz"):
             assert (out / algo / name).exists(), (algo, name)
         summary = json.loads((out / algo / "summary.json").read_text())
         assert summary["seeds"] == [0, 1]
@@ -52,4 +52,41 @@ def test_bring_your_own_env_example_bad_input_is_one_line(tmp_path, capsys):
     assert example.main([str(tmp_path / "x"), "--updates", "1"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("bring_your_own_env: error: remidi.num_buffers") and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_users_task_runs_from_the_command_line_by_import_path(tmp_path, capsys, monkeypatch):
+    """`remidi run module:function` trains the UEDTask the function returns on the engine's
+    default config with the given --set keys, writes the standard outputs, and resumes by name."""
+    from remidi.cli import main
+
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    out = tmp_path / "cli"
+    argv = ["run", "bring_your_own_env:make_task", "--algo", "plr", "--seeds", "1", "--quiet", "--out", str(out),
+            "--set", "num_updates=4", "--set", "eval_every=2", "--set", "checkpoint_every=2", "--set", "num_envs=4",
+            "--set", "num_steps=16", "--set", "eval_attempts=1", "--set", "ppo.epochs=1"]
+    assert main(argv) == 0
+    for name in ("config.json", "metrics.csv", "summary.json", "training.png", "checkpoint.npz"):
+        assert (out / name).exists(), name
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["experiment"] == "bring_your_own_env:make_task" and summary["preset"] == "default"
+    assert list(summary["metrics"])[:2] == ["solve_rate/hidden", "solve_rate/visible"]
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0  # found again by its import path
+
+
+@pytest.mark.parametrize("target, needle", [
+    ("no_such_module_xyz:make", "experiment: cannot import no_such_module_xyz (ModuleNotFoundError"),
+    ("bring_your_own_env:nothing", "experiment: bring_your_own_env has no nothing"),
+    ("bring_your_own_env:sample_level", "building the task of bring_your_own_env:sample_level failed"),
+    ("json:dumps", "building the task of json:dumps failed"),
+    ("bring_your_own_env:LENGTH", "gives a int, not a remidi UEDTask"),
+])
+def test_an_import_path_that_is_no_task_is_one_line(tmp_path, capsys, monkeypatch, target, needle):
+    from remidi.cli import main
+
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    assert main(["run", target, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
     assert not (tmp_path / "x").exists()

@@ -158,6 +158,8 @@ def _cmd_run(args) -> int:
         raise RemidiError("remidi run: name an experiment (see remidi list) or pass --resume DIR")
     exp = get_experiment(args.experiment)
     algos = parse_algos(exp, args.algo)
+    if args.preset is None:  # smoke where the experiment has it (every built-in one), else its first preset
+        args.preset = "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
     if args.preset not in exp.presets:
         from remidi.errors import one_of
 
@@ -242,11 +244,11 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run an experiment (see `remidi list`)",
                          description="Train one or more algorithms on an experiment for several seeds and "
                                      "write config.json, metrics.csv, summary.json and plots.")
-    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`)")
+    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask")
     run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
-    run.add_argument("--preset", default="smoke", help="smoke (minutes on a CPU), paper, or another of the "
-                                                      "experiment's presets (cpu, reference: remidi list EXPERIMENT); "
-                                                      "default: smoke")
+    run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
+                                      "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
+                                      "as module:function: default, the engine's UEDConfig)")
     run.add_argument("--seeds", type=int, help="number of seeds (default: the preset's)")
     run.add_argument("--seed", type=int, default=0, help="first seed (default 0): seeds are SEED … SEED+N−1")
     run.add_argument("--out", help="output folder (default: runs/EXPERIMENT/TIMESTAMP); must not hold a run")

@@ -17,6 +17,12 @@ def all_experiments() -> dict[str, Experiment]:
 
 
 def get_experiment(name: str) -> Experiment:
+    """A registered experiment, or for ``module:function`` the user's task it names
+    (:func:`remidi.experiments.custom.import_experiment`)."""
+    if ":" in name:
+        from remidi.experiments.custom import import_experiment
+
+        return import_experiment(name)
     experiments = all_experiments()
     if name not in experiments:
         raise one_of("experiment", name, experiments)

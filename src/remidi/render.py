@@ -50,7 +50,10 @@ UNSEEN = (24, 28, 70)  # a cell of the agent's view that it cannot see
 MIN_FRAME_WIDTH = 320  # pixels: an episode frame is at least this wide, so its captions fit
 FRAME_MS = 150
 LAST_FRAME_MS = 2000
-ACTION_NAMES = ("left", "right", "forward", "pickup", "drop", "toggle", "done")
+# the maze's seven actions; 3–6 change nothing in a maze (jaxued names the last one "done", which a
+# caption would read as "the episode ended": called "no-op" here)
+ACTION_NAMES = ("turn left", "turn right", "forward", "no-op (pickup)", "no-op (drop)", "no-op (toggle)",
+                "no-op (done)")
 
 
 # ----------------------------------------------------------------------------------- checks

@@ -76,6 +76,7 @@ def save_checkpoint(path: Path, runner, meta: dict) -> None:
     atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
 
 
+HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
 # what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
 _UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
 
@@ -83,7 +84,7 @@ _UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZi
 def _unreadable(path: Path, err: Exception) -> ConfigError:
     detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
     return ConfigError(f"--resume: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''}); "
-                       f"it is damaged: delete it (and {CHECKPOINT} beside it) to train the run from the start")
+                       f"it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start")
 
 
 def load_checkpoint(path: Path, template):
@@ -99,8 +100,8 @@ def load_checkpoint(path: Path, template):
             meta = json.loads(str(data["meta"]))
             count = sum(1 for name in data.files if name.startswith("leaf_"))
             leaves = [np.asarray(data[f"leaf_{i}"]) for i in range(min(count, treedef.num_leaves))]
-        if not all(key in meta for key in ("done", "steps", "num_blocks")):
-            raise KeyError("meta lacks done, steps or num_blocks")
+        if not isinstance(meta, dict):
+            raise TypeError(f"its meta is a {type(meta).__name__}")
     except _UNREADABLE as err:
         raise _unreadable(path, err) from None
     mismatch = None
@@ -137,6 +138,8 @@ def load_history(path: Path, meta: dict):
         raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
                           f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
     try:
+        if not all(key in meta for key in ("done", "steps", "num_blocks")):
+            raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
         with np.load(path) as saved:
             return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
     except _UNREADABLE as err:
@@ -291,8 +294,8 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         runner, meta = load_checkpoint(ckpt, runner)
         if sharding is not None:
             runner = _put(runner, sharding)
+        history, per_step = load_history(ckpt.with_suffix(".history.npz"), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
-        history, per_step = load_history(ckpt.with_suffix(".history.npz"), meta)
 
     desc = f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + (f" on {devices} devices" if mesh else "")
     bar = _progress(cfg.num_updates, done, desc, progress and writer)

@@ -426,54 +426,60 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
     return jax.nn.softmax(logits, axis=-1)
 
 
+def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng):
+    """The first-episode return of ``attempts`` sampled episodes on each of ``levels`` (leaves
+    [L, ...], played by ``env``; under ``remidi.policy=combine`` by the combined policy):
+    ``(returns f32[L, attempts], discounted f32[L, attempts])``, the latter Σ_t γ^t r_t with
+    γ = ``ppo.gamma``. One rollout of ``task.max_episode_steps`` on L·attempts envs."""
+    task = setup.task
+    frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
+    tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
+    n = jax.tree.leaves(tiled)[0].shape[0]
+    traj, _ = rollout(rng, env, task.params, policy_apply(setup, runner), runner.train_state.params,
+                      setup.net.initialize_carry(n), tiled, task.max_episode_steps, frozen, tracker_env=task.env,
+                      dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
+    returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
+    discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
+    return returns, discounted
+
+
 def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     """Metrics on each evaluation set ``<set>``: ``eval_attempts`` sampled episodes per level (the
-    first episode of each; the sets one environment plays are rolled out together) give
-    ``solve_rate/<set>``, ``return/<set>`` and ``discounted_return/<set>`` (Σ_t γ^t r_t, γ =
-    ``ppo.gamma``). With the task's optimal return, the regret per level
-    gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's levels): the *expected*
-    regret ``optimal − E[return]``, exact for a one-step task that knows its ``expected_return``
-    (which adds ``entropy/<set>``, the mean entropy of the policy over the set's levels), estimated
-    from the sampled episodes otherwise."""
+    first episode of each; the sets one environment plays are rolled out together,
+    :func:`level_returns`) give ``solve_rate/<set>``, ``return/<set>`` and
+    ``discounted_return/<set>`` (Σ_t γ^t r_t, γ = ``ppo.gamma``). With the task's optimal return,
+    the regret per level gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's
+    levels): the *expected* regret ``optimal − E[return]`` (undiscounted), exact for a one-step
+    task that knows its ``expected_return`` (which adds ``entropy/<set>``, the mean entropy of the
+    policy over the set's levels), estimated from the sampled episodes otherwise."""
     task, cfg = setup.task, setup.cfg
-    params = runner.train_state.params
-    frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
-        tiled = [jax.tree.map(lambda x: jnp.repeat(x, cfg.eval_attempts, axis=0), task.eval_sets[name])
-                 for name in names]
-        sizes = [jax.tree.leaves(t)[0].shape[0] for t in tiled]
-        levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *tiled)
-        carry = setup.net.initialize_carry(sum(sizes))
-        traj, _ = rollout(jax.random.fold_in(rng, i), env, task.params, policy_apply(setup, runner), params, carry,
-                          levels, task.max_episode_steps, frozen, tracker_env=task.env,
-                          dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
-        returns = first_episode_return(traj.reward, traj.done)
-        discounted = first_episode_return(traj.reward, traj.done, cfg.ppo.gamma)
+        levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[name] for name in names))
+        returns, discounted = level_returns(setup, runner, env, levels, cfg.eval_attempts, jax.random.fold_in(rng, i))
         optimal = None
         if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
-            optimal = jax.vmap(task.optimal_return)(jax.tree.map(lambda *xs: jnp.concatenate(xs),
-                                                                 *(task.eval_sets[name] for name in names)))
+            optimal = jax.vmap(task.optimal_return)(levels)
         start = 0
-        for name, size in zip(names, sizes):
-            ret = returns[start:start + size]
-            first, count = start // cfg.eval_attempts, size // cfg.eval_attempts  # the set's untiled levels
-            set_optimal = None if optimal is None else optimal[first:first + count]
-            start += size
+        for name in names:
+            set_levels = task.eval_sets[name]
+            count = jax.tree.leaves(set_levels)[0].shape[0]
+            ret, set_discounted = returns[start:start + count], discounted[start:start + count]  # [count, attempts]
+            set_optimal = None if optimal is None else optimal[start:start + count]
+            start += count
             if task.solved is not None:
                 out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
-            out[f"discounted_return/{name}"] = jnp.mean(discounted[start - size:start])
+            out[f"discounted_return/{name}"] = jnp.mean(set_discounted)
             if task.optimal_return is None:
                 continue
-            set_levels = task.eval_sets[name]
             if task.expected_return is not None:
                 probs = first_step_policy(setup, runner, env, set_levels)  # [L, A]
                 expected = jax.vmap(task.expected_return)(set_levels, probs)
                 entropy = -jnp.sum(probs * jnp.log(jnp.maximum(probs, 1e-30)), axis=-1)
                 out[f"entropy/{name}"] = jnp.mean(entropy)
             else:
-                expected = ret.reshape(-1, cfg.eval_attempts).mean(axis=1)  # levels were repeated in place
+                expected = ret.mean(axis=1)
             regret = set_optimal - expected
             out[f"regret/{name}/mean"] = jnp.mean(regret)
             out[f"regret/{name}/worst"] = jnp.max(regret)

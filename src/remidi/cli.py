@@ -196,6 +196,19 @@ def _cmd_render(args) -> int:
     return 0
 
 
+def _cmd_evaluate(args) -> int:
+    from remidi.evaluate import run_from_args
+
+    doc = run_from_args(args)
+    for algo, entry in doc["algorithms"].items():
+        n = len(entry["seeds"])
+        print(f"\n{algo} ({n} seed{'s' if n != 1 else ''}, checkpoint of update {entry['update']})")
+        for name, m in entry["metrics"].items():
+            print(f"  {name:32s} {m['mean']:10.4f} ± {m['std']:.4f}")
+    print(f"\nwrote {Path(args.run_dir) / 'evaluate.json'}, evaluate.csv, evaluate.png")
+    return 0
+
+
 def _cmd_table(args) -> int:
     from remidi.experiments.table import markdown_table, summaries
 
@@ -301,6 +314,15 @@ def build_parser() -> argparse.ArgumentParser:
     episode.add_argument("--out", metavar="FILE.gif", help="output file (default: RUN_DIR/episode_<NAME>_seed<S>.gif)")
     episode.add_argument("--tile", **tile)
     render.set_defaults(func=_cmd_render)
+
+    evaluate = sub.add_parser("evaluate", help="a UED run's agents on more levels: held-out sets, CVaR over the "
+                                               "generator, larger perfect mazes",
+                              description="Reload every seed and algorithm of a UED run from its checkpoint and "
+                                          "evaluate it; writes RUN_DIR/evaluate.json, evaluate.csv, evaluate.png.")
+    from remidi.evaluate import main_args
+
+    main_args(evaluate)
+    evaluate.set_defaults(func=_cmd_evaluate)
 
     table = sub.add_parser("table", help="a Markdown table of finished runs (mean ± std over seeds, wall time)",
                            description="One row per experiment × algorithm of the given run folders (each "

@@ -85,6 +85,9 @@ class Experiment:
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
     preset_reasons: dict[str, dict[str, str]] = field(default_factory=dict)
+    # config → the UEDTask a run of this experiment trains on (UED experiments; None for the tabular
+    # games): for tools that reload a run's agent (remidi evaluate)
+    make_task: Callable[[Any], Any] | None = None
 
 
 def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None):
@@ -184,9 +187,10 @@ def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: boo
                             devices=devices)
 
 
-def _saved_run(exp_lookup, folder: Path):
+def _saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
     """``(experiment, algo, preset, seeds, config)`` of the run recorded in ``folder/config.json``;
-    ConfigError (one line, naming the file) when it is unreadable or incomplete."""
+    ConfigError (one line, starting with ``flag`` and naming the file) when it is unreadable or
+    incomplete."""
     path = folder / "config.json"
     try:
         saved = outputs.read_json(path)
@@ -196,10 +200,10 @@ def _saved_run(exp_lookup, folder: Path):
         if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) and s >= 0 for s in seeds)):
             raise ValueError(f"seeds must be a list of integers ≥ 0, got {seeds!r}")
     except ConfigError as err:
-        raise ConfigError(f"--resume: {path}: {err}") from None
+        raise ConfigError(f"{flag}: {path}: {err}") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         what = f"no {err}" if isinstance(err, KeyError) else (str(err).strip().splitlines() or [""])[0]
-        raise ConfigError(f"--resume: {path} is not a readable run config ({type(err).__name__}: {what})") from None
+        raise ConfigError(f"{flag}: {path} is not a readable run config ({type(err).__name__}: {what})") from None
     exp.validate(config, algo)
     return exp, algo, preset, seeds, config
 

@@ -112,4 +112,5 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
         preset_reasons=preset_reasons or {},
+        make_task=task_for,
     )

@@ -1,0 +1,309 @@
+"""``remidi evaluate RUN_DIR``: a UED run's trained agents on more evaluation levels.
+
+Every seed of every algorithm in ``RUN_DIR`` (a run folder, or a several-algorithm run's folder)
+is reloaded from its ``checkpoint.npz`` (a finished run's last one, or an interrupted run's
+latest) and evaluated on
+
+* **the task's own evaluation sets** (the ten held-out mazes, the lever's visible and hidden
+  levels, ...) with ``--attempts`` sampled episodes per level: ``solve_rate/<set>``,
+  ``return/<set>`` (and ``solve_rate/mean`` over the sets);
+* **CVaR over the level generator** (Rutherford et al. 2024, "No Regrets"): ``--cvar-levels``
+  levels drawn from the task's generator with ``--seed`` (the same levels for every seed and
+  algorithm), ``--cvar-attempts`` episodes each; per level its solve rate (and mean return), then
+  the mean over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
+  ``cvar/return/<α>`` (100% is the plain mean);
+* **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
+  ``--perfect-sizes`` (default 21 and 51), each a *perfect* maze (exactly one path between any
+  two open cells, carved by a randomised depth-first search from ``--seed``), the agent and the
+  goal on random open cells; the agent's egocentric view plays any size. Its exact optimal
+  return comes from the same shortest-path search as training's (episodes still last at most
+  250 steps, so a far goal may be out of reach: ``perfect<S>/reachable`` is the share of levels
+  whose optimum is positive). ``perfect<S>/solve_rate``, ``perfect<S>/return``,
+  ``perfect<S>/regret`` (optimal minus mean return).
+
+Writes ``RUN_DIR/evaluate.json`` (the arguments, and per algorithm the update its checkpoint is
+from and every metric's mean, std and per-seed values), ``RUN_DIR/evaluate.csv`` (long format:
+algo, seed, metric, value) and ``RUN_DIR/evaluate.png`` (the main metrics per algorithm).
+Every bad argument, or a folder that is not a UED run with a checkpoint, is a one-line error
+before anything is computed or written.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from remidi.errors import ConfigError, RemidiError
+
+ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
+DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
+            "seed": 0}
+MAX_PERFECT_SIZE = 101
+
+
+# ------------------------------------------------------------------------------ pure pieces
+def cvar(values: np.ndarray, alpha: float) -> float:
+    """The mean of the lowest ``ceil(alpha · N)`` (at least one) of ``values`` f[N]: the
+    conditional value at risk of the worst ``alpha`` share of levels."""
+    values = np.sort(np.asarray(values, dtype=float))
+    k = max(1, math.ceil(alpha * len(values) - 1e-9))
+    return float(values[:k].mean())
+
+
+def perfect_maze_walls(rng: np.random.Generator, size: int) -> np.ndarray:
+    """bool[size, size] walls of a perfect maze: the cells at odd coordinates are rooms, a
+    randomised depth-first search from a random room opens the wall between a room and an unvisited
+    neighbour, so the open cells form a tree (one path between any two). ``size`` odd ≥ 5."""
+    walls = np.ones((size, size), bool)
+    rooms = [(x, y) for y in range(1, size - 1, 2) for x in range(1, size - 1, 2)]
+    start = rooms[rng.integers(len(rooms))]
+    walls[start[1], start[0]] = False
+    stack = [start]
+    while stack:
+        x, y = stack[-1]
+        options = [(x + dx, y + dy) for dx, dy in ((2, 0), (-2, 0), (0, 2), (0, -2))
+                   if 0 < x + dx < size - 1 and 0 < y + dy < size - 1 and walls[y + dy, x + dx]]
+        if not options:
+            stack.pop()
+            continue
+        nx, ny = options[rng.integers(len(options))]
+        walls[(y + ny) // 2, (x + nx) // 2] = False
+        walls[ny, nx] = False
+        stack.append((nx, ny))
+    return walls
+
+
+def perfect_mazes(size: int, count: int, seed: int):
+    """``count`` perfect mazes of side ``size`` as one :class:`~remidi.envs.maze.MazeLevel` batch
+    (leading dim ``count``), deterministic in ``seed``: walls by :func:`perfect_maze_walls`, the
+    agent (random direction) and the goal on two different random open cells."""
+    from remidi.envs.maze import MazeLevel, _stack
+
+    rng = np.random.default_rng([seed, size])
+    levels = []
+    for _ in range(count):
+        walls = perfect_maze_walls(rng, size)
+        ys, xs = np.nonzero(~walls)
+        agent, goal = rng.choice(len(xs), size=2, replace=False)
+        levels.append(MazeLevel.make(walls, (xs[goal], ys[goal]), (xs[agent], ys[agent]), rng.integers(4)))
+    return _stack(levels)
+
+
+# ------------------------------------------------------------------------------ the command
+@dataclass
+class _Loaded:
+    folder: Path
+    algo: str
+    seeds: list[int]
+    setup: Any
+    runner: Any
+    update: int
+
+
+def _check_args(attempts, cvar_levels, cvar_attempts, perfect_sizes, perfect_count, seed) -> None:
+    for key, value in (("--attempts", attempts), ("--cvar-levels", cvar_levels), ("--cvar-attempts", cvar_attempts),
+                       ("--perfect-count", perfect_count)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(f"{key}: must be an integer ≥ 1, got {value!r}")
+    for size in perfect_sizes:
+        if isinstance(size, bool) or not isinstance(size, int) or size < 5 or size % 2 == 0 or size > MAX_PERFECT_SIZE:
+            raise ConfigError(f"--perfect-sizes: each must be an odd integer in [5, {MAX_PERFECT_SIZE}], got {size!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ConfigError(f"--seed: must be an integer in [0, {2**32 - 1}], got {seed!r}")
+
+
+def _run_folders(run_dir: Path) -> list[Path]:
+    if not run_dir.is_dir():
+        raise ConfigError(f"RUN_DIR: {run_dir} is not a folder")
+    if (run_dir / "config.json").is_file():
+        return [run_dir]
+    subs = sorted(p for p in run_dir.iterdir() if (p / "config.json").is_file())
+    if not subs:
+        raise ConfigError(f"RUN_DIR: {run_dir} holds no run (no config.json in it or its sub-folders)")
+    return subs
+
+
+def _load(folder: Path) -> _Loaded:
+    """The run in ``folder``, its agent restored from the checkpoint (leaves with the seed axis
+    first). ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
+    import jax
+    import jax.numpy as jnp
+
+    from remidi.engine import driver
+    from remidi.engine import train as tr
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import _saved_run
+
+    exp, algo, _, seeds, config = _saved_run(get_experiment, folder, flag="RUN_DIR")
+    if exp.make_task is None:
+        raise ConfigError(f"RUN_DIR: {folder} is a {exp.name} run; evaluate needs a UED run (a trained agent)")
+    path = folder / driver.CHECKPOINT
+    if not path.is_file():
+        raise ConfigError(f"RUN_DIR: {folder} has no {driver.CHECKPOINT} (the run wrote no checkpoint yet)")
+    setup = tr.make_setup(exp.make_task(config), config, algo)
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
+    template = jax.eval_shape(lambda k: driver._init(setup, k), keys)  # the runner's structure, not compiled
+    try:
+        runner, meta = driver.load_checkpoint(path, template)
+    except ConfigError as err:
+        raise ConfigError(str(err).replace("--resume: ", "RUN_DIR: ", 1)) from None
+    return _Loaded(folder=folder, algo=algo, seeds=list(seeds), setup=setup, runner=runner,
+                   update=int(meta.get("done", -1)))
+
+
+def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
+    """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
+    evaluation of one run: per held-out set ``[S]`` values; for CVaR the per-level solve rates and
+    returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
+    import jax
+    import jax.numpy as jnp
+
+    from remidi.engine import train as tr
+
+    task = setup.task
+
+    def one_seed(runner, key):
+        out = {}
+        for i, (env, names) in enumerate(tr.eval_groups(task)):
+            levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[n] for n in names))
+            returns, _ = tr.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, i))
+            start = 0
+            for name in names:
+                count = jax.tree.leaves(task.eval_sets[name])[0].shape[0]
+                ret = returns[start:start + count]
+                start += count
+                if task.solved is not None:
+                    out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
+                out[f"return/{name}"] = jnp.mean(ret)
+        ret, _ = tr.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, 1000))
+        out["cvar_raw/return"] = ret.mean(axis=1)
+        if task.solved is not None:
+            out["cvar_raw/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
+        for size, (env, levels) in perfect.items():
+            ret, _ = tr.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size))
+            out[f"perfect_raw/{size}"] = ret  # [L, attempts]
+        return out
+
+    return jax.jit(jax.vmap(one_seed))
+
+
+def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-seed metrics f[S] from the raw evaluations."""
+    task = setup.task
+    out = {name: np.asarray(v, float) for name, v in raw.items() if not name.startswith(("cvar_raw/", "perfect_raw/"))}
+    rates = [name for name in out if name.startswith("solve_rate/")]
+    if len(rates) > 1:
+        out["solve_rate/mean"] = np.mean([out[name] for name in rates], axis=0)
+    for kind in ("solve_rate", "return"):
+        if f"cvar_raw/{kind}" in raw:
+            per_level = np.asarray(raw[f"cvar_raw/{kind}"], float)  # [S, N]
+            for alpha, label in ALPHAS:
+                out[f"cvar/{kind}/{label}"] = np.array([cvar(row, alpha) for row in per_level])
+    for size, optimal in perfect_optimal.items():
+        returns = np.asarray(raw[f"perfect_raw/{size}"], float)  # [S, L, attempts]
+        if task.solved is not None:
+            out[f"perfect{size}/solve_rate"] = np.asarray(task.solved(returns), float).mean(axis=(1, 2))
+        out[f"perfect{size}/return"] = returns.mean(axis=(1, 2))
+        out[f"perfect{size}/regret"] = (optimal[None, :] - returns.mean(axis=2)).mean(axis=1)
+        out[f"perfect{size}/reachable"] = np.full(returns.shape[0], float(np.mean(optimal > 0)))
+    return out
+
+
+def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: int = DEFAULTS["cvar_levels"],
+                 cvar_attempts: int = DEFAULTS["cvar_attempts"], perfect_sizes=DEFAULTS["perfect_sizes"],
+                 perfect_count: int = DEFAULTS["perfect_count"], seed: int = DEFAULTS["seed"],
+                 log: Callable[[str], None] | None = None) -> dict:
+    """Evaluate every algorithm and seed in ``run_dir`` (module docstring) and write
+    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there. Returns the JSON document."""
+    import jax
+
+    from remidi.envs.maze import MazeEnv, optimal_return
+    from remidi.experiments import outputs
+
+    _check_args(attempts, cvar_levels, cvar_attempts, tuple(perfect_sizes), perfect_count, seed)
+    run_dir = Path(run_dir)
+    loaded = [_load(folder) for folder in _run_folders(run_dir)]  # every run checked before any is evaluated
+    args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
+            "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
+    doc: dict[str, Any] = {"run": str(run_dir), "args": args, "algorithms": {}}
+    rows = []
+    for run in loaded:
+        task = run.setup.task
+        levels = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(seed), cvar_levels))
+        perfect, optimal = {}, {}
+        if isinstance(task.env, MazeEnv):
+            for size in perfect_sizes:
+                batch = perfect_mazes(size, perfect_count, seed)
+                perfect[size] = (MazeEnv(size), batch)
+                optimal[size] = np.asarray(jax.jit(jax.vmap(optimal_return))(batch), float)
+        if log is not None:
+            log(f"evaluating {run.folder} ({run.algo}, {len(run.seeds)} seed{'s' if len(run.seeds) != 1 else ''}, "
+                f"checkpoint of update {run.update})")
+        keys = jax.vmap(jax.random.PRNGKey)(np.asarray(run.seeds, np.uint32) + np.uint32(seed))
+        raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
+        metrics = _summarise(raw, run.setup, optimal)
+        doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
+                                       "metrics": outputs.summarize(metrics)}
+        rows += [(run.algo, s, name, float(values[i])) for name, values in metrics.items()
+                 for i, s in enumerate(run.seeds)]
+    outputs.write_json(run_dir / "evaluate.json", doc)
+
+    def write_csv(fh):
+        w = csv.writer(fh)
+        w.writerow(["algo", "seed", "metric", "value"])
+        for row in rows:
+            w.writerow([*row[:3], repr(row[3])])
+
+    outputs.atomic_write(run_dir / "evaluate.csv", write_csv)
+    _plot(run_dir / "evaluate.png", doc)
+    return doc
+
+
+def _plot(path: Path, doc: dict) -> None:
+    """Bars per algorithm (mean ± std over seeds) of the solve-rate metrics (returns where the task
+    has no solve criterion)."""
+    from remidi.experiments.plots import plot_bars
+
+    algos = doc["algorithms"]
+    names = list(next(iter(algos.values()))["metrics"])
+    kind = "solve_rate" if any("solve_rate" in n for n in names) else "return"
+    shown = [n for n in names if n.split("/")[0] == kind or n.startswith("cvar/" + kind)
+             or (n.startswith("perfect") and n.endswith("/" + kind))]
+    series = {algo: np.array([entry["metrics"][n]["per_seed"] for n in shown], float) for algo, entry in algos.items()}
+    plot_bars(path, f"remidi evaluate: {kind.replace('_', ' ')}", shown, series, kind,
+              ylim=(0.0, 1.0) if kind == "solve_rate" else None)
+
+
+def main_args(parser) -> None:
+    """The ``remidi evaluate`` arguments (added to the CLI's sub-parser)."""
+    parser.add_argument("run_dir", metavar="RUN_DIR", help="a run folder, or a several-algorithm run's folder")
+    parser.add_argument("--attempts", type=int, default=DEFAULTS["attempts"],
+                        help=f"episodes per level of the task's evaluation sets and the perfect mazes "
+                             f"(default {DEFAULTS['attempts']})")
+    parser.add_argument("--cvar-levels", type=int, default=DEFAULTS["cvar_levels"],
+                        help=f"levels drawn from the task's generator for CVaR (default {DEFAULTS['cvar_levels']})")
+    parser.add_argument("--cvar-attempts", type=int, default=DEFAULTS["cvar_attempts"],
+                        help=f"episodes per CVaR level (default {DEFAULTS['cvar_attempts']})")
+    parser.add_argument("--perfect-sizes", default=",".join(map(str, DEFAULTS["perfect_sizes"])),
+                        help="sides of the perfect mazes, comma-separated odd numbers (maze runs; default 21,51)")
+    parser.add_argument("--perfect-count", type=int, default=DEFAULTS["perfect_count"],
+                        help=f"perfect mazes per size (default {DEFAULTS['perfect_count']})")
+    parser.add_argument("--seed", type=int, default=DEFAULTS["seed"],
+                        help="draws the CVaR levels and perfect mazes (the same for every run) and the episodes")
+
+
+def run_from_args(args) -> dict:
+    try:
+        sizes = tuple(int(x) for x in str(args.perfect_sizes).split(",") if x.strip())
+    except ValueError:
+        raise RemidiError(f"--perfect-sizes: must be comma-separated odd integers, got {args.perfect_sizes!r}") from None
+    import sys
+
+    return evaluate_run(args.run_dir, attempts=args.attempts, cvar_levels=args.cvar_levels,
+                        cvar_attempts=args.cvar_attempts, perfect_sizes=sizes, perfect_count=args.perfect_count,
+                        seed=args.seed, log=lambda line: print(line, file=sys.stderr, flush=True))

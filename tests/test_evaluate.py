@@ -1,0 +1,107 @@
+"""`remidi evaluate`: CVaR on hand-known values, perfect mazes against an independent search,
+and the whole command on a tiny lever run (keys, files, one-line errors)."""
+
+import csv
+import json
+import shutil
+
+import jax
+import numpy as np
+import pytest
+from test_cli import LEVER_TINY
+from test_maze_env import brute_force_steps
+
+from remidi.cli import main
+from remidi.envs import maze as M
+from remidi.evaluate import cvar, perfect_maze_walls, perfect_mazes
+
+
+def test_cvar_is_the_mean_of_the_worst_share():
+    rates = np.array([1.0, 0.0, 0.5, 0.25] + [1.0] * 96)  # 100 levels
+    assert cvar(rates, 0.01) == 0.0  # the worst level
+    assert cvar(rates, 0.04) == pytest.approx((0 + 0.25 + 0.5 + 1.0) / 4)
+    assert cvar(rates, 0.1) == pytest.approx((0 + 0.25 + 0.5 + 7 * 1.0) / 10)
+    assert cvar(rates, 1.0) == pytest.approx(rates.mean())
+    assert cvar(np.array([0.3, 0.7]), 0.01) == 0.3  # at least one level
+
+
+@pytest.mark.parametrize("size", [7, 21, 51])
+def test_perfect_mazes_are_trees_and_their_optimum_matches_a_search(size):
+    rng = np.random.default_rng(size)
+    walls = perfect_maze_walls(rng, size)
+    open_cells = {(x, y) for y, x in zip(*np.nonzero(~walls))}
+    edges = sum(1 for x, y in open_cells for dx, dy in ((1, 0), (0, 1)) if (x + dx, y + dy) in open_cells)
+    assert edges == len(open_cells) - 1  # a tree ...
+    seen, stack = {next(iter(open_cells))}, [next(iter(open_cells))]
+    while stack:  # ... that is connected: one path between any two open cells
+        x, y = stack.pop()
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            if (x + dx, y + dy) in open_cells and (x + dx, y + dy) not in seen:
+                seen.add((x + dx, y + dy))
+                stack.append((x + dx, y + dy))
+    assert seen == open_cells and len(open_cells) >= ((size - 1) // 2) ** 2
+    levels = perfect_mazes(size, 6, seed=3)
+    assert levels.wall_map.shape == (6, size, size)
+    again = perfect_mazes(size, 6, seed=3)
+    np.testing.assert_array_equal(np.asarray(levels.wall_map), np.asarray(again.wall_map))  # deterministic
+    got = np.asarray(jax.jit(jax.vmap(M.optimal_return))(levels))
+    for i in range(6):
+        n = brute_force_steps(np.asarray(levels.wall_map[i]), np.asarray(levels.goal_pos[i]).tolist(),
+                              np.asarray(levels.agent_pos[i]).tolist(), int(levels.agent_dir[i]))
+        assert np.isfinite(n)  # a perfect maze connects every open cell
+        want = 1 - 0.9 * n / M.MAX_STEPS if n <= M.MAX_STEPS else 0.0
+        np.testing.assert_allclose(got[i], want, rtol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def lever_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("evaluate") / "run"
+    assert main(["run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]) == 0
+    return out
+
+
+def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(lever_run, run)
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--attempts", "3", "--cvar-levels", "40", "--cvar-attempts", "2"]) == 0
+    doc = json.loads((run / "evaluate.json").read_text())
+    assert doc["args"]["cvar_levels"] == 40 and set(doc["algorithms"]) == {"plr", "remidi"}
+    for algo, entry in doc["algorithms"].items():
+        assert entry["seeds"] == [0, 1] and entry["update"] == 40
+        m = entry["metrics"]
+        for name in ("solve_rate/visible", "solve_rate/hidden", "solve_rate/mean", "return/visible",
+                     "cvar/solve_rate/1%", "cvar/solve_rate/10%", "cvar/solve_rate/100%", "cvar/return/1%"):
+            assert name in m, (algo, name)
+        for s in range(2):
+            worst = [m[f"cvar/solve_rate/{a}"]["per_seed"][s] for a in ("1%", "10%", "100%")]
+            assert 0 <= worst[0] <= worst[1] <= worst[2] <= 1
+        assert not any(name.startswith("perfect") for name in m)  # only maze runs get perfect mazes
+    with open(run / "evaluate.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["algo"] for r in rows} == {"plr", "remidi"} and {r["seed"] for r in rows} == {"0", "1"}
+    assert (run / "evaluate.png").stat().st_size > 5_000
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--attempts", "0"], "--attempts: must be an integer ≥ 1, got 0"),
+    (["--perfect-sizes", "20"], "--perfect-sizes: each must be an odd integer"),
+    (["--perfect-sizes", "x"], "--perfect-sizes: must be comma-separated odd integers"),
+    (["--seed", "-1"], "--seed: must be an integer in"),
+])
+def test_bad_evaluate_arguments_are_one_line(lever_run, capsys, argv, needle):
+    assert main(["evaluate", str(lever_run), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err
+    assert not (lever_run / "evaluate.json").exists()
+
+
+def test_a_folder_that_is_no_ued_run_is_one_line(tmp_path, capsys):
+    assert main(["evaluate", str(tmp_path)]) == 2
+    assert "holds no run" in capsys.readouterr().err
+    assert main(["run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--quiet", "--set", "iterations=20",
+                 "--out", str(tmp_path / "tab")]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "tab")]) == 2
+    assert "evaluate needs a UED run" in capsys.readouterr().err

@@ -145,10 +145,11 @@ def _cmd_run(args) -> int:
     from remidi.experiments import get_experiment
     from remidi.experiments.base import parse_algos, resume_experiment, run_experiment
     from remidi.experiments.config import parse_set_items
+    from remidi.experiments.tracking import parse_log
 
     if args.resume is not None:
         if (args.experiment is not None or args.algo or args.out or args.sets or args.seeds is not None
-                or args.devices is not None):
+                or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
         summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)
@@ -172,9 +173,10 @@ def _cmd_run(args) -> int:
     seeds = list(range(args.seed, args.seed + num_seeds))
     out = Path(args.out) if args.out else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)
+    log = parse_log(args.log)  # a missing package: one line naming the extra, before anything is written
     summaries = run_experiment(exp, algos=algos, preset=args.preset, seeds=seeds,
                                overrides=parse_set_items(args.sets), out=out, progress=not args.quiet,
-                               argv=sys.argv[1:], devices=1 if args.devices is None else args.devices)
+                               argv=sys.argv[1:], devices=1 if args.devices is None else args.devices, log=log)
     _print_summaries(summaries, out)
     return 0
 
@@ -272,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "see docs/devices.md)")
     run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--log", metavar="wandb,tensorboard", help="experiment tracking: Weights & Biases and/or "
+                     "TensorBoard (pip install \"remidi[wandb]\" / \"remidi[tensorboard]\"); files under the run "
+                     "folder, WANDB_MODE=offline works; --resume continues the same tracked runs")
     run.set_defaults(func=_cmd_run)
 
     lst = sub.add_parser("list", help="list experiments, algorithms, presets and config keys",

@@ -63,6 +63,9 @@ class RunContext:
     resume: bool = False
     progress: bool = True
     devices: int = 1  # devices the seeds are sharded over (experiments with shards_seeds)
+    # called as each block of training finishes: (step, {metric: f[S]}), for experiment tracking;
+    # experiments that train in one piece (the tabular games) never call it
+    on_block: Callable[[int, dict], None] | None = None
 
 
 @dataclass(frozen=True)
@@ -126,10 +129,11 @@ MAX_SEED = 2**32 - 1  # jax.random.PRNGKey takes 32-bit seeds
 
 def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: list[int],
                    overrides: dict[str, Any], out: Path, progress: bool = True,
-                   argv: list[str] | None = None, devices: int = 1) -> dict[str, dict]:
+                   argv: list[str] | None = None, devices: int = 1, log: list[str] | None = None) -> dict[str, dict]:
     """Validate, train every algorithm, write all outputs; return ``{algo: summary}``.
 
-    ``devices``: shard the seeds over that many devices (:func:`_check_devices`)."""
+    ``devices``: shard the seeds over that many devices (:func:`_check_devices`). ``log``: the
+    experiment-tracking backends (:mod:`remidi.experiments.tracking`, checked by its ``parse_log``)."""
     notes: list[str] = []
     config = resolve_config(exp, preset, overrides, notes)
     for algo in algos:
@@ -143,10 +147,11 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch
             return _write_and_train(exp, algos, preset, seeds, config, Path(scratch) / "run", [], False, argv, devices)
-    return _write_and_train(exp, algos, preset, seeds, config, Path(out), notes, progress, argv, devices)
+    return _write_and_train(exp, algos, preset, seeds, config, Path(out), notes, progress, argv, devices, log or [])
 
 
-def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progress, argv, devices) -> dict[str, dict]:
+def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progress, argv, devices,
+                     log: list[str] = ()) -> dict[str, dict]:
     folders = {algo: (out / algo if len(algos) > 1 else out) for algo in algos}
     for folder in dict.fromkeys([out, *folders.values()]):  # check every folder before writing anything
         outputs.prepare_out_dir(folder, create=False)
@@ -154,9 +159,10 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
         print(f"remidi: {note}", file=sys.stderr, flush=True)
     for algo, folder in folders.items():
         outputs.prepare_out_dir(folder)
-        write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders))
+        write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
+                         log=list(log))
     return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
-                            devices=devices)
+                            devices=devices, log=list(log))
 
 
 def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
@@ -184,7 +190,18 @@ def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: boo
     devices = _saved_devices(folder)
     _check_devices(exp, devices, len(seeds))
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
-                            devices=devices)
+                            devices=devices, log=_saved_log(folder))
+
+
+def _saved_log(folder: Path) -> list[str]:
+    """The tracking backends recorded in ``folder/config.json`` (checked again: a resume on a
+    machine without the package says so before anything is written)."""
+    from remidi.experiments.tracking import parse_log
+
+    saved = outputs.read_json(folder / "config.json").get("log") or []
+    if not isinstance(saved, list) or not all(isinstance(name, str) for name in saved):
+        raise ConfigError(f"--resume: {folder / 'config.json'}: log must be a list of backend names, got {saved!r}")
+    return parse_log(",".join(saved))
 
 
 def _saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
@@ -254,6 +271,7 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
     runs = [(sub, *_saved_run(exp_lookup, sub)) for sub in subs]
     runs.sort(key=lambda run: _run_order(run[0], run[1], run[2]))
     devices = {sub: _saved_devices(sub) for sub in subs}
+    logs = {sub: _saved_log(sub) for sub in subs}
     for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
@@ -262,7 +280,7 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
             summaries[algo] = outputs.read_json(sub / "summary.json")
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
-                                              progress=progress, devices=devices[sub]))
+                                              progress=progress, devices=devices[sub], log=logs[sub]))
     exp, config = runs[0][1], runs[0][5]
     results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
     exp.plot(folder, results, config)
@@ -285,8 +303,9 @@ def result_from_files(folder: Path) -> RunResult:
 
 
 def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seeds: list[int], config, argv,
-                     devices: int = 1, algos: list[str] | None = None) -> None:
-    """``algos``: every algorithm of the run, in the order the user gave (plots keep it on resume)."""
+                     devices: int = 1, algos: list[str] | None = None, log: list[str] | None = None) -> None:
+    """``algos``: every algorithm of the run, in the order the user gave (plots keep it on resume);
+    ``log``: its experiment-tracking backends (a resume continues them)."""
     outputs.write_json(folder / "config.json", {
         "experiment": exp.name,
         "algo": algo,
@@ -294,20 +313,32 @@ def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seed
         "preset": preset,
         "seeds": seeds,
         "devices": devices,
+        "log": list(log or []),
         "config": config_to_dict(config),
         "command": ["remidi", *(argv if argv is not None else sys.argv[1:])],
         "remidi_version": __version__,
     })
 
 
-def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress, devices=1):
+def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress, devices=1, log=()):
     results: dict[str, RunResult] = {}
     summaries: dict[str, dict] = {}
     for algo, folder in folders.items():
+        tracker = None
+        if log:
+            from remidi.experiments.tracking import Tracker
+
+            tracker = Tracker(list(log), folder, f"{exp.name}/{algo}", outputs.read_json(folder / "config.json"),
+                              seeds, group=str(Path(out).resolve()))
         ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress,
-                         devices=devices)
+                         devices=devices, on_block=tracker.log if tracker is not None else None)
         started = time.perf_counter()
-        result = exp.train(ctx)
+        try:
+            result = exp.train(ctx)
+        except BaseException:  # Ctrl-C or an error: close the tracked runs, a resume continues them
+            if tracker is not None:
+                tracker.close()
+            raise
         # wall time of the training (compilation included) in this invocation: a resumed run counts its last part
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}
         results[algo] = result
@@ -316,6 +347,9 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
             folder / "summary.json", experiment=exp.name, algo=algo, preset=preset, seeds=seeds,
             final=result.final_metrics(), **timing, **result.extra)
         exp.plot(folder, {algo: result}, config)
+        if tracker is not None:
+            tracker.log_history(result.steps, result.history)  # what was not streamed (the tabular games)
+            tracker.finish(summaries[algo], sorted(folder.glob("*.png")))
     if len(folders) > 1:
         exp.plot(out, results, config)
     return summaries

@@ -42,8 +42,14 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         validate_ued_config(cfg, ctx.algo, task)  # the same rules as run_experiment, for direct callers
         for warning in run_warnings(cfg, ctx.algo, task):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
+        on_block = None
+        if ctx.on_block is not None:  # stream each block's metrics, with the derived ones (e.g. solve_rate/mean)
+            def on_block(done, metrics):
+                more = derive({k: np.asarray(v)[:, None] for k, v in metrics.items()}) if derive is not None else {}
+                ctx.on_block(done, {**metrics, **{k: np.asarray(v)[:, 0] for k, v in more.items()}})
+
         steps, history, raw, _ = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
-                                             progress=ctx.progress, devices=ctx.devices)
+                                             progress=ctx.progress, devices=ctx.devices, on_block=on_block)
         if derive is not None:
             history.update(derive(history))
         final = {name: history[name][:, -1] for name in history}

@@ -62,7 +62,14 @@ def test_lever_plot(figures, tmp_path):
     assert chance and chance[0].get_ydata()[0] == pytest.approx(1 / 64) and chance[0].get_linestyle() == "--"
     assert hidden.get_ylabel() == "solve_rate/hidden"
     replay = axes["share of hidden levels among replayed"]
-    assert legend(replay) == ["remidi", "plr"]  # dr never replays
+    assert legend(replay) == ["remidi", "plr"]  # dr never replays ...
+    assert [t.get_text() for t in replay.texts] == ["n/a: dr"]  # ... and the panel says so
+    assert not axes["solve rate, hidden answer"].texts
+    # a panel without a fixed range keeps its curves and reference lines clear of the frame and legend
+    regret = axes["mean regret over visible levels"]
+    lo, hi = regret.get_ylim()
+    drawn = np.concatenate([line.get_ydata() for line in regret.get_lines()])
+    assert hi - drawn.max() >= 0.2 * (drawn.max() - drawn.min()) and drawn.min() > lo
     colours = {line.get_label(): line.get_color() for ax in axes.values() for line in ax.get_lines()}
     for algo in results:
         assert colours[algo] == plots.algorithm_style(algo)["color"]

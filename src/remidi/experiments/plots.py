@@ -62,6 +62,8 @@ class Panel:
     # draw curves whose means coincide (root-mean-square gap under 2% of the panel's range) once,
     # labelled "a, b"
     merge_coinciding: bool = False
+    # algorithms of the run for which the metric is undefined (DR's replay share): named in the panel
+    missing: list[str] = field(default_factory=list)
 
 
 def algorithm_curves(results: dict, metric: str) -> list[Curve]:
@@ -128,14 +130,21 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
             ax.axhline(y, linestyle=(0, (4, 3)), color="black", linewidth=1, alpha=0.6,
                        label=None if label in seen else label)
             seen.add(label)
-        if panel.ylim is not None:
-            ax.set_ylim(*panel.ylim)
+        # a fixed end of the range stays; a free one gets headroom, so that neither the frame nor the
+        # legend hides a curve or a reference line
+        lo, hi = ax.get_ylim()
+        span = (hi - lo) or 1.0
+        want_lo, want_hi = panel.ylim if panel.ylim is not None else (None, None)
+        ax.set_ylim(lo - 0.05 * span if want_lo is None else want_lo, hi + 0.25 * span if want_hi is None else want_hi)
+        if panel.missing:
+            ax.text(0.02, 0.03, f"n/a: {', '.join(panel.missing)}", transform=ax.transAxes, fontsize=8,
+                    color="dimgray")
         ax.set_title(panel.title)
         ax.set_xlabel(panel.xlabel)
         ax.set_ylabel(panel.ylabel)
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="best")
     if title:
         fig.suptitle(title)
     _save(fig, path)

@@ -78,8 +78,10 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
             options = more[0] if more else {}
             kind = metric.split("/")[0]
             ylim = options.get("ylim", (-0.03, 1.03) if kind in UNIT_INTERVAL else None)
-            figure.append(Panel(title, algorithm_curves(results, metric), metric, "update",
-                                references=list(options.get("references", ())), ylim=ylim))
+            curves = algorithm_curves(results, metric)
+            drawn = {c.label for c in curves}
+            figure.append(Panel(title, curves, metric, "update", references=list(options.get("references", ())),
+                                ylim=ylim, missing=[algo for algo in results if algo not in drawn]))
         plot_panels(folder / "training.png", figure)
         if bars is not None:
             title, metrics = bars

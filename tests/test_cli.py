@@ -386,3 +386,37 @@ def test_lever_tiny_is_the_engine_tests_tiny_configuration():
 
     overrides = parse_set_items(LEVER_TINY[1::2])
     assert resolve_config(get_experiment("lever"), "smoke", overrides) == TINY
+
+
+def test_a_full_disk_is_one_line_and_loses_nothing(tmp_path, capsys, monkeypatch):
+    """ENOSPC while a result file is written: one line naming the file, exit 1, the file before
+    intact and no temporary left; the resume hint names the run folder."""
+    import errno
+
+    from remidi.experiments import outputs
+
+    path = tmp_path / "summary.json"
+    path.write_text("before")
+
+    def full(fh):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError) as err:
+        outputs.atomic_write(path, full)
+    assert err.value.filename == str(path) and path.read_text() == "before"
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]
+    real = outputs.atomic_write
+
+    def full_at_summary(target, write, binary=False):
+        if target.name == "summary.json":
+            return real(target, full, binary)
+        return real(target, write, binary)
+
+    monkeypatch.setattr(outputs, "atomic_write", full_at_summary)
+    out = tmp_path / "run"
+    code, _, err_text = run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--quiet",
+                                *FAST, "--out", str(out))
+    assert code == 1 and err_text.count("\n") == 1, err_text
+    assert f"{out / 'summary.json'}: No space left on device; files written before are intact" in err_text
+    assert f"continue with: remidi run --resume {out}" in err_text
+    assert (out / "config.json").exists() and not list(out.glob(".*.tmp"))

@@ -28,6 +28,17 @@ class _Parser(argparse.ArgumentParser):
 _RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume hint
 
 
+def _write_failed_message(err: OSError) -> str:
+    """One line for a failed write (``No space left on device``, ...): what failed, that the files
+    written before are whole (every write is atomic), and how to continue a run."""
+    what = f"{err.filename}: " if err.filename else ""
+    line = f"remidi: error: {what}{err.strerror or type(err).__name__}; files written before are intact"
+    run_dir = Path(_RUN_DIR[-1]) if _RUN_DIR else None
+    if run_dir is not None and ((run_dir / "config.json").exists() or any(run_dir.glob("*/config.json"))):
+        line += f"; continue with: remidi run --resume {run_dir}"
+    return line
+
+
 def _interrupted_message() -> str:
     """``remidi: interrupted`` and, once the run folder holds a resumable run, how to resume it."""
     message = "remidi: interrupted"
@@ -377,6 +388,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `remidi list | head`: the reader has gone, which is no error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
+    except OSError as err:  # a full disk, a folder made read-only meanwhile: writes are atomic, nothing is lost
+        print(_write_failed_message(err), file=sys.stderr)
+        return 1
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)

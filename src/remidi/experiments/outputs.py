@@ -75,9 +75,11 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are ordinary files
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
+            raise OSError(err.errno, err.strerror or str(err), str(path)) from None
         raise
 
 

@@ -176,6 +176,11 @@ def _save(fig, path: Path) -> None:
     """Save atomically (temporary file, then rename) and close the figure."""
     fig.tight_layout()
     tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    try:
+        fig.savefig(tmp, dpi=110)
+        tmp.replace(path)
+    except OSError as err:  # a full disk: the plot before stays; name the plot, not the temporary
+        tmp.unlink(missing_ok=True)
+        raise OSError(err.errno, err.strerror or str(err), str(path)) from None
+    finally:
+        plt.close(fig)

@@ -319,13 +319,17 @@ def solve_blp_plans(
     base = poly.equalities()
     eq = base
     covered = np.zeros(payoff.shape[0], dtype=bool)
+    fixed = np.zeros(len(poly.parent), dtype=bool)
     rounds: list[RawRound] = []
     while not covered.all():
         active = ~covered
         raw = solve_regret_game(payoff_n, optimal_n, eq, active, tol)
         covered = covered | raw.support
-        fixed = realisable_infosets(poly, reach, raw.plan, covered, tol)
-        frozen = np.array(sorted({seq for info in np.flatnonzero(fixed) for seq in poly.children[info]}), dtype=int)
+        before, fixed = fixed, realisable_infosets(poly, reach, raw.plan, covered, tol)
+        # only the information sets this round freezes: those frozen before are pinned by `eq` (and
+        # so are their ancestors, realisable whenever they are), so their mass is the same in every plan
+        frozen = np.array(sorted({seq for info in np.flatnonzero(fixed & ~before) for seq in poly.children[info]}),
+                          dtype=int)
         unique = frozen_plan_is_unique(payoff_n, optimal_n, eq, active, raw.value, frozen)
         rounds.append(_rescaled(replace(raw, unique=unique), scale))
         rows, rhs = fixing_equalities(poly, raw.plan, fixed)

@@ -118,7 +118,7 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, m
 
     real = ued.train_seeds
 
-    def interrupted(*args, **kwargs):
+    def interrupted(*args, on_block=None, **kwargs):
         def ctrl_c(done, metrics):
             if done == 10:
                 raise KeyboardInterrupt
@@ -169,7 +169,7 @@ def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, c
 
     real = ued.train_seeds
 
-    def stop_in_remidi(task, cfg, algo, *args, **kwargs):
+    def stop_in_remidi(task, cfg, algo, *args, on_block=None, **kwargs):
         def ctrl_c(done, metrics):
             if algo == "remidi" and done == 10:
                 raise KeyboardInterrupt

@@ -16,7 +16,7 @@ from remidi.engine import train as tr
 from remidi.engine.distributions import CATEGORICAL, GAUSSIAN, for_task
 from remidi.engine.networks import make_network
 from remidi.engine.ppo import Batch, PPOConfig, create_train_state, ppo_update
-from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
 
 
 def test_gaussian_log_prob_and_entropy_match_closed_forms():
@@ -145,6 +145,7 @@ def target_task():
     grid = jnp.stack(jnp.meshgrid(jnp.linspace(-0.8, 0.8, 3), jnp.linspace(-0.8, 0.8, 3)), -1).reshape(-1, 2)
     return UEDTask(env=env, params=None, sample_level=sample, num_actions=2, max_episode_steps=1,
                    optimal_return=lambda level: jnp.asarray(1.0),
+                   optimal_discounted_return=one_step_discounted(lambda level: jnp.asarray(1.0)),
                    eval_sets={"shown": TargetLevel(target=grid, hidden=jnp.zeros(9, bool))},
                    level_tags=lambda level: {"hidden": level.hidden}, deterministic_reset=True, continuous=True)
 

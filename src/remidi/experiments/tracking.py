@@ -136,6 +136,7 @@ class Tracker:
             if images:
                 self._wandb.log(images, step=max(self.last_step, 0))
             self._wandb.finish()
+            wandb.teardown()  # stop W&B's service process: it would outlive the run holding our stdout open
         if self._writers is not None:
             import matplotlib.image
 
@@ -154,7 +155,10 @@ class Tracker:
     def close(self) -> None:
         """Flush and close every backend after an interruption (the run continues on resume)."""
         if self._wandb is not None:
+            import wandb
+
             self._wandb.finish(exit_code=1)
+            wandb.teardown()
             self._wandb = None
         if self._writers is not None:
             for writer in self._writers.values():

@@ -105,3 +105,14 @@ def test_a_folder_that_is_no_ued_run_is_one_line(tmp_path, capsys):
     capsys.readouterr()
     assert main(["evaluate", str(tmp_path / "tab")]) == 2
     assert "evaluate needs a UED run" in capsys.readouterr().err
+
+
+def test_cvar_levels_leave_out_levels_no_agent_can_solve():
+    from remidi.evaluate import _solvable_levels
+
+    task = M.maze_task("maze", 0.5, 60)  # 60 walls: many goals cut off
+    drawn = jax.jit(jax.vmap(task.sample_level))(jax.random.split(jax.random.PRNGKey(0), 32))
+    assert (np.asarray(jax.jit(jax.vmap(M.optimal_return))(drawn)) <= 0).any()  # the generator makes some
+    levels = _solvable_levels(task, 32, seed=0)
+    assert levels.wall_map.shape[0] == 32
+    assert (np.asarray(jax.jit(jax.vmap(M.optimal_return))(levels)) > 0).all()

@@ -8,8 +8,9 @@ latest) and evaluated on
   levels, ...) with ``--attempts`` sampled episodes per level: ``solve_rate/<set>``,
   ``return/<set>`` (and ``solve_rate/mean`` over the sets);
 * **CVaR over the level generator** (Rutherford et al. 2024, "No Regrets"): ``--cvar-levels``
-  levels drawn from the task's generator with ``--seed`` (the same levels for every seed and
-  algorithm), ``--cvar-attempts`` episodes each; per level its solve rate (and mean return), then
+  solvable levels drawn from the task's generator with ``--seed`` (the same levels for every seed
+  and algorithm; levels whose optimal return is ≤ 0, which no agent can solve, are drawn again),
+  ``--cvar-attempts`` episodes each; per level its solve rate (and mean return), then
   the mean over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
   ``cvar/return/<α>`` (100% is the plain mean);
 * **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
@@ -118,6 +119,9 @@ def _check_args(attempts, cvar_levels, cvar_attempts, perfect_sizes, perfect_cou
 
 
 def _run_folders(run_dir: Path) -> list[Path]:
+    """The run folders of ``run_dir``: itself, or its algorithms' sub-folders in the run's order."""
+    from remidi.experiments import outputs
+
     if not run_dir.is_dir():
         raise ConfigError(f"RUN_DIR: {run_dir} is not a folder")
     if (run_dir / "config.json").is_file():
@@ -125,7 +129,11 @@ def _run_folders(run_dir: Path) -> list[Path]:
     subs = sorted(p for p in run_dir.iterdir() if (p / "config.json").is_file())
     if not subs:
         raise ConfigError(f"RUN_DIR: {run_dir} holds no run (no config.json in it or its sub-folders)")
-    return subs
+    try:
+        order = outputs.read_json(subs[0] / "config.json").get("algos") or []
+    except (OSError, ValueError, AttributeError):
+        order = []  # _load reports an unreadable config.json
+    return sorted(subs, key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name))
 
 
 def _load(folder: Path) -> _Loaded:
@@ -154,6 +162,31 @@ def _load(folder: Path) -> _Loaded:
         raise ConfigError(str(err).replace("--resume: ", "RUN_DIR: ", 1)) from None
     return _Loaded(folder=folder, algo=algo, seeds=list(seeds), setup=setup, runner=runner,
                    update=int(meta.get("done", -1)))
+
+
+def _solvable_levels(task, count: int, seed: int):
+    """``count`` levels from the task's generator (drawn with ``seed``), leaving out those no agent
+    can solve where the task knows its optimum (optimal return ≤ 0, e.g. a maze whose goal the walls
+    cut off): they would sit at the bottom of every agent's CVaR. Draws in rounds until ``count``
+    remain (at most 64 rounds; fewer levels if the generator rarely makes a solvable one)."""
+    import jax
+
+    keys = jax.random.split(jax.random.PRNGKey(seed), 64)
+    sample = jax.jit(jax.vmap(task.sample_level))
+    kept, total = [], 0
+    for key in keys:
+        batch = sample(jax.random.split(key, count))
+        if task.optimal_return is not None:
+            solvable = np.asarray(jax.jit(jax.vmap(task.optimal_return))(batch)) > 0
+            batch = jax.tree.map(lambda x: x[solvable], batch)
+        kept.append(batch)
+        total += int(jax.tree.leaves(batch)[0].shape[0])
+        if total >= count:
+            break
+    levels = jax.tree.map(lambda *xs: np.concatenate(xs)[:count], *kept)
+    if total == 0:
+        raise ConfigError("--cvar-levels: the task's generator made no solvable level in 64 rounds")
+    return levels
 
 
 def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
@@ -234,7 +267,7 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
     rows = []
     for run in loaded:
         task = run.setup.task
-        levels = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(seed), cvar_levels))
+        levels = _solvable_levels(task, cvar_levels, seed)
         perfect, optimal = {}, {}
         if isinstance(task.env, MazeEnv):
             for size in perfect_sizes:

@@ -62,7 +62,8 @@ SMOKE = {
 # (at most 20 minutes per seed and algorithm), each deviation with its reason (`remidi list`)
 CPU_REASONS = {
     "num_updates": "30000 updates take ≈ 8 h per seed and algorithm on a 2-core CPU; 1500 fit the 20-minute "
-                   "budget (measured: PLR⊥ ≈ 7, ReMiDi ≈ 12 minutes per seed)",
+                   "budget (measured, 2 seeds trained together: DR 17, PLR⊥ 20, minimax return 24, ReMiDi 33 "
+                   "minutes, i.e. 8–17 per seed)",
     "lstm_size": "the paper's 256-unit LSTM is most of an update's cost; 64 units learn to navigate in 1500 "
                  "updates (DR solves held-out mazes, measured)",
     "eval_every": "the paper's 250 would give 6 points; 150 gives 10 points over the run",

@@ -255,3 +255,16 @@ def test_inconsistent_actions_within_an_information_set(tmp_path):
 def test_onestep_game_checks_shapes():
     with pytest.raises(ValueError):
         OneStepGame(("A", "B"), ("x",), ("h",), np.zeros((1, 3)))
+
+
+def test_remidi_solve_reports_each_blp_round_on_stderr(capsys):
+    from pathlib import Path
+
+    from remidi.cli import main
+
+    game = Path(__file__).resolve().parent.parent / "examples" / "tabular_shared.json"
+    assert main(["solve", str(game), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["mmr_value"] == pytest.approx(1.0)  # stdout: only the report
+    assert err.splitlines() == ["remidi: BLP round: value 1, support 2 level(s), 2/6 levels covered",
+                                "remidi: BLP round: value 0.175, support 4 level(s), 6/6 levels covered"]

@@ -90,7 +90,8 @@ def _install_sigint_handler():
 def _cmd_solve(args) -> int:
     from remidi.solvers.report import solve_command
 
-    print(solve_command(args.game, as_json=args.json))
+    print(solve_command(args.game, as_json=args.json,
+                        log=lambda line: print(f"remidi: {line}", file=sys.stderr, flush=True)))
     return 0
 
 

@@ -303,7 +303,7 @@ def solve_mmr_plan(poly: Polytope, payoff: np.ndarray, tol: float) -> RawRound:
 
 
 def solve_blp_plans(
-    poly: Polytope, payoff: np.ndarray, reach: np.ndarray, tol: float
+    poly: Polytope, payoff: np.ndarray, reach: np.ndarray, tol: float, progress=None
 ) -> list[RawRound]:
     """BLP by iterated refinement: the list of rounds, the last one holding the final plan.
 
@@ -311,7 +311,9 @@ def solve_blp_plans(
     every information set realisable on the union of the earlier supports, and lets the
     adversary choose only among levels outside those supports. Stops when every level is covered.
     Each round's ``unique`` tells whether the behaviour it fixes is the same in every optimal plan
-    of its regret game (:func:`frozen_plan_is_unique`).
+    of its regret game (:func:`frozen_plan_is_unique`). ``progress(round, covered, total)``, if
+    given, is called after each round with the round (rescaled) and how many levels the supports
+    cover so far.
     """
     optimal = best_response_values(poly, payoff)
     scale = normalise(payoff, optimal)
@@ -332,6 +334,8 @@ def solve_blp_plans(
                           dtype=int)
         unique = frozen_plan_is_unique(payoff_n, optimal_n, eq, active, raw.value, frozen)
         rounds.append(_rescaled(replace(raw, unique=unique), scale))
+        if progress is not None:
+            progress(rounds[-1], int(covered.sum()), len(covered))
         rows, rhs = fixing_equalities(poly, raw.plan, fixed)
         eq = (np.vstack([base[0], rows]), np.concatenate([base[1], rhs]))
     return rounds

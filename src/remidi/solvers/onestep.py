@@ -86,14 +86,15 @@ def solve_mmr(game: OneStepGame, tol: float = 1e-7) -> MMRResult[np.ndarray]:
                      game.rewards.max(axis=1))
 
 
-def solve_blp(game: OneStepGame, tol: float = 1e-7) -> BLPResult[np.ndarray]:
+def solve_blp(game: OneStepGame, tol: float = 1e-7, progress=None) -> BLPResult[np.ndarray]:
     """Bayesian level-perfect minimax regret by iterated refinement (see :mod:`remidi.solvers.lp`).
 
-    ``tol`` is the probability below which a level is outside an adversary's support.
+    ``tol`` is the probability below which a level is outside an adversary's support;
+    ``progress`` as in :func:`remidi.solvers.lp.solve_blp_plans`.
     """
     poly, payoff, reach = _sequence_form(game)
     rounds = []
-    for raw in lp.solve_blp_plans(poly, payoff, reach, tol):
+    for raw in lp.solve_blp_plans(poly, payoff, reach, tol, progress):
         policy = _policy(game, raw.plan)
         rounds.append(Round(raw.value, _support_names(game, raw.support), raw.adversary, policy,
                             policy_regret(game, policy), raw.unique))

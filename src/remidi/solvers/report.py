@@ -35,7 +35,7 @@ def _policy_table(game: OneStepGame | TreeGame, policy) -> dict[str, dict[str, f
     }
 
 
-def summarise(game: OneStepGame | TreeGame) -> dict:
+def summarise(game: OneStepGame | TreeGame, progress=None) -> dict:
     """JSON-ready summary of the BLP solution (whose first round is the MMR solution).
 
     Keys: format, actions, mmr_value, adversary (round 1, {level: prob}), rounds
@@ -45,7 +45,7 @@ def summarise(game: OneStepGame | TreeGame) -> dict:
     support holds it}).
     """
     solver = onestep if isinstance(game, OneStepGame) else sequence_form
-    result = solver.solve_blp(game)
+    result = solver.solve_blp(game, progress=progress)
     names = game.level_names
     rounds = [
         {"value": _clean(r.value), "support": list(r.support),
@@ -116,9 +116,17 @@ def format_text(summary: dict, source: str) -> str:
     return "\n".join(lines)
 
 
-def solve_command(path: str, as_json: bool) -> str:
-    """Text (or, with ``as_json``, JSON) report for a game file; raises GameFileError."""
-    summary = summarise(load_game(path))
+def solve_command(path: str, as_json: bool, log=None) -> str:
+    """Text (or, with ``as_json``, JSON) report for a game file; raises GameFileError. ``log``
+    (a function of one line) hears each BLP round as it is solved."""
+    game = load_game(path)
+
+    def progress(raw, covered, total):
+        if log is not None:
+            log(f"BLP round: value {raw.value:.6g}, support {int(raw.support.sum())} level(s), "
+                f"{covered}/{total} levels covered")
+
+    summary = summarise(game, progress)
     if as_json:
         return json.dumps(summary, indent=2)
     return format_text(summary, os.path.basename(path))

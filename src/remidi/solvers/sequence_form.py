@@ -192,11 +192,11 @@ def solve_mmr(game: TreeGame, tol: float = 1e-7) -> MMRResult[TreePolicy]:
                      lp.best_response_values(form.poly, form.payoff))
 
 
-def solve_blp(game: TreeGame, tol: float = 1e-7) -> BLPResult[TreePolicy]:
+def solve_blp(game: TreeGame, tol: float = 1e-7, progress=None) -> BLPResult[TreePolicy]:
     """Bayesian level-perfect minimax regret by iterated refinement over AOHs.
 
     ``tol`` is the probability below which a level is outside an adversary's support and a
-    sequence counts as never played.
+    sequence counts as never played. ``progress`` as in :func:`remidi.solvers.lp.solve_blp_plans`.
 
     Each round fixes the behaviour on every AOH realisable under the previous round's policy on
     a level of an earlier support (see :func:`remidi.solvers.lp.solve_blp_plans`).
@@ -205,7 +205,7 @@ def solve_blp(game: TreeGame, tol: float = 1e-7) -> BLPResult[TreePolicy]:
     rounds = [
         Round(raw.value, _support_names(game, raw.support), raw.adversary,
               _policy(form, raw.plan, tol), raw.regret, raw.unique)
-        for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol)
+        for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol, progress)
     ]
     return BLPResult(rounds[0].value, rounds, rounds[-1].policy, rounds[-1].regret,
                      lp.best_response_values(form.poly, form.payoff))

@@ -285,6 +285,10 @@ def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
     assert resolve_config(lever, "smoke", {"num_updates": "300"}, notes) == resolve_config(lever, "smoke", {})
     assert notes == []
     assert resolve_config(lever, "smoke", {"num_updates": "97"}).eval_every == 97  # a prime: one block
+    from remidi.experiments.config import nearest_divisor
+
+    assert nearest_divisor(1500, 50) == 50 and nearest_divisor(20, 10 / 3) == 4
+    assert nearest_divisor(10**20, 5e15) == 5 * 10**15  # no search over a length validation refuses
     tab = resolve_config(get_experiment("tabular-shared"), "smoke", {"iterations": "150"})
     assert (tab.log_every, tab.iters_per_adversary) == (1, 50)
 

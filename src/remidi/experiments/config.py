@@ -197,7 +197,10 @@ def get_value(config, key: str) -> Any:
 def nearest_divisor(length: int, target: float) -> int:
     """The divisor of ``length`` closest to ``target`` in ratio (|log(d / target)|; the larger on
     a tie): 20 updates at a target of 3.3 give 4; a prime length gives itself or 1."""
-    divisors = [d for d in range(1, length + 1) if length % d == 0]
+    if length >= 2**31:  # no run is that long (validation refuses it): no divisor search over it
+        return max(1, int(math.floor(target + 0.5)))
+    small = [d for d in range(1, math.isqrt(length) + 1) if length % d == 0]
+    divisors = small + [length // d for d in small]
     return min(divisors, key=lambda d: (abs(math.log(d / max(target, 1e-9))), -d))
 
 

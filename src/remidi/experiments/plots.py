@@ -137,8 +137,8 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
         want_lo, want_hi = panel.ylim if panel.ylim is not None else (None, None)
         ax.set_ylim(lo - 0.05 * span if want_lo is None else want_lo, hi + 0.25 * span if want_hi is None else want_hi)
         if panel.missing:
-            ax.text(0.02, 0.03, f"n/a: {', '.join(panel.missing)}", transform=ax.transAxes, fontsize=8,
-                    color="dimgray")
+            ax.text(0.98, 0.12, f"n/a: {', '.join(panel.missing)}", transform=ax.transAxes, fontsize=8,
+                    color="dimgray", ha="right", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
         ax.set_title(panel.title)
         ax.set_xlabel(panel.xlabel)
         ax.set_ylabel(panel.ylabel)

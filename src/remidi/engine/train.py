@@ -234,24 +234,20 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     return traj, adv, targets, mean_return, best_return
 
 
-def regret_gamma(cfg: UEDConfig) -> float:
-    """The discount of the perfect-regret score's returns: ``ppo.gamma``, or 1 (undiscounted)."""
-    return cfg.ppo.gamma if cfg.discounted_regret else 1.0
-
-
 def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
     """f32[N]: each level's score, in the environment's reward units (the critic's values and
     the advantages, learnt on ``reward × reward_scale``, are scaled back). Perfect regret compares
     the optimum and the agent's mean episodic return in the same units: both discounted by
-    :func:`regret_gamma` (the paper's utility) unless ``discounted_regret`` is off."""
+    ``ppo.gamma`` (the paper's utility), or with ``discounted_regret`` off the undiscounted
+    ``mean_return`` the rollout already gave."""
     optimal = None
     if score_name(setup.cfg, setup.algo) == "perfect_regret":
-        gamma = regret_gamma(setup.cfg)
         if setup.cfg.discounted_regret:
+            gamma = setup.cfg.ppo.gamma
             optimal = jax.vmap(lambda level: setup.task.optimal_discounted_return(level, gamma))(levels)
+            mean_return, _, _ = sc.episode_returns(traj.reward, traj.done, gamma)
         else:
             optimal = jax.vmap(setup.task.optimal_return)(levels)
-        mean_return, _, _ = sc.episode_returns(traj.reward, traj.done, gamma)
     unscale = 1.0 / setup.cfg.reward_scale
     return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value * unscale,
                            advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal,

@@ -139,9 +139,6 @@ def _run_folders(run_dir: Path) -> list[Path]:
 def _load(folder: Path) -> _Loaded:
     """The run in ``folder``, its agent restored from the checkpoint (leaves with the seed axis
     first). ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
-    import jax
-    import jax.numpy as jnp
-
     from remidi.engine import driver
     from remidi.engine import train as tr
     from remidi.experiments import get_experiment
@@ -154,12 +151,7 @@ def _load(folder: Path) -> _Loaded:
     if not path.is_file():
         raise ConfigError(f"RUN_DIR: {folder} has no {driver.CHECKPOINT} (the run wrote no checkpoint yet)")
     setup = tr.make_setup(exp.make_task(config), config, algo)
-    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    template = jax.eval_shape(lambda k: driver._init(setup, k), keys)  # the runner's structure, not compiled
-    try:
-        runner, meta = driver.load_checkpoint(path, template)
-    except ConfigError as err:
-        raise ConfigError(str(err).replace("--resume: ", "RUN_DIR: ", 1)) from None
+    runner, meta = driver.load_run_state(setup, seeds, path, flag="RUN_DIR")
     return _Loaded(folder=folder, algo=algo, seeds=list(seeds), setup=setup, runner=runner,
                    update=int(meta.get("done", -1)))
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -219,10 +218,7 @@ def _load_run(run_dir) -> _Run:
     if experiment not in MAZE_EXPERIMENTS:
         raise RemidiError(f"RUN_DIR: {folder} is a {experiment!r} run; render buffers/episode needs a maze run "
                           f"(experiments: {', '.join(MAZE_EXPERIMENTS)})")
-    try:
-        _, algo, _, seeds, config = _saved_run(get_experiment, folder)
-    except (KeyError, TypeError, ValueError) as err:
-        raise RemidiError(f"RUN_DIR: {folder / 'config.json'} is not a run's config.json ({err})") from None
+    _, algo, _, seeds, config = _saved_run(get_experiment, folder, flag="RUN_DIR")
     return _Run(folder=folder, experiment=experiment, algo=algo, seeds=list(seeds), config=config)
 
 
@@ -246,27 +242,13 @@ def _check_checkpoint(run: _Run) -> Path:
 
 def _load_runner(run: _Run, path: Path):
     """``(runner, meta)`` from the checkpoint; the runner's leaves have the seeds axis first."""
-    import jax
-    import jax.numpy as jnp
-
     from remidi.engine import driver
     from remidi.engine import train as tr
     from remidi.experiments.maze import task_factory
 
     task = task_factory(run.experiment)(run.config)
     run.setup = tr.make_setup(task, run.config, run.algo)
-    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(run.seeds, jnp.uint32))
-    # the structure of driver._init's runner, without compiling it
-    template = jax.eval_shape(lambda k: driver._init(run.setup, k), keys)
-    try:
-        runner, meta = driver.load_checkpoint(path, template)
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise RemidiError(f"RUN_DIR: {path} cannot be read ({type(err).__name__}: {err})") from None
-    for want, got in zip(jax.tree.leaves(template), jax.tree.leaves(runner)):
-        if tuple(want.shape) != tuple(got.shape):
-            raise RemidiError(f"RUN_DIR: {path} does not match {run.folder / 'config.json'} "
-                              f"(an array of shape {tuple(got.shape)} where {tuple(want.shape)} was expected)")
-    return runner, meta
+    return driver.load_run_state(run.setup, run.seeds, path, flag="RUN_DIR")
 
 
 def _open_run(run_dir, seed, out, default_name: str, suffix: str):

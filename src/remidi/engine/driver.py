@@ -81,18 +81,20 @@ HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, b
 _UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
 
 
-def _unreadable(path: Path, err: Exception) -> ConfigError:
+def _unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
     detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
-    return ConfigError(f"--resume: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''}); "
-                       f"it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start")
+    advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
+        if flag == "--resume" else ""
+    return ConfigError(f"{flag}: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''})"
+                       f"{advice}")
 
 
-def load_checkpoint(path: Path, template):
+def load_checkpoint(path: Path, template, flag: str = "--resume"):
     """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``.
 
-    Raises ConfigError (one line, naming the file) when the file cannot be read, or when it does
-    not hold a runner of ``template``'s structure, shapes and dtypes (a checkpoint of another run,
-    or a config.json edited since: seeds, algorithm or network sizes)."""
+    Raises ConfigError (one line, starting with ``flag`` and naming the file) when the file cannot
+    be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
+    checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
     treedef = jax.tree.structure(template)
     wanted = jax.tree.leaves(template)
     try:
@@ -103,7 +105,7 @@ def load_checkpoint(path: Path, template):
         if not isinstance(meta, dict):
             raise TypeError(f"its meta is a {type(meta).__name__}")
     except _UNREADABLE as err:
-        raise _unreadable(path, err) from None
+        raise _unreadable(path, err, flag) from None
     mismatch = None
     if count != treedef.num_leaves:
         mismatch = f"it holds {count} arrays, this run's state has {treedef.num_leaves}"
@@ -114,9 +116,17 @@ def load_checkpoint(path: Path, template):
                             f"{want.dtype}{list(want.shape)}")
                 break
     if mismatch is not None:
-        raise ConfigError(f"--resume: {path} does not match the run's config.json ({mismatch}): was config.json "
+        raise ConfigError(f"{flag}: {path} does not match the run's config.json ({mismatch}): was config.json "
                           f"edited (seeds, algo, network sizes) or the checkpoint copied from another run?")
     return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
+
+
+def load_run_state(setup: tr.Setup, seeds: list[int], path: Path, flag: str = "--resume"):
+    """``(runner, meta)``: the training state of every seed (leaves with the seed axis first) from
+    the checkpoint ``path`` of a run of ``setup``, checked against the structure :func:`_init`
+    gives (traced, not compiled); errors as :func:`load_checkpoint`'s."""
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
+    return load_checkpoint(path, jax.eval_shape(lambda k: _init(setup, k), keys), flag)
 
 
 def remove_stale_temporaries(ckpt: Path) -> list[Path]:
@@ -124,7 +134,7 @@ def remove_stale_temporaries(ckpt: Path) -> list[Path]:
     writes go through ``.<name>.<random>.tmp``; SIGKILL stops them before the rename or the clean-up).
     Called when a run starts or resumes, before it writes; returns what was removed."""
     removed = []
-    for name in (ckpt.name, ckpt.with_suffix(".history.npz").name):
+    for name in (ckpt.name, HISTORY):
         for tmp in ckpt.parent.glob(f".{name}.*.tmp"):
             tmp.unlink(missing_ok=True)
             removed.append(tmp)
@@ -134,12 +144,12 @@ def remove_stale_temporaries(ckpt: Path) -> list[Path]:
 def load_history(path: Path, meta: dict):
     """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
     per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
+    if not all(key in meta for key in ("done", "steps", "num_blocks")):
+        raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
     if not path.exists():
         raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
                           f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
     try:
-        if not all(key in meta for key in ("done", "steps", "num_blocks")):
-            raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
         with np.load(path) as saved:
             return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
     except _UNREADABLE as err:
@@ -294,7 +304,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         runner, meta = load_checkpoint(ckpt, runner)
         if sharding is not None:
             runner = _put(runner, sharding)
-        history, per_step = load_history(ckpt.with_suffix(".history.npz"), meta)  # checks meta's keys too
+        history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
 
     desc = f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + (f" on {devices} devices" if mesh else "")

@@ -5,8 +5,9 @@ is reloaded from its ``checkpoint.npz`` (a finished run's last one, or an interr
 latest) and evaluated on
 
 * **the task's own evaluation sets** (the ten held-out mazes, the lever's visible and hidden
-  levels, ...) with ``--attempts`` sampled episodes per level: ``solve_rate/<set>``,
-  ``return/<set>`` (and ``solve_rate/mean`` over the sets);
+  levels, ...) with ``--attempts`` sampled episodes per level, the metrics training logs for them
+  (``solve_rate/<set>``, ``return/<set>``, ``discounted_return/<set>``, ``regret/<set>/...``)
+  and ``solve_rate/mean`` over the sets;
 * **CVaR over the level generator** (Rutherford et al. 2024, "No Regrets"): ``--cvar-levels``
   solvable levels drawn from the task's generator with ``--seed`` (the same levels for every seed
   and algorithm; levels whose optimal return is ≤ 0, which no agent can solve, are drawn again),
@@ -165,11 +166,12 @@ def _solvable_levels(task, count: int, seed: int):
 
     keys = jax.random.split(jax.random.PRNGKey(seed), 64)
     sample = jax.jit(jax.vmap(task.sample_level))
+    optimum = jax.jit(jax.vmap(task.optimal_return)) if task.optimal_return is not None else None
     kept, total = [], 0
     for key in keys:
         batch = sample(jax.random.split(key, count))
-        if task.optimal_return is not None:
-            solvable = np.asarray(jax.jit(jax.vmap(task.optimal_return))(batch)) > 0
+        if optimum is not None:
+            solvable = np.asarray(optimum(batch)) > 0
             batch = jax.tree.map(lambda x: x[solvable], batch)
         kept.append(batch)
         total += int(jax.tree.leaves(batch)[0].shape[0])
@@ -183,28 +185,21 @@ def _solvable_levels(task, count: int, seed: int):
 
 def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
     """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
-    evaluation of one run: per held-out set ``[S]`` values; for CVaR the per-level solve rates and
-    returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
+    evaluation of one run: the task's evaluation sets as training evaluates them
+    (:func:`remidi.engine.train.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
+    the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
+    import dataclasses
+
     import jax
     import jax.numpy as jnp
 
     from remidi.engine import train as tr
 
     task = setup.task
+    held_out = tr.make_setup(task, dataclasses.replace(setup.cfg, eval_attempts=attempts), setup.algo)
 
     def one_seed(runner, key):
-        out = {}
-        for i, (env, names) in enumerate(tr.eval_groups(task)):
-            levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[n] for n in names))
-            returns, _ = tr.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, i))
-            start = 0
-            for name in names:
-                count = jax.tree.leaves(task.eval_sets[name])[0].shape[0]
-                ret = returns[start:start + count]
-                start += count
-                if task.solved is not None:
-                    out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
-                out[f"return/{name}"] = jnp.mean(ret)
+        out = dict(tr.evaluate(held_out, runner, key))
         ret, _ = tr.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, 1000))
         out["cvar_raw/return"] = ret.mean(axis=1)
         if task.solved is not None:
@@ -257,15 +252,21 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
     doc: dict[str, Any] = {"run": str(run_dir), "args": args, "algorithms": {}}
     rows = []
+    cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels: the algorithms of one run share both
+    mazes: dict[int, tuple] = {}  # size → (env, perfect mazes, their optimal returns), built once
+    if any(isinstance(run.setup.task.env, MazeEnv) for run in loaded):
+        optimum = jax.jit(jax.vmap(optimal_return))
+        for size in perfect_sizes:
+            batch = perfect_mazes(size, perfect_count, seed)
+            mazes[size] = (MazeEnv(size), batch, np.asarray(optimum(batch), float))
     for run in loaded:
         task = run.setup.task
-        levels = _solvable_levels(task, cvar_levels, seed)
-        perfect, optimal = {}, {}
-        if isinstance(task.env, MazeEnv):
-            for size in perfect_sizes:
-                batch = perfect_mazes(size, perfect_count, seed)
-                perfect[size] = (MazeEnv(size), batch)
-                optimal[size] = np.asarray(jax.jit(jax.vmap(optimal_return))(batch), float)
+        if task not in cvar_sets:
+            cvar_sets[task] = _solvable_levels(task, cvar_levels, seed)
+        levels = cvar_sets[task]
+        is_maze = isinstance(task.env, MazeEnv)
+        perfect = {size: (env, batch) for size, (env, batch, _) in mazes.items()} if is_maze else {}
+        optimal = {size: opt for size, (_, _, opt) in mazes.items()} if is_maze else {}
         if log is not None:
             log(f"evaluating {run.folder} ({run.algo}, {len(run.seeds)} seed{'s' if len(run.seeds) != 1 else ''}, "
                 f"checkpoint of update {run.update})")

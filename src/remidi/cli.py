@@ -106,7 +106,7 @@ def _format_value(value) -> str:
 
 def _cmd_list(args) -> int:
     from remidi.experiments import all_experiments, get_experiment
-    from remidi.experiments.base import resolve_config
+    from remidi.experiments.base import default_preset, resolve_config
     from remidi.experiments.config import field_names, get_value, key_help
 
     experiments = [get_experiment(args.experiment)] if args.experiment else list(all_experiments().values())
@@ -124,7 +124,7 @@ def _cmd_list(args) -> int:
             cfg = resolve_config(exp, name, {})
             for key, why in reasons.items():
                 print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
-        default = "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
+        default = default_preset(exp)
         configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
         print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
               f"differs) and meaning:")
@@ -155,7 +155,7 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 
 def _cmd_run(args) -> int:
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import parse_algos, resume_experiment, run_experiment
+    from remidi.experiments.base import default_preset, parse_algos, resume_experiment, run_experiment
     from remidi.experiments.config import parse_set_items
     from remidi.experiments.tracking import parse_log
 
@@ -171,8 +171,8 @@ def _cmd_run(args) -> int:
         raise RemidiError("remidi run: name an experiment (see remidi list) or pass --resume DIR")
     exp = get_experiment(args.experiment)
     algos = parse_algos(exp, args.algo)
-    if args.preset is None:  # smoke where the experiment has it (every built-in one), else its first preset
-        args.preset = "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
+    if args.preset is None:
+        args.preset = default_preset(exp)
     if args.preset not in exp.presets:
         from remidi.errors import one_of
 

@@ -115,8 +115,10 @@ def _check_args(attempts, cvar_levels, cvar_attempts, perfect_sizes, perfect_cou
     for size in perfect_sizes:
         if isinstance(size, bool) or not isinstance(size, int) or size < 5 or size % 2 == 0 or size > MAX_PERFECT_SIZE:
             raise ConfigError(f"--perfect-sizes: each must be an odd integer in [5, {MAX_PERFECT_SIZE}], got {size!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
-        raise ConfigError(f"--seed: must be an integer in [0, {2**32 - 1}], got {seed!r}")
+    from remidi.experiments.base import MAX_SEED
+
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"--seed: must be an integer in [0, {MAX_SEED}], got {seed!r}")
 
 
 def _run_folders(run_dir: Path) -> list[Path]:

@@ -93,6 +93,11 @@ class Experiment:
     make_task: Callable[[Any], Any] | None = None
 
 
+def default_preset(exp: Experiment) -> str:
+    """``smoke`` where the experiment has it (every built-in one), else its first preset."""
+    return "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
+
+
 def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None):
     """The preset's configuration with ``overrides`` on top; keys that depend on a length the
     overrides change (``exp.scaled_keys``) and that they leave alone are scaled in proportion,

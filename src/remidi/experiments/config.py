@@ -230,9 +230,8 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
             if key in overrides:
                 continue
             value = get_value(base, key)
-            target = max(1, int(math.floor(value * new / old + 0.5)))
-            if key in divisors:
-                target = nearest_divisor(new, value * new / old)
+            target = (nearest_divisor(new, value * new / old) if key in divisors
+                      else max(1, int(math.floor(value * new / old + 0.5))))
             if target != value:
                 scaled[key] = target
                 changes.append(f"{key} {value} → {target}")

@@ -208,6 +208,9 @@ def test_unknown_morphology_or_backend_is_a_config_error():
     ("brax.theta_low=3", "brax.theta_low: must be ≤ brax.theta_high (1.5), got 3.0"),
     ("reward_scale=0", "reward_scale: must be > 0"),
     ("remidi.policy=combine", "remidi.policy: must be masked with normalize_obs"),
+    # the cached discounted reference holds for the γ it was measured at only
+    ("ppo.gamma=0.95", "brax.reference_discounted_return: the cached value is the reference's return discounted "
+                       "at ppo.gamma 0.99, but this run has ppo.gamma 0.95"),
 ])
 def test_bad_brax_settings_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, setting, needle):
     from remidi.cli import main

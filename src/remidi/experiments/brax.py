@@ -56,7 +56,7 @@ def paper_config() -> BraxUEDConfig:
     """Paper §6.5 / appendix: 200 updates of PPO on 256 envs × 100 steps (4 epochs, 32
     minibatches, γ 0.99, λ 0.95, lr 1e-4), rewards ÷ 10 and running observation normalisation,
     perfect regret, PLR⊥ rank prioritisation (β 1.0) over a buffer of 512, replay 0.8; ReMiDi 2
-    buffers of 512, the first used for 25 updates. The agent: a 256-unit tanh layer, a 256-unit
+    buffers of 512, the first used for 25 updates. The agent: two 256-unit tanh layers, a 256-unit
     LSTM, 64-unit heads, a Gaussian policy with a state-independent log-std."""
     return BraxUEDConfig(
         num_updates=200, num_envs=256, num_steps=100, score="perfect_regret", network="mlp_lstm",
@@ -143,6 +143,13 @@ def task_factory(morphology: str):
                 raise ConfigError(f"brax.{key}: no cached reference value for {morphology}; compute one with "
                                   f"`remidi run brax-{morphology} --algo dr --preset reference` and pass its final "
                                   f"{metric} as --set brax.{key}=R (or choose another score)")
+        reference_gamma = paper_config().ppo.gamma  # the reference preset's: its discounted return is at this γ
+        if (cfg.score == "perfect_regret" and cfg.discounted_regret and not b.reference_discounted_return
+                and cfg.ppo.gamma != reference_gamma):
+            raise ConfigError(f"brax.reference_discounted_return: the cached value is the reference's return "
+                              f"discounted at ppo.gamma {reference_gamma:g}, but this run has ppo.gamma "
+                              f"{cfg.ppo.gamma:g}; pass the reference's discounted_return/undisturbed at that γ as "
+                              f"--set brax.reference_discounted_return=R, or set discounted_regret=false")
         return brax_task(morphology, b.backend, float(b.theta_low), float(b.theta_high), float(b.type_b_prob), ref,
                          reference_discounted_return=dref)
 

@@ -84,20 +84,13 @@ def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
     for seed, step, name, value in outputs.read_metrics_csv(path):
         if name in metrics:
             series.setdefault((name, seed), []).append((step, value))
-    out = {}
+    per_seed = {}
     for name in metrics:
-        per_seed = []
+        per_seed[name] = []
         for seed in doc["seeds"]:
             points = [v for _, v in sorted(series.get((name, seed), []))[-last:] if math.isfinite(v)]
-            per_seed.append(sum(points) / len(points) if points else math.nan)
-        finite = [v for v in per_seed if math.isfinite(v)]
-        if len(finite) < len(per_seed) or not finite:
-            out[name] = {"mean": None, "std": None, "per_seed": per_seed}
-            continue
-        mean = sum(finite) / len(finite)
-        std = math.sqrt(sum((v - mean) ** 2 for v in finite) / len(finite))
-        out[name] = {"mean": mean, "std": std, "per_seed": per_seed}
-    return out
+            per_seed[name].append(sum(points) / len(points) if points else math.nan)
+    return outputs.summarize(per_seed)  # a seed without a defined point makes the mean NaN: n/a
 
 
 def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int | None = None) -> str:

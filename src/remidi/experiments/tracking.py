@@ -3,7 +3,8 @@
 Each algorithm's run folder becomes one tracked run per backend:
 
 * **Weights & Biases** (``pip install "remidi[wandb]"``): one W&B run per algorithm (named
-  ``<experiment>/<algo>``, grouped by the output folder), its files under ``<folder>/wandb``
+  ``<experiment>/<algo>``, grouped by the output folder, in project ``$WANDB_PROJECT`` or
+  ``remidi``), its files under ``<folder>/wandb``
   (``WANDB_MODE=offline`` works and keeps everything there; sync later with ``wandb sync``).
 * **TensorBoard** (``pip install "remidi[tensorboard]"``, tensorboardX): event files under
   ``<folder>/tensorboard/seed_<s>``, one writer per seed, so TensorBoard overlays the seeds.
@@ -72,9 +73,11 @@ class Tracker:
 
     def __init__(self, backends: list[str], folder: Path, name: str, config_doc: dict, seeds: list[int],
                  group: str = ""):
-        self.folder, self.seeds, self.backends = Path(folder), list(seeds), list(backends)
+        from remidi.experiments.outputs import read_json
+
+        self.folder, self.seeds = Path(folder), list(seeds)
         state_path = self.folder / STATE
-        self.state: dict[str, Any] = json.loads(state_path.read_text()) if state_path.exists() else {}
+        self.state: dict[str, Any] = read_json(state_path) if state_path.exists() else {}
         self.last_step = int(self.state.get("last_step", -1))
         self._wandb = self._writers = None
         if "wandb" in backends:
@@ -82,7 +85,7 @@ class Tracker:
 
             run_id = self.state.get("wandb_id") or uuid.uuid4().hex[:8]
             self.state["wandb_id"] = run_id
-            self._wandb = wandb.init(project=config_doc.get("wandb_project", "remidi"), name=name, group=group or None,
+            self._wandb = wandb.init(project=os.environ.get("WANDB_PROJECT", "remidi"), name=name, group=group or None,
                                      id=run_id, resume="allow", dir=str(self.folder), config=config_doc,
                                      settings=wandb.Settings(silent=True, console="off"))
         if "tensorboard" in backends:

@@ -13,7 +13,7 @@ FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_p
 
 
 def test_bench_json_has_only_the_document_on_stdout():
-    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-env", "lstm-matmul", "--tiny", "--repeats", "2",
+    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-env", "lstm-matmul", "solve-onestep", "--tiny", "--repeats", "2",
                            "--json"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -27,6 +27,8 @@ def test_bench_json_has_only_the_document_on_stdout():
     matmul = doc["benchmarks"]["lstm-matmul"]  # a FLOP rate, no environment steps
     assert matmul["env_steps_per_s"] is None and matmul["gflops_per_s"] > 0
     assert abs(matmul["gflops_per_s"] * 1e9 * matmul["seconds_per_call"] - 2 * 4 * 406 * 1024 * 64) < 1e3
+    solve = doc["benchmarks"]["solve-onestep"]  # plain Python: nothing compiled, no steps
+    assert solve["compile_s"] < 0.01 and solve["env_steps_per_s"] is None and solve["rounds"] > 100
     assert "cpu" in doc["device"]
     assert "bench maze-env" in proc.stderr and "bench lstm-matmul" in proc.stderr  # progress goes to stderr
 

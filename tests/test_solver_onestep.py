@@ -179,3 +179,39 @@ def test_blp_rounds_match_brute_force_and_invariants(seed):
         if i:
             assert rnd.value <= result.rounds[i - 1].value + 1e-9
     assert covered == set(game.level_names)
+
+
+def continuous_game(seed: int) -> OneStepGame:
+    """Uniform rewards (no ties): 12 levels over 3 observations and 3 actions."""
+    rng = np.random.default_rng(seed)
+    return OneStepGame(("a0", "a1", "a2"), tuple(f"l{i}" for i in range(12)),
+                       tuple(f"o{rng.integers(3)}" for _ in range(12)), rng.random((12, 3)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_blp_rounds_of_continuous_games_match_brute_force(seed):
+    game = continuous_game(seed)
+    result = solve_blp(game)
+    covered: set[str] = set()
+    for rnd in result.rounds:
+        fixed = {o for n, o in zip(game.level_names, game.observations) if n in covered}
+        active = [k for k, n in enumerate(game.level_names) if n not in covered]
+        regret = regret_matrix(game, {o: policy_rows(game, result.policy)[o] for o in fixed})[:, active]
+        assert rnd.value == pytest.approx(matrix_game_value(regret), abs=1e-7)
+        assert {game.level_names[active[k]] for k in maximal_support(regret, rnd.value)} == set(rnd.support)
+        assert sum(rnd.adversary.values()) == pytest.approx(1.0)
+        covered |= set(rnd.support)
+    assert covered == set(game.level_names)
+
+
+def test_observations_whose_values_differ_by_little_are_separate_rounds():
+    """Observation games with values 0.5 and c/(1+c) = 0.5 - 2.5e-5: two rounds. (A support test
+    on adversary probabilities merges them: 2.5e-5 of value buys the adversary ~1e-6 of mass.)"""
+    c = 1.0 - 1e-4
+    game = OneStepGame(("a", "b"), ("x1", "x2", "y1", "y2"), ("x", "x", "y", "y"),
+                       np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 0.0], [0.0, c]]))
+    result = solve_blp(game)
+    assert [r.value for r in result.rounds] == pytest.approx([0.5, c / (1 + c)], abs=1e-12)
+    assert [set(r.support) for r in result.rounds] == [{"x1", "x2"}, {"y1", "y2"}]
+    assert result.policy[1, 0] == pytest.approx(1 / (1 + c), abs=1e-9)
+    assert set(np.flatnonzero(solve_mmr(game).adversary > 0)) == {0, 1}

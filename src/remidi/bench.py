@@ -25,6 +25,9 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   this machine reaches on the shape that dominates maze training. Training workloads report
   their network's ``gflops_per_s`` too (XLA's operation count), so ``maze_plr_flops_over_matmul``
   says how far ``maze-plr`` is from it.
+* ``solve-onestep``: ``remidi solve``'s exact BLP of a random one-step game of 10,000 levels,
+  100 observations and 3 actions (rewards uniform in [0, 1], seed 0); plain Python and HiGHS, no
+  compilation (not run by default).
 * ``brax-plr``: PLR⊥ on ``brax-hopper``'s paper preset (256 envs × 100 steps, PPO 4 epochs × 32
   minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 8 s
   per update on a 2-core CPU).
@@ -95,12 +98,13 @@ class Benchmark:
 
 @dataclass
 class Workload:
-    fn: Callable  # jitted
+    fn: Callable  # jitted (unless ``jit`` is false)
     args: tuple
-    env_steps_per_call: int
+    env_steps_per_call: int | None
     extras: Callable[[object], dict] = lambda out: {}  # reported values read off a call's output
     chain: bool = False  # fn returns (new first argument, ...): feed it to the next call
     flops_per_call: float | None = None  # floating-point operations of the agent's network per call (XLA's count)
+    jit: bool = True  # false: ``fn`` is plain Python (nothing to compile, compile_s is 0)
 
 
 def register(name: str, description: str):
@@ -298,6 +302,26 @@ def _lstm_matmul():
     return Workload(block, (x, w), None, flops_per_call=2.0 * n * d * g * length)
 
 
+def random_onestep_game(n_levels: int, n_obs: int, n_actions: int, seed: int = 0):
+    """A one-step game [L levels, O observations, A actions] with rewards uniform in [0, 1]."""
+    import numpy as np
+
+    from remidi.solvers.onestep import OneStepGame
+
+    rng = np.random.default_rng(seed)
+    return OneStepGame(tuple(f"a{i}" for i in range(n_actions)), tuple(f"l{i}" for i in range(n_levels)),
+                       tuple(f"o{o}" for o in rng.integers(n_obs, size=n_levels)),
+                       rng.random((n_levels, n_actions)))
+
+
+@register("solve-onestep", "exact BLP of a one-step game: 10,000 levels, 100 observations, 3 actions")
+def _solve_onestep():
+    from remidi.solvers.onestep import solve_blp
+
+    game = random_onestep_game(300 if _tiny() else 10_000, 100, 3)
+    return Workload(solve_blp, (game,), None, extras=lambda out: {"rounds": len(out.rounds)}, jit=False)
+
+
 # ----------------------------------------------------------------------------- timing
 def run_one(name: str, repeats: int) -> dict:
     """Compile, warm up and time benchmark ``name`` in this process."""
@@ -306,12 +330,13 @@ def run_one(name: str, repeats: int) -> dict:
     work = BENCHMARKS[name].build()
     args = work.args
     start = time.perf_counter()
-    compiled = work.fn.lower(*args).compile()
+    compiled = work.fn.lower(*args).compile() if work.jit else work.fn
     compile_s = time.perf_counter() - start
 
     def call(args):
         out = compiled(*args)
-        jax.block_until_ready(out)
+        if work.jit:
+            jax.block_until_ready(out)
         return out
 
     out = call(args)  # warm-up

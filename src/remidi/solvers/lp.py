@@ -20,9 +20,13 @@ seen positive, an LP maximises that level's probability over the set of equilibr
 reported adversary is the average of these solutions (still an equilibrium, since the set is
 convex), restricted to the levels whose maximum exceeded ``tol``. A plain LP dual would be a
 vertex and could miss levels (e.g. with two duplicate levels it names only one). A level outside
-every equilibrium can reach at most ``_VALUE_SLACK / gap`` probability, where ``gap`` is how much
-adversary value a unit of its mass costs, so it is misclassified only if ``gap < 1e-4`` (in
-normalised units) with the default ``tol = 1e-7``.
+every equilibrium can reach at most ``slack / gap`` probability, where ``gap`` is how much
+adversary value a unit of its mass costs and ``slack`` is ``_VALUE_SLACK`` plus HiGHS's feasibility
+tolerance (1e-10), so with the default ``tol = 1e-7`` it is misclassified when ``gap`` is below
+about 1e-3 (normalised units): two supports whose values differ by less than that may be merged
+into one round (seen on a 100-level random game with a gap of 3e-5). The one-step solver
+(:mod:`remidi.solvers.onestep`) compares its observation games' values directly and has no such
+limit across observations.
 
 **Uniqueness.** A round's optimal plan need not be unique, and the behaviour it freezes decides
 what later rounds can achieve: with one observation and levels paying (1, 0, 0), (0, 1, 1) and
@@ -311,9 +315,9 @@ def solve_blp_plans(
     every information set realisable on the union of the earlier supports, and lets the
     adversary choose only among levels outside those supports. Stops when every level is covered.
     Each round's ``unique`` tells whether the behaviour it fixes is the same in every optimal plan
-    of its regret game (:func:`frozen_plan_is_unique`). ``progress(round, covered, total)``, if
-    given, is called after each round with the round (rescaled) and how many levels the supports
-    cover so far.
+    of its regret game (:func:`frozen_plan_is_unique`). ``progress(value, support, covered,
+    total)``, if given, is called after each round with its value, its support's size, and how
+    many of the ``total`` levels the supports cover so far.
     """
     optimal = best_response_values(poly, payoff)
     scale = normalise(payoff, optimal)
@@ -335,7 +339,7 @@ def solve_blp_plans(
         unique = frozen_plan_is_unique(payoff_n, optimal_n, eq, active, raw.value, frozen)
         rounds.append(_rescaled(replace(raw, unique=unique), scale))
         if progress is not None:
-            progress(rounds[-1], int(covered.sum()), len(covered))
+            progress(rounds[-1].value, int(raw.support.sum()), int(covered.sum()), len(covered))
         rows, rhs = fixing_equalities(poly, raw.plan, fixed)
         eq = (np.vstack([base[0], rows]), np.concatenate([base[1], rhs]))
     return rounds

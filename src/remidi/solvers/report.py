@@ -49,7 +49,7 @@ def summarise(game: OneStepGame | TreeGame, progress=None) -> dict:
     names = game.level_names
     rounds = [
         {"value": _clean(r.value), "support": list(r.support),
-         "adversary": {n: _clean(p) for n, p in zip(names, r.adversary) if n in r.support},
+         "adversary": {n: _clean(p) for n, p in r.adversary.items()},
          "unique": bool(r.unique)}
         for r in result.rounds
     ]
@@ -121,9 +121,9 @@ def solve_command(path: str, as_json: bool, log=None) -> str:
     (a function of one line) hears each BLP round as it is solved."""
     game = load_game(path)
 
-    def progress(raw, covered, total):
+    def progress(value, support, covered, total):
         if log is not None:
-            log(f"BLP round: value {raw.value:.6g}, support {int(raw.support.sum())} level(s), "
+            log(f"BLP round: value {value:.6g}, support {support} level(s), "
                 f"{covered}/{total} levels covered")
 
     summary = summarise(game, progress)

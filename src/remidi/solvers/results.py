@@ -20,8 +20,11 @@ class Round(Generic[P]):
 
     value: the round's minimax regret over the levels still available to the adversary.
     support: names of the levels of the maximal-support equilibrium adversary.
-    adversary: [L] that adversary (zero outside the available levels).
-    policy: the round's policy; regret: [L] its regret on every level.
+    adversary: that adversary, ``{level name: probability}`` over ``support`` (every other level
+        has probability 0; a mapping, not an array [L], so that games with thousands of rounds
+        and levels stay small).
+    policy: the round's policy; regret: [L] its regret on every level (rounds may share these
+        objects: the one-step solver reports the final BLP policy, optimal in every round).
     unique: whether the behaviour this round freezes (its policy on every observation / history
         realisable on the levels covered so far) is the same in every optimal policy of the
         round. If not, later rounds and the final regrets may depend on which optimal policy the
@@ -30,7 +33,7 @@ class Round(Generic[P]):
 
     value: float
     support: tuple[str, ...]
-    adversary: np.ndarray
+    adversary: dict[str, float]
     policy: P
     regret: np.ndarray
     unique: bool

@@ -203,7 +203,8 @@ def solve_blp(game: TreeGame, tol: float = 1e-7, progress=None) -> BLPResult[Tre
     """
     form = build_sequence_form(game)
     rounds = [
-        Round(raw.value, _support_names(game, raw.support), raw.adversary,
+        Round(raw.value, _support_names(game, raw.support),
+              {n: float(p) for n, p, s in zip(game.level_names, raw.adversary, raw.support) if s},
               _policy(form, raw.plan, tol), raw.regret, raw.unique)
         for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol, progress)
     ]

@@ -39,3 +39,39 @@ def pytest_collection_modifyitems(session, config, items):
         return rank.get(getattr(module, "__name__", ""), len(rank))
 
     items.sort(key=key)  # stable: the order within a file, and of the other files, is kept
+
+
+# ------------------------------------------------- where the suite's time goes (diagnostic, opt-in)
+# REMIDI_TEST_COMPILE_REPORT=DIR: each worker appends one JSON line per test to DIR/<worker>.jsonl
+# with its wall time and the XLA compile and tracing seconds (and compile count) spent during it
+# (module fixtures count towards the first test that uses them). Read it with
+# ``python tests/compile_report.py DIR``.
+_REPORT = os.environ.get("REMIDI_TEST_COMPILE_REPORT")
+if _REPORT:
+    import json
+    import time
+
+    import pytest
+    from jax import monitoring
+
+    _spent = {"compile_s": 0.0, "compiles": 0, "trace_s": 0.0}
+
+    def _listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            _spent["compile_s"] += duration
+            _spent["compiles"] += 1
+        elif event in ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration"):
+            _spent["trace_s"] += duration
+
+    monitoring.register_event_duration_secs_listener(_listen)
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        before, start = dict(_spent), time.perf_counter()
+        yield
+        row = {"test": item.nodeid, "wall_s": time.perf_counter() - start,
+               **{k: _spent[k] - before[k] for k in _spent}}
+        Path(_REPORT).mkdir(parents=True, exist_ok=True)
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        with open(Path(_REPORT) / f"{worker}.jsonl", "a") as f:
+            f.write(json.dumps(row) + "\n")

@@ -201,8 +201,8 @@ def test_scores_are_in_the_environments_units_whatever_the_reward_scale(score):
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(1), TINY.num_envs))
     traj, adv, _, mean_ret, best_ret = tr.collect(setup, runner, jax.random.PRNGKey(2), levels, None)
     scaled = tr.make_setup(TASK, dataclasses.replace(plain, reward_scale=0.1), "plr")
-    expected = tr.score(setup, levels, traj, adv, mean_ret, best_ret)
-    got = tr.score(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
+    expected = tr.score_rollout(setup, levels, traj, adv, mean_ret, best_ret)
+    got = tr.score_rollout(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
     np.testing.assert_allclose(got, expected, rtol=1e-5)
     assert np.all(np.isfinite(np.asarray(expected)))
 

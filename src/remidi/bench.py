@@ -189,11 +189,12 @@ def network_flops_per_step(setup, params) -> float:
 
 
 def _maze_config(algo: str, budget: int | None = None):
+    from remidi.engine.algorithms import get_algorithm
     from remidi.experiments.maze import paper_config
 
     cfg = paper_config()
     cfg = dataclasses.replace(cfg, buffer=dataclasses.replace(cfg.buffer, replay_prob=1.0))
-    if algo == "remidi":  # stay on the last buffer: no switch during the benchmark
+    if get_algorithm(algo).buffer_sequence:  # stay on the last buffer: no switch during the benchmark
         remidi = dataclasses.replace(cfg.remidi, steps_per_buffer=10**9, count="updates")
         if budget is not None:
             remidi = dataclasses.replace(remidi, tracker_budget=budget)

@@ -4,7 +4,12 @@ Anything a user can get wrong (a malformed game file, an unknown algorithm, a va
 range) raises :class:`RemidiError` with a one-line message that names the offending field and,
 where there is a finite set, the allowed values. The CLI prints it as ``remidi: error: ...`` and
 exits with status 2, before anything is written.
+
+The validation helpers below (:func:`require`, :func:`choice`, ...) raise those errors; the engine,
+the environments and the experiments all use them.
 """
+
+from typing import Any, Iterable
 
 
 class RemidiError(Exception):
@@ -23,3 +28,32 @@ def one_of(field: str, value, allowed) -> ConfigError:
     """Error for a value outside a finite set: names the field, the value and the allowed values."""
     allowed = ", ".join(str(a) for a in allowed)
     return ConfigError(f"{field}: unknown value {value!r}; allowed: {allowed}")
+
+
+# ------------------------------------------------------------------------------ validation
+def require(cond: bool, key: str, what: str, value: Any) -> None:
+    """Raise ``ConfigError("key: must be WHAT, got VALUE")`` unless ``cond``."""
+    if not cond:
+        raise ConfigError(f"{key}: must be {what}, got {value!r}")
+
+
+def positive_int(key: str, value: int) -> None:
+    require(isinstance(value, int) and value >= 1, key, "an integer ≥ 1", value)
+
+
+def non_negative(key: str, value: float) -> None:
+    require(value >= 0, key, "≥ 0", value)
+
+
+def positive(key: str, value: float) -> None:
+    require(value > 0, key, "> 0", value)
+
+
+def probability(key: str, value: float) -> None:
+    require(0.0 <= value <= 1.0, key, "in [0, 1]", value)
+
+
+def choice(key: str, value: Any, allowed: Iterable[Any]) -> None:
+    allowed = tuple(allowed)
+    if value not in allowed:
+        raise one_of(key, value, allowed)

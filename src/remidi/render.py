@@ -296,7 +296,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
         tmaze = np.asarray(buffers.levels.tmaze[k]) & valid[k]
         blind = np.asarray(buffers.levels.blind[k]) & valid[k]
         state = ("active" if k == active else "frozen" if k < active else "not used yet") \
-            if run.algo == "remidi" else "active"
+            if run.setup.algo.buffer_sequence else "active"
         label = f"buffer {k} ({state}): {int(valid[k].sum())}/{capacity} levels"
         if run.experiment == "tmaze":
             label += f", {int(tmaze.sum())} T-mazes"

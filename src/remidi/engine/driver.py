@@ -39,7 +39,7 @@ from jax.sharding import PartitionSpec as P
 from remidi.engine import train as tr
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
-from remidi.experiments.outputs import atomic_write
+from remidi.files import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
 SEED_AXIS = "seed"
@@ -58,15 +58,10 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
     """Aggregate per-step metrics f[S, B] of one block into f[S]; ``replayed/<tag>`` counts
     become :func:`replay_fractions` of the block."""
     out = replay_fractions(step_metrics, num_envs)
+    reduce = {"sum": lambda v: v.sum(axis=1), "last": lambda v: v[:, -1], "mean": lambda v: v.mean(axis=1)}
     for name, values in step_metrics.items():
-        if name.startswith("replayed/"):
-            continue
-        if name in ("rejected", "inserted", "tracker_overflow"):
-            out[name] = values.sum(axis=1)
-        elif name == "active_buffer":
-            out[name] = values[:, -1]
-        else:
-            out[name] = values.mean(axis=1)
+        if not name.startswith("replayed/"):
+            out[name] = reduce[tr.BLOCK_REDUCTIONS.get(name, "mean")](values)
     return out
 
 

@@ -1,22 +1,26 @@
-"""The one UED train step shared by every algorithm: DR, PLR⊥, minimax return, ReMiDi.
+"""The one UED train step shared by every algorithm (:mod:`remidi.engine.algorithms`).
 
-One train step, top to bottom (:func:`train_step`):
+One train step, top to bottom (:func:`train_step`), each stage a small function below it:
 
-1. Choose the levels: *replay* (probability ``buffer.replay_prob`` once the active buffer holds
-   enough levels) samples N levels from the active buffer; otherwise N fresh random levels. DR
-   always takes fresh levels.
-2. Roll the policy out once on them (with the distinguishability tracker against the frozen
-   buffers, for ReMiDi) and score them.
-3. Buffer: replayed levels get their new scores; fresh levels go into the active buffer by score,
-   except those whose rollout was indistinguishable from a frozen level at every step ("complete
-   overlap"), which are scored −inf and therefore never inserted.
-4. Train: PPO on replayed levels (the PLR family does not train on fresh levels: robust PLR⊥; DR
-   does), with the loss masked to the distinguishable steps.
-5. ReMiDi: after ``remidi.steps_per_buffer`` updates (or replays) in the active buffer, freeze it
-   and move to the next; stay on the last.
+1. :func:`choose_levels`: *replay* (probability ``buffer.replay_prob`` once the active buffer
+   holds enough levels) samples N levels from the active buffer; otherwise N fresh random levels.
+   An algorithm that does not replay (DR) always takes fresh levels.
+2. :func:`collect`: roll the policy out once on them (with the distinguishability tracker against
+   the frozen buffers, for a buffer sequence: ReMiDi), then :func:`score_rollout`.
+3. :func:`update_buffer`: replayed levels get their new scores; fresh levels go into the active
+   buffer by score, except those whose rollout was indistinguishable from a frozen level at every
+   step ("complete overlap"), which are scored −inf and therefore never inserted.
+4. :func:`train`: PPO on replayed levels (and on fresh ones for an algorithm that trains on them:
+   DR), with the loss masked to the distinguishable steps.
+5. :func:`switch_buffer`: for a buffer sequence, after ``remidi.steps_per_buffer`` updates (or
+   replays) in the active buffer, freeze it and move to the next; stay on the last.
+6. :func:`step_metrics`: the step's scalars (:data:`BLOCK_REDUCTIONS` says how the driver
+   reduces each over a block).
 
-PLR⊥ is ReMiDi with one buffer; minimax return is PLR⊥ scored by negative return. Everything in
-a step is a pure function of :class:`Runner`, jit-ed and vmapped over seeds by the driver.
+Which branch a stage takes depends on the :class:`~remidi.engine.algorithms.Algorithm`'s fields,
+never on its name: PLR⊥ is ReMiDi with one buffer, minimax return is PLR⊥ scored by negative
+return. Everything in a step is a pure function of :class:`Runner`, jit-ed and vmapped over seeds
+by the driver.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from flax import struct
 from flax.training.train_state import TrainState
 
 from remidi.engine import buffer as buf
+from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
 from remidi.engine import normalize as nrm
 from remidi.engine import scores as sc
 from remidi.engine.distributions import for_task
@@ -39,7 +44,7 @@ from remidi.engine import tracker as trk
 from remidi.engine.rollout import Frozen, Trajectory, combined_logits, rollout
 from remidi.envs.interface import UEDTask, tree_equal
 
-ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
+__all__ = ["ALGORITHMS", "Algorithm", "get_algorithm"]  # re-exported: where the step's callers find them
 POLICIES = ("masked", "combine")
 
 
@@ -96,16 +101,19 @@ class UEDConfig:
 DERIVED_KEYS = ("ppo.total_updates",)  # not settable: follows num_updates
 
 
-def score_name(cfg: UEDConfig, algo: str) -> str:
-    return "neg_return" if algo == "minimax-return" else cfg.score
+def score_name(cfg: UEDConfig, algo: Algorithm) -> str:
+    """The score ``algo`` ranks levels by under ``cfg``."""
+    return algo.score_name(cfg.score)
 
 
-def num_buffers(cfg: UEDConfig, algo: str) -> int:
-    return cfg.remidi.num_buffers if algo == "remidi" else 1
+def num_buffers(cfg: UEDConfig, algo: Algorithm) -> int:
+    """K, the number of level buffers: ``remidi.num_buffers`` for a buffer sequence, else 1."""
+    return cfg.remidi.num_buffers if algo.buffer_sequence else 1
 
 
-def buffer_config(cfg: UEDConfig, algo: str) -> buf.BufferConfig:
-    if algo == "remidi":
+def buffer_config(cfg: UEDConfig, algo: Algorithm) -> buf.BufferConfig:
+    """Each buffer's settings (a buffer sequence's buffers hold ``remidi.buffer_capacity``)."""
+    if algo.buffer_sequence:
         return dataclasses.replace(cfg.buffer, capacity=cfg.remidi.buffer_capacity)
     return cfg.buffer
 
@@ -131,12 +139,13 @@ class Setup:
 
     task: UEDTask
     cfg: UEDConfig
-    algo: str
+    algo: Algorithm
     net: object = field(compare=False)
 
 
-def make_setup(task: UEDTask, cfg: UEDConfig, algo: str) -> Setup:
-    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task))
+def make_setup(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm) -> Setup:
+    """The set-up of a run of ``algo`` (a name or an :class:`Algorithm`)."""
+    return Setup(task=task, cfg=cfg, algo=get_algorithm(algo), net=network_for(cfg, task))
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):
@@ -191,14 +200,14 @@ def init_runner(setup: Setup, rng) -> Runner:
 
 
 def combines(setup: Setup) -> bool:
-    """ReMiDi with ``remidi.policy=combine`` and at least two buffers."""
-    return setup.algo == "remidi" and setup.cfg.remidi.policy == "combine" and setup.cfg.remidi.num_buffers >= 2
+    """A buffer sequence (ReMiDi) with ``remidi.policy=combine`` and at least two buffers."""
+    return setup.algo.buffer_sequence and setup.cfg.remidi.policy == "combine" and setup.cfg.remidi.num_buffers >= 2
 
 
 # ------------------------------------------------------------------------------- pieces
 def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
     """The levels of every buffer before the active one, as one batch of F = (K−1)·capacity."""
-    if setup.algo != "remidi" or setup.cfg.remidi.num_buffers < 2:
+    if not setup.algo.buffer_sequence or setup.cfg.remidi.num_buffers < 2:
         return None
     earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
     k = earlier.valid.shape[0]
@@ -234,7 +243,7 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     return traj, adv, targets, mean_return, best_return
 
 
-def score(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
+def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_return):
     """f32[N]: each level's score, in the environment's reward units (the critic's values and
     the advantages, learnt on ``reward × reward_scale``, are scaled back). Perfect regret compares
     the optimum and the agent's mean episodic return in the same units: both discounted by
@@ -274,94 +283,156 @@ def tag_counts(setup: Setup, levels, weight) -> dict[str, jax.Array]:
 # ---------------------------------------------------------------------------- the step
 def train_step(setup: Setup, runner: Runner):
     """One update. Returns ``(runner, metrics)``, metrics a dict of f32[] scalars."""
-    cfg, algo = setup.cfg, setup.algo
-    bcfg = buffer_config(cfg, algo)
     rng, k_branch, k_roll, k_levels, k_learn, k_sample = jax.random.split(runner.rng, 6)
-    active = buf.select_buffer(runner.buffers, runner.active)
     frozen = frozen_levels(setup, runner)
-    n = cfg.num_envs
-    if algo == "dr":
-        replay = jnp.asarray(False)
-    else:
-        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
-
     # 1. choose the levels: a replay sample from the active buffer, or fresh random levels
-    new = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
-    if algo == "dr":
-        sampled_buf, idxs, levels = active, None, new
-    else:
-        sampled_buf, idxs, replayed = buf.sample_replay(active, bcfg, k_sample, n)
-        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
-
-    # 2. one rollout (with the tracker against the frozen buffers, for ReMiDi), then score
-    traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, levels, frozen)
-    if algo != "dr":  # MaxMC's record: the best return ever seen on a replayed level
-        best_ret = jnp.where(replay, jnp.maximum(best_ret, sampled_buf.extras["max_return"][idxs]), best_ret)
-    scores = score(setup, levels, traj, adv, mean_ret, best_ret)
-    overlap = jnp.all(traj.indist, axis=0) & ~replay  # bool[N]: new level overlapping a frozen one completely
-
-    # 3. the buffer: replayed levels get their new scores; new levels are inserted by score, never
-    #    one that overlaps completely (robust PLR⊥ does not train on new levels)
-    if algo == "dr":
-        buffers, inserted = runner.buffers, jnp.zeros((n,), bool)
-    else:
-        def rescore(_):
-            return buf.update_scores(sampled_buf, idxs, scores, {"max_return": best_ret}), jnp.zeros((n,), bool)
-
-        def insert(_):
-            new_buf, ins, _ = buf.insert_batch(active, bcfg, levels, jnp.where(overlap, -jnp.inf, scores),
-                                               {"max_return": best_ret})
-            return new_buf, ins
-
-        new_buf, inserted = jax.lax.cond(replay, rescore, insert, None)
-        buffers = buf.replace_buffer(runner.buffers, runner.active, new_buf)
-
-    # 4. train (masked PPO) on replayed levels, and on every level for DR
-    if algo == "dr":
-        train_state = learn(setup, runner, k_learn, traj, adv, targets)
-    else:
-        train_state = jax.lax.cond(replay, lambda r: learn(setup, r, k_learn, traj, adv, targets),
-                                   lambda r: r.train_state, runner)
+    chosen = choose_levels(setup, runner, k_branch, k_levels, k_sample)
+    # 2. one rollout (with the tracker against the frozen buffers, for a buffer sequence), then score
+    traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, chosen.levels, frozen)
+    best_ret = best_return_record(setup, chosen, best_ret)
+    scores = score_rollout(setup, chosen.levels, traj, adv, mean_ret, best_ret)
+    overlap = jnp.all(traj.indist, axis=0) & ~chosen.replay  # bool[N]: new level overlapping a frozen one completely
+    # 3. the buffer: new scores for replayed levels, fresh ones inserted by score unless they overlap
+    buffers, inserted = update_buffer(setup, runner, chosen, scores, overlap, best_ret)
+    # 4. train (masked PPO)
+    train_state = train(setup, runner, chosen.replay, k_learn, traj, adv, targets)
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
     if obs_stats is not None:
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
-    extra = {"rejected": jnp.sum(overlap).astype(jnp.float32), "inserted": jnp.sum(inserted).astype(jnp.float32)}
-    if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
-        extra["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
+    # 5. a buffer sequence's switching rule (a no-op with one buffer)
+    active, count, frozen_params = switch_buffer(setup, runner, chosen.replay, train_state.params)
+    runner = Runner(rng=rng, train_state=train_state, buffers=buffers, active=active, count=count,
+                    update=runner.update + 1, frozen_params=frozen_params, obs_stats=obs_stats)
+    # 6. what the step reports
+    return runner, step_metrics(setup, runner, chosen, traj, mean_ret, scores, overlap, inserted, frozen)
 
-    # ReMiDi's switching rule (a no-op with one buffer).
+
+@struct.dataclass
+class Chosen:
+    """The levels of one update and where they came from.
+
+    replay: bool[], replayed from the active buffer (else fresh from the generator);
+    levels: leaves [N, ...]; buffer: the active buffer as sampled (its replay counters advanced;
+    the active buffer as it was for an algorithm that does not replay); slots: i32[N], the
+    replayed levels' slots in it (None for an algorithm that does not replay).
+    """
+
+    replay: jax.Array
+    levels: object
+    buffer: buf.BufferState
+    slots: jax.Array | None
+
+
+def choose_levels(setup: Setup, runner: Runner, k_branch, k_levels, k_sample) -> Chosen:
+    """Stage 1: replay N levels of the active buffer (probability ``buffer.replay_prob`` once it can
+    replay, for an algorithm that replays), else N fresh levels from the task's generator."""
+    cfg, algo = setup.cfg, setup.algo
+    bcfg = buffer_config(cfg, algo)
+    active = buf.select_buffer(runner.buffers, runner.active)
+    n = cfg.num_envs
+    if not algo.replays:
+        replay = jnp.asarray(False)
+    else:
+        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
+    new = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
+    if not algo.replays:
+        return Chosen(replay=replay, levels=new, buffer=active, slots=None)
+    sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, n)
+    levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+    return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots)
+
+
+def best_return_record(setup: Setup, chosen: Chosen, best_return):
+    """f32[N]: MaxMC's record, the best return ever seen on a level: this rollout's best episode
+    ``best_return`` [N], and for a replayed level the buffer's record too."""
+    if not setup.algo.replays:
+        return best_return
+    record = chosen.buffer.extras["max_return"][chosen.slots]
+    return jnp.where(chosen.replay, jnp.maximum(best_return, record), best_return)
+
+
+def update_buffer(setup: Setup, runner: Runner, chosen: Chosen, scores, overlap, best_return):
+    """Stage 3: replayed levels get their new ``scores`` [N]; fresh levels are inserted into the
+    active buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
+    bool[N]: scored −inf). Returns ``(buffers, inserted bool[N])``; an algorithm that does not
+    replay keeps its buffers as they are."""
+    n = setup.cfg.num_envs
+    if not setup.algo.replays:
+        return runner.buffers, jnp.zeros((n,), bool)
+    bcfg = buffer_config(setup.cfg, setup.algo)
+
+    def rescore(_):
+        return buf.update_scores(chosen.buffer, chosen.slots, scores, {"max_return": best_return}), jnp.zeros((n,), bool)
+
+    def insert(_):
+        active = buf.select_buffer(runner.buffers, runner.active)
+        new_buf, ins, _ = buf.insert_batch(active, bcfg, chosen.levels, jnp.where(overlap, -jnp.inf, scores),
+                                           {"max_return": best_return})
+        return new_buf, ins
+
+    new_buf, inserted = jax.lax.cond(chosen.replay, rescore, insert, None)
+    return buf.replace_buffer(runner.buffers, runner.active, new_buf), inserted
+
+
+def train(setup: Setup, runner: Runner, replay, rng, traj: Trajectory, adv, targets) -> TrainState:
+    """Stage 4: masked PPO on the rollout if it replayed levels or the algorithm trains on fresh
+    ones (robust PLR⊥ does not); otherwise the train state as it was."""
+    if setup.algo.trains_on_fresh:
+        return learn(setup, runner, rng, traj, adv, targets)
+    return jax.lax.cond(replay, lambda r: learn(setup, r, rng, traj, adv, targets), lambda r: r.train_state, runner)
+
+
+def switch_buffer(setup: Setup, runner: Runner, replay, params):
+    """Stage 5: a buffer sequence's switching rule. Counts the update (or, with
+    ``remidi.count=replays``, a replay) on the active buffer; after ``remidi.steps_per_buffer``
+    it freezes the buffer (and, under ``remidi.policy=combine``, keeps ``params`` as its policy)
+    and moves to the next, staying on the last. Returns ``(active i32[], count i32[],
+    frozen_params)``."""
+    cfg = setup.cfg
     count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
     k = runner.buffers.valid.shape[0]
-    switch = (count >= cfg.remidi.steps_per_buffer) & (runner.active + 1 < k) if algo == "remidi" else jnp.asarray(False)
+    if setup.algo.buffer_sequence:
+        switch = (count >= cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
+    else:
+        switch = jnp.asarray(False)
     frozen_params = runner.frozen_params
     if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
         frozen_params = jax.tree.map(
             lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[runner.active]), mode="drop"),
-            frozen_params, train_state.params)
-    runner = Runner(rng=rng, train_state=train_state, buffers=buffers,
-                    active=jnp.where(switch, runner.active + 1, runner.active),
-                    count=jnp.where(switch, 0, count), update=runner.update + 1, frozen_params=frozen_params,
-                    obs_stats=obs_stats)
+            frozen_params, params)
+    return jnp.where(switch, runner.active + 1, runner.active), jnp.where(switch, 0, count), frozen_params
 
-    trained = replay | (algo == "dr")
+
+#: how the driver reduces a step metric over a block of updates: "sum", "last" or "mean" (any
+#: metric not listed). ``replayed/<tag>`` counts become the block's ``replay_fraction/<tag>``.
+BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "sum", "active_buffer": "last"}
+
+
+def step_metrics(setup: Setup, runner: Runner, chosen: Chosen, traj: Trajectory, mean_return, scores, overlap,
+                 inserted, frozen) -> dict[str, jax.Array]:
+    """Stage 6: the step's f32[] scalars (``runner`` is the one after the step)."""
+    trained = chosen.replay | setup.algo.trains_on_fresh
     metrics = {
-        "replay": replay.astype(jnp.float32),
-        "mean_return": jnp.mean(mean_ret),
+        "replay": chosen.replay.astype(jnp.float32),
+        "mean_return": jnp.mean(mean_return),
         "mean_score": jnp.mean(jnp.where(jnp.isfinite(scores), scores, 0.0)),
         "trained_fraction_masked": jnp.where(trained, jnp.mean(traj.indist.astype(jnp.float32)), 0.0),
         "active_buffer": runner.active.astype(jnp.float32),
-        **extra,
+        "rejected": jnp.sum(overlap).astype(jnp.float32),
+        "inserted": jnp.sum(inserted).astype(jnp.float32),
     }
-    for name, c in tag_counts(setup, levels, jnp.where(replay, 1.0, 0.0)).items():
+    if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
+        metrics["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
+    for name, c in tag_counts(setup, chosen.levels, jnp.where(chosen.replay, 1.0, 0.0)).items():
         metrics[f"replayed/{name}"] = c
-    return runner, metrics
+    return metrics
 
 
 def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
     """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active one;
     nothing for DR, which has no buffer."""
     out = {}
-    if setup.algo == "dr":
+    if not setup.algo.replays:
         return out
     valid = runner.buffers.valid  # bool[K, C]
     sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
@@ -532,7 +603,7 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
                       f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
 
 
-def run_warnings(cfg: UEDConfig, algo: str, task: UEDTask) -> list[str]:
+def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[str]:
     """One-line warnings about a valid run that would train degenerately without saying so:
 
     * a score that needs finished episodes (``pvl``, ``maxmc``, ``learnability``) on rollouts
@@ -543,12 +614,13 @@ def run_warnings(cfg: UEDConfig, algo: str, task: UEDTask) -> list[str]:
       level and the actions, so it may judge identical levels distinguishable.
     """
     out = []
+    algo = get_algorithm(algo)
     name = score_name(cfg, algo)
-    if algo != "dr" and name in ("pvl", "maxmc", "learnability") and cfg.num_steps < task.max_episode_steps:
+    if algo.replays and name in ("pvl", "maxmc", "learnability") and cfg.num_steps < task.max_episode_steps:
         out.append(f"score {name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) is "
                    f"shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not end "
                    f"score -inf and are never inserted; raise num_steps or use another score")
-    if algo == "remidi" and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
+    if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
         level = task.sample_level(jax.random.PRNGKey(0))
         obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
         if not bool(tree_equal(obs[0], obs[1])):
@@ -570,14 +642,14 @@ def validate_section(prefix: str, validate) -> None:
         raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
 
 
-def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
+def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
     """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
     from remidi.engine.ppo import validate_ppo_config
     from remidi.engine.tracker import MODES
     from remidi.errors import ConfigError
-    from remidi.experiments.config import choice, positive_int, require
+    from remidi.errors import choice, positive_int, require
 
-    choice("--algo", algo, ALGORITHMS)
+    algo = get_algorithm(algo)
     for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
         positive_int(key, getattr(cfg, key))
     steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count
@@ -627,7 +699,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str, task: UEDTask) -> None:
     validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
     validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))
-    if algo == "remidi":
+    if algo.buffer_sequence:
         needed = (r.num_buffers - 1) * r.steps_per_buffer
         if needed >= cfg.num_updates:
             raise ConfigError(

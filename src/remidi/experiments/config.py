@@ -14,7 +14,9 @@ import sys
 import typing
 from typing import Any, Iterable
 
-from remidi.errors import ConfigError, one_of
+from remidi.errors import ConfigError
+# the validation helpers live in remidi.errors (the engine uses them too); the experiments import them from here
+from remidi.errors import choice, non_negative, positive, positive_int, probability, require  # noqa: F401
 
 
 def parse_set_items(items: Iterable[str]) -> dict[str, str]:
@@ -261,32 +263,3 @@ def config_from_dict(cls, data: dict[str, Any]):
     walk("", data)
     settable = set(field_names(cls()))
     return apply_overrides(cls(), {k: v for k, v in flat.items() if k in settable}, source="config.json")
-
-
-# ------------------------------------------------------------------------------ validation
-def require(cond: bool, key: str, what: str, value: Any) -> None:
-    """Raise ``ConfigError("key: must be WHAT, got VALUE")`` unless ``cond``."""
-    if not cond:
-        raise ConfigError(f"{key}: must be {what}, got {value!r}")
-
-
-def positive_int(key: str, value: int) -> None:
-    require(isinstance(value, int) and value >= 1, key, "an integer ≥ 1", value)
-
-
-def non_negative(key: str, value: float) -> None:
-    require(value >= 0, key, "≥ 0", value)
-
-
-def positive(key: str, value: float) -> None:
-    require(value > 0, key, "> 0", value)
-
-
-def probability(key: str, value: float) -> None:
-    require(0.0 <= value <= 1.0, key, "in [0, 1]", value)
-
-
-def choice(key: str, value: Any, allowed: Iterable[Any]) -> None:
-    allowed = tuple(allowed)
-    if value not in allowed:
-        raise one_of(key, value, allowed)

@@ -18,13 +18,13 @@ import csv
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
 
 from remidi.errors import ConfigError
+from remidi.files import atomic_write  # noqa: F401  (the experiments import it from here)
 
 
 def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> Path:
@@ -53,34 +53,6 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
         except OSError as err:
             raise ConfigError(f"--out: {out} cannot be made ({err.strerror or type(err).__name__})") from None
     return out
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write(path: Path, write, binary: bool = False) -> None:
-    """Call ``write(file)`` on a temporary file beside ``path``, then move it onto ``path``.
-
-    A write that is interrupted leaves ``path`` as it was (and no temporary file behind).
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="")) as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are ordinary files
-        os.replace(tmp, path)
-    except BaseException as err:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
-            raise OSError(err.errno, err.strerror or str(err), str(path)) from None
-        raise
 
 
 def _clean(obj: Any) -> Any:

@@ -113,7 +113,7 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         validate_ued_config(cfg, algo, task_for(cfg))
 
     return Experiment(
-        name=name, description=description, algorithms=ALGORITHMS, config_factory=config_factory,
+        name=name, description=description, algorithms=tuple(ALGORITHMS), config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
         scaled_keys=SCALED_KEYS,

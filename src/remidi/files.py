@@ -1,0 +1,36 @@
+"""Writing files so that an interruption never leaves a half-written one (shared by the engine's
+checkpoints and the experiments' outputs)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: Path, write, binary: bool = False) -> None:
+    """Call ``write(file)`` on a temporary file beside ``path``, then move it onto ``path``.
+
+    A write that is interrupted leaves ``path`` as it was (and no temporary file behind).
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="")) as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are ordinary files
+        os.replace(tmp, path)
+    except BaseException as err:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
+            raise OSError(err.errno, err.strerror or str(err), str(path)) from None
+        raise

@@ -34,7 +34,8 @@ CASES = {
 
 def fingerprint(algo: str, cfg) -> dict:
     """Every logged metric [S, T], and per runner leaf its sum and sum of squares (float64)."""
-    steps, history, per_step, runner = driver.train_seeds(TASK, cfg, algo, SEEDS, progress=False)
+    result = driver.train_seeds(TASK, cfg, algo, SEEDS, progress=False)
+    steps, history, per_step, runner = result.steps, result.history, result.per_step, result.runner
     leaves = {jax.tree_util.keystr(path): np.asarray(leaf, dtype=np.float64)
               for path, leaf in jax.tree_util.tree_leaves_with_path(runner)}
     return {

@@ -165,7 +165,8 @@ def test_algorithms_train_on_continuous_actions(algo):
     from remidi.engine import driver
 
     assert TASK.sample_level(jax.random.PRNGKey(0)).target.shape == (2,)
-    _, hist, _, runner = driver.train_seeds(TASK, TINY, algo, [0], progress=False)
+    result = driver.train_seeds(TASK, TINY, algo, [0], progress=False)
+    hist, runner = result.history, result.runner
     runner = jax.tree.map(lambda x: x[0], runner)  # the one seed
     assert runner.obs_stats.mean.shape == (3,)
     assert all(np.all(np.isfinite(v)) for name, v in hist.items() if not name.startswith("replay_fraction"))
@@ -217,11 +218,12 @@ def test_observation_statistics_survive_a_resume(tmp_path):
         if done == 3:
             raise Crash
 
-    _, full, _, runner = driver.train_seeds(TASK, TINY, "remidi", [0], progress=False)
+    result = driver.train_seeds(TASK, TINY, "remidi", [0], progress=False)
+    full, runner = result.history, result.runner
     with pytest.raises(Crash):
         driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, progress=False, on_block=crash)
-    _, resumed, _, runner_b = driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, resume=True,
-                                                 progress=False)
+    second = driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, resume=True, progress=False)
+    resumed, runner_b = second.history, second.runner
     assert float(runner.obs_stats.count[0]) == TINY.num_updates * TINY.num_envs * TINY.num_steps
     for a, b in zip(jax.tree.leaves(runner), jax.tree.leaves(runner_b)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -46,7 +46,7 @@ real, runners, calls = ued.train_seeds, {}, []
 def keep(*args, **kwargs):
     calls.append(kwargs["devices"])
     result = real(*args, **kwargs)
-    runners[len(calls)] = result[3]
+    runners[len(calls)] = result.runner
     return result
 
 

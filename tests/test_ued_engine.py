@@ -32,8 +32,9 @@ class Crash(Exception):
 
 
 def test_same_seed_same_result_and_resume_matches_uninterrupted(tmp_path):
-    steps, full, raw, runner = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "a", progress=False)
-    _, again, _, _ = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False)
+    first = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "a", progress=False)
+    steps, full, raw, runner = first.steps, first.history, first.per_step, first.runner
+    again = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False).history
     for name in full:
         np.testing.assert_array_equal(full[name], again[name], err_msg=name)
 
@@ -43,8 +44,8 @@ def test_same_seed_same_result_and_resume_matches_uninterrupted(tmp_path):
 
     with pytest.raises(Crash):
         driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "b", progress=False, on_block=crash)
-    steps_b, resumed, raw_b, runner_b = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "b",
-                                                          resume=True, progress=False)
+    second = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "b", resume=True, progress=False)
+    steps_b, resumed, raw_b, runner_b = second.steps, second.history, second.per_step, second.runner
     np.testing.assert_array_equal(steps, steps_b)
     for name in full:
         np.testing.assert_array_equal(full[name], resumed[name], err_msg=name)
@@ -77,7 +78,8 @@ def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, mon
 
 def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
     # seeds 0 and 1: the program compiled for the determinism test (shared through the cache)
-    _, hist, _, runner = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False)
+    result = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False)
+    hist, runner = result.history, result.runner
     levels, valid = runner.buffers.levels, np.asarray(runner.buffers.valid)  # [S, K, C]
     correct, visible = np.asarray(levels.correct), np.asarray(levels.visible)
     assert np.asarray(runner.active).tolist() == [1, 1]
@@ -157,7 +159,8 @@ def test_jaxued_maze_trains_through_our_interface():
             remidi=R(TINY.remidi, steps_per_buffer=2, buffer_capacity=4),
             buffer=R(TINY.buffer, capacity=4, topk_k=2, min_fill=0.25))
     validate_ued_config(cfg, "remidi", task)
-    _, hist, _, runner = driver.train_seeds(task, cfg, "remidi", [0], progress=False)
+    result = driver.train_seeds(task, cfg, "remidi", [0], progress=False)
+    hist, runner = result.history, result.runner
     assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(runner.train_state.params))
     assert np.isfinite(hist["mean_return"]).all()
 

@@ -1,11 +1,14 @@
 """Driving a UED run: all seeds in one compiled program, evaluation, progress and checkpoints.
 
-The run is cut into blocks of ``eval_every`` updates. One block is a single jit-compiled
-``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds (:func:`over_seeds`). After each block
-the driver evaluates, records the block's metrics, updates the progress bar and, every
-``checkpoint_every`` updates, writes a checkpoint atomically (temporary file, then rename), so a
-killed run never leaves a corrupt checkpoint. ``resume`` continues from the last checkpoint and
-ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
+:func:`train_seeds` is the entry point: it validates the config, builds the run's
+:class:`Programs` (init, run a block, evaluate) and hands them to :func:`drive`, which returns a
+:class:`TrainResult`. The run is cut into blocks of ``eval_every`` updates. One block is a single
+jit-compiled ``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds
+(:func:`over_seeds`). After each block the driver evaluates, records the block's metrics
+(reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the progress bar and,
+every ``checkpoint_every`` updates, writes a checkpoint (:mod:`remidi.engine.checkpoint`)
+atomically, so a killed run never leaves a corrupt checkpoint. ``resume`` continues from the last
+checkpoint and ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
 
 ``devices=N`` shards the seeds over N devices: a 1-D :class:`~jax.sharding.Mesh` with axis
 ``"seed"``, the runner's leading (seed) axis and the per-seed keys placed with
@@ -24,8 +27,7 @@ runs on different hardware do. A sharded run is itself deterministic and resumes
 
 from __future__ import annotations
 
-import json
-import zipfile
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Callable
@@ -37,11 +39,11 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from remidi.engine import train as tr
+from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history,  # noqa: F401 (re-exported)
+                                      remove_stale_temporaries, save_checkpoint, save_run)
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
-from remidi.files import atomic_write
 
-CHECKPOINT = "checkpoint.npz"
 SEED_AXIS = "seed"
 
 
@@ -65,90 +67,12 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
     return out
 
 
-def save_checkpoint(path: Path, runner, meta: dict) -> None:
-    """Write the runner's leaves and ``meta`` (JSON) to ``path`` atomically."""
-    leaves = {f"leaf_{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(jax.device_get(runner)))}
-    atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
-
-
-HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
-# what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
-_UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
-
-
-def _unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
-    detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
-    advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
-        if flag == "--resume" else ""
-    return ConfigError(f"{flag}: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''})"
-                       f"{advice}")
-
-
-def load_checkpoint(path: Path, template, flag: str = "--resume"):
-    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``.
-
-    Raises ConfigError (one line, starting with ``flag`` and naming the file) when the file cannot
-    be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
-    checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
-    treedef = jax.tree.structure(template)
-    wanted = jax.tree.leaves(template)
-    try:
-        with np.load(path) as data:
-            meta = json.loads(str(data["meta"]))
-            count = sum(1 for name in data.files if name.startswith("leaf_"))
-            leaves = [np.asarray(data[f"leaf_{i}"]) for i in range(min(count, treedef.num_leaves))]
-        if not isinstance(meta, dict):
-            raise TypeError(f"its meta is a {type(meta).__name__}")
-    except _UNREADABLE as err:
-        raise _unreadable(path, err, flag) from None
-    mismatch = None
-    if count != treedef.num_leaves:
-        mismatch = f"it holds {count} arrays, this run's state has {treedef.num_leaves}"
-    else:
-        for i, (leaf, want) in enumerate(zip(leaves, wanted)):
-            if leaf.shape != want.shape or leaf.dtype != want.dtype:
-                mismatch = (f"array {i} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
-                            f"{want.dtype}{list(want.shape)}")
-                break
-    if mismatch is not None:
-        raise ConfigError(f"{flag}: {path} does not match the run's config.json ({mismatch}): was config.json "
-                          f"edited (seeds, algo, network sizes) or the checkpoint copied from another run?")
-    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
-
-
 def load_run_state(setup: tr.Setup, seeds: list[int], path: Path, flag: str = "--resume"):
     """``(runner, meta)``: the training state of every seed (leaves with the seed axis first) from
     the checkpoint ``path`` of a run of ``setup``, checked against the structure :func:`_init`
     gives (traced, not compiled); errors as :func:`load_checkpoint`'s."""
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
     return load_checkpoint(path, jax.eval_shape(lambda k: _init(setup, k), keys), flag)
-
-
-def remove_stale_temporaries(ckpt: Path) -> list[Path]:
-    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt`` (atomic
-    writes go through ``.<name>.<random>.tmp``; SIGKILL stops them before the rename or the clean-up).
-    Called when a run starts or resumes, before it writes; returns what was removed."""
-    removed = []
-    for name in (ckpt.name, HISTORY):
-        for tmp in ckpt.parent.glob(f".{name}.*.tmp"):
-            tmp.unlink(missing_ok=True)
-            removed.append(tmp)
-    return removed
-
-
-def load_history(path: Path, meta: dict):
-    """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
-    per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
-    if not all(key in meta for key in ("done", "steps", "num_blocks")):
-        raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
-    if not path.exists():
-        raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
-                          f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
-    try:
-        with np.load(path) as saved:
-            return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
-    except _UNREADABLE as err:
-        raise _unreadable(path, err) from None
 
 
 @partial(jax.jit, static_argnums=0)
@@ -260,32 +184,77 @@ def _to_host(tree):
     return jax.tree.map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
-def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], out: Path | None = None,
-                resume: bool = False, progress: bool = True, on_block: Callable[[int, dict], None] | None = None,
-                devices: int = 1):
-    """Train ``algo`` for every seed. Returns ``(steps i[T], history {name: f[S, T]}, per_step
-    {name: f[S, num_updates]}, runner)``: ``history`` holds block aggregates and evaluations at
-    the end of each block; ``per_step`` the raw per-update replay counters. ``on_block(updates
-    done, block metrics)`` is called after each block, once its checkpoint is written.
+@dataclass(frozen=True)
+class Programs:
+    """What the driver runs, for every seed at once (runner leaves ``[S, ...]``, keys ``[S, 2]``):
+
+    init(keys) -> runner; run_block(runner, length) -> (runner, per-step metrics {name: f[S,
+    length]}); evaluate(runner, keys) -> {name: f[S]}. :func:`ued_programs` builds them for the
+    shared UED train step, on one device or sharded over several.
+    """
+
+    init: Callable
+    run_block: Callable
+    evaluate: Callable
+    mesh: jax.sharding.Mesh | None = None  # set when the seeds are sharded over devices
+
+
+def ued_programs(setup: tr.Setup, devices: int = 1) -> Programs:
+    """The compiled programs of a UED run of ``setup``, on ``devices`` devices."""
+    if devices == 1:
+        return Programs(init=partial(_init, setup), run_block=partial(_run_block, setup),
+                        evaluate=partial(_evaluate, setup))
+    mesh = seed_mesh(devices)
+    return Programs(init=partial(_init_sharded, mesh, setup), run_block=partial(_run_block_sharded, mesh, setup),
+                    evaluate=partial(_evaluate_sharded, mesh, setup), mesh=mesh)
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """A finished run: ``steps`` i[T] (the update count at the end of each block), ``history``
+    {name: f[S, T]} (each block's reduced step metrics and the evaluation at its end),
+    ``per_step`` {name: f[S, num_updates]} (the raw replay counters of every update) and the
+    final ``runner`` (leaves ``[S, ...]``; sharded along the seed axis for a sharded run)."""
+
+    steps: np.ndarray
+    history: dict[str, np.ndarray]
+    per_step: dict[str, np.ndarray]
+    runner: object
+
+
+def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str | tr.Algorithm, seeds: list[int],
+                out: Path | None = None, resume: bool = False, progress: bool = True,
+                on_block: Callable[[int, dict], None] | None = None, devices: int = 1) -> TrainResult:
+    """Train ``algo`` (a name or an :class:`~remidi.engine.algorithms.Algorithm`) for every seed
+    and return the :class:`TrainResult`. With ``out``, checkpoints go there every
+    ``checkpoint_every`` updates and at the end, and ``resume`` continues from the last one.
+    ``on_block(updates done, block metrics)`` is called after each block, once its checkpoint is
+    written.
 
     ``devices=N`` shards the seeds over the first N of ``jax.devices()`` (N must divide the
-    number of seeds; :func:`check_devices`); the returned runner's leaves are then sharded along
-    their seed axis. In a multi-process run (``jax.distributed``) every process calls this with
-    the same arguments, all get the full results, and only process 0 writes checkpoints."""
+    number of seeds; :func:`check_devices`). In a multi-process run (``jax.distributed``) every
+    process calls this with the same arguments, all get the full results, and only process 0
+    writes checkpoints."""
     tr.validate_ued_config(cfg, algo, task)  # the CLI's checks, for Python callers too
     check_devices(devices, len(seeds))
     setup = tr.make_setup(task, cfg, algo)
+    desc = f"{setup.algo.name} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + \
+        (f" on {devices} devices" if devices > 1 else "")
+    return drive(ued_programs(setup, devices), seeds, num_updates=cfg.num_updates, eval_every=cfg.eval_every,
+                 checkpoint_every=cfg.checkpoint_every, num_envs=cfg.num_envs, out=out, resume=resume,
+                 progress=progress, desc=desc, on_block=on_block)
+
+
+def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every: int, checkpoint_every: int,
+          num_envs: int, out: Path | None = None, resume: bool = False, progress: bool = True, desc: str = "",
+          on_block: Callable[[int, dict], None] | None = None) -> TrainResult:
+    """Run ``programs`` for every seed in blocks of ``eval_every`` updates (see
+    :func:`train_seeds`; ``num_envs`` turns replay counts into replay fractions)."""
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    if devices == 1:
-        mesh = sharding = None
-        init, run_block, evaluate = _init, _run_block, _evaluate
-    else:
-        mesh = seed_mesh(devices)
-        sharding = NamedSharding(mesh, P(SEED_AXIS))
-        init, run_block, evaluate = (partial(_init_sharded, mesh), partial(_run_block_sharded, mesh),
-                                     partial(_evaluate_sharded, mesh))
+    mesh = programs.mesh
+    sharding = None if mesh is None else NamedSharding(mesh, P(SEED_AXIS))
     writer = mesh is None or jax.process_index() == 0
-    runner = init(setup, keys if sharding is None else _put(keys, sharding))
+    runner = programs.init(keys if sharding is None else _put(keys, sharding))
     steps: list[int] = []
     history: list[dict[str, np.ndarray]] = []
     per_step: list[dict[str, np.ndarray]] = []
@@ -302,24 +271,23 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
 
-    desc = f"{algo} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + (f" on {devices} devices" if mesh else "")
-    bar = _progress(cfg.num_updates, done, desc, progress and writer)
-    while done < cfg.num_updates:
-        length = min(cfg.eval_every, cfg.num_updates - done)
-        runner, step_metrics = run_block(setup, runner, length)
+    bar = _progress(num_updates, done, desc, progress and writer)
+    while done < num_updates:
+        length = min(eval_every, num_updates - done)
+        runner, step_metrics = programs.run_block(runner, length)
         step_metrics = _to_host(step_metrics)
         eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
-        evals = _to_host(evaluate(setup, runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
+        evals = _to_host(programs.evaluate(runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
         done += length
         steps.append(done)
-        history.append({**_block_metrics(step_metrics, cfg.num_envs), **evals})
+        history.append({**_block_metrics(step_metrics, num_envs), **evals})
         per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
         if bar is not None:
             bar.update(length)
-        if ckpt is not None and (done % cfg.checkpoint_every < length or done == cfg.num_updates):
+        if ckpt is not None and (done % checkpoint_every < length or done == num_updates):
             host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
             if writer:  # process 0 writes
-                _save_all(ckpt, host_runner, done, steps, history, per_step)
+                save_run(ckpt, host_runner, done, steps, history, per_step)
         if on_block is not None:
             on_block(done, history[-1])
     if bar is not None:
@@ -327,27 +295,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str, seeds: list[int], o
     names = history[0].keys()
     hist = {name: np.stack([h[name] for h in history], axis=1) for name in names}
     raw = {name: np.concatenate([p[name] for p in per_step], axis=1) for name in per_step[0]}
-    return np.asarray(steps), hist, raw, runner
-
-
-def _save_all(ckpt: Path, runner, done, steps, history, per_step) -> None:
-    arrays = {}
-    for i, h in enumerate(history):
-        arrays.update({f"h{i}|{k}": v for k, v in h.items()})
-    for i, p in enumerate(per_step):
-        arrays.update({f"p{i}|{k}": v for k, v in p.items()})
-    atomic_write(ckpt.with_suffix(".history.npz"), lambda fh: np.savez(fh, **arrays), binary=True)
-    # the runner checkpoint is written last: it is what marks the history as complete
-    save_checkpoint(ckpt, runner, {"done": done, "steps": steps, "num_blocks": len(per_step)})
-
-
-def _unstack(saved, prefix: str, count: int) -> list[dict[str, np.ndarray]]:
-    out = [dict() for _ in range(count)]
-    for key in saved.files:
-        head, name = key.split("|", 1)
-        if head[0] == prefix and int(head[1:]) < count:
-            out[int(head[1:])][name] = saved[key]
-    return out
+    return TrainResult(np.asarray(steps), hist, raw, runner)
 
 
 def _progress(total: int, initial: int, desc: str, enabled: bool):

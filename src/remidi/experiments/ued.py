@@ -48,15 +48,16 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
                 more = derive({k: np.asarray(v)[:, None] for k, v in metrics.items()}) if derive is not None else {}
                 ctx.on_block(done, {**metrics, **{k: np.asarray(v)[:, 0] for k, v in more.items()}})
 
-        steps, history, raw, _ = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
-                                             progress=ctx.progress, devices=ctx.devices, on_block=on_block)
+        result = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
+                             progress=ctx.progress, devices=ctx.devices, on_block=on_block)
+        history = dict(result.history)
         if derive is not None:
             history.update(derive(history))
         final = {name: history[name][:, -1] for name in history}
-        final.update(final_replay_fractions(raw, cfg.num_envs))
+        final.update(final_replay_fractions(result.per_step, cfg.num_envs))
         ordered = {name: final[name] for name in summary_metrics if name in final}
         ordered.update({k: v for k, v in final.items() if k not in ordered})
-        return RunResult(steps=steps, history=history, final=ordered)
+        return RunResult(steps=result.steps, history=history, final=ordered)
 
     return train
 

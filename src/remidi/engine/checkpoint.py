@@ -1,0 +1,118 @@
+"""Checkpoints of a UED run: the runner (``checkpoint.npz``) and the metrics logged so far
+(``checkpoint.history.npz``), written atomically, read back with one-line errors for every way
+a file can be damaged or belong to another run."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from remidi.errors import ConfigError
+from remidi.files import atomic_write
+
+CHECKPOINT = "checkpoint.npz"
+
+
+def save_checkpoint(path: Path, runner, meta: dict) -> None:
+    """Write the runner's leaves and ``meta`` (JSON) to ``path`` atomically."""
+    leaves = {f"leaf_{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(jax.device_get(runner)))}
+    atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
+
+
+HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
+# what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
+_UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
+
+
+def _unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
+    detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
+    advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
+        if flag == "--resume" else ""
+    return ConfigError(f"{flag}: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''})"
+                       f"{advice}")
+
+
+def load_checkpoint(path: Path, template, flag: str = "--resume"):
+    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``.
+
+    Raises ConfigError (one line, starting with ``flag`` and naming the file) when the file cannot
+    be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
+    checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
+    treedef = jax.tree.structure(template)
+    wanted = jax.tree.leaves(template)
+    try:
+        with np.load(path) as data:
+            meta = json.loads(str(data["meta"]))
+            count = sum(1 for name in data.files if name.startswith("leaf_"))
+            leaves = [np.asarray(data[f"leaf_{i}"]) for i in range(min(count, treedef.num_leaves))]
+        if not isinstance(meta, dict):
+            raise TypeError(f"its meta is a {type(meta).__name__}")
+    except _UNREADABLE as err:
+        raise _unreadable(path, err, flag) from None
+    mismatch = None
+    if count != treedef.num_leaves:
+        mismatch = f"it holds {count} arrays, this run's state has {treedef.num_leaves}"
+    else:
+        for i, (leaf, want) in enumerate(zip(leaves, wanted)):
+            if leaf.shape != want.shape or leaf.dtype != want.dtype:
+                mismatch = (f"array {i} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
+                            f"{want.dtype}{list(want.shape)}")
+                break
+    if mismatch is not None:
+        raise ConfigError(f"{flag}: {path} does not match the run's config.json ({mismatch}): was config.json "
+                          f"edited (seeds, algo, network sizes) or the checkpoint copied from another run?")
+    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
+
+
+def remove_stale_temporaries(ckpt: Path) -> list[Path]:
+    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt`` (atomic
+    writes go through ``.<name>.<random>.tmp``; SIGKILL stops them before the rename or the clean-up).
+    Called when a run starts or resumes, before it writes; returns what was removed."""
+    removed = []
+    for name in (ckpt.name, HISTORY):
+        for tmp in ckpt.parent.glob(f".{name}.*.tmp"):
+            tmp.unlink(missing_ok=True)
+            removed.append(tmp)
+    return removed
+
+
+def load_history(path: Path, meta: dict):
+    """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
+    per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
+    if not all(key in meta for key in ("done", "steps", "num_blocks")):
+        raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
+    if not path.exists():
+        raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
+                          f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
+    try:
+        with np.load(path) as saved:
+            return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
+    except _UNREADABLE as err:
+        raise _unreadable(path, err) from None
+
+
+def save_run(ckpt: Path, runner, done, steps, history, per_step) -> None:
+    """Write a run's state at ``done`` updates: the metrics logged so far (``steps``, ``history``
+    and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``."""
+    arrays = {}
+    for i, h in enumerate(history):
+        arrays.update({f"h{i}|{k}": v for k, v in h.items()})
+    for i, p in enumerate(per_step):
+        arrays.update({f"p{i}|{k}": v for k, v in p.items()})
+    atomic_write(ckpt.with_name(HISTORY), lambda fh: np.savez(fh, **arrays), binary=True)
+    # the runner checkpoint is written last: it is what marks the history as complete
+    save_checkpoint(ckpt, runner, {"done": done, "steps": steps, "num_blocks": len(per_step)})
+
+
+def _unstack(saved, prefix: str, count: int) -> list[dict[str, np.ndarray]]:
+    out = [dict() for _ in range(count)]
+    for key in saved.files:
+        head, name = key.split("|", 1)
+        if head[0] == prefix and int(head[1:]) < count:
+            out[int(head[1:])][name] = saved[key]
+    return out

@@ -165,7 +165,7 @@ def test_jaxued_maze_trains_through_our_interface():
     assert np.isfinite(hist["mean_return"]).all()
 
 
-@pytest.mark.parametrize("algo", ["dr", "plr", "remidi"])
+@pytest.mark.parametrize("algo", ["dr", "plr", "remidi", "accel", "remidi-accel"])
 def test_one_update_rolls_out_once(algo, monkeypatch):
     """Replay or fresh levels, an update performs a single rollout (chosen levels first, then one
     rollout), and so traces the environment's step once for the agent's envs."""

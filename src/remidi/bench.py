@@ -18,6 +18,9 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   overflow.
 * ``maze-remidi-reference``: ``maze-remidi`` with the reference tracker (every frozen level
   stepped beside every env), for the ratio of the two trackers (not run by default: slow).
+* ``maze-accel``: ACCEL (``accel``) on the same set-up as ``maze-plr``: with every update
+  replaying, the updates alternate between a replay (rollout + PPO) and an edit of that replay's
+  levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``).
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
@@ -154,7 +157,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     def extras(out):
         _, metrics = out
-        return {name: float(metrics[name].mean()) for name in ("replay", "tracker_overflow", "rejected")
+        return {name: float(metrics[name].mean()) for name in ("replay", "edit", "tracker_overflow", "rejected")
                 if name in metrics}
 
     steps = updates_per_call * cfg.num_envs * cfg.num_steps
@@ -215,6 +218,13 @@ def _maze_remidi():
 
     cfg = _maze_config("remidi")
     return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
+
+
+@register("maze-accel", "ACCEL on the T-maze task: PLR⊥'s update, every other one editing the last replay's levels")
+def _maze_accel():
+    from remidi.envs.maze import maze_task
+
+    return _train_workload(maze_task("tmaze"), _maze_config("accel"), "accel", active=0)
 
 
 @register("maze-remidi-reference", "maze-remidi with the reference tracker (every frozen level stepped)")
@@ -375,6 +385,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
     if "maze-remidi" in results and "maze-plr" in results:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
+    if "maze-accel" in results and "maze-plr" in results:
+        out["accel_step_over_plr_step"] = per_call("maze-accel") / per_call("maze-plr")
     if "maze-remidi-reference" in results and "maze-plr" in results:
         out["remidi_reference_step_over_plr_step"] = per_call("maze-remidi-reference") / per_call("maze-plr")
     if "maze-plr" in results and "maze-env" in results:

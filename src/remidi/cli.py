@@ -114,7 +114,8 @@ def _cmd_list(args) -> int:
         if i:
             print()
         print(f"{exp.name}: {exp.description}")
-        print(f"  algorithms: {', '.join(exp.algorithms)}")
+        print(f"  algorithms: {', '.join(exp.algorithms)}"
+              + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
         presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                             for p in exp.presets)
         print(f"  presets:    {presets}")

@@ -29,6 +29,10 @@ class Algorithm:
         after ``remidi.steps_per_buffer``; earlier buffers are frozen, a fresh level whose rollout a
         frozen level explains at every step is rejected, and PPO's loss is masked on the steps a
         frozen level explains.
+    edits: ACCEL's editing: the update after a replay edits the levels it replayed with the task's
+        mutator (``UEDTask.mutate_level``, ``accel.num_edits`` edits each), rolls them out, scores
+        them and offers them to the buffer like fresh levels, without training on them. Edited
+        levels are new levels: with a buffer sequence, one a frozen level explains is rejected.
     description: one line for ``remidi list`` and the docs.
     """
 
@@ -37,6 +41,7 @@ class Algorithm:
     trains_on_fresh: bool
     score: str | None = None
     buffer_sequence: bool = False
+    edits: bool = False
     description: str = ""
 
     def score_name(self, configured: str) -> str:
@@ -53,8 +58,15 @@ MINIMAX_RETURN = Algorithm("minimax-return", replays=True, trains_on_fresh=False
 REMIDI = Algorithm("remidi", replays=True, trains_on_fresh=False, buffer_sequence=True,
                    description="ReMiDi: PLR⊥ with a sequence of buffers; levels an earlier buffer explains are rejected")
 
+ACCEL = Algorithm("accel", replays=True, trains_on_fresh=False, edits=True,
+                  description="ACCEL: PLR⊥ whose replayed levels are edited, and the edits offered to the buffer")
+REMIDI_ACCEL = Algorithm("remidi-accel", replays=True, trains_on_fresh=False, buffer_sequence=True, edits=True,
+                         description="ReMiDi over ACCEL: ACCEL's edits are new levels for ReMiDi's buffer sequence")
+
 #: every algorithm ``--algo`` accepts, by name, in the order the docs and plots list them
-ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI)}
+ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL)}
+#: the algorithms of the paper's comparisons: what ``remidi run`` trains when ``--algo`` is not given
+PAPER_ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 
 
 def get_algorithm(algo: str | Algorithm, key: str = "--algo") -> Algorithm:

@@ -70,6 +70,16 @@ class ReMiDiConfig:
 
 
 @dataclass(frozen=True)
+class AccelConfig:
+    """ACCEL's editing (algorithms with ``edits``: ``accel``, ``remidi-accel``)."""
+
+    num_edits: int = field(default=5, metadata={
+        "help": "ACCEL: edits per edited level (a maze edit flips one wall or moves the goal)"})
+    easy_start: bool = field(default=False, metadata={
+        "help": "ACCEL: fresh levels from the task's easy generator (mazes: no walls)"})
+
+
+@dataclass(frozen=True)
 class UEDConfig:
     """A UED run's hyper-parameters (hashable; static under jit)."""
 
@@ -92,6 +102,7 @@ class UEDConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
     remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
+    accel: AccelConfig = field(default_factory=AccelConfig)
 
     def __post_init__(self):
         # the learning-rate schedule spans the run: ppo.total_updates is always num_updates
@@ -130,6 +141,8 @@ class Runner:
     update: jax.Array  # i32[], train steps done
     frozen_params: object = None  # remidi.policy=combine: the policy frozen with each buffer, leaves [K−1, ...]
     obs_stats: object = None  # normalize_obs: running observation statistics (engine/normalize.py)
+    edit_next: object = None  # ACCEL: bool[], the next update edits the levels this one replayed
+    last_replayed: object = None  # ACCEL: the levels of the last replay, leaves [N, ...]
 
 
 @dataclass(frozen=True)
@@ -195,8 +208,12 @@ def init_runner(setup: Setup, rng) -> Runner:
     obs_stats = None
     if cfg.normalize_obs:
         obs_stats = nrm.init_stats(flatten_obs(jax.tree.map(lambda x: x[None, None], example_obs)).shape[-1])
+    edit_next = last_replayed = None
+    if setup.algo.edits:
+        edit_next = jnp.asarray(False)
+        last_replayed = jax.tree.map(lambda x: jnp.stack([x] * cfg.num_envs), example_level)
     return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
-                  frozen_params=frozen_params, obs_stats=obs_stats)
+                  frozen_params=frozen_params, obs_stats=obs_stats, edit_next=edit_next, last_replayed=last_replayed)
 
 
 def combines(setup: Setup) -> bool:
@@ -301,8 +318,10 @@ def train_step(setup: Setup, runner: Runner):
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
     # 5. a buffer sequence's switching rule (a no-op with one buffer)
     active, count, frozen_params = switch_buffer(setup, runner, chosen.replay, train_state.params)
+    edit_next, last_replayed = remember_replay(setup, runner, chosen)
     runner = Runner(rng=rng, train_state=train_state, buffers=buffers, active=active, count=count,
-                    update=runner.update + 1, frozen_params=frozen_params, obs_stats=obs_stats)
+                    update=runner.update + 1, frozen_params=frozen_params, obs_stats=obs_stats,
+                    edit_next=edit_next, last_replayed=last_replayed)
     # 6. what the step reports
     return runner, step_metrics(setup, runner, chosen, traj, mean_ret, scores, overlap, inserted, frozen)
 
@@ -311,21 +330,25 @@ def train_step(setup: Setup, runner: Runner):
 class Chosen:
     """The levels of one update and where they came from.
 
-    replay: bool[], replayed from the active buffer (else fresh from the generator);
+    replay: bool[], replayed from the active buffer (else fresh from the generator, or edited);
     levels: leaves [N, ...]; buffer: the active buffer as sampled (its replay counters advanced;
     the active buffer as it was for an algorithm that does not replay); slots: i32[N], the
-    replayed levels' slots in it (None for an algorithm that does not replay).
+    replayed levels' slots in it (None for an algorithm that does not replay); edit: bool[], the
+    levels are edits of the last replay's (None for an algorithm that does not edit).
     """
 
     replay: jax.Array
     levels: object
     buffer: buf.BufferState
     slots: jax.Array | None
+    edit: jax.Array | None = None
 
 
 def choose_levels(setup: Setup, runner: Runner, k_branch, k_levels, k_sample) -> Chosen:
     """Stage 1: replay N levels of the active buffer (probability ``buffer.replay_prob`` once it can
-    replay, for an algorithm that replays), else N fresh levels from the task's generator."""
+    replay, for an algorithm that replays), else N fresh levels from the task's generator. An
+    algorithm that edits (ACCEL) instead edits the levels of the update before, if that one
+    replayed."""
     cfg, algo = setup.cfg, setup.algo
     bcfg = buffer_config(cfg, algo)
     active = buf.select_buffer(runner.buffers, runner.active)
@@ -334,12 +357,34 @@ def choose_levels(setup: Setup, runner: Runner, k_branch, k_levels, k_sample) ->
         replay = jnp.asarray(False)
     else:
         replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
-    new = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, n))
+    generate = setup.task.easy_level if algo.edits and cfg.accel.easy_start else setup.task.sample_level
+    new = jax.vmap(generate)(jax.random.split(k_levels, n))
     if not algo.replays:
         return Chosen(replay=replay, levels=new, buffer=active, slots=None)
     sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, n)
-    levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
-    return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots)
+    if not algo.edits:
+        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+        return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots)
+    edit = runner.edit_next
+    replay = replay & ~edit
+    edited = edit_levels(setup, runner.last_replayed, jax.random.fold_in(k_levels, 1))
+    levels = jax.tree.map(lambda e, r, f: jnp.where(edit, e, jnp.where(replay, r, f)), edited, replayed, new)
+    return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots, edit=edit)
+
+
+def edit_levels(setup: Setup, levels, rng):
+    """ACCEL's edits: ``accel.num_edits`` edits of each of ``levels`` [N] by the task's mutator."""
+    n = jax.tree.leaves(levels)[0].shape[0]
+    edits = setup.cfg.accel.num_edits
+    return jax.vmap(lambda key, level: setup.task.mutate_level(key, level, edits))(jax.random.split(rng, n), levels)
+
+
+def remember_replay(setup: Setup, runner: Runner, chosen: Chosen):
+    """ACCEL: ``(edit_next, last_replayed)``: after a replay the next update edits its levels."""
+    if not setup.algo.edits:
+        return runner.edit_next, runner.last_replayed
+    last = jax.tree.map(lambda c, o: jnp.where(chosen.replay, c, o), chosen.levels, runner.last_replayed)
+    return chosen.replay, last
 
 
 def best_return_record(setup: Setup, chosen: Chosen, best_return):
@@ -423,6 +468,8 @@ def step_metrics(setup: Setup, runner: Runner, chosen: Chosen, traj: Trajectory,
     }
     if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
         metrics["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
+    if chosen.edit is not None:
+        metrics["edit"] = chosen.edit.astype(jnp.float32)
     for name, c in tag_counts(setup, chosen.levels, jnp.where(chosen.replay, 1.0, 0.0)).items():
         metrics[f"replayed/{name}"] = c
     return metrics
@@ -696,6 +743,14 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
                 "observations normalised by statistics gathered after they were frozen)", r.policy)
         require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
                 "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
+    positive_int("accel.num_edits", cfg.accel.num_edits)
+    require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
+    if algo.edits and task.mutate_level is None:
+        raise ConfigError(f"--algo: {algo.name} edits levels, but this task has no level mutator "
+                          f"(UEDTask.mutate_level); allowed: {', '.join(a for a in ALGORITHMS if not ALGORITHMS[a].edits)}")
+    if algo.edits and cfg.accel.easy_start and task.easy_level is None:
+        raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
+                          "allowed: false")
     validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
     validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))

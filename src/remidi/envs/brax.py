@@ -259,6 +259,22 @@ class BraxUED(UnderspecifiedEnv):
         seed = jax.random.bits(k_seed, (2,), jnp.uint32)
         return BraxLevel(theta=theta, type_b=type_b, sign=sign, seed=seed)
 
+    def mutate_level(self, rng, level: BraxLevel, num_edits: int, theta_low: float = 0.5,
+                     theta_high: float = 1.5) -> BraxLevel:
+        """ACCEL's Brax editor. A type A level: each of ``num_edits`` edits moves θ of one random
+        action dimension by N(0, (0.1 (theta_high − theta_low))²), clipped to [theta_low,
+        theta_high]. A type B level stays type B (θ stays canonical): each edit flips its sign
+        with probability 1/2 (another guessing game, which plays identically until its one step)."""
+        def edit(lv: BraxLevel, key):
+            k_dim, k_step, k_sign = jax.random.split(key, 3)
+            dim = jax.random.randint(k_dim, (), 0, self.num_actions)
+            step = 0.1 * (theta_high - theta_low) * jax.random.normal(k_step)
+            theta = lv.theta.at[dim].set(jnp.clip(lv.theta[dim] + step, theta_low, theta_high))
+            sign = lv.sign ^ jax.random.bernoulli(k_sign)
+            return lv.replace(theta=jnp.where(lv.type_b, lv.theta, theta), sign=jnp.where(lv.type_b, sign, lv.sign)), None
+
+        return jax.lax.scan(edit, level, jax.random.split(rng, num_edits))[0]
+
     def undisturbed_levels(self, n: int) -> BraxLevel:
         """``n`` type A levels with theta = 1 and seeds ``PRNGKey(i)``, ``i < n`` (batched)."""
         return BraxLevel(theta=jnp.ones((n, self.num_actions), jnp.float32),
@@ -299,6 +315,7 @@ def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float 
         eval_sets={"undisturbed": env.undisturbed_levels(num_eval_levels)},
         level_tags=lambda level: {"type_b": level.type_b},
         solved=None,  # a return > 0 is no solve criterion for a walker: no solve_rate, no learnability
+        mutate_level=lambda rng, level, edits: env.mutate_level(rng, level, edits, theta_low, theta_high),
         deterministic_reset=True,
         continuous=True,
     )

@@ -126,6 +126,11 @@ class UEDTask:
         expected_return: for a one-step task, ``(level, probs f32[num_actions]) -> f32[]``, the
             exact expected return of a policy with those action probabilities; makes the
             evaluation's regret exact (instead of sampled) and adds the policy's entropy.
+        mutate_level: ``(rng, level, num_edits: int) -> level``, ACCEL's level editor: at most
+            ``num_edits`` small changes (e.g. a wall added or removed), returning a valid level of
+            the same shapes; None for a task without one (ACCEL cannot run on it).
+        easy_level: ``rng -> level``, the generator of ACCEL's "easy start" (e.g. mazes without
+            walls, ``accel.easy_start``); None for a task without one.
         deterministic_reset: ``env.reset_to_level`` ignores its key (the level fixes the start,
             as in every environment of this package). Lets ReMiDi use the candidate tracker,
             whose cost per step does not grow with the number of frozen levels; leave False for
@@ -144,6 +149,8 @@ class UEDTask:
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
     solved: Callable[[jax.Array], jax.Array] | None = lambda ret: ret > 0
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
+    mutate_level: Callable[[jax.Array, Any, int], Any] | None = None
+    easy_level: Callable[[jax.Array], Any] | None = None
     deterministic_reset: bool = False
     continuous: bool = False
 

@@ -73,6 +73,12 @@ class LeverGame(UnderspecifiedEnv):
         return LeverLevel(correct=jax.random.randint(k1, (), 0, self.num_levers),
                           visible=jax.random.uniform(k2) < visible_prob)
 
+    def mutate_level(self, rng, level: LeverLevel, num_edits: int) -> LeverLevel:
+        """ACCEL's lever editor: each of ``num_edits`` edits moves the correct lever to a neighbour
+        (one up or down, wrapping around); a hidden level stays hidden, a visible one visible."""
+        steps = jnp.sum(jnp.where(jax.random.bernoulli(rng, 0.5, (num_edits,)), 1, -1))
+        return level.replace(correct=((level.correct + steps) % self.num_levers).astype(level.correct.dtype))
+
     def all_levels(self, visible: bool) -> LeverLevel:
         """Every level with the given visibility, batched: leading dim num_levers."""
         return LeverLevel(correct=jnp.arange(self.num_levers, dtype=jnp.int32),
@@ -97,5 +103,6 @@ def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplie
         eval_sets={"visible": env.all_levels(True), "hidden": env.all_levels(False)},
         level_tags=lambda level: {"hidden": ~level.visible},
         expected_return=lambda level, probs: env.expected_return(level, probs, params),
+        mutate_level=env.mutate_level,
         deterministic_reset=True,
     )

@@ -47,7 +47,7 @@ from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 __all__ = [
     "MazeLevel", "MazeState", "MazeEnv", "MAX_STEPS", "TRAIN_SIZE", "NUM_WALLS", "PREFAB_NAMES", "HELD_OUT_NAMES",
     "random_maze", "tmaze_level", "prefab_level", "corridor_levels", "held_out_sets", "cost_to_go", "shortest_path_steps",
-    "optimal_return", "optimal_discounted_return", "maze_task", "from_jaxued",
+    "optimal_return", "optimal_discounted_return", "maze_task", "from_jaxued", "mutate_maze",
 ]
 
 MAX_STEPS = 250
@@ -197,6 +197,43 @@ def tmaze_level(rng, size: int = TRAIN_SIZE, view: int = VIEW) -> MazeLevel:
     return MazeLevel.make(wall_map, jnp.stack([goal_x, jnp.asarray(c)]), (c, c), UP, tmaze=True)
 
 
+def mutate_maze(rng, level: MazeLevel, num_edits: int, view: int = VIEW) -> MazeLevel:
+    """ACCEL's maze editor (minimax's and jaxued's edits): ``num_edits`` edits, each with
+    probability 1/2 flipping one wall cell (adding or removing a wall; never on the agent's or the
+    goal's cell) or moving the goal to a free cell other than the agent's. The agent never moves,
+    so at most ``num_edits`` wall cells change and the goal always stands on a free cell.
+
+    A T-maze stays a T-maze and a blind level stays blind (the flags are kept): an edit of a level
+    whose regret is irreducible is again one. A T-maze's edits flip only cells the agent cannot
+    see from the junction and never move the goal, so an edited T-maze plays exactly like the
+    original (same observations, same one-move outcome): ReMiDi over ACCEL rejects it.
+    """
+    size = level.wall_map.shape[0]
+    cells = jnp.arange(size * size)
+    _, visible = _tmaze_layout(size, view)
+    visible = jnp.asarray(visible.reshape(-1))
+
+    def index(pos):
+        return (pos[1] * size + pos[0]).astype(jnp.int32)
+
+    def edit(lv: MazeLevel, key):
+        k_kind, k_flip, k_goal = jax.random.split(key, 3)
+        walls = lv.wall_map.reshape(-1)
+        occupied = (cells == index(lv.agent_pos)) | (cells == index(lv.goal_pos))
+        flippable = ~occupied & ~(lv.tmaze & visible)
+        flip = jax.random.choice(k_flip, cells, p=flippable / jnp.maximum(flippable.sum(), 1))
+        flipped = walls.at[flip].set(~walls[flip])
+        free = ~walls & ~occupied
+        goal = jax.random.choice(k_goal, cells, p=free / jnp.maximum(free.sum(), 1))
+        move_goal = jax.random.bernoulli(k_kind) & ~lv.tmaze & jnp.any(free)
+        do_flip = ~move_goal & jnp.any(flippable)
+        new_goal = jnp.stack([goal % size, goal // size]).astype(jnp.uint32)
+        return lv.replace(wall_map=jnp.where(do_flip, flipped, walls).reshape(size, size),
+                          goal_pos=jnp.where(move_goal, new_goal, lv.goal_pos)), None
+
+    return jax.lax.scan(edit, level, jax.random.split(rng, num_edits))[0]
+
+
 def prefab_level(name: str) -> MazeLevel:
     """A ``jaxued`` prefab maze (``jaxued.environments.maze.level.prefabs``), loaded at run time."""
     from jaxued.environments.maze.level import Level, prefabs
@@ -322,14 +359,17 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
         raise ValueError(f"maze kind must be one of {KINDS}, got {kind!r}")
     env = MazeEnv(TRAIN_SIZE)
 
-    def sample_level(rng):
-        k_kind, k_maze, k_t = jax.random.split(rng, 3)
-        special = jax.random.bernoulli(k_kind, prob) if kind != "maze" else jnp.asarray(False)
-        maze = random_maze(k_maze, TRAIN_SIZE, num_walls)
-        if kind == "tmaze":
-            t = tmaze_level(k_t, TRAIN_SIZE)
-            return jax.tree.map(lambda a, b: jnp.where(special, a, b), t, maze)
-        return maze.replace(blind=special)
+    def generator(walls: int):
+        def sample_level(rng):
+            k_kind, k_maze, k_t = jax.random.split(rng, 3)
+            special = jax.random.bernoulli(k_kind, prob) if kind != "maze" else jnp.asarray(False)
+            maze = random_maze(k_maze, TRAIN_SIZE, walls)
+            if kind == "tmaze":
+                t = tmaze_level(k_t, TRAIN_SIZE)
+                return jax.tree.map(lambda a, b: jnp.where(special, a, b), t, maze)
+            return maze.replace(blind=special)
+
+        return sample_level
 
     tag = {"tmaze": "tmaze", "blindfold": "blind"}.get(kind)  # the level flag it reports
     sets = held_out_sets()
@@ -337,7 +377,7 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
     return UEDTask(
         env=env,
         params=env.default_params,
-        sample_level=sample_level,
+        sample_level=generator(num_walls),
         num_actions=env.action_space(env.default_params).n,
         max_episode_steps=MAX_STEPS,
         optimal_return=optimal_return,
@@ -345,5 +385,7 @@ def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS
         eval_sets={name: levels for name, (_, levels) in sets.items()},
         eval_envs={name: envs[size] for name, (size, _) in sets.items() if size != TRAIN_SIZE},
         level_tags=(lambda level: {tag: getattr(level, tag)}) if tag else (lambda level: {}),
+        mutate_level=mutate_maze,
+        easy_level=generator(0),  # ACCEL's easy start: no walls (T-mazes and blind levels as generated)
         deterministic_reset=True,
     )

@@ -91,6 +91,8 @@ class Experiment:
     # config → the UEDTask a run of this experiment trains on (UED experiments; None for the tabular
     # games): for tools that reload a run's agent (remidi evaluate)
     make_task: Callable[[Any], Any] | None = None
+    # what `remidi run` trains without --algo (None: every algorithm); --algo all trains every one
+    default_algorithms: tuple[str, ...] | None = None
 
 
 def default_preset(exp: Experiment) -> str:
@@ -113,7 +115,9 @@ def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], note
 
 
 def parse_algos(exp: Experiment, text: str | None) -> list[str]:
-    if text is None or text == "all":
+    if text is None:
+        return list(exp.default_algorithms or exp.algorithms)
+    if text == "all":
         return list(exp.algorithms)
     algos = [a.strip() for a in text.split(",")]
     if not any(algos):

@@ -26,8 +26,10 @@ ALGORITHM_STYLES = {
     "minimax-return": ("#ff7f0e", ":", "^"),
     "remidi": ("#d62728", "-", "D"),
     "mmr": ("#9467bd", "--", "v"),
+    "accel": ("#2ca02c", "-.", "P"),
+    "remidi-accel": ("#8c564b", "-", "X"),
 }
-_SPARE = [("#2ca02c", "-.", "P"), ("#8c564b", "-", "X"), ("#e377c2", "--", "*"), ("#17becf", ":", "h")]
+_SPARE = [("#e377c2", "--", "*"), ("#17becf", ":", "h")]
 
 
 def algorithm_style(name: str) -> dict:

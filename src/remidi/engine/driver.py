@@ -88,11 +88,8 @@ def over_seeds(fn):
     vmapped, or for ``S = 1`` called on the arguments without that axis (results given it back).
 
     A vmapped axis of size 1 is not free: XLA keeps it in the network's matrix products and
-    turns the train step's ``lax.cond`` into selects. Measured side by side on a 2-core CPU
-    (``remidi bench``, the driver's one-seed program with and without the axis): maze PLR⊥
-    7.9 k vs 7.3 k env-steps/s without it (20% before the LSTM's backward pass was written
-    out), Brax PLR⊥ no clear difference, the lever game 26 k vs 32 k (XLA picks a slower kernel
-    for the unbatched MLP's weight gradients): without it on the expensive domains. ``S`` is the
+    turns the train step's ``lax.cond`` into selects (the measurements are in
+    ``docs/performance.md``, "A seed axis of size 1"). ``S`` is the
     axis's size where ``fn`` runs: under ``shard_map`` a device's share of the seeds."""
 
     def mapped(*args):

@@ -28,43 +28,12 @@ valid Brax state (reset from its seed, never stepped), so the type A branch, whi
 computes for every level, never runs physics on garbage; the branches are merged with
 ``where``, which does not let a discarded branch's values through.
 
-Backend choice (measured, not assumed). Brax offers ``generalized`` and ``mjx`` (reference
-fidelity: MuJoCo's generalized-coordinate dynamics; ``mjx`` *is* MuJoCo in JAX) and ``spring`` /
-``positional`` (cheaper approximations of those dynamics, with their own time steps, and for
-``positional`` ant a different gear). Env steps/s of *this* wrapped environment (the wrapper
-costs nothing measurable next to the physics) on the 2-core CPU used for development, shared
-with other work (load ~2.5, so numbers move by ±20–40 % between runs), 256 type A levels, a
-jitted ``lax.scan`` of 100 vmapped steps with random actions, median of 3 runs after a warm-up;
-in parentheses the compile time of that scan. No GPU was available to measure: on an accelerator
-the ranking may differ (MJX is the backend tuned for GPUs)::
-
-    backend                       hopper          walker2d        halfcheetah     ant
-    spring                        80k  (17 s)     44k  (14 s)      8.0k (18 s)    13.7k (10 s)
-    positional                    21k  (21 s)     14k  (25 s)      3.0k (21 s)     5.0k (19 s)
-    generalized                   10k  (22 s)      8.2k (21 s)     2.8k (24 s)     4.3k (22 s) [1]
-    mjx, MJCF options [2]          2.2k (20 s)     1.4k (13 s)     0.96k (22 s)   14.6k (17 s)
-    mjx, fast options (default)   28k  (11 s)     25k  (11 s)     15k  (11 s)     12.9k (20 s)
-    mjx, fast but Euler damping   28k             19k             13k  NaN [3]       -
-
-    [1] NaN after some steps when stepped on without a reset (fine with AutoReplay: none in
-        77k steps).  [2] Newton, ``iterations=4`` from Brax's MJCF files, MuJoCo's default
-        ``ls_iterations=50``; ant: Brax itself already sets the fast options.  [3] halfcheetah
-        reached NaN within 100 steps.
-
-"Fast options" are the ones Brax sets for its MJX ant: Newton solver, ``iterations=1``,
-``ls_iterations=4``, Euler damping disabled; here they apply to every morphology. They cost
-little fidelity: against MJX with the MJCF options (same levels and actions, median over 32
-levels of the largest observation difference after 1 step), hopper: fast 0.002, generalized
-0.003, positional 0.8, spring 1.4; walker2d: fast 0.17, generalized 0.59, spring 8.7,
-positional 8.8 (walker2d drifts apart fast whatever the backend). Keeping Euler damping instead
-made halfcheetah blow up (footnote 3). With AutoReplay and actions ~ N(0, 2²), 256 levels ×
-1000 steps per morphology gave no NaN.
-
-**Default: ``mjx`` (with the fast options).** It is MuJoCo's own dynamics at about generalized's
-accuracy or better, and on this CPU it is 2.8–5.4× faster than ``generalized`` (and, for
-halfcheetah, faster than ``spring``); ``spring`` is faster still on hopper/walker2d but is a
-different, approximate simulator (observations diverge by O(1) after one step). It also compiles
-about as fast as the others or faster, and it is the backend meant for accelerators.
+Backend: ``mjx`` (MuJoCo in JAX) with the fast solver options Brax sets for its MJX ant (Newton
+solver, ``iterations=1``, ``ls_iterations=4``, Euler damping disabled), for every morphology: MuJoCo's
+own dynamics at about ``generalized``'s accuracy, faster than ``generalized`` on a CPU, and the
+backend meant for accelerators. The measurements behind the choice (throughput and compile time
+of every backend, fidelity against MJX with the MJCF options, NaN checks) are in
+``docs/performance.md``, "Brax backends".
 
 ``backend=`` overrides the default in :func:`brax_task`.
 

@@ -378,7 +378,7 @@ def test_every_settable_key_has_a_description():
     for exp in all_experiments().values():
         cfg = exp.config_factory()
         missing = [key for key in field_names(cfg) if not key_help(cfg, key)]
-        assert not missing, f"{exp.name}: add these keys to remidi.experiments.config.HELP: {missing}"
+        assert not missing, f"{exp.name}: give these keys a help text in their field's metadata: {missing}"
 
 
 def test_lever_tiny_is_the_engine_tests_tiny_configuration():

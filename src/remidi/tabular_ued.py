@@ -31,7 +31,7 @@ iterations, ``vmap`` over seeds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import jax
@@ -48,21 +48,31 @@ NEG = -1e9  # logit given to levels an adversary may not choose
 class TabularUEDConfig:
     """Hyper-parameters of exact tabular UED (defaults: the paper's, SPEC §5)."""
 
-    iterations: int = 3000
-    adversary_updates: int = 5
-    agent_updates: int = 5
-    policy_lr: float = 0.01
-    value_lr: float = 1.0
-    agent_entropy: float = 0.1
-    adversary_entropy: float = 0.1
-    gamma: float = 0.95  # one-step episodes: the return is the immediate reward, γ never enters
-    optimizer: str = "adam"  # for the logits ("adam" or "sgd"); critics use SGD with value_lr
-    adam_b1: float = 0.0  # no momentum: with β1 = 0.9 play cycles around the equilibrium
-    init_scale: float = 0.5  # std of the initial logits (the only source of seed variation)
-    num_adversaries: int = 3  # K, for remidi; mmr uses 1
-    iters_per_adversary: int = 1000  # switching rule: fixed iterations per adversary
-    support_threshold: float = 0.1  # support: prob ≥ this × the adversary's largest prob (see support())
-    log_every: int = 10
+    iterations: int = field(default=3000, metadata={
+        "help": "training iterations (each: adversary updates, then agent updates)"})
+    adversary_updates: int = field(default=5, metadata={
+        "help": "adversary (level distribution) gradient steps per iteration"})
+    agent_updates: int = field(default=5, metadata={"help": "agent (policy) gradient steps per iteration"})
+    policy_lr: float = field(default=0.01, metadata={"help": "learning rate of both players' logits"})
+    value_lr: float = field(default=1.0, metadata={"help": "learning rate of the critics (SGD), in (0, 1]"})
+    agent_entropy: float = field(default=0.1, metadata={
+        "help": "agent's entropy bonus (coefficient × entropy averaged over observations)"})
+    adversary_entropy: float = field(default=0.1, metadata={"help": "adversary's entropy bonus"})
+    gamma: float = field(default=0.95, metadata={
+        "help": "discount (one-step episodes: has no effect)"})
+    optimizer: str = field(default="adam", metadata={
+        "help": "optimizer of the logits: adam or sgd"})
+    adam_b1: float = field(default=0.0, metadata={
+        "help": "Adam's β1 (0: no momentum; 0.9 makes the players cycle)"})
+    init_scale: float = field(default=0.5, metadata={
+        "help": "std of the initial logits (the only source of seed variation)"})
+    num_adversaries: int = field(default=3, metadata={
+        "help": "remidi: number of (policy, adversary) pairs; mmr uses 1"})
+    iters_per_adversary: int = field(default=1000, metadata={
+        "help": "remidi: iterations before the next adversary takes over"})
+    support_threshold: float = field(default=0.1, metadata={
+        "help": "remidi: a level is in an adversary's support at ≥ this × its largest probability"})
+    log_every: int = field(default=10, metadata={"help": "iterations between logged points"})
 
 
 class GameArrays(NamedTuple):

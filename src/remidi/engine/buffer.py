@@ -39,7 +39,7 @@ Scores
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Mapping, Sequence
 
@@ -69,14 +69,15 @@ class BufferConfig:
         duplicate_check: if true, inserting a level equal to a valid entry updates that entry.
     """
 
-    capacity: int = 4000
-    prioritization: str = "rank"
-    temperature: float = 1.0
-    topk_k: int = 32
-    staleness_coef: float = 0.3
-    replay_prob: float = 0.8
-    min_fill: float = 0.0
-    duplicate_check: bool = False
+    capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
+    prioritization: str = field(default="rank", metadata={"help": "replay sampling: rank or topk"})
+    temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation"})
+    topk_k: int = field(default=32, metadata={"help": "k of top-k prioritisation"})
+    staleness_coef: float = field(default=0.3, metadata={"help": "ρ: weight of staleness in the replay distribution"})
+    replay_prob: float = field(default=0.8, metadata={"help": "probability that a train step replays buffer levels"})
+    min_fill: float = field(default=0.0, metadata={"help": "fraction of the buffer that must be filled before replay"})
+    duplicate_check: bool = field(default=False, metadata={
+        "help": "re-inserting a level already in the buffer updates it"})
 
 
 @flax.struct.dataclass

@@ -21,7 +21,7 @@ and log-std for continuous actions ``f32[T, N, A]``).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import flax
@@ -42,18 +42,18 @@ class PPOConfig:
     from ``lr`` to 0 over ``total_updates * epochs * minibatches`` optimiser steps.
     """
 
-    gamma: float = 0.995
-    gae_lambda: float = 0.95
-    clip_eps: float = 0.2
-    clip_value: bool = True
-    vf_coef: float = 0.5
-    ent_coef: float = 0.0
-    epochs: int = 5
-    minibatches: int = 1
-    lr: float = 1e-3
-    anneal_lr: bool = True
-    adam_eps: float = 1e-5
-    max_grad_norm: float = 0.5
+    gamma: float = field(default=0.995, metadata={"help": "discount factor"})
+    gae_lambda: float = field(default=0.95, metadata={"help": "GAE λ"})
+    clip_eps: float = field(default=0.2, metadata={"help": "PPO ratio clipping ε"})
+    clip_value: bool = field(default=True, metadata={"help": "clip the value loss like the policy ratio"})
+    vf_coef: float = field(default=0.5, metadata={"help": "value-loss coefficient"})
+    ent_coef: float = field(default=0.0, metadata={"help": "entropy-bonus coefficient"})
+    epochs: int = field(default=5, metadata={"help": "PPO epochs per update"})
+    minibatches: int = field(default=1, metadata={"help": "minibatches per epoch (must divide num_envs)"})
+    lr: float = field(default=1e-3, metadata={"help": "Adam learning rate"})
+    anneal_lr: bool = field(default=True, metadata={"help": "decay the learning rate linearly to 0 over the run"})
+    adam_eps: float = field(default=1e-5, metadata={"help": "Adam ε"})
+    max_grad_norm: float = field(default=0.5, metadata={"help": "global gradient-norm clipping"})
     total_updates: int = 30000
 
 
@@ -73,9 +73,9 @@ def validate_ppo_config(cfg: PPOConfig, num_envs: int) -> None:
         ("max_grad_norm", cfg.max_grad_norm > 0, "must be > 0"),
         ("total_updates", cfg.total_updates >= 1, "must be ≥ 1"),
     ]
-    for field, ok, why in checks:
+    for key, ok, why in checks:
         if not ok:
-            raise ConfigError(f"ppo.{field}: {getattr(cfg, field)!r} {why}")
+            raise ConfigError(f"ppo.{key}: {getattr(cfg, key)!r} {why}")
 
 
 @functools.lru_cache(maxsize=64)

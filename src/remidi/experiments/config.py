@@ -50,77 +50,10 @@ def field_names(config) -> list[str]:
     return names
 
 
-# One line per settable key, shown by `remidi list`. A config dataclass may instead carry its own
-# text as ``dataclasses.field(metadata={"help": ...})``, which takes precedence.
-HELP = {
-    # tabular UED (tabular-distinct, tabular-shared)
-    "iterations": "training iterations (each: adversary updates, then agent updates)",
-    "adversary_updates": "adversary (level distribution) gradient steps per iteration",
-    "agent_updates": "agent (policy) gradient steps per iteration",
-    "policy_lr": "learning rate of both players' logits",
-    "value_lr": "learning rate of the critics (SGD), in (0, 1]",
-    "agent_entropy": "agent's entropy bonus (coefficient × entropy averaged over observations)",
-    "adversary_entropy": "adversary's entropy bonus",
-    "gamma": "discount (one-step episodes: has no effect)",
-    "optimizer": "optimizer of the logits: adam or sgd",
-    "adam_b1": "Adam's β1 (0: no momentum; 0.9 makes the players cycle)",
-    "init_scale": "std of the initial logits (the only source of seed variation)",
-    "num_adversaries": "remidi: number of (policy, adversary) pairs; mmr uses 1",
-    "iters_per_adversary": "remidi: iterations before the next adversary takes over",
-    "support_threshold": "remidi: a level is in an adversary's support at ≥ this × its largest probability",
-    "log_every": "iterations between logged points",
-    # the UED engine (lever, tmaze, blindfold)
-    "num_updates": "train steps (one rollout + one PPO update or buffer insertion each)",
-    "num_envs": "parallel environments (levels) per train step",
-    "num_steps": "environment steps per env per rollout",
-    "score": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return, learnability (SFL: p(1 − p), "
-             "p the level's solve rate in the rollout)",
-    "discounted_regret": "perfect_regret on the paper's discounted utility Σ γ^t r_t (γ = ppo.gamma), both "
-                         "the optimum and the agent's return; false: undiscounted on both sides",
-    "network": "actor-critic: mlp, maze_lstm or mlp_lstm",
-    "hidden_size": "width of each fully-connected trunk layer (0: the network's default)",
-    "lstm_size": "units of the network's LSTM (0: the network's default)",
-    "reward_scale": "PPO learns from reward × reward_scale (returns and scores stay unscaled)",
-    "normalize_obs": "normalise observations by their running mean and std (kept in checkpoints)",
-    "eval_every": "updates between evaluations (and logged points)",
-    "eval_attempts": "sampled attempts per evaluation level",
-    "checkpoint_every": "updates between checkpoints (checkpoint.npz in the run folder)",
-    "ppo.gamma": "discount factor",
-    "ppo.gae_lambda": "GAE λ",
-    "ppo.clip_eps": "PPO ratio clipping ε",
-    "ppo.clip_value": "clip the value loss like the policy ratio",
-    "ppo.vf_coef": "value-loss coefficient",
-    "ppo.ent_coef": "entropy-bonus coefficient",
-    "ppo.epochs": "PPO epochs per update",
-    "ppo.minibatches": "minibatches per epoch (must divide num_envs)",
-    "ppo.lr": "Adam learning rate",
-    "ppo.anneal_lr": "decay the learning rate linearly to 0 over the run",
-    "ppo.adam_eps": "Adam ε",
-    "ppo.max_grad_norm": "global gradient-norm clipping",
-    "buffer.capacity": "PLR level buffer size (plr, minimax-return)",
-    "buffer.prioritization": "replay sampling: rank or topk",
-    "buffer.temperature": "β of rank prioritisation",
-    "buffer.topk_k": "k of top-k prioritisation",
-    "buffer.staleness_coef": "ρ: weight of staleness in the replay distribution",
-    "buffer.replay_prob": "probability that a train step replays buffer levels",
-    "buffer.min_fill": "fraction of the buffer that must be filled before replay",
-    "buffer.duplicate_check": "re-inserting a level already in the buffer updates it",
-    "remidi.num_buffers": "ReMiDi: number of level buffers (adversaries) in sequence",
-    "remidi.buffer_capacity": "ReMiDi: size of each buffer",
-    "remidi.steps_per_buffer": "ReMiDi: updates (train steps) on a buffer before it is frozen (replays with remidi.count=replays)",
-    "remidi.count": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' unit) or replays",
-    "remidi.tracker": "ReMiDi: prefix (one frozen level made the whole prefix) or per_step (authors' rule)",
-    "remidi.tracker_budget": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)",
-    "remidi.policy": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)",
-    # the maze domain (tmaze, blindfold)
-    "maze.prob": "probability that a generated level is a T-maze (tmaze) or blindfolded (blindfold)",
-    "maze.num_walls": "walls of a random 13×13 maze",
-}
-
-
 def key_help(config, key: str) -> str:
-    """The one-line description of the dotted ``key`` of ``config``: the field's ``help``
-    metadata, else :data:`HELP`, else ``""``."""
+    """The one-line description of the dotted ``key`` of ``config``: the ``help`` metadata of its
+    field (``dataclasses.field(metadata={"help": ...})``, next to the field: the one source of
+    ``remidi list``), else ``""``."""
 
     def from_metadata(cfg, dotted: str) -> str:
         head, _, rest = dotted.partition(".")
@@ -129,7 +62,7 @@ def key_help(config, key: str) -> str:
                 return from_metadata(getattr(cfg, head), rest) if rest else f.metadata.get("help", "")
         return ""
 
-    return from_metadata(config, key) or HELP.get(key, "")
+    return from_metadata(config, key)
 
 
 def _convert(key: str, text: Any, kind) -> Any:

@@ -23,8 +23,10 @@ from remidi.experiments.ued import make_ued_experiment
 
 @dataclass(frozen=True)
 class MazeLevelsConfig:
-    prob: float = 0.5  # probability that a generated level is a T-maze (tmaze) or blind (blindfold)
-    num_walls: int = 25  # walls of a random maze (drawn i.i.d., with replacement)
+    prob: float = field(default=0.5, metadata={
+        "help": "probability that a generated level is a T-maze (tmaze) or blindfolded (blindfold)"})
+    num_walls: int = field(default=25, metadata={
+        "help": "walls of a random 13×13 maze"})
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.envs.tabular import PAPER_REWARDS, TabularGame, paper_game
-from remidi.tabular_ued import (
+from remidi.solvers.onestep import OneStepGame
+from remidi.tabular.games import PAPER_REWARDS, paper_game
+from remidi.tabular.learner import (
     TabularUEDConfig, agent_action_values, combined_probs, game_arrays, init_state, level_regret,
     maybe_switch, obs_regret, train,
 )
@@ -17,11 +18,10 @@ SHARED = paper_game("shared")
 DISTINCT = paper_game("distinct")
 # 12 + 12 levels: six copies each of θ1, θ2 behind observation "easy", of θ5, θ6 behind "hard".
 # An adversary spread over the 12 hard levels gives each less than 0.1.
-WIDE = TabularGame(
+WIDE = OneStepGame(
     actions=("A", "B"),
     level_names=tuple(f"{name}_{i}" for name in ("theta1", "theta2", "theta5", "theta6") for i in range(6)),
-    observation_names=("easy", "hard"),
-    level_obs=np.repeat([0, 0, 1, 1], 6),
+    observations=("easy",) * 12 + ("hard",) * 12,
     rewards=np.repeat(PAPER_REWARDS[[0, 1, 4, 5]], 6, axis=0),
 )
 

@@ -11,12 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from remidi.envs.tabular import TabularGame, paper_game
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.config import choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.plots import Curve, Panel, plot_panels
-from remidi.tabular_ued import TabularUEDConfig, train
+from remidi.solvers.onestep import OneStepGame, solve_blp
+from remidi.tabular.games import paper_game
+from remidi.tabular.learner import TabularUEDConfig, train
 
 ALGORITHMS = ("mmr", "remidi")
 PRESETS = {
@@ -56,18 +57,12 @@ def validate(cfg: TabularUEDConfig, algo: str) -> None:
                 f"num_adversaries or iters_per_adversary, or raise iterations")
 
 
-def reference(game: TabularGame) -> dict:
+def reference(game: OneStepGame) -> dict:
     """Exact MMR value and BLP regret per observation from the LP solver."""
-    from remidi.solvers.onestep import OneStepGame, solve_blp
-
-    exact = solve_blp(OneStepGame(
-        actions=game.actions,
-        level_names=game.level_names,
-        observations=tuple(game.observation_names[o] for o in game.level_obs),
-        rewards=game.rewards,
-    ))
+    exact = solve_blp(game)
     level_regret = np.asarray(exact.regret)
-    blp = {name: float(level_regret[game.level_obs == o].max()) for o, name in enumerate(game.observation_names)}
+    obs = game.observation_index()
+    blp = {name: float(level_regret[obs == o].max()) for o, name in enumerate(game.observation_names)}
     return {"mmr_value": float(exact.mmr_value), "blp_regret": blp,
             "rounds": [{"value": float(r.value), "support": list(r.support)} for r in exact.rounds]}
 

@@ -40,7 +40,8 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
-        validate_ued_config(cfg, ctx.algo, task)  # the same rules as run_experiment, for direct callers
+        # validation: train_seeds (the engine's entry point, for every caller) checks the config with
+        # validate_ued_config; run_experiment calls the same function before it writes anything
         for warning in run_warnings(cfg, ctx.algo, task):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
         on_block = None

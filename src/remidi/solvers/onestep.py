@@ -73,6 +73,28 @@ class OneStepGame:
         position = {o: i for i, o in enumerate(self.observation_names)}
         return np.array([position[o] for o in self.observations], dtype=int)
 
+    @property
+    def num_levels(self) -> int:
+        return len(self.level_names)
+
+    @property
+    def num_observations(self) -> int:
+        return len(self.observation_names)
+
+    @property
+    def num_actions(self) -> int:
+        return len(self.actions)
+
+    def obs_level_matrix(self) -> np.ndarray:
+        """f64[O, L]: 1 where level l shows observation o."""
+        m = np.zeros((self.num_observations, self.num_levels))
+        m[self.observation_index(), np.arange(self.num_levels)] = 1.0
+        return m
+
+    def action_regret(self) -> np.ndarray:
+        """f64[L, A]: regret of playing action a on level l, ``max_b r(l, b) − r(l, a)``."""
+        return self.rewards.max(axis=1, keepdims=True) - self.rewards
+
 
 @dataclass(frozen=True)
 class _ObservationGame:

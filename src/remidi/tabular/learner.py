@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from remidi.envs.tabular import TabularGame
+from remidi.solvers.onestep import OneStepGame
 
 NEG = -1e9  # logit given to levels an adversary may not choose
 
@@ -76,7 +76,7 @@ class TabularUEDConfig:
 
 
 class GameArrays(NamedTuple):
-    """JAX view of a :class:`TabularGame`. ``obs_of`` i32[L], ``obs_level`` f32[O, L],
+    """JAX view of a :class:`OneStepGame`. ``obs_of`` i32[L], ``obs_level`` f32[O, L],
     ``action_regret`` f32[L, A]."""
 
     obs_of: jax.Array
@@ -98,9 +98,9 @@ class UEDState(NamedTuple):
     stage: jax.Array  # i32[], index of the pair being trained
 
 
-def game_arrays(game: TabularGame) -> GameArrays:
+def game_arrays(game: OneStepGame) -> GameArrays:
     return GameArrays(
-        obs_of=jnp.asarray(game.level_obs, jnp.int32),
+        obs_of=jnp.asarray(game.observation_index(), jnp.int32),
         obs_level=jnp.asarray(game.obs_level_matrix(), jnp.float32),
         action_regret=jnp.asarray(game.action_regret(), jnp.float32),
     )
@@ -283,7 +283,7 @@ def metrics_of(state: UEDState, g: GameArrays) -> dict[str, jax.Array]:
     }
 
 
-def train(seeds, game: TabularGame, cfg: TabularUEDConfig, num_pairs: int):
+def train(seeds, game: OneStepGame, cfg: TabularUEDConfig, num_pairs: int):
     """Train every seed in ``seeds`` (ints; seed s uses ``PRNGKey(s)``, so its result does not
     depend on which other seeds run beside it) in one compiled program.
 

@@ -3,8 +3,9 @@
 
 ``python tests/engine_reference.py`` rewrites ``tests/data/engine_reference.json``. Do that only
 for a change that is *meant* to change training results, and say so in its commit; a refactor
-must leave the file as it is (the values were written by commit 8bb28df's engine, before the
-algorithm seam of issue #19).
+must leave the file as it is (the values of dr, plr, minimax-return, remidi and remidi-combine
+were written by commit 8bb28df's engine, before the algorithm seam of issue #19; those of accel
+and remidi-accel when ACCEL was added).
 """
 
 import dataclasses
@@ -29,6 +30,8 @@ CASES = {
     "minimax-return": ("minimax-return", TINY),
     "remidi": ("remidi", TINY),
     "remidi-combine": ("remidi", dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, policy="combine"))),
+    "accel": ("accel", TINY),
+    "remidi-accel": ("remidi-accel", TINY),
 }
 
 
@@ -47,8 +50,9 @@ def fingerprint(algo: str, cfg) -> dict:
     }
 
 
-if __name__ == "__main__":
-    doc = {name: fingerprint(algo, cfg) for name, (algo, cfg) in CASES.items()}
+if __name__ == "__main__":  # python tests/engine_reference.py [CASE ...]: (re)write those cases only
+    doc = json.loads(PATH.read_text()) if PATH.exists() else {}
+    doc.update({name: fingerprint(*CASES[name]) for name in (sys.argv[1:] or CASES)})
     PATH.parent.mkdir(exist_ok=True)
     PATH.write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {PATH}")

@@ -7,6 +7,7 @@ import importlib.util
 import json
 import struct
 
+import numpy as np
 import pytest
 from test_cli import LEVER_TINY
 
@@ -28,7 +29,7 @@ def tensorboard_steps(logdir) -> dict[str, list[int]]:
             i += 12 + n + 4
             for value in event.summary.value:
                 tags.setdefault(value.tag, []).append(event.step)
-    return tags
+    return {tag: sorted(steps) for tag, steps in tags.items()}  # each part of a resumed run has a file of its own
 
 
 def wandb_bytes(folder, run_id) -> bytes:
@@ -102,3 +103,16 @@ def test_missing_package_or_login_is_one_line_before_writing(tmp_path, capsys, m
                          ("wandb,", "has an empty name")):
         assert main(["run", "lever", "--log", text, "--out", str(out)]) == 2
         assert needle in capsys.readouterr().err and not out.exists()
+
+
+def test_a_part_resumed_within_the_same_second_keeps_the_parts_before(tmp_path):
+    """tensorboardX names event files by the second: without a suffix of its own, a resume opened
+    in the same second as the part before overwrote that part's file (steps 10, 20 lost)."""
+    from remidi.experiments.tracking import Tracker
+
+    for steps in ((10, 20), (30, 40)):  # two parts, well within one second
+        tracker = Tracker(["tensorboard"], tmp_path, "run", {"config": {}}, [0])
+        for step in steps:
+            tracker.log(step, {"loss": np.array([1.0])})
+        tracker.close()
+    assert tensorboard_steps(tmp_path / "tensorboard" / "seed_0")["loss"] == [10, 20, 30, 40]

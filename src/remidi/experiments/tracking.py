@@ -91,7 +91,12 @@ class Tracker:
         if "tensorboard" in backends:
             from tensorboardX import SummaryWriter
 
-            self._writers = {s: SummaryWriter(logdir=str(self.folder / "tensorboard" / f"seed_{s}")) for s in seeds}
+            # tensorboardX names an event file by the second it opened it: a part resumed within the same
+            # second as the one before (a short run, programs from the compilation cache) would overwrite
+            # that part's file, so each part's files get a suffix of their own
+            part = f".part{uuid.uuid4().hex[:8]}"
+            self._writers = {s: SummaryWriter(logdir=str(self.folder / "tensorboard" / f"seed_{s}"), filename_suffix=part)
+                             for s in seeds}
             if self.last_step < 0:  # once per tracked run
                 text = "```\n" + json.dumps(config_doc, indent=2) + "\n```"
                 for writer in self._writers.values():

@@ -20,7 +20,8 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   stepped beside every env), for the ratio of the two trackers (not run by default: slow).
 * ``maze-accel``: ACCEL (``accel``) on the same set-up as ``maze-plr``: with every update
   replaying, the updates alternate between a replay (rollout + PPO) and an edit of that replay's
-  levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``).
+  levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``)
+  and no GFLOP/s (the network's count assumes every update trains).
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
@@ -161,8 +162,11 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
                 if name in metrics}
 
     steps = updates_per_call * cfg.num_envs * cfg.num_steps
-    return Workload(block, (runner,), steps, extras, chain=True,
-                    flops_per_call=steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params)))
+    # the network's operation count assumes every update trains; an editing algorithm's edit
+    # updates do not (no figure rather than a wrong one)
+    flops = None if setup.algo.edits else \
+        steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
+    return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
 
 def network_flops_per_step(setup, params) -> float:

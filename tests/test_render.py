@@ -60,6 +60,7 @@ def runs(tmp_path_factory):
     T-maze at its best score."""
     from remidi.engine import driver
     from remidi.engine import train as tr
+    from remidi.engine.checkpoint import CHECKPOINT, save_checkpoint
     from remidi.experiments import get_experiment
     from remidi.experiments.base import resolve_config, write_run_config
     from remidi.experiments.maze import task_factory
@@ -95,13 +96,13 @@ def runs(tmp_path_factory):
     runner = runner.replace(buffers=runner.buffers.replace(levels=levels, valid=valid,
                                                            scores=np.where(valid, scores, 0.0).astype(np.float32)),
                             active=np.ones(len(SEEDS), np.int32))
-    driver.save_checkpoint(folder / driver.CHECKPOINT, runner, {"done": 20, "steps": [10, 20], "num_blocks": 2})
+    save_checkpoint(folder / CHECKPOINT, runner, {"done": 20, "steps": [10, 20], "num_blocks": 2})
 
     lever = root / "lever_run"
     lever.mkdir()
     lexp = get_experiment("lever")
     write_run_config(lever, lexp, "remidi", "smoke", [0], resolve_config(lexp, "smoke", {}), argv=["run", "lever"])
-    (lever / driver.CHECKPOINT).write_bytes(b"")
+    (lever / CHECKPOINT).write_bytes(b"")
     return {"maze": folder, "lever": lever, "levels": levels, "scores": scores, "valid": valid}
 
 

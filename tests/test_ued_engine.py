@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from remidi.engine import driver
+from remidi.engine.checkpoint import load_checkpoint, save_checkpoint
 from remidi.engine.train import validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.envs.lever import lever_task
@@ -58,7 +59,7 @@ def test_same_seed_same_result_and_resume_matches_uninterrupted(tmp_path):
 def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, monkeypatch):
     path = tmp_path / "checkpoint.npz"
     runner = {"a": jnp.arange(3), "b": jnp.ones(2)}
-    driver.save_checkpoint(path, runner, {"done": 1})
+    save_checkpoint(path, runner, {"done": 1})
     before = path.read_bytes()
 
     def dying_savez(fh, **arrays):
@@ -67,10 +68,10 @@ def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, mon
 
     monkeypatch.setattr(np, "savez", dying_savez)
     with pytest.raises(KeyboardInterrupt):
-        driver.save_checkpoint(path, {"a": jnp.arange(3) + 5, "b": jnp.zeros(2)}, {"done": 2})
+        save_checkpoint(path, {"a": jnp.arange(3) + 5, "b": jnp.zeros(2)}, {"done": 2})
     monkeypatch.undo()
     assert path.read_bytes() == before
-    restored, meta = driver.load_checkpoint(path, runner)
+    restored, meta = load_checkpoint(path, runner)
     assert meta == {"done": 1}
     np.testing.assert_array_equal(restored["a"], [0, 1, 2])
     assert [p.name for p in tmp_path.iterdir()] == ["checkpoint.npz"]

@@ -68,7 +68,8 @@ def check_overrides(overrides: dict) -> None:
     from remidi.engine.buffer import validate_buffer_config
     from remidi.engine.ppo import validate_ppo_config
     from remidi.engine.train import UEDConfig, validate_section
-    from remidi.experiments.config import apply_overrides, positive_int
+    from remidi.errors import positive_int
+    from remidi.experiments.config import apply_overrides
 
     cfg = apply_overrides(UEDConfig(), overrides)
     for key in ("num_updates", "num_envs", "num_steps"):

@@ -144,15 +144,16 @@ def _load(folder: Path) -> _Loaded:
     first). ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
     from remidi.engine import driver
     from remidi.engine import train as tr
+    from remidi.engine.checkpoint import CHECKPOINT
     from remidi.experiments import get_experiment
     from remidi.experiments.base import _saved_run
 
     exp, algo, _, seeds, config = _saved_run(get_experiment, folder, flag="RUN_DIR")
     if exp.make_task is None:
         raise ConfigError(f"RUN_DIR: {folder} is a {exp.name} run; evaluate needs a UED run (a trained agent)")
-    path = folder / driver.CHECKPOINT
+    path = folder / CHECKPOINT
     if not path.is_file():
-        raise ConfigError(f"RUN_DIR: {folder} has no {driver.CHECKPOINT} (the run wrote no checkpoint yet)")
+        raise ConfigError(f"RUN_DIR: {folder} has no {CHECKPOINT} (the run wrote no checkpoint yet)")
     setup = tr.make_setup(exp.make_task(config), config, algo)
     runner, meta = driver.load_run_state(setup, seeds, path, flag="RUN_DIR")
     return _Loaded(folder=folder, algo=algo, seeds=list(seeds), setup=setup, runner=runner,

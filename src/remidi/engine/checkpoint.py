@@ -16,6 +16,7 @@ from remidi.errors import ConfigError
 from remidi.files import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
+HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
 
 
 def save_checkpoint(path: Path, runner, meta: dict) -> None:
@@ -24,7 +25,6 @@ def save_checkpoint(path: Path, runner, meta: dict) -> None:
     atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
 
 
-HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
 # what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
 _UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
 

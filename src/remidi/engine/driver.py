@@ -39,8 +39,8 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from remidi.engine import train as tr
-from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history,  # noqa: F401 (re-exported)
-                                      remove_stale_temporaries, save_checkpoint, save_run)
+from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history, remove_stale_temporaries,
+                                      save_run)
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 

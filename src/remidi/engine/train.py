@@ -44,7 +44,6 @@ from remidi.engine import tracker as trk
 from remidi.engine.rollout import Frozen, Trajectory, combined_logits, rollout
 from remidi.envs.interface import UEDTask, tree_equal
 
-__all__ = ["ALGORITHMS", "Algorithm", "get_algorithm"]  # re-exported: where the step's callers find them
 POLICIES = ("masked", "combine")
 
 

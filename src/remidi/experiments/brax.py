@@ -25,8 +25,7 @@ from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
 from remidi.engine.train import ReMiDiConfig, UEDConfig
 from remidi.envs.brax import BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES
-from remidi.errors import ConfigError
-from remidi.experiments.config import choice, probability, require
+from remidi.errors import ConfigError, choice, probability, require
 from remidi.experiments.ued import make_ued_experiment
 
 REFERENCE_FILE = Path(__file__).with_name("brax_reference.json")

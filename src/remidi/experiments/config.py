@@ -15,8 +15,6 @@ import typing
 from typing import Any, Iterable
 
 from remidi.errors import ConfigError
-# the validation helpers live in remidi.errors (the engine uses them too); the experiments import them from here
-from remidi.errors import choice, non_negative, positive, positive_int, probability, require  # noqa: F401
 
 
 def parse_set_items(items: Iterable[str]) -> dict[str, str]:

@@ -24,7 +24,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from remidi.errors import ConfigError
-from remidi.files import atomic_write  # noqa: F401  (the experiments import it from here)
+from remidi.files import atomic_write
 
 
 def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> Path:

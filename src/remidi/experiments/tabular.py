@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.config import choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.plots import Curve, Panel, plot_panels
 from remidi.solvers.onestep import OneStepGame, solve_blp
 from remidi.tabular.games import paper_game

@@ -14,8 +14,8 @@ from typing import Callable
 import numpy as np
 
 from remidi.engine.driver import replay_fractions, train_seeds
-from remidi.engine.algorithms import PAPER_ALGORITHMS
-from remidi.engine.train import ALGORITHMS, UEDConfig, run_warnings, validate_ued_config
+from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
+from remidi.engine.train import UEDConfig, run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels

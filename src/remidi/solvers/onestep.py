@@ -112,13 +112,13 @@ class _ObservationGame:
 
 def _solve_observations(game: OneStepGame, scale: float, tol: float) -> list[_ObservationGame]:
     """Every observation's game [O], solved with payoffs divided by ``scale``."""
-    n_act = len(game.actions)
+    n_act = game.num_actions
     actions = np.arange(1, n_act + 1)
     poly = lp.Polytope(1 + n_act, (0,), (tuple(actions),))
     eq = poly.equalities()
     obs_index = game.observation_index()
     solved = []
-    for o in range(len(game.observation_names)):
+    for o in range(game.num_observations):
         levels = np.flatnonzero(obs_index == o)
         payoff = np.zeros((len(levels), 1 + n_act))
         payoff[:, 1:] = game.rewards[levels] / scale

@@ -10,18 +10,65 @@ Scheduling (``pyproject.toml``: ``--dist loadfile --no-loadscope-reorder``): eac
 on one pytest-xdist worker, so a file's tests share its compiled programs and module fixtures
 instead of compiling them on both workers, and the files start heaviest first (:data:`HEAVY_FIRST`,
 measured), so that both workers finish at about the same time.
+
+XLA optimisation: most test files run programs for milliseconds and spend their time compiling
+them, and XLA:CPU compiles about twice as fast with JAX's ``jax_disable_most_optimizations`` (no
+LLVM optimisation). So the suite compiles without optimisations, except in the files of
+:data:`OPTIMIZED`, whose end-to-end runs execute long enough that optimised code pays for itself
+(unoptimised, the Brax smoke run takes minutes instead of seconds). The two differ only in
+floating-point rounding. ``REMIDI_TEST_OPTIMIZE=all`` optimises every file, ``none`` none;
+subprocesses started by tests inherit the setting through :func:`subprocess_env`.
 """
 
 import os
 from pathlib import Path
 
 import jax
+import pytest
 
 _CACHE = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
 if _CACHE:
     jax.config.update("jax_compilation_cache_dir", _CACHE)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+# the files whose end-to-end runs execute long enough that XLA's optimisations pay for themselves
+# (measured: each takes longer unoptimised, the Brax run ~7x). tests/test_engine_reference.py
+# compares with values written unoptimised and compiles unoptimised whatever the setting
+OPTIMIZED = ("test_brax_smoke", "test_maze_smoke", "test_lever_smoke")
+_OPTIMIZE = os.environ.get("REMIDI_TEST_OPTIMIZE", "some")
+if _OPTIMIZE not in ("some", "all", "none"):
+    raise pytest.UsageError(f"REMIDI_TEST_OPTIMIZE: unknown value {_OPTIMIZE!r}; allowed: some, all, none")
+
+
+def optimized(module_name: str) -> bool:
+    """Whether the tests of ``module_name`` compile with XLA's optimisations."""
+    return _OPTIMIZE == "all" or (_OPTIMIZE == "some" and module_name in OPTIMIZED)
+
+
+jax.config.update("jax_disable_most_optimizations", _OPTIMIZE != "all")  # collection-time programs
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _xla_optimization(request):
+    disable = not optimized(request.module.__name__)
+    if jax.config.read("jax_disable_most_optimizations") != disable:
+        # jit's in-memory cache does not key on the setting (the persistent cache does): without
+        # this, a program compiled by an earlier file would run under the other setting
+        jax.clear_caches()
+        jax.config.update("jax_disable_most_optimizations", disable)
+    yield
+
+
+def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[str, str]:
+    """The environment for a Python subprocess started by a test of ``module_name``: this
+    process's, with the suite's XLA optimisation setting and (``cache``) compilation cache, which
+    a subprocess does not get from this file, and ``extra``."""
+    env = dict(os.environ, JAX_DISABLE_MOST_OPTIMIZATIONS="0" if optimized(module_name) else "1", **extra)
+    if _CACHE and cache:
+        env.update(JAX_COMPILATION_CACHE_DIR=_CACHE, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.1",
+                   JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
+    return env
 
 # the files that take longest on a cold cache (worker-seconds, 2-core CPU), heaviest first; the
 # others follow in their usual order

@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import subprocess_env
 
 from remidi.bench import BENCHMARKS, DEFAULT, format_table, ratios
 
@@ -15,7 +16,7 @@ FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_p
 def test_bench_json_has_only_the_document_on_stdout():
     proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-env", "lstm-matmul", "solve-onestep", "--tiny", "--repeats", "2",
                            "--json"],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300, env=subprocess_env(__name__))
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)  # nothing but the document
     assert set(doc) == {"benchmarks", "ratios", "device", "tiny", "set"} and doc["tiny"] is True
@@ -50,7 +51,8 @@ def test_ratios_compare_time_per_env_step():
 
 def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors():
     assert set(DEFAULT) <= set(BENCHMARKS) and "maze-remidi-reference" in BENCHMARKS
-    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-fast"], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-fast"], capture_output=True, text=True,
+                          env=subprocess_env(__name__))
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.count("\n") == 1 and "maze-fast" in proc.stderr and "maze-plr" in proc.stderr
 

@@ -2,15 +2,13 @@
 130, one line `remidi: interrupted...`, no traceback, no abort, no half-written file."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
-
+from conftest import subprocess_env
 from test_cli import LEVER_TINY
 
 # the `remidi` program with Python's default Ctrl-C handling (a test runner may start its
@@ -32,11 +30,8 @@ def test_ctrl_c_exits_130_with_one_line(tmp_path, when):
     out = tmp_path / "run"
     # ReMiDi on 2 seeds: tests/test_cli.py's programs, from the suite's compilation cache when they are there
     argv = ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]
-    env = dict(os.environ)
-    cache = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
-    if cache and when == "training":  # the suite's compilation cache (tests/conftest.py): faster to the first block
-        env.update(JAX_COMPILATION_CACHE_DIR=cache, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-                   JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
+    # the suite's compilation cache (tests/conftest.py) for "training" only: faster to the first block
+    env = subprocess_env(__name__, cache=when == "training")
     proc = subprocess.Popen([sys.executable, "-c", LAUNCH, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
     ready = {"start-up": lambda: True, "compiling": _started(out / "config.json"),

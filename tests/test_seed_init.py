@@ -9,6 +9,8 @@ of stalling the suite.
 import subprocess
 import sys
 
+from conftest import subprocess_env
+
 SCRIPT = """
 import jax, jax.numpy as jnp
 from remidi.engine import driver, train as tr
@@ -22,6 +24,7 @@ print("initialised", runner.train_state.step.shape)
 
 
 def test_initialising_eight_seeds_finishes():
-    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120)
+    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120,
+                          env=subprocess_env(__name__))
     assert done.returncode == 0, done.stderr[-2000:]
     assert "initialised (8,)" in done.stdout

@@ -10,7 +10,6 @@ second device are checked in this process.
 
 import csv
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +17,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import pytest
-
+from conftest import subprocess_env
 from test_cli import LEVER_TINY, run_cli
 
 # 4 updates in 2 blocks (an evaluation and a checkpoint after each; ReMiDi's second buffer from
@@ -89,11 +88,7 @@ def _metrics(folder: Path):
 
 
 def _four_devices(out: Path) -> dict:
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
-    cache = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
-    if cache:  # the persistent compilation cache of tests/conftest.py, which the subprocess does not load
-        env.update(JAX_COMPILATION_CACHE_DIR=cache, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-                   JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
+    env = subprocess_env(__name__, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     done = subprocess.run([sys.executable, "-c", SCRIPT, str(out), json.dumps(RUN)], capture_output=True,
                           text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -170,9 +165,10 @@ def test_resume_takes_no_devices(tmp_path, capsys):
 
 
 def test_python_api_checks_devices_before_compiling():
+    from test_ued_engine import TASK, TINY
+
     from remidi.engine.driver import train_seeds
     from remidi.errors import ConfigError
-    from test_ued_engine import TASK, TINY
 
     with pytest.raises(ConfigError, match=r"--devices: must be an integer ≥ 1, got 0; allowed: 1"):
         train_seeds(TASK, TINY, "remidi", [0, 1], progress=False, devices=0)

@@ -91,22 +91,36 @@ def pytest_collection_modifyitems(session, config, items):
 # ------------------------------------------------- where the suite's time goes (diagnostic, opt-in)
 # REMIDI_TEST_COMPILE_REPORT=DIR: each worker appends one JSON line per test to DIR/<worker>.jsonl
 # with its wall time and the XLA compile and tracing seconds (and compile count) spent during it
-# (module fixtures count towards the first test that uses them). Read it with
-# ``python tests/compile_report.py DIR``.
+# (module fixtures count towards the first test that uses them), and one line per program that
+# went through the persistent cache to DIR/<worker>.programs.jsonl (its name and cache key, hit or
+# compiled, and how long compiling took). Read them with ``python tests/compile_report.py DIR``.
 _REPORT = os.environ.get("REMIDI_TEST_COMPILE_REPORT")
 if _REPORT:
     import json
     import time
 
-    import pytest
     from jax import monitoring
+    from jax._src import compiler
 
     _spent = {"compile_s": 0.0, "compiles": 0, "trace_s": 0.0}
+    _programs: list[dict] = []  # this test's programs that went through the persistent cache
+    _current = {"test": ""}
+
+    def _looked_up(hit):
+        def log(module_name, cache_key):
+            _programs.append({"test": _current["test"], "name": module_name, "key": cache_key[-16:], "hit": hit,
+                              "compile_s": 0.0})
+        return log
+
+    compiler.log_persistent_cache_hit = _looked_up(True)  # called by compile_or_get_cached
+    compiler.log_persistent_cache_miss = _looked_up(False)
 
     def _listen(event, duration, **kwargs):
         if event == "/jax/core/compile/backend_compile_duration":
             _spent["compile_s"] += duration
             _spent["compiles"] += 1
+            if _programs and not _programs[-1]["hit"] and not _programs[-1]["compile_s"]:
+                _programs[-1]["compile_s"] = duration
         elif event in ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration"):
             _spent["trace_s"] += duration
 
@@ -115,6 +129,7 @@ if _REPORT:
     @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_protocol(item, nextitem):
         before, start = dict(_spent), time.perf_counter()
+        _current["test"] = item.nodeid
         yield
         row = {"test": item.nodeid, "wall_s": time.perf_counter() - start,
                **{k: _spent[k] - before[k] for k in _spent}}
@@ -122,3 +137,6 @@ if _REPORT:
         worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
         with open(Path(_REPORT) / f"{worker}.jsonl", "a") as f:
             f.write(json.dumps(row) + "\n")
+        with open(Path(_REPORT) / f"{worker}.programs.jsonl", "a") as f:
+            f.writelines(json.dumps(p) + "\n" for p in _programs)
+        _programs.clear()

@@ -10,11 +10,9 @@ import pytest
 
 from remidi.engine import driver
 from remidi.engine import train as tr
-from remidi.envs.lever import lever_task
 from remidi.errors import ConfigError
-from test_ued_engine import TINY
+from test_ued_engine import TASK, TINY  # the task object too: programs are cached per task object
 
-TASK = lever_task(64)
 R = dataclasses.replace
 
 

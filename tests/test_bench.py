@@ -49,12 +49,13 @@ def test_ratios_compare_time_per_env_step():
     assert "remidi_step_over_plr_step: 1.200" in table
 
 
-def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors():
+def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors(capsys):
+    from remidi.cli import main
+
     assert set(DEFAULT) <= set(BENCHMARKS) and "maze-remidi-reference" in BENCHMARKS
-    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-fast"], capture_output=True, text=True,
-                          env=subprocess_env(__name__))
-    assert proc.returncode == 2 and proc.stdout == ""
-    assert proc.stderr.count("\n") == 1 and "maze-fast" in proc.stderr and "maze-plr" in proc.stderr
+    assert main(["bench", "maze-fast"]) == 2  # refused before any benchmark starts
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "maze-fast" in err and "maze-plr" in err
 
 
 @pytest.mark.parametrize("setting, needle", [

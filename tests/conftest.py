@@ -11,20 +11,62 @@ on one pytest-xdist worker, so a file's tests share its compiled programs and mo
 instead of compiling them on both workers, and the files start heaviest first (:data:`HEAVY_FIRST`,
 measured), so that both workers finish at about the same time.
 
-XLA optimisation: most test files run programs for milliseconds and spend their time compiling
-them, and XLA:CPU compiles about twice as fast with JAX's ``jax_disable_most_optimizations`` (no
-LLVM optimisation). So the suite compiles without optimisations, except in the files of
-:data:`OPTIMIZED`, whose end-to-end runs execute long enough that optimised code pays for itself
-(unoptimised, the Brax smoke run takes minutes instead of seconds). The two differ only in
-floating-point rounding. ``REMIDI_TEST_OPTIMIZE=all`` optimises every file, ``none`` none;
-subprocesses started by tests inherit the setting through :func:`subprocess_env`.
+XLA settings, chosen for a suite that mostly compiles (measured on the maze smoke run's block
+program, 2-core CPU; tests/compile_report.py shows any program's):
+
+* :data:`FAST_XLA_FLAGS`: XLA:CPU's older fusion emitters compile these programs about twice as
+  fast as its newer (MLIR) ones, and LLVM level 1 instead of 2 halves the optimised compile again
+  while the code runs nearly as fast (block: 3.8 s to compile and 1.4 s to run, instead of 8.5 s
+  and 1.0 s). They go into ``XLA_FLAGS`` before any backend starts, so the xdist workers and the
+  tests' subprocesses inherit them; a jaxlib that no longer knows one of them (XLA would abort)
+  is found by a probe, and the suite then runs without them (the report header says which).
+  ``REMIDI_TEST_XLA_FLAGS=0`` leaves ``XLA_FLAGS`` alone.
+* Most test files run their programs for milliseconds, so they compile without LLVM optimisation
+  (JAX's ``jax_disable_most_optimizations``: 2.0 s instead of 3.8 s to compile the block, which
+  then runs 12x slower), except the files of :data:`OPTIMIZED`, whose end-to-end runs execute long
+  enough that optimised code pays for itself (unoptimised, the Brax smoke run takes minutes
+  instead of seconds). ``REMIDI_TEST_OPTIMIZE=all`` optimises every file, ``none`` none;
+  subprocesses started by tests inherit the setting through :func:`subprocess_env`.
+
+The settings differ only in floating-point rounding (tests that compare two programs' floats
+allow for it, e.g. tests/test_maze_env.py's rewards against jaxued's).
 """
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import jax
 import pytest
+
+FAST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1"
+_FLAGS_CHECKED = "REMIDI_TEST_XLA_FLAGS_CHECKED"  # set once the controlling process has decided
+
+
+def _add_fast_xla_flags() -> None:
+    if os.environ.get(_FLAGS_CHECKED) or os.environ.get("REMIDI_TEST_XLA_FLAGS", "1") == "0":
+        return  # a worker or subprocess: the controlling process decided, and XLA_FLAGS says what
+    os.environ[_FLAGS_CHECKED] = "1"
+    flags = f"{os.environ.get('XLA_FLAGS', '')} {FAST_XLA_FLAGS}".strip()
+    try:
+        probe = subprocess.run([sys.executable, "-c", "import jax.numpy as j; j.ones(2).sum().block_until_ready()"],
+                               env=dict(os.environ, XLA_FLAGS=flags), capture_output=True, timeout=300).returncode
+    except subprocess.TimeoutExpired:
+        probe = None
+    if probe == 0:
+        os.environ["XLA_FLAGS"] = flags
+    else:
+        os.environ[_FLAGS_CHECKED] = "refused"  # for the report header
+
+
+def pytest_report_header(config):
+    if os.environ.get(_FLAGS_CHECKED) == "refused":
+        return f"XLA_FLAGS: this jaxlib refused {FAST_XLA_FLAGS}; compiling with its defaults (slower)"
+    return f"XLA_FLAGS: {os.environ.get('XLA_FLAGS', '')}"
+
+
+_add_fast_xla_flags()
 
 _CACHE = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
 if _CACHE:
@@ -65,6 +107,8 @@ def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[s
     process's, with the suite's XLA optimisation setting and (``cache``) compilation cache, which
     a subprocess does not get from this file, and ``extra``."""
     env = dict(os.environ, JAX_DISABLE_MOST_OPTIMIZATIONS="0" if optimized(module_name) else "1", **extra)
+    if "XLA_FLAGS" in extra and os.environ.get("XLA_FLAGS"):  # the suite's flags too
+        env["XLA_FLAGS"] = f"{os.environ['XLA_FLAGS']} {extra['XLA_FLAGS']}"
     if _CACHE and cache:
         env.update(JAX_COMPILATION_CACHE_DIR=_CACHE, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.1",
                    JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
@@ -72,11 +116,11 @@ def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[s
 
 # the files that take longest on a cold cache (worker-seconds, 2-core CPU, measured with the
 # compile report below), heaviest first; the others follow in their usual order
-HEAVY_FIRST = ("test_lever_smoke", "test_maze_smoke", "test_brax_env", "test_brax_smoke", "test_examples",
-               "test_continuous", "test_cli", "test_maze_env", "test_sharding", "test_engine_reference",
-               "test_tracker_equivalence", "test_tabular_ued", "test_bench", "test_accel", "test_ued_engine",
-               "test_evaluate", "test_combine", "test_ppo", "test_buffer", "test_networks", "test_interrupt",
-               "test_render", "test_scores", "test_tracker", "test_seed_init", "test_resume_damaged")
+HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_brax_smoke", "test_examples",
+               "test_cli", "test_engine_reference", "test_bench", "test_continuous", "test_sharding",
+               "test_maze_env", "test_accel", "test_tracker_equivalence", "test_evaluate", "test_tabular_ued",
+               "test_interrupt", "test_ued_engine", "test_render", "test_ppo", "test_buffer", "test_networks",
+               "test_tracking", "test_scores", "test_resume_damaged", "test_seed_init")
 
 
 def pytest_collection_modifyitems(session, config, items):

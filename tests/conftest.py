@@ -28,8 +28,9 @@ program, 2-core CPU; tests/compile_report.py shows any program's):
   instead of seconds). ``REMIDI_TEST_OPTIMIZE=all`` optimises every file, ``none`` none;
   subprocesses started by tests inherit the setting through :func:`subprocess_env`.
 
-The settings differ only in floating-point rounding (tests that compare two programs' floats
-allow for it, e.g. tests/test_maze_env.py's rewards against jaxued's).
+The settings differ only in floating-point rounding: tests/test_engine_reference.py allows for
+it, and tests/test_maze_env.py, which compares our maze with jaxued's bit for bit, compiles those
+programs with XLA's own fusion emitters.
 """
 
 import os

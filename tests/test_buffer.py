@@ -63,16 +63,45 @@ def test_rank_weights_beta_half_hand_computed():
 
 
 def test_topk_weights_hand_computed():
-    # top-2 = slots 1, 2: h = [0, 1/2, 1/2]; 0.7*h + 0.3*[4/7, 1/7, 2/7]
+    # top-2 = slots 1, 2 (scores 3, 2): h = softmax = [0, e/(1+e), 1/(1+e)]; 0.7*h + 0.3*[4/7, 1/7, 2/7]
     cfg = config(prioritization="topk", topk_k=2, staleness_coef=0.3)
     w = B.replay_weights(manual_state(cfg, **HAND_STATE), cfg)
-    np.testing.assert_allclose(w, [6 / 35, 11 / 28, 61 / 140, 0.0], rtol=1e-6)
+    e = np.e
+    np.testing.assert_allclose(w, [0.3 * 4 / 7, 0.7 * e / (1 + e) + 0.3 / 7, 0.7 / (1 + e) + 0.3 * 2 / 7, 0.0],
+                               rtol=1e-6)
+
+
+def test_topk_softmax_is_jaxueds_rule_at_temperature_one():
+    """jaxued's LevelSampler ``topk`` (``jax.nn.softmax(scores, where=top-k mask)``; its call no
+    longer runs on current JAX: ``softmax`` lost ``initial``), computed here in NumPy."""
+    scores, valid = np.array([0.5, 3.0, -1.0, 2.0, 1.5, 0.0]), np.array([1, 1, 1, 1, 1, 0], bool)
+    cfg = config(capacity=6, prioritization="topk", topk_k=3, staleness_coef=0.0)
+    ours = B.replay_weights(manual_state(cfg, scores, valid, [0] * 6, 1), cfg)
+    top = np.zeros(6, bool)
+    top[np.argsort(-np.where(valid, scores, -np.inf))[:3]] = True  # slots 1, 3, 4
+    want = np.where(top, np.exp(scores), 0.0) / np.exp(scores[top]).sum()
+    np.testing.assert_allclose(ours, want, rtol=1e-6)
+
+
+def test_topk_temperature_sharpens_the_softmax():
+    # top-2 scores 3, 2 at β = 0.5: weights ∝ e^6, e^4
+    cfg = config(prioritization="topk", topk_k=2, staleness_coef=0.0, temperature=0.5)
+    w = B.replay_weights(manual_state(cfg, **HAND_STATE), cfg)
+    e2 = np.e ** 2
+    np.testing.assert_allclose(w, [0.0, e2 / (1 + e2), 1 / (1 + e2), 0.0], rtol=1e-6)
+
+
+def test_topk_without_finite_scores_is_uniform_over_the_top_k():
+    cfg = config(prioritization="topk", topk_k=2, staleness_coef=0.0)
+    state = manual_state(cfg, [-np.inf, np.nan, -np.inf, 0.0], [1, 1, 1, 0], [0, 0, 0, 0], 1)
+    np.testing.assert_allclose(B.replay_weights(state, cfg), [0.5, 0.5, 0.0, 0.0])
 
 
 def test_topk_k_clipped_to_number_valid():
     cfg = config(prioritization="topk", topk_k=10, staleness_coef=0.0)
     w = B.replay_weights(manual_state(cfg, **HAND_STATE), cfg)
-    np.testing.assert_allclose(w, [1 / 3, 1 / 3, 1 / 3, 0.0], rtol=1e-6)
+    z = np.e ** 1 + np.e ** 3 + np.e ** 2
+    np.testing.assert_allclose(w, [np.e / z, np.e ** 3 / z, np.e ** 2 / z, 0.0], rtol=1e-6)
 
 
 def test_rank_ties_broken_by_index():

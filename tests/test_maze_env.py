@@ -110,6 +110,8 @@ def test_tmaze_stem_and_blocked_moves():
     np.testing.assert_array_equal(reward[:, 3], -1.0)  # down the stem: away from either arm
     assert done[:, 3].all()
     np.testing.assert_array_equal(OPTIMAL(TMAZES), 1.0)
+    # the agent faces the top wall, so the reward comes at step index 1: discounted optimum γ
+    np.testing.assert_allclose(jax.vmap(lambda lv: M.optimal_discounted_return(lv, GAMMA))(TMAZES), GAMMA, rtol=1e-7)
 
 
 # ----------------------------------------------------------------------------- blindfold
@@ -173,6 +175,34 @@ def test_shortest_path_matches_brute_force(size, walls):
         assert np.isinf(got).any() and np.isfinite(got).any()  # both cases are exercised
     opt = np.asarray(OPTIMAL(levels))
     np.testing.assert_allclose(opt, np.where(np.isinf(want), 0.0, 1 - 0.9 * np.asarray(want) / 250), rtol=1e-6)
+
+
+def best_discounted_return_by_brute_force(env, levels, length: int, gamma: float) -> np.ndarray:
+    """f[N]: the best Σ_t γ^t r_t over every sequence of ``length`` actions (left, right, forward)
+    played in the real environment, rewards after the episode's end ignored."""
+    seqs = np.array(np.meshgrid(*[[LEFT, RIGHT, FORWARD]] * length, indexing="ij")).reshape(length, -1).T
+    n, m = len(seqs), int(levels.agent_dir.shape[0])
+    tiled = jax.tree.map(lambda x: jnp.repeat(x, n, axis=0), levels)
+    _, _, reward, done = play(env, tiled, jnp.asarray(np.tile(seqs, (m, 1))))
+    alive = np.concatenate([np.ones((len(done), 1), bool), ~np.cumsum(done, axis=1)[:, :-1].astype(bool)], axis=1)
+    value = (np.where(alive, reward, 0.0) * gamma ** np.arange(length)).sum(axis=1)
+    return value.reshape(m, n).max(axis=1)
+
+
+def test_discounted_optimum_matches_brute_force_over_action_sequences():
+    """optimal_discounted_return against the best of all action sequences, played step by step in
+    the environment: T-mazes (the optimum is γ: a turn, then the move into the goal arm) and 5×5
+    mazes whose goal is at most 7 actions away."""
+    np.testing.assert_allclose(best_discounted_return_by_brute_force(ENV, TMAZES, 4, GAMMA),
+                               jax.vmap(lambda lv: M.optimal_discounted_return(lv, GAMMA))(TMAZES), rtol=1e-6)
+    small = jax.jit(jax.vmap(lambda k: M.random_maze(k, 5, 3)))(jax.random.split(jax.random.PRNGKey(21), 30))
+    steps = np.asarray(jax.vmap(M.shortest_path_steps)(small))
+    pick = np.flatnonzero(steps <= 7)[:6]
+    assert len(pick) == 6 and len(set(steps[pick])) >= 3  # several path lengths
+    small = jax.tree.map(lambda x: x[pick], small)
+    for gamma in (GAMMA, 0.9):
+        want = best_discounted_return_by_brute_force(M.MazeEnv(5), small, 7, gamma)
+        np.testing.assert_allclose(jax.vmap(lambda lv: M.optimal_discounted_return(lv, gamma))(small), want, rtol=1e-6)
 
 
 def test_optimal_return_is_what_a_shortest_path_agent_earns():

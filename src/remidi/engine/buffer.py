@@ -59,9 +59,10 @@ class BufferConfig:
 
     Attributes:
         capacity: number of slots.
-        prioritization: ``"rank"`` (weight ∝ (1/rank)^(1/temperature)) or ``"topk"`` (uniform
-            over the ``topk_k`` highest-scored valid entries).
-        temperature: β of rank prioritisation, > 0.
+        prioritization: ``"rank"`` (weight ∝ (1/rank)^(1/temperature)) or ``"topk"`` (a softmax
+            of score/temperature over the ``topk_k`` highest-scored valid entries, zero elsewhere;
+            ``jaxued``'s ``topk`` at temperature 1).
+        temperature: β of rank prioritisation and of the top-k softmax, > 0.
         topk_k: k of top-k prioritisation, ≥ 1 (clipped to the number of valid entries).
         staleness_coef: ρ; replay weights = (1-ρ)·score weights + ρ·staleness weights.
         replay_prob: probability of a replay step; used by the train loop, stored here.
@@ -71,7 +72,7 @@ class BufferConfig:
 
     capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
     prioritization: str = field(default="rank", metadata={"help": "replay sampling: rank or topk"})
-    temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation"})
+    temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation and of the top-k softmax"})
     topk_k: int = field(default=32, metadata={"help": "k of top-k prioritisation"})
     staleness_coef: float = field(default=0.3, metadata={"help": "ρ: weight of staleness in the replay distribution"})
     replay_prob: float = field(default=0.8, metadata={"help": "probability that a train step replays buffer levels"})
@@ -211,7 +212,12 @@ def _score_weights(state: BufferState, config: BufferConfig, ranks: jax.Array) -
     if config.prioritization == "rank":
         raw = (1.0 / ranks.astype(jnp.float32)) ** (1.0 / config.temperature)
     else:  # "topk": ranks of valid entries are 1..size, so this is the k best, k clipped to size
-        raw = (ranks <= config.topk_k).astype(jnp.float32)
+        top = (ranks <= config.topk_k) & state.valid
+        logits = _effective_scores(state) / config.temperature
+        peak = jnp.max(jnp.where(top, logits, -jnp.inf))
+        # a softmax over the top k (exp(-inf) = 0); uniform over them if none has a finite score
+        raw = jnp.where(top, jnp.where(jnp.isfinite(peak), jnp.exp(logits - jnp.where(jnp.isfinite(peak), peak, 0.0)),
+                                       1.0), 0.0)
     return _normalise_over_valid(raw, state.valid)
 
 

@@ -18,8 +18,9 @@ Level kinds (flags of :class:`MazeLevel`):
   seen. The first action that changes the agent's position ends the episode with ``+1`` if it
   moved towards the goal (the Manhattan distance to the goal fell) and ``−1`` otherwise (the
   other arm, or the stem). Every cell the agent can never see from the junction is a wall with
-  probability 1/2, so T-mazes are distinct levels that all play identically. Optimal return 1;
-  any policy that cannot see the goal has regret ≥ 1 on one of the two sides.
+  probability 1/2, so T-mazes are distinct levels that all play identically. Optimal return 1
+  (discounted: ``γ``, a turn, then the move); any policy that cannot see the goal has regret ≥ 1
+  on one of the two sides.
 * **Blind** (``blind``): an ordinary maze whose observations are all zeros (image and direction).
 
 Optimal return (:func:`optimal_return`): an exact shortest path over (position, direction)
@@ -320,8 +321,8 @@ def optimal_return(level: MazeLevel, max_steps: int = MAX_STEPS) -> jax.Array:
     ``1 − 0.9·n/T`` (the reward the environment gives at step ``t = n − 1``), so the optimal
     return is that value for ``n`` = :func:`shortest_path_steps`, and ``0`` when the goal is
     unreachable or ``n > T``. (``jaxued``'s ``MazeSolved.optimal_value`` uses ``n + 1``, one step
-    too many.) A T-maze's optimal return is ``1``: an agent that could see the goal would step
-    towards it at once. Blindness does not change the level's optimum.
+    too many.) A T-maze's optimal return is ``1``: an agent that could see the goal would turn
+    towards it and step into its arm. Blindness does not change the level's optimum.
     """
     return optimal_discounted_return(level, 1.0, max_steps)
 
@@ -332,14 +333,15 @@ def optimal_discounted_return(level: MazeLevel, gamma: float, max_steps: int = M
     The goal reached with the ``n``-th action pays ``1 − 0.9·n/T`` at ``t = n − 1``, so the
     optimum is ``γ^(n−1)·(1 − 0.9·n/T)`` for ``n`` = :func:`shortest_path_steps` (a shorter path
     is both discounted less and paid more, so the shortest path is optimal for every γ), and
-    ``0`` when the goal is unreachable or ``n > T``. A T-maze pays ``1`` at ``t = 0``, so its
-    optimum is ``1``. ``gamma = 1`` gives :func:`optimal_return`.
+    ``0`` when the goal is unreachable or ``n > T``. A T-maze's agent faces the top wall, so the
+    best it can do is a turn, then the move into the goal arm, paid ``1`` at ``t = 1``: its optimum
+    is ``γ``. ``gamma = 1`` gives :func:`optimal_return`.
     """
     n = shortest_path_steps(level)
     reachable = n <= max_steps
     steps = jnp.where(reachable, n, 1.0)
     maze = jnp.where(reachable, jnp.power(jnp.float32(gamma), steps - 1.0) * (1.0 - 0.9 * steps / max_steps), 0.0)
-    return jnp.where(level.tmaze, 1.0, maze).astype(jnp.float32)
+    return jnp.where(level.tmaze, jnp.float32(gamma), maze).astype(jnp.float32)
 
 
 # -------------------------------------------------------------------------------------- tasks

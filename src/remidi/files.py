@@ -34,3 +34,26 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
         if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
             raise OSError(err.errno, err.strerror or str(err), str(path)) from None
         raise
+
+
+def code_version() -> dict:
+    """What code and libraries a run used, for its ``config.json``: the git commit of the checkout
+    the ``remidi`` package was imported from (``dirty``: uncommitted changes under ``src/``), or
+    ``None`` for an installed copy, and the JAX versions (results depend on XLA's rounding)."""
+    import subprocess
+
+    import jax
+    import jaxlib
+
+    src = Path(__file__).resolve().parent
+
+    def git(*args):
+        try:
+            done = subprocess.run(["git", "-C", str(src), *args], capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    dirty = bool(git("status", "--porcelain", "--", str(src.parent))) if commit else None
+    return {"commit": commit, "dirty": dirty, "jax": jax.__version__, "jaxlib": jaxlib.__version__}

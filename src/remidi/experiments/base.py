@@ -29,6 +29,7 @@ import numpy as np
 
 from remidi import __version__
 from remidi.errors import ConfigError, one_of
+from remidi.files import code_version
 from remidi.experiments import outputs
 from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict, scale_dependents
 
@@ -326,6 +327,7 @@ def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seed
         "config": config_to_dict(config),
         "command": ["remidi", *(argv if argv is not None else sys.argv[1:])],
         "remidi_version": __version__,
+        "code": code_version(),
     })
 
 

@@ -13,7 +13,9 @@ came later and were not used to write it; the test passes within its float32 tol
 
 Written again for issue #28 (results meant to change): top-k replay became jaxued's softmax over
 the top k (every lever case but dr), and the maze cases were added after the T-maze's
-discounted optimum became γ. The ``accel`` case was written with the suite's XLA flags (without
+discounted optimum became γ. The maze cases were written again, with the
+suite's XLA flags, when the corridors' start direction became "facing right" (only the corridors'
+evaluation metrics moved; training did not). The ``accel`` case was written with the suite's XLA flags (without
 them its worst hidden regret drifted 3e-4 from what the suite computes; written with them it
 passes both ways). The runs of issue #28's results page use that engine.
 """

@@ -258,6 +258,7 @@ def test_held_out_sets():
         assert not walls[0].any() and not walls[-1].any() and not walls[:, 0].any() and not walls[:, -1].any()
         assert walls[mid, 1:-1].all()
         np.testing.assert_array_equal(levels.agent_pos, np.tile([0, mid], (dead_ends, 1)))
+        np.testing.assert_array_equal(levels.agent_dir, 0)  # facing right, into the middle row's wall (DCD, minimax)
         goals = {tuple(g) for g in np.asarray(levels.goal_pos).tolist()}
         assert len(goals) == dead_ends and all(y in (mid - 1, mid + 1) and x % 2 == 0 for x, y in goals)
         assert np.isfinite(jax.jit(jax.vmap(M.shortest_path_steps))(levels)).all()
@@ -269,7 +270,7 @@ def test_large_corridor_is_played_at_its_own_size():
     level = jax.tree.map(lambda x: x[0], levels)
     obs, state = env.reset_to_level(KEY, level, PARAMS)
     assert obs.image.shape == (5, 5, 3)
-    # walk the ring clockwise to the far right end: x reaches 18
-    for a in [FORWARD] * 9 + [RIGHT] + [FORWARD] * 18:
+    # face up, then walk the ring clockwise to the far right end: x reaches 18
+    for a in [LEFT] + [FORWARD] * 9 + [RIGHT] + [FORWARD] * 18:
         obs, state, _, _, _ = env.step(KEY, state, a, PARAMS)
     assert int(state.inner.agent_pos[0]) == 18

@@ -39,7 +39,10 @@ class PPOConfig:
     """PPO hyperparameters (hashable: pass as a static argument to ``jax.jit``).
 
     Defaults are the paper's maze settings. With ``anneal_lr`` the learning rate decays linearly
-    from ``lr`` to 0 over ``total_updates * epochs * minibatches`` optimiser steps.
+    from ``lr`` to 0 over ``total_updates * epochs * minibatches`` optimiser steps. The optimiser
+    steps only on updates that train, so an algorithm that trains on some updates only (PLR⊥,
+    ReMiDi: replay probability 0.8) ends its run with about ``(1 − 0.8)·lr``, as the authors'
+    code does.
     """
 
     gamma: float = field(default=0.995, metadata={"help": "discount factor"})
@@ -51,7 +54,7 @@ class PPOConfig:
     epochs: int = field(default=5, metadata={"help": "PPO epochs per update"})
     minibatches: int = field(default=1, metadata={"help": "minibatches per epoch (must divide num_envs)"})
     lr: float = field(default=1e-3, metadata={"help": "Adam learning rate"})
-    anneal_lr: bool = field(default=True, metadata={"help": "decay the learning rate linearly to 0 over the run"})
+    anneal_lr: bool = field(default=True, metadata={"help": "decay the learning rate linearly towards 0 over the optimiser steps of num_updates training updates (an algorithm that trains on some updates only ends above 0: PLR⊥ at ≈ 0.2·lr)"})
     adam_eps: float = field(default=1e-5, metadata={"help": "Adam ε"})
     max_grad_norm: float = field(default=0.5, metadata={"help": "global gradient-norm clipping"})
     total_updates: int = 30000

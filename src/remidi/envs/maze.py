@@ -55,7 +55,7 @@ MAX_STEPS = 250
 TRAIN_SIZE = 13
 NUM_WALLS = 25
 VIEW = 5
-UP = 3
+RIGHT, UP = 0, 3
 PREFAB_NAMES = ("SixteenRooms", "SixteenRooms2", "Labyrinth", "LabyrinthFlipped", "Labyrinth2",
                 "StandardMaze", "StandardMaze2", "StandardMaze3")
 CORRIDORS = {"SmallCorridor": 13, "LargeCorridor": 19}
@@ -250,8 +250,9 @@ def corridor_levels(size: int) -> MazeLevel:
     Layout: a ring corridor along the border; the middle row is a wall except at its two ends;
     every even interior column holds two dead-end corridors, one running from the top border down
     towards the middle row and one from the bottom border up towards it; every other cell is a
-    wall. The agent starts at the left end of the middle row, facing up; the goal sits at the
-    inner end of one dead end (the cell next to the middle row).
+    wall. The agent starts at the left end of the middle row facing right, into the middle row's
+    wall (as DCD's and minimax's corridors do); the goal sits at the inner end of one dead end (the
+    cell next to the middle row).
     """
     assert size % 2 == 1 and size >= 5, size
     mid = size // 2
@@ -262,7 +263,7 @@ def corridor_levels(size: int) -> MazeLevel:
         walls[1:mid, x] = False  # from the top border to the middle
         walls[mid + 1:size - 1, x] = False  # from the bottom border to the middle
     goals = [(x, y) for x in columns for y in (mid - 1, mid + 1)]
-    return _stack([MazeLevel.make(walls, goal, (0, mid), UP) for goal in goals])
+    return _stack([MazeLevel.make(walls, goal, (0, mid), RIGHT) for goal in goals])
 
 
 def _stack(levels):

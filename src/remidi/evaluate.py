@@ -11,9 +11,11 @@ latest) and evaluated on
 * **CVaR over the level generator** (Rutherford et al. 2024, "No Regrets"): ``--cvar-levels``
   solvable levels drawn from the task's generator with ``--seed`` (the same levels for every seed
   and algorithm; levels whose optimal return is ≤ 0, which no agent can solve, are drawn again),
-  ``--cvar-attempts`` episodes each; per level its solve rate (and mean return), then
-  the mean over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
-  ``cvar/return/<α>`` (100% is the plain mean);
+  ``--cvar-attempts`` episodes each, twice, on independent episodes (SFL's protocol): the first
+  set of rollouts ranks the levels (per level its solve rate, or mean return), the second scores
+  them, so the worst levels' luck in ranking does not bias their score downward; then the mean
+  score over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
+  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts);
 * **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
   ``--perfect-sizes`` (default 21 and 51), each a *perfect* maze (exactly one path between any
   two open cells, carved by a randomised depth-first search from ``--seed``), the agent and the
@@ -49,12 +51,15 @@ MAX_PERFECT_SIZE = 101
 
 
 # ------------------------------------------------------------------------------ pure pieces
-def cvar(values: np.ndarray, alpha: float) -> float:
-    """The mean of the lowest ``ceil(alpha · N)`` (at least one) of ``values`` f[N]: the
-    conditional value at risk of the worst ``alpha`` share of levels."""
-    values = np.sort(np.asarray(values, dtype=float))
+def cvar(values: np.ndarray, alpha: float, rank_by: np.ndarray | None = None) -> float:
+    """The conditional value at risk of the worst ``alpha`` share of levels: the mean of
+    ``values`` f[N] over the ``ceil(alpha · N)`` (at least one) levels that rank lowest by
+    ``rank_by`` f[N] (ties in level order), an independent estimate of the same quantity (SFL:
+    rank on one set of rollouts, score on another); ``rank_by=None`` ranks by ``values`` itself."""
+    values = np.asarray(values, dtype=float)
+    order = np.argsort(values if rank_by is None else np.asarray(rank_by, dtype=float), kind="stable")
     k = max(1, math.ceil(alpha * len(values) - 1e-9))
-    return float(values[:k].mean())
+    return float(values[order[:k]].mean())
 
 
 def perfect_maze_walls(rng: np.random.Generator, size: int) -> np.ndarray:
@@ -203,10 +208,12 @@ def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: 
 
     def one_seed(runner, key):
         out = dict(tr.evaluate(held_out, runner, key))
-        ret, _ = tr.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, 1000))
-        out["cvar_raw/return"] = ret.mean(axis=1)
-        if task.solved is not None:
-            out["cvar_raw/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
+        # CVaR: one set of rollouts ranks the levels, an independent one (other keys) scores them
+        for part, salt in (("rank", 1000), ("score", 1001)):
+            ret, _ = tr.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, salt))
+            out[f"cvar_raw/{part}/return"] = ret.mean(axis=1)
+            if task.solved is not None:
+                out[f"cvar_raw/{part}/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
         for size, (env, levels) in perfect.items():
             ret, _ = tr.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size))
             out[f"perfect_raw/{size}"] = ret  # [L, attempts]
@@ -223,10 +230,11 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
     if len(rates) > 1:
         out["solve_rate/mean"] = np.mean([out[name] for name in rates], axis=0)
     for kind in ("solve_rate", "return"):
-        if f"cvar_raw/{kind}" in raw:
-            per_level = np.asarray(raw[f"cvar_raw/{kind}"], float)  # [S, N]
+        if f"cvar_raw/score/{kind}" in raw:
+            ranking = np.asarray(raw[f"cvar_raw/rank/{kind}"], float)  # [S, N]
+            scoring = np.asarray(raw[f"cvar_raw/score/{kind}"], float)  # [S, N], independent episodes
             for alpha, label in ALPHAS:
-                out[f"cvar/{kind}/{label}"] = np.array([cvar(row, alpha) for row in per_level])
+                out[f"cvar/{kind}/{label}"] = np.array([cvar(v, alpha, r) for v, r in zip(scoring, ranking)])
     for size, optimal in perfect_optimal.items():
         returns = np.asarray(raw[f"perfect_raw/{size}"], float)  # [S, L, attempts]
         if task.solved is not None:

@@ -7,17 +7,17 @@ import pytest
 from remidi.cli import main
 
 
-def write_run(folder, experiment, algo, values, wall=75.0, algos=None):
+def write_run(folder, experiment, algo, values, wall=75.0, algos=None, seeds=(0, 1)):
     folder.mkdir(parents=True)
     metrics = {name: {"mean": sum(v) / len(v), "std": 0.5, "per_seed": v} if v is not None
                else {"mean": None, "std": None, "per_seed": [None]} for name, v in values.items()}
     (folder / "summary.json").write_text(json.dumps({"experiment": experiment, "algo": algo, "preset": "smoke",
-                                                     "seeds": [0, 1], "metrics": metrics, "wall_s": wall,
+                                                     "seeds": list(seeds), "metrics": metrics, "wall_s": wall,
                                                      "resumed": False}))
     (folder / "config.json").write_text(json.dumps({"algo": algo, "algos": algos or [algo]}))
 
 
-def test_table_rows_follow_the_run_order_and_show_mean_and_std(tmp_path, capsys):
+def test_table_rows_follow_the_run_order_and_show_mean_sample_std_iqm_and_ci(tmp_path, capsys):
     order = ["remidi", "plr"]  # as the user gave them: not alphabetical
     write_run(tmp_path / "hop" / "plr", "brax-hopper", "plr", {"return/undisturbed": [1.0, 2.0],
                                                               "replay_fraction/type_b": [0.9, 1.0]}, algos=order)
@@ -25,9 +25,34 @@ def test_table_rows_follow_the_run_order_and_show_mean_and_std(tmp_path, capsys)
                                                                     "replay_fraction/type_b": None}, 30.0, order)
     assert main(["table", str(tmp_path / "hop"), "--metrics", "return/undisturbed,replay_fraction/type_b"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert lines[0] == "| experiment | algorithm | return/undisturbed | replay_fraction/type_b | seeds | preset | wall time |"
-    assert lines[2] == "| brax-hopper | remidi | 15.0 ± 0.5 | n/a | 2 | smoke | 30 s |"
-    assert lines[3] == "| brax-hopper | plr | 1.5 ± 0.5 | 0.95 ± 0.50 | 2 | smoke | 1.2 min |"
+    assert lines[0] == ("| experiment | algorithm | return/undisturbed | return/undisturbed IQM"
+                        " | return/undisturbed 95% CI | replay_fraction/type_b | replay_fraction/type_b IQM"
+                        " | replay_fraction/type_b 95% CI"
+                        " | seeds | preset | wall time |")
+    # ± is recomputed from per_seed with ddof 1 (the summary's "std": 0.5 is ddof 0): sd of (10, 20) = 7.07;
+    # of two seeds the IQM is their mean; the bootstrap means of two seeds are a, (a+b)/2, b with
+    # probabilities 1/4, 1/2, 1/4, so the 2.5% and 97.5% percentiles are a and b
+    assert lines[2] == ("| brax-hopper | remidi | 15.0 ± 7.1 | 15.0 | [10.0, 20.0] | n/a | n/a | n/a"
+                        " | 2 | smoke | 30 s |")
+    assert lines[3] == ("| brax-hopper | plr | 1.5 ± 0.7 | 1.5 | [1.0, 2.0] | 0.95 ± 0.07 | 0.95 | [0.90, 1.00]"
+                        " | 2 | smoke | 1.2 min |")
+    assert lines[4:] == ["", "± is the sample standard deviation over seeds (ddof 1); IQM is the interquartile mean "
+                         "(mean of the middle 50% of seeds); 95% CI is the percentile-bootstrap confidence interval "
+                         "of the mean over seeds (10,000 resamples)."]
+
+
+def test_table_iqm_and_ci_on_four_seeds_and_one_seed(tmp_path, capsys):
+    write_run(tmp_path / "a", "tmaze", "plr", {"solve_rate/mean": [0.0, 0.1, 0.3, 1.0]}, seeds=range(4))
+    write_run(tmp_path / "b", "tmaze", "remidi", {"solve_rate/mean": [0.5]}, seeds=[0])
+    assert main(["table", str(tmp_path / "a"), str(tmp_path / "b")]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    # mean 0.35; sd ddof 1 = sqrt((0.1225 + 0.0625 + 0.0025 + 0.4225) / 3) = 0.4509; IQM = mean(0.1, 0.3) = 0.2;
+    # the interval of the mean lies inside [min, max] and around the mean
+    cells = lines[2].split(" | ")
+    assert cells[:5] == ["| tmaze", "plr", "0.35 ± 0.45", "0.20", cells[4]] and cells[5] == "4"
+    low, high = map(float, cells[4].strip("[]").split(", "))
+    assert 0.0 <= low < 0.35 < high <= 1.0 and high - low > 0.3
+    assert lines[3].startswith("| tmaze | remidi | 0.50 | 0.50 | n/a | 1 |"), lines[3]  # one seed: no sd, no CI
 
 
 def test_a_folder_without_runs_is_one_line_exit_2(tmp_path, capsys):
@@ -45,8 +70,8 @@ def test_last_k_averages_each_seeds_last_logged_points(tmp_path, capsys):
     (folder / "metrics.csv").write_text("\n".join(rows) + "\n")
     assert main(["table", str(folder), "--metrics", "solve_rate/mean", "--last", "3"]) == 0
     line = capsys.readouterr().out.strip().splitlines()[2]
-    # seed 0: mean(0.1, 0.2, 0.3) = 0.2; seed 1: mean(0.5, 0.7) = 0.6 (NaN left out) → 0.40 ± 0.20
-    assert line.startswith("| tmaze | plr | 0.40 ± 0.20 | 2 |"), line
+    # seed 0: mean(0.1, 0.2, 0.3) = 0.2; seed 1: mean(0.5, 0.7) = 0.6 (NaN left out) → 0.40 ± 0.28 (ddof 1)
+    assert line.startswith("| tmaze | plr | 0.40 ± 0.28 | 0.40 | [0.20, 0.60] | 2 |"), line
     assert main(["table", str(folder), "--last", "0"]) == 2
     assert "--last: must be an integer ≥ 1" in capsys.readouterr().err
 

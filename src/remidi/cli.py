@@ -142,15 +142,24 @@ def _cmd_list(args) -> int:
     return 0
 
 
+def _undefined(x) -> bool:
+    return x is None or x != x  # null in JSON, NaN in memory
+
+
+def _mean_and_spread(m: dict) -> str:
+    """``mean ± sample std`` of a summary entry; ``n/a`` for an undefined mean, the mean alone for
+    one seed (no spread)."""
+    if _undefined(m["mean"]):
+        return f"{'n/a':>10s}"
+    return f"{m['mean']:10.4f}" + ("" if _undefined(m["std"]) else f" ± {m['std']:.4f}")
+
+
 def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     for algo, summary in summaries.items():
         n = len(summary["seeds"])
         print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {n} seed{'s' if n != 1 else ''}): final metrics")
         for name, m in summary["metrics"].items():
-            if m["mean"] is None or m["mean"] != m["mean"]:  # undefined (null in JSON, NaN in memory)
-                print(f"  {name:32s} {'n/a':>10s}")
-            else:
-                print(f"  {name:32s} {m['mean']:10.4f} ± {m['std']:.4f}")
+            print(f"  {name:32s} {_mean_and_spread(m)}")
     print(f"\nwrote {out}")
 
 
@@ -219,7 +228,7 @@ def _cmd_evaluate(args) -> int:
         n = len(entry["seeds"])
         print(f"\n{algo} ({n} seed{'s' if n != 1 else ''}, checkpoint of update {entry['update']})")
         for name, m in entry["metrics"].items():
-            print(f"  {name:32s} {m['mean']:10.4f} ± {m['std']:.4f}")
+            print(f"  {name:32s} {_mean_and_spread(m)}")
     print(f"\nwrote {Path(args.run_dir) / 'evaluate.json'}, evaluate.csv, evaluate.png")
     return 0
 
@@ -229,6 +238,21 @@ def _cmd_table(args) -> int:
 
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
     print(markdown_table(summaries(args.runs), metrics, args.last))
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from remidi.experiments.compare import compare_runs, format_comparison, plot_comparison
+    from remidi.experiments.table import summaries
+
+    if args.out is not None and Path(args.out).suffix.lower() != ".png":
+        raise RemidiError(f"--out: must be a .png file, got {args.out!r}")
+    result = compare_runs(summaries(args.runs), args.metric, args.algo, args.baseline, paired=args.paired,
+                          last=args.last)
+    print(format_comparison(result))
+    if args.out is not None:
+        plot_comparison(result, Path(args.out))
+        print(f"\nwrote {args.out}")
     return 0
 
 
@@ -342,15 +366,36 @@ def build_parser() -> argparse.ArgumentParser:
     main_args(evaluate)
     evaluate.set_defaults(func=_cmd_evaluate)
 
-    table = sub.add_parser("table", help="a Markdown table of finished runs (mean ± std over seeds, wall time)",
+    table = sub.add_parser("table", help="a Markdown table of finished runs (mean ± sample std, IQM, 95%% CI "
+                                         "over seeds)",
                            description="One row per experiment × algorithm of the given run folders (each "
-                                       "with summary.json, or with one sub-folder per algorithm).")
+                                       "with summary.json, or with one sub-folder per algorithm); per metric "
+                                       "the mean ± sample standard deviation over seeds (ddof 1), the "
+                                       "interquartile mean and the 95% percentile-bootstrap interval of the mean.")
     table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
     table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: the first three of the "
                                                          "first run's summary)")
     table.add_argument("--last", type=int, metavar="K", help="per seed, the mean of each metric's last K logged "
                                                             "points (metrics.csv) instead of its final value")
     table.set_defaults(func=_cmd_table)
+
+    compare = sub.add_parser("compare", help="an algorithm against a baseline on one metric: probability of "
+                                             "improvement, permutation p-value, interval plot",
+                             description="For each experiment in the given run folders: both algorithms' "
+                                         "per-seed mean ± sample std, IQM and 95% bootstrap intervals, the "
+                                         "probability of improvement P(ALGO > BASELINE) with its 95% bootstrap "
+                                         "interval, and the exact one-sided permutation p-value of ALGO's mean "
+                                         "being higher (Holm-adjusted over several experiments).")
+    compare.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
+    compare.add_argument("--metric", required=True, metavar="M", help="the metric compared (a summary.json key)")
+    compare.add_argument("--algo", required=True, metavar="A", help="the algorithm claimed better")
+    compare.add_argument("--baseline", required=True, metavar="B", help="the algorithm it is compared with")
+    compare.add_argument("--paired", action="store_true", help="pair the two algorithms' runs by seed (both "
+                                                               "must have the same seeds)")
+    compare.add_argument("--last", type=int, metavar="K", help="per seed, the mean of the metric's last K logged "
+                                                              "points (metrics.csv) instead of its final value")
+    compare.add_argument("--out", metavar="FIG.png", help="also draw the interval plot into FIG.png")
+    compare.set_defaults(func=_cmd_compare)
 
     bench = sub.add_parser("bench", help="throughput benchmarks (env-steps/s, compile time, memory)",
                            description="Time named workloads, each in a fresh process after compiling and "

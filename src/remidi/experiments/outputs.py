@@ -4,7 +4,8 @@
   resolved configuration, the command line, the package version).
 * ``metrics.csv``: long format, one row per (seed, step, metric, value).
 * ``summary.json``: ``{"experiment", "algo", "preset", "seeds", "metrics": {NAME: {"mean",
-  "std", "per_seed"}}}`` with the final value of each metric.
+  "std", "per_seed"}}}`` with the final value of each metric; ``std`` is the sample standard
+  deviation over seeds (ddof 1; null for one seed).
 * PNG plots.
 
 Each file is written to a temporary name in the same folder and moved into place, so a killed
@@ -110,11 +111,13 @@ def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
 
 
 def summarize(final: Mapping[str, np.ndarray]) -> dict[str, dict[str, Any]]:
-    """``{name: {"mean", "std", "per_seed"}}`` from final values f[S] per metric."""
+    """``{name: {"mean", "std", "per_seed"}}`` from final values f[S] per metric; ``std`` is the
+    sample standard deviation (ddof 1), NaN (null in JSON) for a single seed."""
     out = {}
     for name, values in final.items():
         values = np.asarray(values, dtype=float)
-        out[name] = {"mean": float(values.mean()), "std": float(values.std()), "per_seed": values.tolist()}
+        std = float(values.std(ddof=1)) if values.size > 1 else float("nan")
+        out[name] = {"mean": float(values.mean()), "std": std, "per_seed": values.tolist()}
     return out
 
 

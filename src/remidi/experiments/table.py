@@ -1,8 +1,13 @@
 """``remidi table RUN ...``: one Markdown table of finished runs (e.g. the paper's Table 1).
 
 A run folder holds ``summary.json`` (one algorithm) or sub-folders that do (several algorithms
-of one ``remidi run``). Each row is one experiment × algorithm: the chosen metrics as
-mean ± std over seeds, then the seeds, the preset and the training wall time.
+of one ``remidi run``). Each row is one experiment × algorithm: per chosen metric, three columns
+computed from its per-seed values (:mod:`remidi.stats`): mean ± sample standard deviation
+(ddof 1), the interquartile mean (IQM) and the 95% percentile-bootstrap confidence interval of the
+mean (seeds resampled; :data:`CI_SEED` fixes the resamples, so a table is reproducible); then the
+seeds, the preset and the training wall time. A note under the table says what ± and the
+interval are. The interval is of the mean, not of the IQM, because the mean is what the results
+page's verdicts judge; with 10 seeds the IQM averages the middle 6.
 
 ``last=K`` (``--last K``) replaces each seed's final value by its mean over the last K logged
 points of ``metrics.csv`` (for evaluation metrics whose single last point is noisy, such as a
@@ -14,8 +19,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
+from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
+
+CI_SEED = 0  # the bootstrap's random seed: the same data give the same table, digit for digit
+NOTE = ("± is the sample standard deviation over seeds (ddof 1); IQM is the interquartile mean "
+        "(mean of the middle 50% of seeds); 95% CI is the percentile-bootstrap confidence interval "
+        f"of the mean over seeds ({stats.N_RESAMPLES:,} resamples).")
 
 
 def _read_summary(path: Path) -> dict:
@@ -58,13 +71,26 @@ def summaries(folders: list[Path]) -> list[dict]:
     return found
 
 
-def _cell(entry: dict | None, digits: int) -> str:
-    if entry is None or entry.get("mean") is None or not math.isfinite(entry["mean"]):
-        return "n/a"
-    mean, std = entry["mean"], entry.get("std") or 0.0
-    if len(entry.get("per_seed", [])) <= 1:
-        return f"{mean:.{digits}f}"
-    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+def per_seed(entry: dict | None) -> list[float]:
+    """A metric entry's per-seed values f[S] (``None``, JSON's NaN, → NaN); ``[mean]`` for an
+    entry without them; ``[]`` for no entry."""
+    if entry is None:
+        return []
+    values = entry.get("per_seed", [entry.get("mean")])
+    return [math.nan if v is None else float(v) for v in values]
+
+
+def _cells(entry: dict | None, digits: int) -> list[str]:
+    """The metric's three cells: mean ± sample std (the mean alone for one seed), IQM, 95% CI of
+    the mean; ``n/a`` where undefined (no value, or a seed without one)."""
+    values = per_seed(entry)
+    mean, std = stats.mean_and_sample_std(values)
+    if not math.isfinite(mean):
+        return ["n/a"] * 3
+    low, high = stats.bootstrap_ci(values, np.mean, seed=CI_SEED)
+    return [f"{mean:.{digits}f}" if len(values) <= 1 else f"{mean:.{digits}f} ± {std:.{digits}f}",
+            f"{float(stats.iqm(values)):.{digits}f}",
+            f"[{low:.{digits}f}, {high:.{digits}f}]" if math.isfinite(low) else "n/a"]
 
 
 def _digits(metric: str) -> int:
@@ -76,7 +102,8 @@ def _digits(metric: str) -> int:
 
 def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
     """``{metric: {"mean", "std", "per_seed"}}``: per seed, the mean of the metric's last ``last``
-    logged points in the run's ``metrics.csv`` (NaN points left out); then mean and std over seeds."""
+    logged points in the run's ``metrics.csv`` (NaN points left out); then mean and std over seeds
+    (``outputs.summarize``: its ``std`` is ddof 0; the table computes its own from ``per_seed``)."""
     path = Path(doc["folder"]) / "metrics.csv"
     if not path.is_file():
         raise ConfigError(f"--last: no metrics.csv in {doc['folder']}")
@@ -94,8 +121,9 @@ def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
 
 
 def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int | None = None) -> str:
-    """The table as Markdown; ``metrics`` default to the first three of the first summary; with
-    ``last``, each metric is the mean of its last ``last`` logged points (:func:`windowed`)."""
+    """The table as Markdown, then a blank line and :data:`NOTE`; ``metrics`` default to the first
+    three of the first summary; with ``last``, each metric is the mean of its last ``last`` logged
+    points (:func:`windowed`)."""
     if not docs:
         raise ConfigError("RUN: no finished runs given")
     if last is not None and (not isinstance(last, int) or last < 1):
@@ -105,7 +133,8 @@ def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int
     unknown = [m for m in metrics if m not in known]
     if unknown:
         raise ConfigError(f"--metrics: no run has {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(known))}")
-    head = ["experiment", "algorithm", *metrics, "seeds", "preset", "wall time"]
+    head = ["experiment", "algorithm", *(c for m in metrics for c in (m, f"{m} IQM", f"{m} 95% CI")),
+            "seeds", "preset", "wall time"]
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for d in docs:
         wall = d.get("wall_s")
@@ -113,7 +142,7 @@ def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int
         if d.get("resumed"):
             wall += " (last part)"
         values = windowed(d, metrics, last) if last is not None else d["metrics"]
-        cells = [d["experiment"], d["algo"], *(_cell(values.get(m), _digits(m)) for m in metrics),
+        cells = [d["experiment"], d["algo"], *(c for m in metrics for c in _cells(values.get(m), _digits(m))),
                  str(len(d["seeds"])), d["preset"], wall]
         lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines) + "\n\n" + NOTE

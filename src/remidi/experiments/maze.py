@@ -115,7 +115,7 @@ def _experiment(name: str, tag: str, what: str, description: str):
 
 EXPERIMENTS = [
     _experiment("tmaze", "tmaze", "T-mazes",
-                "paper §6.3, Fig. 6-7: random mazes mixed with T-mazes whose goal side is hidden"),
+                "paper §6.3, Figs. 6a, 7a: random mazes mixed with T-mazes whose goal side is hidden"),
     _experiment("blindfold", "blind", "blind levels",
-                "paper §6.3: random mazes, half of them blindfolded (all-zero observations)"),
+                "paper §6.3, Figs. 6b, 7b: random mazes, half of them blindfolded (all-zero observations)"),
 ]

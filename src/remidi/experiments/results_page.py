@@ -1,0 +1,503 @@
+"""The results page (``docs/results.md``): every table and figure generated from committed data.
+
+``python -m remidi.experiments.results_page`` reads the runs under ``docs/results/data`` and
+rewrites, in ``docs/results.md``, every block between ``<!-- generated:NAME -->`` and
+``<!-- /generated:NAME -->``, and the figures under ``docs/results/``; ``--check`` only says
+which blocks differ from what the data give (exit 1), as ``tests/test_results_page.py`` does.
+
+**Data.** ``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its
+seeds): ``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``)
+and ``metrics.csv.gz``. Parts of one experiment × algorithm are merged by seed (a seed twice is
+an error), so seeds can be run in parts.
+
+**Claims and the verdict rule** (:data:`CLAIMS`, :func:`verdict`), stated before the runs: each
+claim of the paper has one primary metric, read from the final checkpoint (``evaluate.json``)
+or the final logged point (``summary.json``), and its comparisons "A's mean > B's" or bounds
+"A's mean lies in [lo, hi]". A comparison *passes* when the ordering holds in the mean and the
+probability of improvement's 95% interval lies above 0.5 or the one-sided exact permutation
+p-value, Holm-adjusted over the claim's comparisons, is below 0.05 (independent groups: the
+seeds of two algorithms share their initial network but not their curricula, so they are not
+paired). A bound passes when the 95% bootstrap interval of the mean lies inside it. A claim is
+**reproduced** when all of its tests pass, **partly** when all hold in the mean but not all pass
+or when some pass, **not reproduced** otherwise, and **pending** while an algorithm has fewer
+seeds than the claim requires. Everything else on the page is secondary and exploratory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import gzip
+import io
+import math
+import re
+import shutil
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from remidi import stats
+from remidi.errors import ConfigError
+from remidi.experiments import outputs
+from remidi.experiments.compare import compare
+
+ROOT = Path(__file__).resolve().parents[3]
+DATA = ROOT / "docs" / "results" / "data"
+PAGE = ROOT / "docs" / "results.md"
+README = ROOT / "README.md"
+FIGURES = ROOT / "docs" / "results"
+ALPHA = 0.05
+
+
+# ------------------------------------------------------------------------------------ claims
+@dataclass(frozen=True)
+class Claim:
+    """One claim of the paper: ``metric`` (``"evaluate:NAME"``: the final checkpoint's
+    ``remidi evaluate``; ``"summary:NAME"``: the run's last logged point) on ``experiments``;
+    ``greater``: pairs (A, B) claiming A's mean > B's on every experiment; ``bounds``: (A, lo,
+    hi) claiming A's mean in [lo, hi]; ``min_seeds``: seeds per algorithm a verdict needs."""
+
+    key: str
+    title: str
+    statement: str
+    metric: str
+    experiments: tuple[str, ...]
+    greater: tuple[tuple[str, str], ...] = ()
+    bounds: tuple[tuple[str, float, float], ...] = ()
+    min_seeds: int = 10
+
+
+BRAX = ("brax-ant", "brax-halfcheetah", "brax-hopper", "brax-walker2d")
+CLAIMS = (
+    Claim("tabular-distinct", "Fig. 3 (tabular, distinct)", "MMR-UED reaches regret ≈ 0 on all six levels "
+          "(bound: the greatest regret over the levels ≤ 0.05)",
+          "summary:regret/max", ("tabular-distinct",), bounds=(("mmr", 0.0, 0.05),), min_seeds=50),
+    Claim("tabular-shared-stagnation", "Figs. 4–5 (tabular, shared)", "MMR stagnates on h1 above ReMiDi's regret",
+          "summary:regret/h1", ("tabular-shared",), greater=(("mmr", "remidi"),), min_seeds=50),
+    Claim("tabular-shared-blp", "Figs. 4–5 (tabular, shared)", "ReMiDi reaches the exact BLP regret 0.175 on h1 "
+          "(bound: within ±0.025, the entropy bonus 0.1 keeps the policy off the pure best action)",
+          "summary:regret/h1", ("tabular-shared",), bounds=(("remidi", 0.15, 0.20),), min_seeds=50),
+    Claim("tmaze-heldout", "Fig. 6a (T-maze)", "ReMiDi solves more held-out mazes than PLR⊥ and minimax return",
+          "evaluate:solve_rate/mean", ("tmaze",), greater=(("remidi", "plr"), ("remidi", "minimax-return"))),
+    Claim("blindfold-heldout", "Fig. 6b (blindfold)", "ReMiDi solves more held-out mazes than PLR⊥ and minimax "
+          "return", "evaluate:solve_rate/mean", ("blindfold",),
+          greater=(("remidi", "plr"), ("remidi", "minimax-return"))),
+    Claim("tmaze-replay", "Fig. 7a (T-maze)", "PLR⊥ replays T-mazes far more than ReMiDi (the last 10% of training)",
+          "summary:replay_fraction/tmaze", ("tmaze",), greater=(("plr", "remidi"),)),
+    Claim("blindfold-replay", "Fig. 7b (blindfold)", "PLR⊥ replays blind levels far more than ReMiDi (the last 10% "
+          "of training)", "summary:replay_fraction/blind", ("blindfold",), greater=(("plr", "remidi"),)),
+    Claim("lever-visible", "Fig. 8 (lever)", "ReMiDi solves visible-answer levels more often than PLR⊥",
+          "evaluate:solve_rate/visible", ("lever",), greater=(("remidi", "plr"),)),
+    Claim("lever-accel", "beyond the paper (lever)", "ReMiDi over ACCEL solves visible-answer levels more often "
+          "than ACCEL", "evaluate:solve_rate/visible", ("lever",), greater=(("remidi-accel", "accel"),)),
+    Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
+          "on each morphology", "evaluate:return/undisturbed", BRAX,
+          greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
+)
+
+
+# -------------------------------------------------------------------------------------- data
+@dataclass
+class Run:
+    """One experiment × algorithm, its parts merged: per source (``summary``, ``evaluate``) and
+    metric ``{seed: value}``; ``curves``: metric → (steps i[T], values f[S, T]) in ``seeds`` order."""
+
+    experiment: str
+    algo: str
+    seeds: list[int] = field(default_factory=list)
+    values: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    folders: list[str] = field(default_factory=list)
+    commits: set = field(default_factory=set)
+    wall_s: float = 0.0
+    preset: str = ""
+
+
+def _read_metrics_gz(path: Path) -> list[tuple[int, int, str, float]]:
+    with gzip.open(path, "rt", newline="") as fh:
+        r = csv.reader(fh)
+        next(r)
+        return [(int(seed), int(step), name, float(value)) for seed, step, name, value in r]
+
+
+def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder: Path) -> None:
+    for name, entry in metrics.items():
+        per = run.values.setdefault(source, {}).setdefault(name, {})
+        for seed, value in zip(seeds, entry["per_seed"]):
+            if seed in per:
+                raise ConfigError(f"data: seed {seed} of {run.experiment} / {run.algo} is in two runs ({folder})")
+            per[seed] = math.nan if value is None else float(value)
+
+
+def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
+    """``{(experiment, algo): Run}`` of every run folder under ``data``."""
+    runs: dict[tuple[str, str], Run] = {}
+    for folder in sorted(p.parent for p in Path(data).glob("*/*/summary.json")):
+        summary = outputs.read_json(folder / "summary.json")
+        config = outputs.read_json(folder / "config.json")
+        key = (summary["experiment"], summary["algo"])
+        run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
+        seeds = list(summary["seeds"])
+        _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
+        if (folder / "evaluate.json").is_file():
+            entry = outputs.read_json(folder / "evaluate.json")["algorithms"][run.algo]
+            _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
+        if (folder / "metrics.csv.gz").is_file():
+            rows = _read_metrics_gz(folder / "metrics.csv.gz")
+            steps = np.array(sorted({step for _, step, _, _ in rows}))
+            index = {s: i for i, s in enumerate(steps)}
+            part: dict[str, np.ndarray] = {}
+            for seed, step, name, value in rows:
+                part.setdefault(name, np.full((len(seeds), len(steps)), np.nan))[seeds.index(seed), index[step]] = value
+            for name, values in part.items():
+                if name in run.curves and not np.array_equal(run.curves[name][0], steps):
+                    raise ConfigError(f"data: {folder} logs {name} at other steps than the other parts")
+                old = run.curves.get(name, (steps, np.zeros((0, len(steps)))))[1]
+                run.curves[name] = (steps, np.concatenate([old, values]))
+        run.seeds += seeds
+        page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
+        run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
+                           else str(folder))
+        run.commits.add((config.get("code") or {}).get("commit"))
+        run.wall_s += float(summary.get("wall_s", 0.0))
+    return runs
+
+
+def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:
+    """``{seed: value}`` of ``metric`` (``"source:name"``) for one experiment × algorithm ({} if none)."""
+    source, name = metric.split(":", 1)
+    run = runs.get((experiment, algo))
+    return dict(sorted(run.values.get(source, {}).get(name, {}).items())) if run else {}
+
+
+# ------------------------------------------------------------------------------------ verdict
+def _holds(value: float, low: float) -> bool:
+    return math.isfinite(value) and value > low
+
+
+def evaluate_claim(claim: Claim, runs: dict) -> dict:
+    """Every test of ``claim`` on ``runs``, and its :func:`verdict`."""
+    tests = []
+    for a, b in claim.greater:
+        for exp in claim.experiments:
+            x, y = metric_values(runs, exp, a, claim.metric), metric_values(runs, exp, b, claim.metric)
+            row = {"kind": "greater", "experiment": exp, "algo": a, "baseline": b, "n": (len(x), len(y))}
+            if x and y:
+                c = compare({exp: x}, {exp: y})["experiments"][exp]
+                row.update(mean=(c["algo"]["mean"], c["baseline"]["mean"]), ci=(c["algo"]["mean_ci"],
+                           c["baseline"]["mean_ci"]), poi=c["probability_of_improvement"], poi_ci=c["poi_ci"],
+                           p=c["p_value"])
+            tests.append(row)
+    ps = [t.get("p", math.nan) for t in tests]
+    for t, p in zip(tests, stats.holm(ps) if tests else []):
+        t["p_holm"] = float(p)
+        t["in_mean"] = "mean" in t and t["mean"][0] > t["mean"][1]
+        t["passes"] = t["in_mean"] and (_holds(t["poi_ci"][0], 0.5) or (math.isfinite(p) and p < ALPHA))
+    for a, lo, hi in claim.bounds:
+        for exp in claim.experiments:
+            x = metric_values(runs, exp, a, claim.metric)
+            row = {"kind": "bound", "experiment": exp, "algo": a, "bound": (lo, hi), "n": (len(x),)}
+            if x:
+                mean, _ = stats.mean_and_sample_std(list(x.values()))
+                ci = stats.bootstrap_ci(list(x.values()), np.mean)
+                row.update(mean=(mean,), ci=(ci,), in_mean=lo <= mean <= hi,
+                           passes=math.isfinite(ci[0]) and lo <= ci[0] and ci[1] <= hi)
+            tests.append(row)
+    return {"claim": claim, "tests": tests, "verdict": verdict(tests, claim.min_seeds)}
+
+
+def verdict(tests: list[dict], min_seeds: int) -> str:
+    """The verdict rule (module docstring) over a claim's tests."""
+    if not tests or any(min(t["n"]) < min_seeds for t in tests):
+        return "pending"
+    if all(t["passes"] for t in tests):
+        return "reproduced"
+    if all(t["in_mean"] for t in tests) or any(t["passes"] for t in tests):
+        return "partly"
+    return "not reproduced"
+
+
+# ------------------------------------------------------------------------------------ tables
+def _f(x: float, digits: int = 2) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _digits(metric: str) -> int:
+    name = metric.split(":", 1)[1]
+    return 3 if name.startswith("regret/") else 1 if name.startswith("return/") else 2
+
+
+def _p(p: float) -> str:
+    return "n/a" if not math.isfinite(p) else f"{p:.2g}" if p >= 0.001 else "< 0.001"
+
+
+def verdict_table(results: list[dict]) -> str:
+    lines = ["| claim | primary metric | test | A | B | P(A > B) [95% CI] | p (Holm) | seeds | verdict |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in results:
+        claim = r["claim"]
+        d = _digits(claim.metric)
+        for i, t in enumerate(r["tests"]):
+            head = (f"{claim.title}: {claim.statement}", f"`{claim.metric.split(':', 1)[1]}` "
+                    f"({'final checkpoint, 30 attempts' if claim.metric.startswith('evaluate') else 'last logged point'})"
+                    ) if i == 0 else ("", "")
+            where = f" on {t['experiment']}" if len(claim.experiments) > 1 else ""
+            if t["kind"] == "greater":
+                test = f"{t['algo']} > {t['baseline']}{where}"
+                a = f"{_f(t['mean'][0], d)} [{_f(t['ci'][0][0], d)}, {_f(t['ci'][0][1], d)}]" if "mean" in t else "—"
+                b = f"{_f(t['mean'][1], d)} [{_f(t['ci'][1][0], d)}, {_f(t['ci'][1][1], d)}]" if "mean" in t else "—"
+                poi = f"{_f(t['poi'])} [{_f(t['poi_ci'][0])}, {_f(t['poi_ci'][1])}]" if "poi" in t else "—"
+                p = f"{_p(t['p'])} ({_p(t['p_holm'])})" if "p" in t else "—"
+                seeds = f"{t['n'][0]} / {t['n'][1]}"
+            else:
+                lo, hi = t["bound"]
+                test = f"{t['algo']} in [{lo:g}, {hi:g}]{where}"
+                a = f"{_f(t['mean'][0], d)} [{_f(t['ci'][0][0], d)}, {_f(t['ci'][0][1], d)}]" if "mean" in t else "—"
+                b, poi, p, seeds = "", "", "", f"{t['n'][0]}"
+            verdict_cell = f"**{r['verdict']}**" if i == 0 else ""
+            lines.append(f"| {head[0]} | {head[1]} | {test} | {a} | {b} | {poi} | {p} | {seeds} | {verdict_cell} |")
+    return "\n".join(lines)
+
+
+def metrics_table(runs: dict, experiment: str, metrics: list[str], algos: list[str]) -> str:
+    """Per algorithm of ``experiment``: each metric's mean ± sample std [95% CI] (IQM)."""
+    head = "| algorithm | seeds | " + " | ".join(f"`{m.split(':', 1)[1]}`" for m in metrics) + " |"
+    lines = [head, "| --- | --- |" + " --- |" * len(metrics)]
+    for algo in algos:
+        if (experiment, algo) not in runs:
+            continue
+        cells = []
+        for m in metrics:
+            x = list(metric_values(runs, experiment, algo, m).values())
+            if not x:
+                cells.append("—")
+                continue
+            d = _digits(m)
+            mean, std = stats.mean_and_sample_std(x)
+            lo, hi = stats.bootstrap_ci(x, np.mean)
+            cells.append(f"{_f(mean, d)} ± {_f(std, d)} [{_f(lo, d)}, {_f(hi, d)}] ({_f(float(stats.iqm(x)), d)})")
+        lines.append(f"| {algo} | {len(runs[experiment, algo].seeds)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def per_seed_table(runs: dict, experiment: str, metric: str, algos: list[str]) -> str:
+    seeds = sorted({s for a in algos for s in metric_values(runs, experiment, a, metric)})
+    lines = ["| algorithm | " + " | ".join(f"seed {s}" for s in seeds) + " |", "| --- |" + " --- |" * len(seeds)]
+    d = _digits(metric)
+    for algo in algos:
+        v = metric_values(runs, experiment, algo, metric)
+        if v:
+            lines.append(f"| {algo} | " + " | ".join(_f(v[s], d) if s in v else "" for s in seeds) + " |")
+    return "\n".join(lines)
+
+
+def summary_lines(results: list[dict]) -> str:
+    """The README's summary: per claim its verdict and, where there are data, each algorithm's mean
+    of the primary metric."""
+    lines = []
+    for r in results:
+        claim = r["claim"]
+        d = _digits(claim.metric)
+        means = {}
+        for t in r["tests"]:
+            if "mean" in t:
+                names = (t["algo"], t["baseline"]) if t["kind"] == "greater" else (t["algo"],)
+                where = f" ({t['experiment'].removeprefix('brax-')})" if len(claim.experiments) > 1 else ""
+                for name, mean in zip(names, t["mean"]):
+                    means[f"{name}{where}"] = mean
+        numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
+        n = min((min(t["n"]) for t in r["tests"]), default=0)
+        detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({n} seeds)" if numbers else ""
+        lines.append(f"- {claim.title}: {claim.statement}: **{r['verdict']}**{detail}")
+    return "\n".join(lines)
+
+
+def provenance_table(runs: dict) -> str:
+    lines = ["| experiment | algorithm | preset | seeds | commit | training wall time (all parts) | data |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for (exp, algo), run in sorted(runs.items()):
+        commits = ", ".join(sorted(str(c)[:7] for c in run.commits))
+        lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {run.wall_s / 60:.1f} min | "
+                     + ", ".join(f"`{f}`" for f in run.folders) + " |")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------ figures
+SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, curves to draw)
+    "tabular-distinct": (["mmr"], ["summary:regret/max"], ["regret/max"]),
+    "tabular-shared": (["mmr", "remidi"], ["summary:regret/h1", "summary:regret/h3", "summary:regret/h5",
+                                           "summary:adversary_prob/theta5"],
+                       ["regret/h1", "regret/h3", "regret/h5", "adversary_prob/theta5", "adversary_prob/theta6"]),
+    "tmaze": (["dr", "plr", "minimax-return", "remidi"],
+              ["evaluate:solve_rate/mean", "summary:replay_fraction/tmaze", "evaluate:cvar/solve_rate/100%",
+               "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
+              ["solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze"]),
+    "blindfold": (["dr", "plr", "minimax-return", "remidi"],
+                  ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
+                   "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
+                  ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
+    "lever": (["dr", "plr", "minimax-return", "remidi", "accel", "remidi-accel"],
+              ["evaluate:solve_rate/visible", "evaluate:solve_rate/hidden", "summary:replay_fraction/hidden",
+               "summary:buffer_fraction/hidden"],
+              ["solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden"]),
+    **{m: (["dr", "plr", "minimax-return", "remidi"],
+           ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
+           ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},
+}
+
+
+def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> list[Path]:
+    """Per experiment its training curves (mean ± std over seeds) and per claim an interval plot."""
+    from remidi.experiments.plots import Curve, Panel, algorithm_style, plot_panels
+
+    written = []
+    for exp, (algos, _, curves) in SECTIONS.items():
+        present = [a for a in algos if (exp, a) in runs]
+        if not curves or not present:
+            continue
+        panels = []
+        for name in curves:
+            lines = [Curve(a, *runs[exp, a].curves[name], algorithm_style(a)) for a in present
+                     if name in runs[exp, a].curves and np.isfinite(runs[exp, a].curves[name][1]).any()]
+            panels.append(Panel(name, lines, ylabel=name, xlabel="update",
+                                missing=[a for a in present if a not in {c.label for c in lines}]))
+        path = folder / f"{exp}-curves.png"
+        plot_panels(path, panels, title=f"{exp}: mean ± std over seeds")
+        written.append(path)
+    for r in results:
+        if r["verdict"] != "pending":
+            path = folder / f"claim-{r['claim'].key}.png"
+            _interval_figure(path, r, runs)
+            written.append(path)
+    return written
+
+
+def _interval_figure(path: Path, result: dict, runs: dict) -> None:
+    """The claim's algorithms: mean and its 95% interval per experiment (rliable's style)."""
+    import matplotlib.pyplot as plt
+
+    from remidi.experiments.compare import _interval
+    from remidi.experiments.plots import _save, algorithm_style
+
+    claim = result["claim"]
+    algos = list(dict.fromkeys([a for pair in claim.greater for a in pair] + [b[0] for b in claim.bounds]))
+    rows = [(exp, a) for exp in claim.experiments for a in algos]
+    fig, ax = plt.subplots(figsize=(6, 0.6 + 0.4 * len(rows)))
+    for y, (exp, a) in enumerate(rows):
+        x = list(metric_values(runs, exp, a, claim.metric).values())
+        if x:
+            _interval(ax, y, float(np.mean(x)), stats.bootstrap_ci(x, np.mean), algorithm_style(a)["color"])
+            ax.plot(x, [y] * len(x), "k.", markersize=3, alpha=0.5)
+    ax.set_yticks(range(len(rows)), [f"{e} / {a}" if len(claim.experiments) > 1 else a for e, a in rows], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_title(f"{claim.title}: {claim.metric.split(':', 1)[1]} (mean, 95% CI, seeds) — {result['verdict']}",
+                 fontsize=8)
+    ax.grid(alpha=0.3, axis="x")
+    _save(fig, path)
+
+
+# ------------------------------------------------------------------------------------ collect
+MAX_POINTS = 100  # log points kept per curve in the committed metrics.csv.gz
+
+
+def collect(run: Path, data: Path = DATA) -> list[Path]:
+    """Copy a finished run (one algorithm's folder, or a folder of them) into
+    ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
+    ``evaluate.json`` and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`SECTIONS`'
+    curves, at most :data:`MAX_POINTS` evenly spaced log points). Returns the folders written."""
+    run = Path(run)
+    folders = [run] if (run / "summary.json").is_file() else sorted(p.parent for p in run.glob("*/summary.json"))
+    if not folders:
+        raise ConfigError(f"collect: no finished run (summary.json) in {run}")
+    written = []
+    for folder in folders:
+        summary = outputs.read_json(folder / "summary.json")
+        exp, algo = summary["experiment"], summary["algo"]
+        target = Path(data) / exp / f"{algo}-s{summary['seeds'][0]}"
+        target.mkdir(parents=True, exist_ok=True)
+        for name in ("config.json", "summary.json", "evaluate.json"):
+            if (folder / name).is_file():
+                shutil.copyfile(folder / name, target / name)
+        keep = set(SECTIONS.get(exp, ([], [], []))[2])
+        rows = [r for r in outputs.read_metrics_csv(folder / "metrics.csv") if r[2] in keep]
+        steps = sorted({r[1] for r in rows})
+        kept = {steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(len(steps), MAX_POINTS)).round()
+                                            .astype(int))} if steps else set()
+        with gzip.GzipFile(target / "metrics.csv.gz", "wb", mtime=0) as raw, \
+                io.TextIOWrapper(raw, newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["seed", "step", "metric", "value"])
+            w.writerows([seed, step, name, repr(value)] for seed, step, name, value in rows if step in kept)
+        written.append(target)
+    return written
+
+
+# --------------------------------------------------------------------------------------- page
+def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
+    """``{block name: Markdown}`` of every generated block, and the claims' results."""
+    results = [evaluate_claim(c, runs) for c in CLAIMS]
+    out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
+           "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
+                                       for r in results if r["verdict"] != "pending") or "_No verdict yet._"}
+    for exp, (algos, metrics, _) in SECTIONS.items():
+        out[f"table:{exp}"] = metrics_table(runs, exp, metrics, algos) if any((exp, a) in runs for a in algos) \
+            else "_No committed data yet._"
+        if any((exp, a) in runs for a in algos):
+            out[f"seeds:{exp}"] = per_seed_table(runs, exp, metrics[0], algos)
+        else:
+            out[f"seeds:{exp}"] = "_No committed data yet._"
+    return out, results
+
+
+#: a block: its opening line, its body (whole lines, possibly none), its closing marker
+_BLOCK = re.compile(r"(<!-- generated:(?P<name>[^ ]+) -->\n)(?P<body>.*?)(<!-- /generated:(?P=name) -->)", re.S)
+
+
+def render(page: str, generated: dict[str, str]) -> str:
+    """``page`` with every generated block's body replaced (unknown block names: ConfigError)."""
+    def sub(m):
+        name = m.group("name")
+        if name not in generated:
+            raise ConfigError(f"page: unknown generated block {name!r}; known: {', '.join(generated)}")
+        return m.group(1) + generated[name] + "\n" + m.group(4)
+
+    return _BLOCK.sub(sub, page)
+
+
+def stale_blocks(page: str, generated: dict[str, str]) -> list[str]:
+    """Names of the page's generated blocks whose body differs from the data's."""
+    return [m.group("name") for m in _BLOCK.finditer(page) if generated.get(m.group("name"), "") + "\n" != m.group("body")]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m remidi.experiments.results_page", description=__doc__.split("\n")[0])
+    parser.add_argument("--data", type=Path, default=DATA)
+    parser.add_argument("--page", type=Path, default=PAGE)
+    parser.add_argument("--check", action="store_true", help="only report blocks that differ from the data (exit 1)")
+    parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--collect", nargs="+", type=Path, metavar="RUN",
+                        help="first copy these finished runs' small outputs into --data")
+    args = parser.parse_args(argv)
+    for run in args.collect or []:
+        for target in collect(run, args.data):
+            print(f"collected {target}", file=sys.stderr)
+    runs = load_runs(args.data)
+    generated, results = blocks(runs)
+    pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's summary
+    if args.check:
+        stale = [f"{p.name}:{name}" for p in pages for name in stale_blocks(p.read_text(), generated)]
+        print("the page matches the data" if not stale else "stale blocks: " + ", ".join(stale))
+        return 1 if stale else 0
+    for page in pages:
+        page.write_text(render(page.read_text(), generated))
+    figures = [] if args.no_figures else draw_figures(runs, results, args.page.parent / "results")
+    for r in results:
+        print(f"{r['claim'].key:28s} {r['verdict']}")
+    print(f"wrote {args.page}" + (f" and {len(figures)} figures" if figures else ""), file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,135 @@
+"""docs/results.md is generated from committed data: the page (and the README's summary) match
+what the data give, the verdict rule says what it states, and collecting a run keeps what the
+page needs."""
+
+import csv
+import gzip
+import json
+
+import numpy as np
+import pytest
+
+from remidi.errors import ConfigError
+from remidi.experiments import results_page as rp
+
+
+def test_the_page_and_the_readme_match_the_committed_data():
+    generated, _ = rp.blocks(rp.load_runs(rp.DATA))
+    for page in (rp.PAGE, rp.README):
+        text = page.read_text()
+        assert "<!-- generated:" in text, page
+        assert rp.stale_blocks(text, generated) == [], f"{page}: run python -m remidi.experiments.results_page"
+
+
+def write_run(root, experiment, algo, seeds, summary=None, evaluate=None):
+    """A finished run folder as `remidi run` and `remidi evaluate` write it (metrics: name → per seed)."""
+    folder = root / experiment / f"{algo}-s{seeds[0]}"
+    folder.mkdir(parents=True)
+    entry = lambda per: {"mean": float(np.mean(per)), "std": 0.0, "per_seed": list(per)}  # noqa: E731
+    (folder / "config.json").write_text(json.dumps({"code": {"commit": "abc1234def"}}))
+    (folder / "summary.json").write_text(json.dumps({
+        "experiment": experiment, "algo": algo, "preset": "cpu", "seeds": list(seeds), "wall_s": 60.0,
+        "metrics": {k: entry(v) for k, v in (summary or {}).items()}}))
+    if evaluate:
+        (folder / "evaluate.json").write_text(json.dumps({"algorithms": {algo: {
+            "seeds": list(seeds), "metrics": {k: entry(v) for k, v in evaluate.items()}}}}))
+    return folder
+
+
+CLAIM = rp.Claim("x", "Fig. X", "A beats B and C", "evaluate:solve_rate/mean", ("tmaze",),
+                 greater=(("remidi", "plr"), ("remidi", "minimax-return")))
+
+
+def verdict_of(tmp_path, remidi, plr, mr):
+    for algo, values in (("remidi", remidi), ("plr", plr), ("minimax-return", mr)):
+        write_run(tmp_path, "tmaze", algo, list(range(len(values))), evaluate={"solve_rate/mean": values})
+    return rp.evaluate_claim(CLAIM, rp.load_runs(tmp_path))
+
+
+def test_clear_separation_on_ten_seeds_is_reproduced(tmp_path):
+    r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(10)], [0.1 + 0.01 * i for i in range(10)],
+                   [0.2 + 0.01 * i for i in range(10)])
+    assert r["verdict"] == "reproduced"
+    for t in r["tests"]:
+        assert t["poi"] == 1.0 and t["poi_ci"][0] == 1.0
+        assert t["p"] == pytest.approx(1 / 184756)  # full separation of 10 against 10: 1 / C(20, 10)
+        assert t["p_holm"] == pytest.approx(2 / 184756)  # both comparisons equal: Holm multiplies the smaller by 2
+
+
+def test_an_ordering_in_the_mean_only_is_partly(tmp_path):
+    rng = np.random.default_rng(0)
+    noise = lambda: rng.normal(0, 0.3, 10)  # noqa: E731
+    r = verdict_of(tmp_path, 0.35 + noise(), 0.3 + noise(), 0.3 + noise())
+    assert all(t["in_mean"] for t in r["tests"]) and not all(t["passes"] for t in r["tests"])
+    assert r["verdict"] == "partly"
+
+
+def test_one_comparison_passing_and_one_reversed_is_partly(tmp_path):
+    r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(10)], [0.1 + 0.01 * i for i in range(10)],
+                   [0.9 + 0.01 * i for i in range(10)])
+    assert [t["passes"] for t in r["tests"]] == [True, False]
+    assert r["verdict"] == "partly"
+
+
+def test_the_reverse_ordering_is_not_reproduced(tmp_path):
+    r = verdict_of(tmp_path, [0.1] * 10, [0.5 + 0.01 * i for i in range(10)], [0.4 + 0.01 * i for i in range(10)])
+    assert r["verdict"] == "not reproduced"
+
+
+def test_fewer_seeds_than_the_claim_needs_is_pending(tmp_path):
+    r = verdict_of(tmp_path, [0.9] * 9, [0.1] * 10, [0.1] * 10)
+    assert r["verdict"] == "pending"
+
+
+def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
+    claim = rp.Claim("b", "Fig. B", "near 0.175", "summary:regret/h1", ("tabular-shared",),
+                     bounds=(("remidi", 0.15, 0.20),), min_seeds=4)
+    write_run(tmp_path / "in", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.18, 0.19, 0.18, 0.19]})
+    write_run(tmp_path / "edge", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.17, 0.19]})
+    assert rp.evaluate_claim(claim, rp.load_runs(tmp_path / "in"))["verdict"] == "reproduced"
+    edge = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "edge"))
+    assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly"
+
+
+def test_parts_of_one_algorithm_are_merged_by_seed_and_a_seed_twice_is_an_error(tmp_path):
+    write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
+    write_run(tmp_path, "tmaze", "plr", [5, 6], evaluate={"solve_rate/mean": [0.3, 0.4]})
+    runs = rp.load_runs(tmp_path)
+    assert rp.metric_values(runs, "tmaze", "plr", "evaluate:solve_rate/mean") == {0: 0.1, 1: 0.2, 5: 0.3, 6: 0.4}
+    assert runs["tmaze", "plr"].seeds == [0, 1, 5, 6]
+    write_run(tmp_path, "tmaze", "plr", [1, 2], evaluate={"solve_rate/mean": [0.5, 0.6]})
+    with pytest.raises(ConfigError, match="seed 1 of tmaze / plr is in two runs"):
+        rp.load_runs(tmp_path)
+
+
+def test_collect_keeps_the_files_and_the_curves_the_page_draws(tmp_path):
+    run = write_run(tmp_path / "runs", "tmaze", "plr", [3, 4], summary={"solve_rate/mean": [0.1, 0.2]},
+                    evaluate={"solve_rate/mean": [0.1, 0.2]})
+    with open(run / "metrics.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["seed", "step", "metric", "value"])
+        for step in range(0, 3000, 10):  # 300 log points, two metrics, one the page does not draw
+            for seed in (3, 4):
+                w.writerow([seed, step, "solve_rate/mean", step / 3000])
+                w.writerow([seed, step, "regret/undrawn", 1.0])
+    [target] = rp.collect(run, tmp_path / "data")
+    assert target == tmp_path / "data" / "tmaze" / "plr-s3"
+    assert {p.name for p in target.iterdir()} == {"config.json", "summary.json", "evaluate.json", "metrics.csv.gz"}
+    with gzip.open(target / "metrics.csv.gz", "rt") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["metric"] for r in rows} == {"solve_rate/mean"}
+    steps = sorted({int(r["step"]) for r in rows})
+    assert len(steps) == rp.MAX_POINTS and steps[0] == 0 and steps[-1] == 2990
+    runs = rp.load_runs(tmp_path / "data")
+    curve_steps, values = runs["tmaze", "plr"].curves["solve_rate/mean"]
+    assert values.shape == (2, rp.MAX_POINTS) and np.array_equal(curve_steps, steps)
+
+
+def test_render_replaces_blocks_and_refuses_unknown_ones():
+    page = "a\n<!-- generated:x -->\nold\n<!-- /generated:x -->\nb\n<!-- generated:y -->\n<!-- /generated:y -->\n"
+    out = rp.render(page, {"x": "new", "y": "| t |"})
+    assert out == "a\n<!-- generated:x -->\nnew\n<!-- /generated:x -->\nb\n<!-- generated:y -->\n| t |\n<!-- /generated:y -->\n"
+    assert rp.stale_blocks(out, {"x": "new", "y": "| t |"}) == []
+    assert rp.stale_blocks(page, {"x": "new", "y": "| t |"}) == ["x", "y"]
+    with pytest.raises(ConfigError, match="unknown generated block 'x'"):
+        rp.render(page, {"y": ""})

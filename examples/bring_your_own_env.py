@@ -41,7 +41,7 @@ from flax import struct
 from remidi import run_ued
 from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
-from remidi.engine.train import ReMiDiConfig, UEDConfig
+from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.errors import RemidiError
 

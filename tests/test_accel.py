@@ -11,6 +11,7 @@ import pytest
 
 from remidi.engine import buffer as buf
 from remidi.engine import train as tr
+from remidi.engine.validation import validate_ued_config
 from remidi.envs.brax import BraxLevel, BraxUED, seed_data
 from remidi.envs.maze import _tmaze_layout, maze_task, mutate_maze
 from remidi.errors import ConfigError
@@ -149,12 +150,12 @@ def test_remidi_over_accel_rejects_edits_a_frozen_buffer_explains():
 def test_accel_needs_a_mutator_and_easy_start_an_easy_generator():
     no_mutator = R(TASK, mutate_level=None)
     with pytest.raises(ConfigError, match="--algo: accel edits levels, but this task has no level mutator"):
-        tr.validate_ued_config(CFG, "accel", no_mutator)
-    tr.validate_ued_config(CFG, "plr", no_mutator)  # the others do not need one
+        validate_ued_config(CFG, "accel", no_mutator)
+    validate_ued_config(CFG, "plr", no_mutator)  # the others do not need one
     with pytest.raises(ConfigError, match="accel.easy_start: this task has no easy-level generator"):
-        tr.validate_ued_config(R(CFG, accel=R(CFG.accel, easy_start=True)), "accel", TASK)
+        validate_ued_config(R(CFG, accel=R(CFG.accel, easy_start=True)), "accel", TASK)
     with pytest.raises(ConfigError, match="accel.num_edits: must be an integer ≥ 1"):
-        tr.validate_ued_config(R(CFG, accel=R(CFG.accel, num_edits=0)), "accel", TASK)
+        validate_ued_config(R(CFG, accel=R(CFG.accel, num_edits=0)), "accel", TASK)
 
 
 def test_maze_easy_start_levels_have_no_walls_but_the_task_mixture():

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from remidi.engine import driver
+from remidi.engine import evaluation
 from remidi.engine import train as tr
+from remidi.engine.validation import validate_ued_config
 from remidi.errors import ConfigError
 from test_ued_engine import TASK, TINY  # the task object too: programs are cached per task object
 
@@ -19,7 +21,7 @@ R = dataclasses.replace
 def hidden_policy(setup, runner):
     """f32[S, 64, 64]: every seed's first-step action probabilities on the 64 hidden levels."""
     levels = TASK.eval_sets["hidden"]
-    return np.asarray(jax.jit(jax.vmap(lambda r: tr.first_step_policy(setup, r, TASK.env, levels)))(runner))
+    return np.asarray(jax.jit(jax.vmap(lambda r: evaluation.first_step_policy(setup, r, TASK.env, levels)))(runner))
 
 
 def run(setup, runner, updates):
@@ -56,6 +58,6 @@ def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
 def test_combine_needs_the_prefix_tracker():
     cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="per_step"))
     with pytest.raises(ConfigError, match="remidi.tracker: must be prefix with remidi.policy=combine"):
-        tr.validate_ued_config(cfg, "remidi", TASK)
+        validate_ued_config(cfg, "remidi", TASK)
     with pytest.raises(ConfigError, match="remidi.policy: unknown value 'exact'; allowed: masked, combine"):
-        tr.validate_ued_config(R(TINY, remidi=R(TINY.remidi, policy="exact")), "remidi", TASK)
+        validate_ued_config(R(TINY, remidi=R(TINY.remidi, policy="exact")), "remidi", TASK)

@@ -13,6 +13,8 @@ from scipy import stats
 
 from remidi.engine import normalize as nrm
 from remidi.engine import train as tr
+from remidi.engine.config import ReMiDiConfig, UEDConfig
+from remidi.engine.validation import validate_ued_config
 from remidi.engine.distributions import CATEGORICAL, GAUSSIAN, for_task
 from remidi.engine.networks import make_network
 from remidi.engine.ppo import Batch, PPOConfig, create_train_state, ppo_update
@@ -151,11 +153,11 @@ def target_task():
 
 
 TASK = target_task()
-TINY = tr.UEDConfig(num_updates=6, num_envs=8, num_steps=4, network="mlp", hidden_size=16, eval_every=3,
+TINY = UEDConfig(num_updates=6, num_envs=8, num_steps=4, network="mlp", hidden_size=16, eval_every=3,
                     eval_attempts=2, checkpoint_every=3, reward_scale=0.1, normalize_obs=True,
                     ppo=PPOConfig(epochs=1, minibatches=2),
-                    buffer=dataclasses.replace(tr.UEDConfig().buffer, capacity=8, min_fill=0.25),
-                    remidi=tr.ReMiDiConfig(num_buffers=2, buffer_capacity=8, steps_per_buffer=3, tracker_budget=2))
+                    buffer=dataclasses.replace(UEDConfig().buffer, capacity=8, min_fill=0.25),
+                    remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=8, steps_per_buffer=3, tracker_budget=2))
 
 
 # DR trains on fresh levels; ReMiDi's first buffer is PLR⊥ (minimax return differs only in its score).
@@ -185,12 +187,12 @@ def test_normalize_obs_rules_are_one_line_errors():
     from remidi.errors import ConfigError
 
     with pytest.raises(ConfigError, match="^remidi.policy: must be masked with normalize_obs"):
-        tr.validate_ued_config(dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, policy="combine")),
+        validate_ued_config(dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, policy="combine")),
                                "remidi", TASK)
     with pytest.raises(ConfigError, match="^reward_scale: must be > 0"):
-        tr.validate_ued_config(dataclasses.replace(TINY, reward_scale=0.0), "plr", TASK)
+        validate_ued_config(dataclasses.replace(TINY, reward_scale=0.0), "plr", TASK)
     with pytest.raises(ConfigError, match="^lstm_size: the network mlp has no such layer"):
-        tr.validate_ued_config(dataclasses.replace(TINY, lstm_size=8), "plr", TASK)
+        validate_ued_config(dataclasses.replace(TINY, lstm_size=8), "plr", TASK)
 
 
 @pytest.mark.parametrize("score", ["pvl", "maxmc"])

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from remidi.engine import evaluation
 from remidi.engine import train as tr
 from remidi.envs.lever import lever_task
 from remidi.experiments.lever import paper_config
@@ -21,7 +22,7 @@ MMR_HIDDEN = 20 * (1 - 1 / 64)  # minimax regret on hidden levels: pull a lever 
 def evaluate_with():
     setup = tr.make_setup(TASK, CFG, "plr")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    evaluate = jax.jit(lambda r: tr.evaluate(setup, r, jax.random.PRNGKey(1)))
+    evaluate = jax.jit(lambda r: evaluation.evaluate(setup, r, jax.random.PRNGKey(1)))
 
     def run(bias):
         """Evaluate the policy whose logits are ``bias`` f32[64] whatever it observes."""
@@ -64,7 +65,7 @@ def test_sampled_regret_where_no_expected_return_is_known(evaluate_with):
     params = runner.train_state.params
     out = params["heads"]["policy_out"]
     params["heads"]["policy_out"] = {"kernel": jnp.zeros_like(out["kernel"]), "bias": jnp.zeros(64).at[0].set(50.0)}
-    m = jax.jit(lambda r: tr.evaluate(setup, r, jax.random.PRNGKey(1)))(
+    m = jax.jit(lambda r: evaluation.evaluate(setup, r, jax.random.PRNGKey(1)))(
         runner.replace(train_state=runner.train_state.replace(params=params)))
     assert float(m["regret/visible/worst"]) == pytest.approx(2.0)
     assert float(m["regret/visible/mean"]) == pytest.approx(2.0 * 63 / 64)

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from remidi.engine import scores as sc
-from remidi.engine.train import first_episode_return
+from remidi.engine.evaluation import first_episode_return
 
 REWARD = jnp.array([[0.0, 1.0], [2.0, 0.0], [0.0, 3.0], [5.0, 0.0]])  # [T=4, N=2]
 DONE = jnp.array([[False, True], [True, False], [False, False], [False, True]])

@@ -10,7 +10,7 @@ import pytest
 
 from remidi.engine import driver
 from remidi.engine.checkpoint import load_checkpoint, save_checkpoint
-from remidi.engine.train import validate_ued_config
+from remidi.engine.validation import validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.envs.lever import lever_task
 from remidi.errors import ConfigError
@@ -187,7 +187,7 @@ def test_one_update_rolls_out_once(algo, monkeypatch):
 
 
 def test_degenerate_but_valid_runs_are_warned_about():
-    from remidi.engine.train import run_warnings
+    from remidi.engine.validation import run_warnings
     from remidi.envs.maze import maze_task
     from remidi.experiments.maze import paper_config as maze_paper
 

@@ -67,7 +67,8 @@ def check_overrides(overrides: dict) -> None:
     any benchmark starts."""
     from remidi.engine.buffer import validate_buffer_config
     from remidi.engine.ppo import validate_ppo_config
-    from remidi.engine.train import UEDConfig, validate_section
+    from remidi.engine.config import UEDConfig
+    from remidi.engine.validation import validate_section
     from remidi.errors import positive_int
     from remidi.experiments.config import apply_overrides
 

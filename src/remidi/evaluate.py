@@ -194,28 +194,29 @@ def _solvable_levels(task, count: int, seed: int):
 def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
     """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
     evaluation of one run: the task's evaluation sets as training evaluates them
-    (:func:`remidi.engine.train.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
+    (:func:`remidi.engine.evaluation.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
     the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
     import dataclasses
 
     import jax
     import jax.numpy as jnp
 
+    from remidi.engine import evaluation
     from remidi.engine import train as tr
 
     task = setup.task
     held_out = tr.make_setup(task, dataclasses.replace(setup.cfg, eval_attempts=attempts), setup.algo)
 
     def one_seed(runner, key):
-        out = dict(tr.evaluate(held_out, runner, key))
+        out = dict(evaluation.evaluate(held_out, runner, key))
         # CVaR: one set of rollouts ranks the levels, an independent one (other keys) scores them
         for part, salt in (("rank", 1000), ("score", 1001)):
-            ret, _ = tr.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, salt))
+            ret, _ = evaluation.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, salt))
             out[f"cvar_raw/{part}/return"] = ret.mean(axis=1)
             if task.solved is not None:
                 out[f"cvar_raw/{part}/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
         for size, (env, levels) in perfect.items():
-            ret, _ = tr.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size))
+            ret, _ = evaluation.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size))
             out[f"perfect_raw/{size}"] = ret  # [L, attempts]
         return out
 

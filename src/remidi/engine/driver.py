@@ -38,7 +38,10 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from remidi.engine import evaluation
 from remidi.engine import train as tr
+from remidi.engine.config import UEDConfig
+from remidi.engine.validation import validate_ued_config
 from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history, remove_stale_temporaries,
                                       save_run)
 from remidi.envs.interface import UEDTask
@@ -114,7 +117,7 @@ def _run_block(setup: tr.Setup, runner, length: int):
 
 @partial(jax.jit, static_argnums=0)
 def _evaluate(setup: tr.Setup, runner, keys):
-    return over_seeds(lambda r, k: {**tr.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
+    return over_seeds(lambda r, k: {**evaluation.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
 
 
 def check_devices(devices: int, num_seeds: int) -> None:
@@ -219,7 +222,7 @@ class TrainResult:
     runner: object
 
 
-def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str | tr.Algorithm, seeds: list[int],
+def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | tr.Algorithm, seeds: list[int],
                 out: Path | None = None, resume: bool = False, progress: bool = True,
                 on_block: Callable[[int, dict], None] | None = None, devices: int = 1) -> TrainResult:
     """Train ``algo`` (a name or an :class:`~remidi.engine.algorithms.Algorithm`) for every seed
@@ -232,7 +235,7 @@ def train_seeds(task: UEDTask, cfg: tr.UEDConfig, algo: str | tr.Algorithm, seed
     number of seeds; :func:`check_devices`). In a multi-process run (``jax.distributed``) every
     process calls this with the same arguments, all get the full results, and only process 0
     writes checkpoints."""
-    tr.validate_ued_config(cfg, algo, task)  # the CLI's checks, for Python callers too
+    validate_ued_config(cfg, algo, task)  # the CLI's checks, for Python callers too
     check_devices(devices, len(seeds))
     setup = tr.make_setup(task, cfg, algo)
     desc = f"{setup.algo.name} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + \

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
-from remidi.engine.train import ReMiDiConfig, UEDConfig
+from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.brax import BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES
 from remidi.errors import ConfigError, choice, probability, require
 from remidi.experiments.ued import make_ued_experiment

@@ -11,7 +11,7 @@ Two entry points:
 
 * Command line: ``remidi run mypkg.tasks:make_task [--algo ...] [--set key=value ...]`` imports
   ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) and runs it
-  on the engine's default :class:`~remidi.engine.train.UEDConfig` with your ``--set`` keys;
+  on the engine's default :class:`~remidi.engine.config.UEDConfig` with your ``--set`` keys;
   ``remidi run --resume DIR`` finds it again by that import path.
 
 Metrics reported and plotted: ``solve_rate/<set>`` (and ``regret/<set>/mean`` when the task gives
@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 import jax
 
-from remidi.engine.train import UEDConfig
+from remidi.engine.config import UEDConfig
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, resume_experiment, run_experiment

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
-from remidi.engine.train import ReMiDiConfig, UEDConfig
+from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.lever import lever_task
 from remidi.experiments.ued import make_ued_experiment
 

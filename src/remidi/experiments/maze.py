@@ -15,7 +15,7 @@ import numpy as np
 
 from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
-from remidi.engine.train import ReMiDiConfig, UEDConfig
+from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.maze import HELD_OUT_NAMES, TRAIN_SIZE, maze_task
 from remidi.errors import probability, require
 from remidi.experiments.ued import make_ued_experiment

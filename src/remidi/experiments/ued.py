@@ -1,7 +1,7 @@
 """Experiments on the UED engine (DR, PLR⊥, minimax return, ReMiDi), shared by every domain.
 
 A domain supplies its :class:`~remidi.envs.interface.UEDTask`, its default
-:class:`~remidi.engine.train.UEDConfig`, presets and which metrics to plot; this module turns
+:class:`~remidi.engine.config.UEDConfig`, presets and which metrics to plot; this module turns
 that into an :class:`~remidi.experiments.base.Experiment`.
 """
 
@@ -15,7 +15,8 @@ import numpy as np
 
 from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
-from remidi.engine.train import UEDConfig, run_warnings, validate_ued_config
+from remidi.engine.config import UEDConfig
+from remidi.engine.validation import run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels

@@ -1,0 +1,114 @@
+"""A UED run's configuration: :class:`UEDConfig` (with the ReMiDi and ACCEL sections) and what it
+derives for an algorithm (its score, number of buffers, buffer settings). Each key's help text
+lives next to its field (``remidi list`` prints them)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from remidi.engine import buffer as buf
+from remidi.engine.algorithms import Algorithm
+from remidi.engine.ppo import PPOConfig
+
+POLICIES = ("masked", "combine")
+
+
+@dataclass(frozen=True)
+class ReMiDiConfig:
+    num_buffers: int = field(default=2, metadata={
+        "help": "ReMiDi: number of level buffers (adversaries) in sequence"})
+    buffer_capacity: int = field(default=32, metadata={
+        "help": "ReMiDi: size of each buffer"})
+    steps_per_buffer: int = field(default=1000, metadata={
+        "help": "ReMiDi: updates (train steps) on a buffer before it is frozen (replays with remidi.count=replays)"})
+    # what steps_per_buffer counts. Every preset counts "updates" (train steps, replay or not): the
+    # paper's text switches adversaries "every N iterations" and the authors' code counts every
+    # train step; the switch then falls on the same update for every seed and does not move with
+    # buffer.replay_prob. "replays" (only replay steps count) is kept for experimentation.
+    count: str = field(default="updates", metadata={
+        "help": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' "
+                "unit) or replays"})
+    tracker: str = field(default="prefix", metadata={
+        "help": "ReMiDi: prefix (one frozen level made the whole prefix) or per_step (authors' rule)"})
+    # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
+    # env's first observation are stepped, at most this many; 0 steps every frozen level (the
+    # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
+    tracker_budget: int = field(default=64, metadata={
+        "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
+    # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
+    # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
+    # buffer acts on the trajectories realisable under that buffer's levels
+    policy: str = field(default="masked", metadata={
+        "help": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)"})
+
+
+@dataclass(frozen=True)
+class AccelConfig:
+    """ACCEL's editing (algorithms with ``edits``: ``accel``, ``remidi-accel``)."""
+
+    num_edits: int = field(default=5, metadata={
+        "help": "ACCEL: edits per edited level (a maze edit flips one wall or moves the goal)"})
+    easy_start: bool = field(default=False, metadata={
+        "help": "ACCEL: fresh levels from the task's easy generator (mazes: no walls)"})
+
+
+@dataclass(frozen=True)
+class UEDConfig:
+    """A UED run's hyper-parameters (hashable; static under jit)."""
+
+    num_updates: int = field(default=2500, metadata={
+        "help": "train steps (one rollout + one PPO update or buffer insertion each)"})
+    num_envs: int = field(default=32, metadata={"help": "parallel environments (levels) per train step"})
+    num_steps: int = field(default=16, metadata={"help": "environment steps per env per rollout"})
+    # one of scores.SCORES; minimax-return always uses neg_return (its Algorithm's score)
+    score: str = field(default="perfect_regret", metadata={
+        "help": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return, learnability (SFL: "
+                "p(1 − p), p the level's solve rate in the rollout)"})
+    # perfect_regret against the paper's discounted utility U = E[Σ_t γ^t r_t] (γ = ppo.gamma) on
+    # both sides; False: undiscounted returns on both sides
+    discounted_regret: bool = field(default=True, metadata={
+        "help": "perfect_regret on the paper's discounted utility Σ γ^t r_t (γ = ppo.gamma), both the "
+                "optimum and the agent's return; false: undiscounted on both sides"})
+    network: str = field(default="mlp", metadata={"help": "actor-critic: mlp, maze_lstm or mlp_lstm"})
+    hidden_size: int = field(default=0, metadata={
+        "help": "width of each fully-connected trunk layer (0: the network's default)"})
+    lstm_size: int = field(default=0, metadata={
+        "help": "units of the network's LSTM (0: the network's default)"})
+    # PPO learns from rewards × reward_scale (returns, scores and metrics stay unscaled)
+    reward_scale: float = field(default=1.0, metadata={
+        "help": "PPO learns from reward × reward_scale (returns and scores stay unscaled)"})
+    normalize_obs: bool = field(default=False, metadata={
+        "help": "normalise observations by their running mean and std (kept in checkpoints)"})
+    eval_every: int = field(default=100, metadata={"help": "updates between evaluations (and logged points)"})
+    eval_attempts: int = field(default=10, metadata={"help": "sampled attempts per evaluation level"})
+    checkpoint_every: int = field(default=500, metadata={
+        "help": "updates between checkpoints (checkpoint.npz in the run folder)"})
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
+    remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
+    accel: AccelConfig = field(default_factory=AccelConfig)
+
+    def __post_init__(self):
+        # the learning-rate schedule spans the run: ppo.total_updates is always num_updates
+        object.__setattr__(self, "ppo", dataclasses.replace(self.ppo, total_updates=self.num_updates))
+
+
+DERIVED_KEYS = ("ppo.total_updates",)  # not settable: follows num_updates
+
+
+def score_name(cfg: UEDConfig, algo: Algorithm) -> str:
+    """The score ``algo`` ranks levels by under ``cfg``."""
+    return algo.score_name(cfg.score)
+
+
+def num_buffers(cfg: UEDConfig, algo: Algorithm) -> int:
+    """K, the number of level buffers: ``remidi.num_buffers`` for a buffer sequence, else 1."""
+    return cfg.remidi.num_buffers if algo.buffer_sequence else 1
+
+
+def buffer_config(cfg: UEDConfig, algo: Algorithm) -> buf.BufferConfig:
+    """Each buffer's settings (a buffer sequence's buffers hold ``remidi.buffer_capacity``)."""
+    if algo.buffer_sequence:
+        return dataclasses.replace(cfg.buffer, capacity=cfg.remidi.buffer_capacity)
+    return cfg.buffer

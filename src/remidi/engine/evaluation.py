@@ -1,0 +1,119 @@
+"""Evaluation of a trained agent: the first-episode returns of sampled attempts on levels, and
+the metrics of a task's evaluation sets (solve rate, return, discounted return, regret)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from remidi.engine import tracker as trk
+from remidi.engine.distributions import for_task
+from remidi.engine.rollout import combined_logits, rollout
+from remidi.engine.train import Runner, Setup, combines, frozen_levels, policy_apply
+from remidi.envs.interface import UEDTask
+
+
+def first_episode_return(reward: jax.Array, done: jax.Array, gamma: float = 1.0) -> jax.Array:
+    """f32[N]: return of the first episode of each env (``reward``, ``done``: [T, N]; the rollout
+    starts the episode), discounted Σ_t γ^t r_t for ``gamma`` < 1."""
+    ended_before = jnp.cumsum(done, axis=0) - done  # episodes finished before step t
+    discount = jnp.power(jnp.float32(gamma), jnp.arange(reward.shape[0], dtype=jnp.float32))[:, None]
+    return jnp.sum(jnp.where(ended_before == 0, discount * reward, 0.0), axis=0)
+
+
+def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
+    """The evaluation sets grouped by the environment that plays them (``task.eval_envs``, else
+    ``task.env``), each group's names sorted: one rollout per group."""
+    groups: list[tuple[object, list[str]]] = []
+    for name in sorted(task.eval_sets):
+        env = task.eval_envs.get(name, task.env)
+        for genv, names in groups:
+            if genv is env:
+                names.append(name)
+                break
+        else:
+            groups.append((env, [name]))
+    return groups
+
+
+def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
+    """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
+    the policy that acts there (under ``remidi.policy=combine``, the combined policy)."""
+    task, net = setup.task, setup.net
+    n = jax.tree.leaves(levels)[0].shape[0]
+    keys = jax.random.split(jax.random.PRNGKey(0), n)
+    obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(keys, levels, task.params)
+    obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool)
+    _, (logits, _) = policy_apply(setup, runner)({"params": runner.train_state.params}, net.initialize_carry(n),
+                                                 obs_in, reset)
+    logits = logits[0]
+    if combines(setup):
+        frozen = frozen_levels(setup, runner)
+        tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
+            task.env, task.params, keys, frozen.levels, frozen.valid, obs)
+        r = setup.cfg.remidi
+        matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, r.num_buffers - 1, r.buffer_capacity)
+        _, (frozen_logits, _) = jax.vmap(lambda p: net.apply({"params": p}, net.initialize_carry(n), obs_in, reset))(
+            frozen.params)
+        logits = combined_logits(matched, frozen_logits[:, 0], logits)
+    return jax.nn.softmax(logits, axis=-1)
+
+
+def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng):
+    """The first-episode return of ``attempts`` sampled episodes on each of ``levels`` (leaves
+    [L, ...], played by ``env``; under ``remidi.policy=combine`` by the combined policy):
+    ``(returns f32[L, attempts], discounted f32[L, attempts])``, the latter Σ_t γ^t r_t with
+    γ = ``ppo.gamma``. One rollout of ``task.max_episode_steps`` on L·attempts envs."""
+    task = setup.task
+    frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
+    tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
+    n = jax.tree.leaves(tiled)[0].shape[0]
+    traj, _ = rollout(rng, env, task.params, policy_apply(setup, runner), runner.train_state.params,
+                      setup.net.initialize_carry(n), tiled, task.max_episode_steps, frozen, tracker_env=task.env,
+                      dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
+    returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
+    discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
+    return returns, discounted
+
+
+def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
+    """Metrics on each evaluation set ``<set>``: ``eval_attempts`` sampled episodes per level (the
+    first episode of each; the sets one environment plays are rolled out together,
+    :func:`level_returns`) give ``solve_rate/<set>``, ``return/<set>`` and
+    ``discounted_return/<set>`` (Σ_t γ^t r_t, γ = ``ppo.gamma``). With the task's optimal return,
+    the regret per level gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's
+    levels): the *expected* regret ``optimal − E[return]`` (undiscounted), exact for a one-step
+    task that knows its ``expected_return`` (which adds ``entropy/<set>``, the mean entropy of the
+    policy over the set's levels), estimated from the sampled episodes otherwise."""
+    task, cfg = setup.task, setup.cfg
+    out = {}
+    for i, (env, names) in enumerate(eval_groups(task)):
+        levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[name] for name in names))
+        returns, discounted = level_returns(setup, runner, env, levels, cfg.eval_attempts, jax.random.fold_in(rng, i))
+        optimal = None
+        if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
+            optimal = jax.vmap(task.optimal_return)(levels)
+        start = 0
+        for name in names:
+            set_levels = task.eval_sets[name]
+            count = jax.tree.leaves(set_levels)[0].shape[0]
+            ret, set_discounted = returns[start:start + count], discounted[start:start + count]  # [count, attempts]
+            set_optimal = None if optimal is None else optimal[start:start + count]
+            start += count
+            if task.solved is not None:
+                out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
+            out[f"return/{name}"] = jnp.mean(ret)
+            out[f"discounted_return/{name}"] = jnp.mean(set_discounted)
+            if task.optimal_return is None:
+                continue
+            if task.expected_return is not None:
+                probs = first_step_policy(setup, runner, env, set_levels)  # [L, A]
+                expected = jax.vmap(task.expected_return)(set_levels, probs)
+                entropy = -jnp.sum(probs * jnp.log(jnp.maximum(probs, 1e-30)), axis=-1)
+                out[f"entropy/{name}"] = jnp.mean(entropy)
+            else:
+                expected = ret.mean(axis=1)
+            regret = set_optimal - expected
+            out[f"regret/{name}/mean"] = jnp.mean(regret)
+            out[f"regret/{name}/worst"] = jnp.max(regret)
+    return out

@@ -1,0 +1,181 @@
+"""Validation of a run before anything is written: every key of :class:`UEDConfig` against its
+allowed values and the task (one-line ConfigError naming the key), whether the network reads the
+task's observations, and warnings about valid runs that would train degenerately."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from remidi.engine import buffer as buf
+from remidi.engine import scores as sc
+from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
+from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
+from remidi.engine.networks import flatten_obs, make_network
+from remidi.engine.train import example_observation, network_for
+from remidi.envs.interface import UEDTask, tree_equal
+
+
+def _observation_batch(task: UEDTask, flat: bool):
+    """The task's first observation as a ``[1, 1, ...]`` batch (flattened to one vector if
+    ``flat``), shapes only. Raises ConfigError, once, with the environment's own error when its
+    level generator or reset fails (a network cannot be judged on an environment that does not run)."""
+    from remidi.errors import ConfigError
+
+    def first():
+        obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
+        return flatten_obs(obs) if flat else obs
+
+    try:
+        return jax.eval_shape(first)
+    except Exception as err:  # the user's environment: report its own error, once
+        message = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise ConfigError(f"task: sampling a level and resetting the environment to it failed: "
+                          f"{type(err).__name__}{': ' + message if message else ''} (the environment must be a "
+                          f"jaxued UnderspecifiedEnv and sample_level must return one of its levels)") from None
+
+
+def _read_error(net, obs) -> Exception | None:
+    """None if ``net`` can be initialised on the observation batch ``obs`` (traced abstractly),
+    else the error it raised."""
+    try:
+        jax.eval_shape(lambda o: net.init(jax.random.PRNGKey(0), net.initialize_carry(1), o, jnp.ones((1, 1), bool)),
+                       obs)
+        return None
+    except Exception as err:  # any failure to read the observation is the choice of network
+        return err
+
+
+def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
+    """Raise ConfigError unless ``net`` can be applied to the task's observations (flattened to
+    one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
+    run). The error names the networks that can; an environment that fails to produce an
+    observation gets its own one-line error instead (:func:`_observation_batch`)."""
+    from remidi.engine.networks import NETWORKS
+    from remidi.errors import ConfigError
+
+    obs = _observation_batch(task, flat)
+    err = _read_error(net, obs)
+    if err is None:
+        return
+    fits = [other for other in sorted(NETWORKS)
+            if other != name and _read_error(make_network(other, task.num_actions, task.continuous), obs) is None]
+    what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
+    raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
+                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
+
+
+def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[str]:
+    """One-line warnings about a valid run that would train degenerately without saying so:
+
+    * a score that needs finished episodes (``pvl``, ``maxmc``, ``learnability``) on rollouts
+      shorter than the task's episode limit: a level whose episode does not end inside the rollout
+      scores −inf, and with every episode too long the buffer holds one level and replays only it;
+    * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
+      give different first observations): the tracker assumes an episode is a function of the
+      level and the actions, so it may judge identical levels distinguishable.
+    """
+    out = []
+    algo = get_algorithm(algo)
+    name = score_name(cfg, algo)
+    if algo.replays and name in ("pvl", "maxmc", "learnability") and cfg.num_steps < task.max_episode_steps:
+        out.append(f"score {name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) is "
+                   f"shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not end "
+                   f"score -inf and are never inserted; raise num_steps or use another score")
+    if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
+        level = task.sample_level(jax.random.PRNGKey(0))
+        obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
+        if not bool(tree_equal(obs[0], obs[1])):
+            out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
+                       "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
+                       "actions; put the random seed into the level (UEDTask.deterministic_reset)")
+    return out
+
+
+def validate_section(prefix: str, validate) -> None:
+    """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
+    section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
+    from remidi.errors import ConfigError
+
+    try:
+        validate()
+    except ConfigError as err:
+        msg = str(err)
+        raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
+
+
+def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
+    """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
+    from remidi.engine.ppo import validate_ppo_config
+    from remidi.engine.tracker import MODES
+    from remidi.errors import ConfigError
+    from remidi.errors import choice, positive_int, require
+
+    algo = get_algorithm(algo)
+    for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
+        positive_int(key, getattr(cfg, key))
+    steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count
+    if steps >= 2**31:
+        raise ConfigError(f"num_updates: must keep num_updates × ppo.epochs × ppo.minibatches below 2^31 "
+                          f"(the optimiser counts its steps in 32 bits), got {cfg.num_updates} × {cfg.ppo.epochs} × "
+                          f"{cfg.ppo.minibatches} = {steps}; lower num_updates")
+    if cfg.eval_every > cfg.num_updates:
+        raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
+                          f"lower eval_every or raise num_updates")
+    choice("score", cfg.score, sc.SCORES)
+    if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
+        raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
+                          f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
+    require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
+    if score_name(cfg, algo) == "learnability" and task.solved is None:
+        raise ConfigError("score: learnability needs a solve criterion, which this task does not define "
+                          f"(UEDTask.solved); allowed: {', '.join(s for s in sc.SCORES if s != 'learnability')}")
+    if (score_name(cfg, algo) == "perfect_regret" and cfg.discounted_regret
+            and task.optimal_discounted_return is None):
+        raise ConfigError("discounted_regret: this task gives no discounted optimal return "
+                          "(UEDTask.optimal_discounted_return), so perfect_regret cannot use the discounted utility; "
+                          "allowed: false (undiscounted returns on both sides)")
+    for key in ("hidden_size", "lstm_size"):
+        require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
+                "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
+    require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
+    # the network kind first (at its default sizes), then the sizes: a preset's hidden_size must not
+    # hide that the network picked cannot read the task's observations
+    check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
+                                     cfg.network, task, cfg.normalize_obs)
+    network_for(cfg, task)  # ConfigError if the network has no layer for hidden_size / lstm_size
+    r = cfg.remidi
+    positive_int("remidi.num_buffers", r.num_buffers)
+    positive_int("remidi.buffer_capacity", r.buffer_capacity)
+    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
+    require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
+            "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
+    choice("remidi.count", r.count, ("updates", "replays"))
+    choice("remidi.tracker", r.tracker, MODES)
+    choice("remidi.policy", r.policy, POLICIES)
+    if r.policy == "combine":
+        require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
+                "observations normalised by statistics gathered after they were frozen)", r.policy)
+        require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
+                "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
+    positive_int("accel.num_edits", cfg.accel.num_edits)
+    require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
+    if algo.edits and task.mutate_level is None:
+        raise ConfigError(f"--algo: {algo.name} edits levels, but this task has no level mutator "
+                          f"(UEDTask.mutate_level); allowed: {', '.join(a for a in ALGORITHMS if not ALGORITHMS[a].edits)}")
+    if algo.edits and cfg.accel.easy_start and task.easy_level is None:
+        raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
+                          "allowed: false")
+    validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
+    validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
+    validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))
+    if algo.buffer_sequence:
+        needed = (r.num_buffers - 1) * r.steps_per_buffer
+        if needed >= cfg.num_updates:
+            raise ConfigError(
+                f"remidi.num_buffers: must be small enough that the last buffer gets updates, but "
+                f"(num_buffers − 1) × steps_per_buffer = ({r.num_buffers} − 1) × {r.steps_per_buffer} = {needed} "
+                f"is not below num_updates = {cfg.num_updates}; lower remidi.num_buffers or "
+                f"remidi.steps_per_buffer, or raise num_updates")

@@ -271,7 +271,7 @@ def metrics_table(runs: dict, experiment: str, metrics: list[str], algos: list[s
         cells = []
         for m in metrics:
             x = list(metric_values(runs, experiment, algo, m).values())
-            if not x:
+            if not x or all(math.isnan(v) for v in x):  # not logged, or undefined (DR's replay share)
                 cells.append("—")
                 continue
             d = _digits(m)

@@ -208,3 +208,24 @@ def test_degenerate_but_valid_runs_are_warned_about():
     assert "reset depends on its random key" in warning
     assert run_warnings(BASE, "plr", noisy) == []  # only ReMiDi's tracker assumes determinism
     assert run_warnings(BASE, "remidi", dataclasses.replace(TASK, deterministic_reset=False)) == []
+
+
+def test_ppo_diagnostics_are_logged_for_the_updates_that_train():
+    """``ppo/<name>`` per update: defined where the update trained (PLR⊥: a replay; DR: always),
+    NaN where it did not; a logged point is the mean over the block's training updates only."""
+    from remidi.engine import driver as drv
+    from remidi.engine import train as tr
+
+    for algo in ("plr", "dr"):
+        setup = tr.make_setup(TASK, TINY, algo)
+        runner = jax.vmap(lambda k: tr.init_runner(setup, k))(jax.random.split(jax.random.PRNGKey(0), 1))
+        _, steps = jax.jit(lambda r: drv.run_steps(setup, r, 12))(runner)
+        trained = np.asarray(steps["replay"][0]) > 0 if algo == "plr" else np.ones(12, bool)
+        assert trained.any() and (algo == "dr" or not trained.all())  # both kinds of update occur for PLR⊥
+        for name in tr.PPO_METRICS:
+            values = np.asarray(steps[f"ppo/{name}"][0])
+            assert np.isfinite(values[trained]).all() and np.isnan(values[~trained]).all(), (algo, name)
+        block = drv._block_metrics({k: np.asarray(v) for k, v in steps.items()}, TINY.num_envs)
+        np.testing.assert_allclose(block["ppo/value_loss"], [np.asarray(steps["ppo/value_loss"][0])[trained].mean()],
+                                   rtol=1e-6)
+        assert (np.asarray(steps["ppo/value_loss"][0])[trained] > 0).all()  # a critic that is not exact has a loss

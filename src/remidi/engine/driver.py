@@ -59,11 +59,19 @@ def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict
             for name, counts in step_metrics.items() if name.startswith("replayed/")}
 
 
+def _nanmean(values: np.ndarray) -> np.ndarray:
+    """f[S]: the mean over axis 1 of the defined values, NaN where none is (no warning)."""
+    defined = ~np.isnan(values)
+    return np.where(defined.any(axis=1), np.where(defined, values, 0.0).sum(axis=1) / np.maximum(defined.sum(axis=1), 1),
+                    np.nan)
+
+
 def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
     """Aggregate per-step metrics f[S, B] of one block into f[S]; ``replayed/<tag>`` counts
     become :func:`replay_fractions` of the block."""
     out = replay_fractions(step_metrics, num_envs)
-    reduce = {"sum": lambda v: v.sum(axis=1), "last": lambda v: v[:, -1], "mean": lambda v: v.mean(axis=1)}
+    reduce = {"sum": lambda v: v.sum(axis=1), "last": lambda v: v[:, -1], "mean": lambda v: v.mean(axis=1),
+              "nanmean": _nanmean}
     for name, values in step_metrics.items():
         if not name.startswith("replayed/"):
             out[name] = reduce[tr.BLOCK_REDUCTIONS.get(name, "mean")](values)

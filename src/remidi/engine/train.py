@@ -196,15 +196,20 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
                            reward=traj.reward, solved=setup.task.solved)
 
 
-def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> TrainState:
+#: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs
+#: and minibatches; NaN on updates that do not train, left out of a block's mean)
+PPO_METRICS = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "grad_norm")
+
+
+def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:
     """Masked PPO on a rollout of ``runner``'s policy: only the distinguishable steps
-    (``~indist``) are trained on. Returns the new train state."""
+    (``~indist``) are trained on. Returns the new train state and :data:`PPO_METRICS` (f32[])."""
     batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
                   values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
-    train_state, _ = ppo_update(runner.train_state, carry, batch, rng, setup.cfg.ppo, policy_apply(setup, runner),
-                                for_task(setup.task.continuous))
-    return train_state
+    train_state, metrics = ppo_update(runner.train_state, carry, batch, rng, setup.cfg.ppo,
+                                      policy_apply(setup, runner), for_task(setup.task.continuous))
+    return train_state, {name: metrics[name].astype(jnp.float32) for name in PPO_METRICS}
 
 
 def tag_counts(setup: Setup, levels, weight) -> dict[str, jax.Array]:
@@ -228,7 +233,7 @@ def train_step(setup: Setup, runner: Runner):
     # 3. the buffer: new scores for replayed levels, fresh ones inserted by score unless they overlap
     buffers, inserted = update_buffer(setup, runner, chosen, scores, overlap, best_ret)
     # 4. train (masked PPO)
-    train_state = train(setup, runner, chosen.replay, k_learn, traj, adv, targets)
+    train_state, ppo_metrics = train(setup, runner, chosen.replay, k_learn, traj, adv, targets)
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
     if obs_stats is not None:
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
@@ -239,7 +244,8 @@ def train_step(setup: Setup, runner: Runner):
                     update=runner.update + 1, frozen_params=frozen_params, obs_stats=obs_stats,
                     edit_next=edit_next, last_replayed=last_replayed)
     # 6. what the step reports
-    return runner, step_metrics(setup, runner, chosen, traj, mean_ret, scores, overlap, inserted, frozen)
+    return runner, {**step_metrics(setup, runner, chosen, traj, mean_ret, scores, overlap, inserted, frozen),
+                    **{f"ppo/{name}": value for name, value in ppo_metrics.items()}}
 
 
 @struct.dataclass
@@ -335,12 +341,17 @@ def update_buffer(setup: Setup, runner: Runner, chosen: Chosen, scores, overlap,
     return buf.replace_buffer(runner.buffers, runner.active, new_buf), inserted
 
 
-def train(setup: Setup, runner: Runner, replay, rng, traj: Trajectory, adv, targets) -> TrainState:
+def train(setup: Setup, runner: Runner, replay, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:
     """Stage 4: masked PPO on the rollout if it replayed levels or the algorithm trains on fresh
-    ones (robust PLR⊥ does not); otherwise the train state as it was."""
+    ones (robust PLR⊥ does not); otherwise the train state as it was. Returns it with PPO's
+    diagnostics (:data:`PPO_METRICS`; NaN when nothing was trained)."""
     if setup.algo.trains_on_fresh:
         return learn(setup, runner, rng, traj, adv, targets)
-    return jax.lax.cond(replay, lambda r: learn(setup, r, rng, traj, adv, targets), lambda r: r.train_state, runner)
+
+    def skip(r):
+        return r.train_state, {name: jnp.float32(jnp.nan) for name in PPO_METRICS}
+
+    return jax.lax.cond(replay, lambda r: learn(setup, r, rng, traj, adv, targets), skip, runner)
 
 
 def switch_buffer(setup: Setup, runner: Runner, replay, params):
@@ -364,9 +375,11 @@ def switch_buffer(setup: Setup, runner: Runner, replay, params):
     return jnp.where(switch, runner.active + 1, runner.active), jnp.where(switch, 0, count), frozen_params
 
 
-#: how the driver reduces a step metric over a block of updates: "sum", "last" or "mean" (any
-#: metric not listed). ``replayed/<tag>`` counts become the block's ``replay_fraction/<tag>``.
-BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "sum", "active_buffer": "last"}
+#: how the driver reduces a step metric over a block of updates: "sum", "last", "mean" (any
+#: metric not listed) or "nanmean" (the mean over the updates where it is defined, NaN if none).
+#: ``replayed/<tag>`` counts become the block's ``replay_fraction/<tag>``.
+BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "sum", "active_buffer": "last",
+                    **{f"ppo/{name}": "nanmean" for name in PPO_METRICS}}
 
 
 def step_metrics(setup: Setup, runner: Runner, chosen: Chosen, traj: Trajectory, mean_return, scores, overlap,

@@ -5,6 +5,7 @@ or flax)."""
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from remidi.cli import main
@@ -42,6 +43,15 @@ def _truncate(name, keep=0.5):
     return edit
 
 
+def _positional(folder):
+    """The checkpoint as remidi wrote it before arrays were named by tree path: leaf_0, leaf_1, ..."""
+    path = folder / "checkpoint.npz"
+    with np.load(path) as data:
+        arrays = [data[name] for name in data.files if name != "meta"]
+        meta = data["meta"]
+    np.savez(path, meta=meta, **{f"leaf_{i}": a for i, a in enumerate(arrays)})
+
+
 def _flip(folder):
     path = folder / "checkpoint.npz"
     data = bytearray(path.read_bytes())
@@ -58,7 +68,10 @@ DAMAGE = {
     "bit-flipped checkpoint": (_flip, "checkpoint.npz cannot be read"),
     "missing history": (lambda f: (f / "checkpoint.history.npz").unlink(), "checkpoint.history.npz is missing"),
     "another run's checkpoint": (None, "checkpoint.npz does not match the run's config.json"),
-    "hidden_size edited": (_edit_config("config.hidden_size", 32), "does not match the run's config.json"),
+    "hidden_size edited": (_edit_config("config.hidden_size", 32),
+                           "does not match the run's config.json (.train_state."),
+    "an older remidi's checkpoint": (_positional, "was written by an older remidi, which stored the state's arrays "
+                                                  "by position"),
     "seeds edited": (_edit_config("seeds", [0, 1, 2]), "does not match the run's config.json"),
     "algo edited": (_edit_config("algo", "plr"), "does not match the run's config.json"),
     "config.json not an object": (lambda f: (f / "config.json").write_text("[1, 2]"),

@@ -1,6 +1,11 @@
 """Checkpoints of a UED run: the runner (``checkpoint.npz``) and the metrics logged so far
 (``checkpoint.history.npz``), written atomically, read back with one-line errors for every way
-a file can be damaged or belong to another run."""
+a file can be damaged or belong to another run.
+
+The runner's arrays are stored by their tree path (``leaf:.train_state.params['params']...``,
+``jax.tree_util.keystr``), so a checkpoint names what it holds and a mismatch names the part of
+the state that differs. Checkpoints of remidi before this format stored arrays by position
+(``leaf_0``, ``leaf_1``, ...); they are refused with a one-line error saying so."""
 
 from __future__ import annotations
 
@@ -16,12 +21,18 @@ from remidi.errors import ConfigError
 from remidi.files import atomic_write
 
 CHECKPOINT = "checkpoint.npz"
+PREFIX = "leaf:"  # a runner array's name in checkpoint.npz: PREFIX + its tree path
 HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
 
 
+def _named_leaves(tree) -> dict[str, object]:
+    """``{PREFIX + tree path: leaf}`` in the tree's leaf order."""
+    return {PREFIX + jax.tree_util.keystr(path): leaf for path, leaf in jax.tree_util.tree_leaves_with_path(tree)}
+
+
 def save_checkpoint(path: Path, runner, meta: dict) -> None:
-    """Write the runner's leaves and ``meta`` (JSON) to ``path`` atomically."""
-    leaves = {f"leaf_{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(jax.device_get(runner)))}
+    """Write the runner's arrays (by tree path) and ``meta`` (JSON) to ``path`` atomically."""
+    leaves = {name: np.asarray(x) for name, x in _named_leaves(jax.device_get(runner)).items()}
     atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
 
 
@@ -43,30 +54,39 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
     Raises ConfigError (one line, starting with ``flag`` and naming the file) when the file cannot
     be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
     checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
-    treedef = jax.tree.structure(template)
-    wanted = jax.tree.leaves(template)
+    wanted = _named_leaves(template)
     try:
         with np.load(path) as data:
             meta = json.loads(str(data["meta"]))
-            count = sum(1 for name in data.files if name.startswith("leaf_"))
-            leaves = [np.asarray(data[f"leaf_{i}"]) for i in range(min(count, treedef.num_leaves))]
+            stored = [name for name in data.files if name != "meta"]
+            positional = any(name.startswith("leaf_") for name in stored)
+            leaves = {name: np.asarray(data[name]) for name in wanted if name in data.files}
         if not isinstance(meta, dict):
             raise TypeError(f"its meta is a {type(meta).__name__}")
     except _UNREADABLE as err:
         raise _unreadable(path, err, flag) from None
+    if positional:
+        raise ConfigError(f"{flag}: {path} was written by an older remidi, which stored the state's arrays by "
+                          f"position; this version reads them by name: continue the run with the version that "
+                          f"wrote it, or delete {CHECKPOINT} and {HISTORY} to train it from the start")
+    missing = [name for name in wanted if name not in leaves]
+    extra = [name for name in stored if name not in wanted]
     mismatch = None
-    if count != treedef.num_leaves:
-        mismatch = f"it holds {count} arrays, this run's state has {treedef.num_leaves}"
+    if missing or extra:
+        mismatch = (f"it lacks {missing[0][len(PREFIX):]}" if missing else
+                    f"it holds {extra[0][len(PREFIX):]}, which this run's state does not have")
     else:
-        for i, (leaf, want) in enumerate(zip(leaves, wanted)):
+        for name, want in wanted.items():
+            leaf = leaves[name]
             if leaf.shape != want.shape or leaf.dtype != want.dtype:
-                mismatch = (f"array {i} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
+                mismatch = (f"{name[len(PREFIX):]} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
                             f"{want.dtype}{list(want.shape)}")
                 break
     if mismatch is not None:
         raise ConfigError(f"{flag}: {path} does not match the run's config.json ({mismatch}): was config.json "
                           f"edited (seeds, algo, network sizes) or the checkpoint copied from another run?")
-    return jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves]), meta
+    treedef = jax.tree.structure(template)
+    return jax.tree.unflatten(treedef, [jnp.asarray(leaves[name]) for name in wanted]), meta
 
 
 def remove_stale_temporaries(ckpt: Path) -> list[Path]:

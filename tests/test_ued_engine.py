@@ -229,3 +229,24 @@ def test_ppo_diagnostics_are_logged_for_the_updates_that_train():
         np.testing.assert_allclose(block["ppo/value_loss"], [np.asarray(steps["ppo/value_loss"][0])[trained].mean()],
                                    rtol=1e-6)
         assert (np.asarray(steps["ppo/value_loss"][0])[trained] > 0).all()  # a critic that is not exact has a loss
+
+
+def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
+    from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
+    from remidi.engine.algorithms import ALGORITHMS, Algorithm
+
+    kinds = {name: (type(a.adversary).__name__, a.replays, a.buffer_sequence, a.edits, a.trains_on_fresh)
+             for name, a in ALGORITHMS.items()}
+    assert kinds == {"dr": ("RandomLevels", False, False, False, True),
+                     "plr": ("LevelBuffers", True, False, False, False),
+                     "minimax-return": ("LevelBuffers", True, False, False, False),
+                     "remidi": ("LevelBuffers", True, True, False, False),
+                     "accel": ("EditingBuffers", True, False, True, False),
+                     "remidi-accel": ("EditingBuffers", True, True, True, False)}
+    with pytest.raises(ConfigError, match="would never train the agent"):
+        RandomLevels(trains_on_fresh=False)
+    with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversary adversary"):
+        Algorithm("bad", "plr")
+    # non-robust PLR (trains on fresh levels too) is a valid adversary
+    assert Algorithm("plr-nonrobust", LevelBuffers(trains_on_fresh=True)).trains_on_fresh
+    assert EditingBuffers(buffer_sequence=True) != EditingBuffers()

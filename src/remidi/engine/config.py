@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from remidi.engine import buffer as buf
-from remidi.engine.algorithms import Algorithm
 from remidi.engine.ppo import PPOConfig
+
+if TYPE_CHECKING:  # algorithms.py imports the adversaries, which import this module
+    from remidi.engine.algorithms import Algorithm
 
 POLICIES = ("masked", "combine")
 

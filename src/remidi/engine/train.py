@@ -1,27 +1,28 @@
 """The one UED train step shared by every algorithm (:mod:`remidi.engine.algorithms`).
 
-One train step, top to bottom (:func:`train_step`), each stage a small function below it:
+One train step, top to bottom (:func:`train_step`), each stage a call to the algorithm's
+adversary (:mod:`remidi.engine.adversary`) or a small function below:
 
-1. :func:`choose_levels`: *replay* (probability ``buffer.replay_prob`` once the active buffer
-   holds enough levels) samples N levels from the active buffer; otherwise N fresh random levels.
-   An algorithm that does not replay (DR) always takes fresh levels.
-2. :func:`collect`: roll the policy out once on them (with the distinguishability tracker against
-   the frozen buffers, for a buffer sequence: ReMiDi), then :func:`score_rollout`.
-3. :func:`update_buffer`: replayed levels get their new scores; fresh levels go into the active
+1. ``adversary.propose``: the N levels of this update (DR: fresh random levels; the PLR family: a
+   replay from the active buffer with probability ``buffer.replay_prob``, else fresh levels;
+   ACCEL: after a replay, edits of the replayed levels), and whether the learner trains on them.
+2. :func:`collect`: roll the policy out once on them, with the distinguishability tracker against
+   ``adversary.frozen`` (ReMiDi's earlier buffers), then :func:`score_rollout`.
+3. ``adversary.update``: replayed levels get their new scores; new levels go into the active
    buffer by score, except those whose rollout was indistinguishable from a frozen level at every
-   step ("complete overlap"), which are scored −inf and therefore never inserted.
-4. :func:`train`: PPO on replayed levels (and on fresh ones for an algorithm that trains on them:
-   DR), with the loss masked to the distinguishable steps.
-5. :func:`switch_buffer`: for a buffer sequence, after ``remidi.steps_per_buffer`` updates (or
-   replays) in the active buffer, freeze it and move to the next; stay on the last.
-6. :func:`step_metrics`: the step's scalars (:data:`BLOCK_REDUCTIONS` says how the driver
-   reduces each over a block).
+   step ("complete overlap"), scored −inf and therefore never inserted.
+4. :func:`train`: masked PPO on the rollout if the proposal is trained on, the loss masked to the
+   distinguishable steps.
+5. ``adversary.advance``: a buffer sequence's switch after ``remidi.steps_per_buffer`` updates
+   (freeze the active buffer, move to the next, stay on the last); ACCEL's memory of the replay.
+6. :func:`step_metrics`: the step's scalars, and PPO's diagnostics (:data:`BLOCK_REDUCTIONS` says
+   how the driver reduces each over a block).
 
-Which branch a stage takes depends on the :class:`~remidi.engine.algorithms.Algorithm`'s fields,
-never on its name: PLR⊥ is ReMiDi with one buffer, minimax return is PLR⊥ scored by negative
-return. Everything in a step is a pure function of :class:`Runner`, jit-ed and vmapped over seeds
-by the driver. The run's configuration is :mod:`remidi.engine.config`, evaluation
-:mod:`remidi.engine.evaluation`, validation :mod:`remidi.engine.validation`.
+No stage compares an algorithm's name or tests its flags: PLR⊥ is ReMiDi's adversary with one
+buffer, minimax return is PLR⊥ scored by negative return. Everything in a step is a pure function
+of :class:`Runner`, jit-ed and vmapped over seeds by the driver. The run's configuration is
+:mod:`remidi.engine.config`, evaluation :mod:`remidi.engine.evaluation`, validation
+:mod:`remidi.engine.validation`.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from remidi.engine.config import UEDConfig, buffer_config, num_buffers, score_na
 from remidi.engine.distributions import for_task
 from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, compute_gae, create_train_state, ppo_update
+from remidi.engine.adversary import Proposal
 from remidi.engine.rollout import Frozen, Trajectory, rollout
 from remidi.envs.interface import UEDTask
 
@@ -124,12 +126,8 @@ def init_runner(setup: Setup, rng) -> Runner:
     obs_stats = None
     if cfg.normalize_obs:
         obs_stats = nrm.init_stats(flatten_obs(jax.tree.map(lambda x: x[None, None], example_obs)).shape[-1])
-    edit_next = last_replayed = None
-    if setup.algo.edits:
-        edit_next = jnp.asarray(False)
-        last_replayed = jax.tree.map(lambda x: jnp.stack([x] * cfg.num_envs), example_level)
     return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
-                  frozen_params=frozen_params, obs_stats=obs_stats, edit_next=edit_next, last_replayed=last_replayed)
+                  frozen_params=frozen_params, obs_stats=obs_stats, **setup.algo.adversary.memory(setup, example_level))
 
 
 def combines(setup: Setup) -> bool:
@@ -139,14 +137,8 @@ def combines(setup: Setup) -> bool:
 
 # ------------------------------------------------------------------------------- pieces
 def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
-    """The levels of every buffer before the active one, as one batch of F = (K−1)·capacity."""
-    if not setup.algo.buffer_sequence or setup.cfg.remidi.num_buffers < 2:
-        return None
-    earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
-    k = earlier.valid.shape[0]
-    valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
-    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
-    return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params, budget=tracker_budget(setup))
+    """The earlier adversaries' levels for the tracker (:meth:`~remidi.engine.adversary.RandomLevels.frozen`)."""
+    return setup.algo.adversary.frozen(setup, runner)
 
 
 def tracker_budget(setup: Setup) -> int:
@@ -221,158 +213,43 @@ def tag_counts(setup: Setup, levels, weight) -> dict[str, jax.Array]:
 # ---------------------------------------------------------------------------- the step
 def train_step(setup: Setup, runner: Runner):
     """One update. Returns ``(runner, metrics)``, metrics a dict of f32[] scalars."""
+    adversary = setup.algo.adversary
     rng, k_branch, k_roll, k_levels, k_learn, k_sample = jax.random.split(runner.rng, 6)
-    frozen = frozen_levels(setup, runner)
-    # 1. choose the levels: a replay sample from the active buffer, or fresh random levels
-    chosen = choose_levels(setup, runner, k_branch, k_levels, k_sample)
-    # 2. one rollout (with the tracker against the frozen buffers, for a buffer sequence), then score
-    traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, chosen.levels, frozen)
-    best_ret = best_return_record(setup, chosen, best_ret)
-    scores = score_rollout(setup, chosen.levels, traj, adv, mean_ret, best_ret)
-    overlap = jnp.all(traj.indist, axis=0) & ~chosen.replay  # bool[N]: new level overlapping a frozen one completely
-    # 3. the buffer: new scores for replayed levels, fresh ones inserted by score unless they overlap
-    buffers, inserted = update_buffer(setup, runner, chosen, scores, overlap, best_ret)
-    # 4. train (masked PPO)
-    train_state, ppo_metrics = train(setup, runner, chosen.replay, k_learn, traj, adv, targets)
+    frozen = adversary.frozen(setup, runner)  # the earlier adversaries' levels (None: nothing frozen)
+    # 1. the adversary proposes the levels: a replay from its buffer, fresh random levels, or edits
+    proposal = adversary.propose(setup, runner, k_branch, k_levels, k_sample)
+    # 2. one rollout (with the tracker against the frozen levels), then score
+    traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, proposal.levels, frozen)
+    best_ret = adversary.best_return(proposal, best_ret)
+    scores = score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
+    overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: new level overlapping a frozen one completely
+    # 3. the adversary takes the scores: replayed levels rescored, new ones inserted unless they overlap
+    buffers, inserted = adversary.update(setup, runner, proposal, scores, overlap, best_ret)
+    # 4. train (masked PPO) if the proposal is trained on
+    train_state, ppo_metrics = train(setup, runner, proposal.train, k_learn, traj, adv, targets)
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
     if obs_stats is not None:
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
-    # 5. a buffer sequence's switching rule (a no-op with one buffer)
-    active, count, frozen_params = switch_buffer(setup, runner, chosen.replay, train_state.params)
-    edit_next, last_replayed = remember_replay(setup, runner, chosen)
-    runner = Runner(rng=rng, train_state=train_state, buffers=buffers, active=active, count=count,
-                    update=runner.update + 1, frozen_params=frozen_params, obs_stats=obs_stats,
-                    edit_next=edit_next, last_replayed=last_replayed)
+    # 5. the adversary moves on: a buffer sequence's switch, ACCEL's memory of the replay
+    moved = adversary.advance(setup, runner, proposal, train_state.params)
+    runner = Runner(rng=rng, train_state=train_state, buffers=buffers, update=runner.update + 1, obs_stats=obs_stats,
+                    **moved)
     # 6. what the step reports
-    return runner, {**step_metrics(setup, runner, chosen, traj, mean_ret, scores, overlap, inserted, frozen),
+    return runner, {**step_metrics(setup, runner, proposal, traj, mean_ret, scores, overlap, inserted, frozen),
                     **{f"ppo/{name}": value for name, value in ppo_metrics.items()}}
 
 
-@struct.dataclass
-class Chosen:
-    """The levels of one update and where they came from.
-
-    replay: bool[], replayed from the active buffer (else fresh from the generator, or edited);
-    levels: leaves [N, ...]; buffer: the active buffer as sampled (its replay counters advanced;
-    the active buffer as it was for an algorithm that does not replay); slots: i32[N], the
-    replayed levels' slots in it (None for an algorithm that does not replay); edit: bool[], the
-    levels are edits of the last replay's (None for an algorithm that does not edit).
-    """
-
-    replay: jax.Array
-    levels: object
-    buffer: buf.BufferState
-    slots: jax.Array | None
-    edit: jax.Array | None = None
-
-
-def choose_levels(setup: Setup, runner: Runner, k_branch, k_levels, k_sample) -> Chosen:
-    """Stage 1: replay N levels of the active buffer (probability ``buffer.replay_prob`` once it can
-    replay, for an algorithm that replays), else N fresh levels from the task's generator. An
-    algorithm that edits (ACCEL) instead edits the levels of the update before, if that one
-    replayed."""
-    cfg, algo = setup.cfg, setup.algo
-    bcfg = buffer_config(cfg, algo)
-    active = buf.select_buffer(runner.buffers, runner.active)
-    n = cfg.num_envs
-    if not algo.replays:
-        replay = jnp.asarray(False)
-    else:
-        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
-    generate = setup.task.easy_level if algo.edits and cfg.accel.easy_start else setup.task.sample_level
-    new = jax.vmap(generate)(jax.random.split(k_levels, n))
-    if not algo.replays:
-        return Chosen(replay=replay, levels=new, buffer=active, slots=None)
-    sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, n)
-    if not algo.edits:
-        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
-        return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots)
-    edit = runner.edit_next
-    replay = replay & ~edit
-    edited = edit_levels(setup, runner.last_replayed, jax.random.fold_in(k_levels, 1))
-    levels = jax.tree.map(lambda e, r, f: jnp.where(edit, e, jnp.where(replay, r, f)), edited, replayed, new)
-    return Chosen(replay=replay, levels=levels, buffer=sampled, slots=slots, edit=edit)
-
-
-def edit_levels(setup: Setup, levels, rng):
-    """ACCEL's edits: ``accel.num_edits`` edits of each of ``levels`` [N] by the task's mutator."""
-    n = jax.tree.leaves(levels)[0].shape[0]
-    edits = setup.cfg.accel.num_edits
-    return jax.vmap(lambda key, level: setup.task.mutate_level(key, level, edits))(jax.random.split(rng, n), levels)
-
-
-def remember_replay(setup: Setup, runner: Runner, chosen: Chosen):
-    """ACCEL: ``(edit_next, last_replayed)``: after a replay the next update edits its levels."""
-    if not setup.algo.edits:
-        return runner.edit_next, runner.last_replayed
-    last = jax.tree.map(lambda c, o: jnp.where(chosen.replay, c, o), chosen.levels, runner.last_replayed)
-    return chosen.replay, last
-
-
-def best_return_record(setup: Setup, chosen: Chosen, best_return):
-    """f32[N]: MaxMC's record, the best return ever seen on a level: this rollout's best episode
-    ``best_return`` [N], and for a replayed level the buffer's record too."""
-    if not setup.algo.replays:
-        return best_return
-    record = chosen.buffer.extras["max_return"][chosen.slots]
-    return jnp.where(chosen.replay, jnp.maximum(best_return, record), best_return)
-
-
-def update_buffer(setup: Setup, runner: Runner, chosen: Chosen, scores, overlap, best_return):
-    """Stage 3: replayed levels get their new ``scores`` [N]; fresh levels are inserted into the
-    active buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
-    bool[N]: scored −inf). Returns ``(buffers, inserted bool[N])``; an algorithm that does not
-    replay keeps its buffers as they are."""
-    n = setup.cfg.num_envs
-    if not setup.algo.replays:
-        return runner.buffers, jnp.zeros((n,), bool)
-    bcfg = buffer_config(setup.cfg, setup.algo)
-
-    def rescore(_):
-        return buf.update_scores(chosen.buffer, chosen.slots, scores, {"max_return": best_return}), jnp.zeros((n,), bool)
-
-    def insert(_):
-        active = buf.select_buffer(runner.buffers, runner.active)
-        new_buf, ins, _ = buf.insert_batch(active, bcfg, chosen.levels, jnp.where(overlap, -jnp.inf, scores),
-                                           {"max_return": best_return})
-        return new_buf, ins
-
-    new_buf, inserted = jax.lax.cond(chosen.replay, rescore, insert, None)
-    return buf.replace_buffer(runner.buffers, runner.active, new_buf), inserted
-
-
-def train(setup: Setup, runner: Runner, replay, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:
-    """Stage 4: masked PPO on the rollout if it replayed levels or the algorithm trains on fresh
-    ones (robust PLR⊥ does not); otherwise the train state as it was. Returns it with PPO's
-    diagnostics (:data:`PPO_METRICS`; NaN when nothing was trained)."""
-    if setup.algo.trains_on_fresh:
+def train(setup: Setup, runner: Runner, trained, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:
+    """Stage 4: masked PPO on the rollout if ``trained`` (bool[]: the proposal's ``train``: a
+    replay, or fresh levels of an adversary that trains on them); otherwise the train state as it
+    was. Returns it with PPO's diagnostics (:data:`PPO_METRICS`; NaN when nothing was trained)."""
+    if setup.algo.trains_on_fresh:  # every proposal is trained on: no branch in the program
         return learn(setup, runner, rng, traj, adv, targets)
 
     def skip(r):
         return r.train_state, {name: jnp.float32(jnp.nan) for name in PPO_METRICS}
 
-    return jax.lax.cond(replay, lambda r: learn(setup, r, rng, traj, adv, targets), skip, runner)
-
-
-def switch_buffer(setup: Setup, runner: Runner, replay, params):
-    """Stage 5: a buffer sequence's switching rule. Counts the update (or, with
-    ``remidi.count=replays``, a replay) on the active buffer; after ``remidi.steps_per_buffer``
-    it freezes the buffer (and, under ``remidi.policy=combine``, keeps ``params`` as its policy)
-    and moves to the next, staying on the last. Returns ``(active i32[], count i32[],
-    frozen_params)``."""
-    cfg = setup.cfg
-    count = runner.count + (replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
-    k = runner.buffers.valid.shape[0]
-    if setup.algo.buffer_sequence:
-        switch = (count >= cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
-    else:
-        switch = jnp.asarray(False)
-    frozen_params = runner.frozen_params
-    if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
-        frozen_params = jax.tree.map(
-            lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[runner.active]), mode="drop"),
-            frozen_params, params)
-    return jnp.where(switch, runner.active + 1, runner.active), jnp.where(switch, 0, count), frozen_params
+    return jax.lax.cond(trained, lambda r: learn(setup, r, rng, traj, adv, targets), skip, runner)
 
 
 #: how the driver reduces a step metric over a block of updates: "sum", "last", "mean" (any
@@ -382,10 +259,10 @@ BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "s
                     **{f"ppo/{name}": "nanmean" for name in PPO_METRICS}}
 
 
-def step_metrics(setup: Setup, runner: Runner, chosen: Chosen, traj: Trajectory, mean_return, scores, overlap,
+def step_metrics(setup: Setup, runner: Runner, chosen: Proposal, traj: Trajectory, mean_return, scores, overlap,
                  inserted, frozen) -> dict[str, jax.Array]:
     """Stage 6: the step's f32[] scalars (``runner`` is the one after the step)."""
-    trained = chosen.replay | setup.algo.trains_on_fresh
+    trained = chosen.train
     metrics = {
         "replay": chosen.replay.astype(jnp.float32),
         "mean_return": jnp.mean(mean_return),
@@ -405,18 +282,5 @@ def step_metrics(setup: Setup, runner: Runner, chosen: Chosen, traj: Trajectory,
 
 
 def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
-    """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active one;
-    nothing for DR, which has no buffer."""
-    out = {}
-    if not setup.algo.replays:
-        return out
-    valid = runner.buffers.valid  # bool[K, C]
-    sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
-    counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels, valid)
-    for name, c in counts.items():  # c: f32[K]
-        fractions = c / sizes
-        for b in range(valid.shape[0]):
-            out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
-        out[f"buffer_fraction/{name}"] = fractions[runner.active]
-    out["buffer_size"] = jnp.sum(valid[runner.active]).astype(jnp.float32)
-    return out
+    """What the adversary's buffers hold (:meth:`~remidi.engine.adversary.RandomLevels.metrics`)."""
+    return setup.algo.adversary.metrics(setup, runner)

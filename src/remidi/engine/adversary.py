@@ -1,0 +1,249 @@
+"""Adversaries: where an update's levels come from, and what becomes of them once scored.
+
+The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
+(:attr:`~remidi.engine.algorithms.Algorithm.adversary`), never its flags:
+
+* :meth:`RandomLevels.propose`: the N levels of this update (a :class:`Proposal`: where they come
+  from, whether the learner trains on them);
+* :meth:`RandomLevels.frozen`: the earlier adversaries' levels, for the distinguishability tracker
+  (None: nothing is frozen);
+* :meth:`RandomLevels.update`: after scoring: the buffer's new scores or insertions (a level a
+  frozen level explains completely is never inserted), and the best-return record of MaxMC;
+* :meth:`RandomLevels.advance`: after the learner: a buffer sequence's switch (freeze the active
+  buffer, and under ``remidi.policy=combine`` the policy trained on it), ACCEL's memory of the last
+  replay;
+* :meth:`RandomLevels.metrics`: what its buffers hold (tag shares, size).
+
+Implementations, each the one before plus what it adds:
+
+* :class:`RandomLevels`: DR, fresh levels from the task's generator every update;
+* :class:`LevelBuffers`: the PLR family: a buffer of scored levels replayed with probability
+  ``buffer.replay_prob``; with ``buffer_sequence`` (ReMiDi) a sequence of ``remidi.num_buffers``
+  buffers switched after ``remidi.steps_per_buffer``, the earlier ones frozen;
+* :class:`EditingBuffers`: ACCEL: the update after a replay edits the replayed levels instead.
+
+Their state lives in named :class:`~remidi.engine.train.Runner` fields (``buffers``, ``active``,
+``count``, ``frozen_params``, ``edit_next``, ``last_replayed``), so checkpoints keep their paths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.engine import buffer as buf
+from remidi.engine.config import buffer_config
+from remidi.engine.rollout import Frozen
+from remidi.errors import ConfigError
+
+
+@struct.dataclass
+class Proposal:
+    """The levels of one update and where they came from.
+
+    levels: leaves [N, ...]; replay: bool[], replayed from the active buffer (else fresh from the
+    generator, or edited); train: bool[], the learner trains on this update's rollout; buffer: the
+    active buffer as sampled (its replay counters advanced; as it was for an adversary without
+    replay); slots: i32[N], the replayed levels' slots in it (None without replay); edit: bool[],
+    the levels are edits of the last replay's (None for an adversary that does not edit).
+    """
+
+    replay: jax.Array
+    levels: object
+    buffer: buf.BufferState
+    slots: jax.Array | None
+    train: jax.Array
+    edit: jax.Array | None = None
+
+
+@dataclass(frozen=True)
+class RandomLevels:
+    """DR's adversary: N fresh levels from the task's generator every update, all trained on.
+
+    ``trains_on_fresh`` (every implementation): the learner trains on rollouts of fresh levels
+    too (DR, and PLR without the robust ⊥); False: only on replays."""
+
+    trains_on_fresh: bool = True
+
+    def __post_init__(self):
+        if type(self) is RandomLevels and not self.trains_on_fresh:
+            raise ConfigError("adversary: RandomLevels without trains_on_fresh would never train the agent (it has "
+                              "no replay); allowed: trains_on_fresh=True")
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        new = self._fresh(setup, k_levels)
+        replay = jnp.asarray(False)
+        return Proposal(replay=replay, levels=new, buffer=buf.select_buffer(runner.buffers, runner.active),
+                        slots=None, train=replay | self.trains_on_fresh)
+
+    def _fresh(self, setup, k_levels):
+        """N fresh levels from the task's generator."""
+        return jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs))
+
+    def frozen(self, setup, runner) -> Frozen | None:
+        return None
+
+    def best_return(self, proposal: Proposal, best_return):
+        """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's."""
+        return best_return
+
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return):
+        """``(buffers, inserted bool[N])`` after scoring: nothing is kept."""
+        return runner.buffers, jnp.zeros((setup.cfg.num_envs,), bool)
+
+    def advance(self, setup, runner, proposal: Proposal, params) -> dict:
+        """The Runner fields the adversary changes after the learner: ``active``, ``count``,
+        ``frozen_params``, ``edit_next``, ``last_replayed``. Counts the update on the active buffer
+        (a replay with ``remidi.count=replays``); with one buffer nothing switches."""
+        cfg = setup.cfg
+        count = runner.count + (proposal.replay.astype(jnp.int32) if cfg.remidi.count == "replays" else 1)
+        return {"active": runner.active, "count": count, "frozen_params": runner.frozen_params,
+                "edit_next": runner.edit_next, "last_replayed": runner.last_replayed}
+
+    def memory(self, setup, example_level) -> dict:
+        """Initial values of the Runner fields only this adversary uses (ACCEL's)."""
+        return {"edit_next": None, "last_replayed": None}
+
+    def metrics(self, setup, runner) -> dict:
+        """What the adversary's buffers hold: nothing without buffers."""
+        return {}
+
+
+@dataclass(frozen=True)
+class LevelBuffers(RandomLevels):
+    """The PLR family's adversary: with probability ``buffer.replay_prob``, once the active buffer
+    can replay, N levels sampled from it (by score rank or top-k, mixed with staleness); else N
+    fresh levels, scored and inserted by score. ``buffer_sequence`` (ReMiDi): a sequence of
+    ``remidi.num_buffers`` buffers; after ``remidi.steps_per_buffer`` the active one is frozen and
+    the next takes over (the last stays); the frozen ones' levels go to the tracker, and a fresh
+    level a frozen one explains at every step (``overlap``) is never inserted."""
+
+    trains_on_fresh: bool = False
+    buffer_sequence: bool = False
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        bcfg = buffer_config(setup.cfg, setup.algo)
+        active = buf.select_buffer(runner.buffers, runner.active)
+        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
+        new = self._fresh(setup, k_levels)
+        sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, setup.cfg.num_envs)
+        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+        return Proposal(replay=replay, levels=levels, buffer=sampled, slots=slots,
+                        train=replay | self.trains_on_fresh)
+
+    def frozen(self, setup, runner) -> Frozen | None:
+        """The levels of every buffer before the active one, one batch of F = (K−1)·capacity."""
+        if not self.buffer_sequence or setup.cfg.remidi.num_buffers < 2:
+            return None
+        from remidi.engine.train import tracker_budget
+
+        earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
+        k = earlier.valid.shape[0]
+        valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
+        flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+        return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
+                      budget=tracker_budget(setup))
+
+    def best_return(self, proposal: Proposal, best_return):
+        """For a replayed level, the buffer's record too."""
+        record = proposal.buffer.extras["max_return"][proposal.slots]
+        return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
+
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return):
+        """Replayed levels get their new ``scores`` [N]; fresh levels are inserted into the active
+        buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
+        bool[N]: scored −inf)."""
+        n = setup.cfg.num_envs
+        bcfg = buffer_config(setup.cfg, setup.algo)
+
+        def rescore(_):
+            return (buf.update_scores(proposal.buffer, proposal.slots, scores, {"max_return": best_return}),
+                    jnp.zeros((n,), bool))
+
+        def insert(_):
+            active = buf.select_buffer(runner.buffers, runner.active)
+            new_buf, ins, _ = buf.insert_batch(active, bcfg, proposal.levels, jnp.where(overlap, -jnp.inf, scores),
+                                               {"max_return": best_return})
+            return new_buf, ins
+
+        new_buf, inserted = jax.lax.cond(proposal.replay, rescore, insert, None)
+        return buf.replace_buffer(runner.buffers, runner.active, new_buf), inserted
+
+    def advance(self, setup, runner, proposal: Proposal, params) -> dict:
+        """After ``remidi.steps_per_buffer`` counted updates on the active buffer of a sequence:
+        freeze it (and, under ``remidi.policy=combine``, keep ``params`` as its policy) and move to
+        the next, staying on the last."""
+        out = super().advance(setup, runner, proposal, params)
+        count = out["count"]
+        k = runner.buffers.valid.shape[0]
+        if self.buffer_sequence:
+            switch = (count >= setup.cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
+        else:
+            switch = jnp.asarray(False)
+        frozen_params = runner.frozen_params
+        if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
+            frozen_params = jax.tree.map(
+                lambda f, p: f.at[runner.active].set(jnp.where(switch, p, f[runner.active]), mode="drop"),
+                frozen_params, params)
+        return {**out, "active": jnp.where(switch, runner.active + 1, runner.active),
+                "count": jnp.where(switch, 0, count), "frozen_params": frozen_params}
+
+    def metrics(self, setup, runner) -> dict:
+        """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active
+        one; the active buffer's size."""
+        from remidi.engine.train import tag_counts
+
+        out = {}
+        valid = runner.buffers.valid  # bool[K, C]
+        sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
+        counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels,
+                                                                                               valid)
+        for name, c in counts.items():  # c: f32[K]
+            fractions = c / sizes
+            for b in range(valid.shape[0]):
+                out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
+            out[f"buffer_fraction/{name}"] = fractions[runner.active]
+        out["buffer_size"] = jnp.sum(valid[runner.active]).astype(jnp.float32)
+        return out
+
+
+@dataclass(frozen=True)
+class EditingBuffers(LevelBuffers):
+    """ACCEL's adversary: :class:`LevelBuffers` whose update after a replay edits the levels it
+    replayed (``accel.num_edits`` edits each by the task's mutator) and offers the edits to the
+    buffer like fresh levels, without training on them; with ``accel.easy_start``, fresh levels
+    come from the task's easy generator. With a buffer sequence, edits a frozen level explains are
+    rejected like fresh levels."""
+
+    def _fresh(self, setup, k_levels):
+        generate = setup.task.easy_level if setup.cfg.accel.easy_start else setup.task.sample_level
+        return jax.vmap(generate)(jax.random.split(k_levels, setup.cfg.num_envs))
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        base = super().propose(setup, runner, k_branch, k_levels, k_sample)  # replayed or fresh levels
+        edit = runner.edit_next
+        replay = base.replay & ~edit
+        edited = edit_levels(setup, runner.last_replayed, jax.random.fold_in(k_levels, 1))
+        levels = jax.tree.map(lambda e, chosen: jnp.where(edit, e, chosen), edited, base.levels)
+        return Proposal(replay=replay, levels=levels, buffer=base.buffer, slots=base.slots,
+                        train=replay | self.trains_on_fresh, edit=edit)
+
+    def advance(self, setup, runner, proposal: Proposal, params) -> dict:
+        """After a replay the next update edits its levels."""
+        out = super().advance(setup, runner, proposal, params)
+        last = jax.tree.map(lambda c, o: jnp.where(proposal.replay, c, o), proposal.levels, runner.last_replayed)
+        return {**out, "edit_next": proposal.replay, "last_replayed": last}
+
+    def memory(self, setup, example_level) -> dict:
+        return {"edit_next": jnp.asarray(False),
+                "last_replayed": jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level)}
+
+
+def edit_levels(setup, levels, rng):
+    """ACCEL's edits: ``accel.num_edits`` edits of each of ``levels`` [N] by the task's mutator."""
+    n = jax.tree.leaves(levels)[0].shape[0]
+    edits = setup.cfg.accel.num_edits
+    return jax.vmap(lambda key, level: setup.task.mutate_level(key, level, edits))(jax.random.split(rng, n), levels)

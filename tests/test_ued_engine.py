@@ -119,6 +119,24 @@ def test_unknown_algorithm_and_missing_optimal_return():
     validate_ued_config(BASE, "minimax-return", no_optimum)  # scores by return: fine
 
 
+def test_a_scores_declared_needs_are_what_validation_checks():
+    """Each score declares what it needs (engine/scores.py's SCORES); validation refuses a task
+    without it and lists the scores that fit the task."""
+    from remidi.engine.scores import SCORES
+
+    needs = {name: (s.needs_optimum, s.needs_solved, s.needs_finished_episodes) for name, s in SCORES.items()}
+    assert needs == {"perfect_regret": (True, False, False), "pvl": (False, False, True),
+                     "maxmc": (False, False, True), "neg_return": (False, False, False),
+                     "learnability": (False, True, True)}
+    bare = dataclasses.replace(TASK, optimal_return=None, solved=None)
+    with pytest.raises(ConfigError, match=r"^score: learnability needs a solve criterion.*; allowed: pvl, maxmc, "
+                                          r"neg_return$"):
+        validate_ued_config(dataclasses.replace(BASE, score="learnability"), "plr", bare)
+    with pytest.raises(ConfigError, match=r"^score: perfect_regret needs the environment's optimal return.*; "
+                                          r"allowed: pvl, maxmc, neg_return$"):
+        validate_ued_config(BASE, "remidi", bare)
+
+
 def test_discounted_regret_needs_the_tasks_discounted_optimum():
     no_discounted = dataclasses.replace(TASK, optimal_discounted_return=None)
     with pytest.raises(ConfigError, match="discounted_regret: this task gives no discounted optimal return"):

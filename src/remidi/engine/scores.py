@@ -36,10 +36,12 @@ partial return).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import jax
 import jax.numpy as jnp
-
-SCORES = ("perfect_regret", "pvl", "maxmc", "neg_return", "learnability")
+from flax import struct
 
 
 def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
@@ -135,18 +137,67 @@ def negative_return(mean_return: jax.Array) -> jax.Array:
     return -mean_return
 
 
+@struct.dataclass
+class ScoreInputs:
+    """What a score may read of one rollout of N levels (T steps), in the environment's reward
+    units: ``mean_return`` f32[N] (the mean return of the finished episodes, discounted for
+    perfect regret under ``discounted_regret``), ``values`` and ``advantages`` f32[T, N] (the
+    critic's, GAE), ``max_return`` f32[N] (MaxMC's record), ``done`` bool[T, N], ``reward``
+    f32[T, N], ``optimal_return`` f32[N] (the task's optimum, given only to a score that
+    ``needs_optimum``); ``solved`` (the task's ``return -> bool``, static) for one that
+    ``needs_solved``."""
+
+    mean_return: jax.Array
+    values: jax.Array
+    advantages: jax.Array
+    max_return: jax.Array
+    done: jax.Array
+    reward: jax.Array
+    optimal_return: jax.Array | None = None
+    solved: Callable | None = struct.field(pytree_node=False, default=None)
+
+
+@dataclass(frozen=True)
+class Score:
+    """A level score: ``fn(ScoreInputs) -> f32[N]`` (higher = replayed more) and what it needs,
+    which the engine checks before a run (``engine/validation.py``) and provides in the step
+    (``engine/train.py``'s ``score_rollout``).
+
+    needs_optimum: the task's optimal return (``UEDTask.optimal_return``; with
+        ``discounted_regret``, ``optimal_discounted_return`` too).
+    needs_solved: the task's solve criterion (``UEDTask.solved``).
+    needs_finished_episodes: it reads only the episodes that end inside a rollout, so a rollout
+        shorter than an episode (``num_steps`` < the episode limit) leaves levels unscored: warned.
+    help: one line for ``remidi list``.
+    """
+
+    name: str
+    fn: Callable[[ScoreInputs], jax.Array]
+    needs_optimum: bool = False
+    needs_solved: bool = False
+    needs_finished_episodes: bool = False
+    help: str = ""
+
+
+#: every score ``score=`` accepts, by name
+SCORES: dict[str, Score] = {score.name: score for score in (
+    Score("perfect_regret", lambda x: perfect_regret(x.mean_return, x.optimal_return), needs_optimum=True,
+          help="optimal return − the agent's mean return"),
+    Score("pvl", lambda x: positive_value_loss(x.advantages, x.done), needs_finished_episodes=True,
+          help="positive value loss: mean of max(GAE advantage, 0) over finished episodes"),
+    Score("maxmc", lambda x: max_mc(x.values, x.max_return, x.done), needs_finished_episodes=True,
+          help="best return seen on the level − V(s), over finished episodes"),
+    Score("neg_return", lambda x: negative_return(x.mean_return), help="−mean return (minimax return)"),
+    Score("learnability", lambda x: learnability(x.reward, x.done, x.solved), needs_solved=True,
+          needs_finished_episodes=True, help="p(1 − p), p the level's solve rate in the rollout (SFL)"),
+)}
+
+
 def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None, reward=None,
                  solved=None) -> jax.Array:
-    """Dispatch on the score's name (static). ``reward`` f32[T, N] and ``solved`` (the task's
-    ``return -> bool``) are needed by ``learnability`` only."""
-    if name == "perfect_regret":
-        return perfect_regret(mean_return, optimal_return)
-    if name == "pvl":
-        return positive_value_loss(advantages, done)
-    if name == "maxmc":
-        return max_mc(values, max_return, done)
-    if name == "neg_return":
-        return negative_return(mean_return)
-    if name == "learnability":
-        return learnability(reward, done, solved)
-    raise ValueError(f"score must be one of {SCORES}, got {name!r}")
+    """f32[N]: the score ``name`` (static; one of :data:`SCORES`) of one rollout."""
+    if name not in SCORES:
+        raise ValueError(f"score must be one of {tuple(SCORES)}, got {name!r}")
+    return SCORES[name].fn(ScoreInputs(mean_return=mean_return, values=values, advantages=advantages,
+                                       max_return=max_return, done=done, reward=reward,
+                                       optimal_return=optimal_return, solved=solved))

@@ -174,8 +174,9 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
     the optimum and the agent's mean episodic return in the same units: both discounted by
     ``ppo.gamma`` (the paper's utility), or with ``discounted_regret`` off the undiscounted
     ``mean_return`` the rollout already gave."""
+    score = sc.SCORES[score_name(setup.cfg, setup.algo)]
     optimal = None
-    if score_name(setup.cfg, setup.algo) == "perfect_regret":
+    if score.needs_optimum:
         if setup.cfg.discounted_regret:
             gamma = setup.cfg.ppo.gamma
             optimal = jax.vmap(lambda level: setup.task.optimal_discounted_return(level, gamma))(levels)
@@ -183,7 +184,7 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
         else:
             optimal = jax.vmap(setup.task.optimal_return)(levels)
     unscale = 1.0 / setup.cfg.reward_scale
-    return sc.score_levels(score_name(setup.cfg, setup.algo), mean_return=mean_return, values=traj.value * unscale,
+    return sc.score_levels(score.name, mean_return=mean_return, values=traj.value * unscale,
                            advantages=adv * unscale, max_return=max_return, done=traj.done, optimal_return=optimal,
                            reward=traj.reward, solved=setup.task.solved)
 

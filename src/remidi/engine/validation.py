@@ -80,7 +80,7 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[s
     out = []
     algo = get_algorithm(algo)
     name = score_name(cfg, algo)
-    if algo.replays and name in ("pvl", "maxmc", "learnability") and cfg.num_steps < task.max_episode_steps:
+    if algo.replays and sc.SCORES[name].needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
         out.append(f"score {name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) is "
                    f"shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not end "
                    f"score -inf and are never inserted; raise num_steps or use another score")
@@ -125,15 +125,18 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
                           f"lower eval_every or raise num_updates")
     choice("score", cfg.score, sc.SCORES)
-    if score_name(cfg, algo) == "perfect_regret" and task.optimal_return is None:
-        raise ConfigError("score: perfect_regret needs the environment's optimal return, which this task "
-                          f"does not provide; allowed: {', '.join(s for s in sc.SCORES if s != 'perfect_regret')}")
+    score = sc.SCORES[score_name(cfg, algo)]
+    for needed, what, has in (
+            (score.needs_optimum, "the environment's optimal return, which this task does not provide "
+                                  "(UEDTask.optimal_return)", task.optimal_return is not None),
+            (score.needs_solved, "a solve criterion, which this task does not define (UEDTask.solved)",
+             task.solved is not None)):
+        if needed and not has:
+            fits = [s.name for s in sc.SCORES.values() if not (s.needs_optimum and task.optimal_return is None)
+                    and not (s.needs_solved and task.solved is None)]
+            raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(fits)}")
     require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
-    if score_name(cfg, algo) == "learnability" and task.solved is None:
-        raise ConfigError("score: learnability needs a solve criterion, which this task does not define "
-                          f"(UEDTask.solved); allowed: {', '.join(s for s in sc.SCORES if s != 'learnability')}")
-    if (score_name(cfg, algo) == "perfect_regret" and cfg.discounted_regret
-            and task.optimal_discounted_return is None):
+    if score.needs_optimum and cfg.discounted_regret and task.optimal_discounted_return is None:
         raise ConfigError("discounted_regret: this task gives no discounted optimal return "
                           "(UEDTask.optimal_discounted_return), so perfect_regret cannot use the discounted utility; "
                           "allowed: false (undiscounted returns on both sides)")

@@ -16,6 +16,8 @@ unless the caller resumes it.
 from __future__ import annotations
 
 import csv
+import gzip
+import io
 import json
 import math
 import os
@@ -94,17 +96,27 @@ def metric_rows(steps: np.ndarray, history: Mapping[str, np.ndarray], seeds: Ite
 
 
 def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
-    def write(fh):
+    """Long-format rows ``(seed, step, metric, value)``; gzipped (reproducibly: no time stamp)
+    when ``path`` ends in ``.gz``."""
+    def write_rows(fh):
         w = csv.writer(fh)
         w.writerow(["seed", "step", "metric", "value"])
         for seed, step, name, value in rows:
             w.writerow([seed, step, name, repr(float(value))])
 
-    atomic_write(path, write)
+    def write_gzipped(raw):
+        with gzip.GzipFile(filename="", fileobj=raw, mode="wb", mtime=0) as zipped, io.TextIOWrapper(zipped, newline="") as fh:
+            write_rows(fh)
+
+    if Path(path).suffix == ".gz":
+        atomic_write(path, write_gzipped, binary=True)
+    else:
+        atomic_write(path, write_rows)
 
 
 def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
-    with open(path, newline="") as fh:
+    """The rows :func:`write_metrics_csv` wrote (``.gz``: gzipped)."""
+    with (gzip.open(path, "rt", newline="") if Path(path).suffix == ".gz" else open(path, newline="")) as fh:
         r = csv.reader(fh)
         next(r)
         return [(int(seed), int(step), name, float(value)) for seed, step, name, value in r]

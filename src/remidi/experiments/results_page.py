@@ -26,9 +26,6 @@ seeds than the claim requires. Everything else on the page is secondary and expl
 from __future__ import annotations
 
 import argparse
-import csv
-import gzip
-import io
 import math
 import re
 import shutil
@@ -115,13 +112,6 @@ class Run:
     preset: str = ""
 
 
-def _read_metrics_gz(path: Path) -> list[tuple[int, int, str, float]]:
-    with gzip.open(path, "rt", newline="") as fh:
-        r = csv.reader(fh)
-        next(r)
-        return [(int(seed), int(step), name, float(value)) for seed, step, name, value in r]
-
-
 def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder: Path) -> None:
     for name, entry in metrics.items():
         per = run.values.setdefault(source, {}).setdefault(name, {})
@@ -145,7 +135,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
             entry = outputs.read_json(folder / "evaluate.json")["algorithms"][run.algo]
             _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
         if (folder / "metrics.csv.gz").is_file():
-            rows = _read_metrics_gz(folder / "metrics.csv.gz")
+            rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
             steps = np.array(sorted({step for _, step, _, _ in rows}))
             index = {s: i for i, s in enumerate(steps)}
             part: dict[str, np.ndarray] = {}
@@ -425,11 +415,7 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         steps = sorted({r[1] for r in rows})
         kept = {steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(len(steps), MAX_POINTS)).round()
                                             .astype(int))} if steps else set()
-        with gzip.GzipFile(target / "metrics.csv.gz", "wb", mtime=0) as raw, \
-                io.TextIOWrapper(raw, newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["seed", "step", "metric", "value"])
-            w.writerows([seed, step, name, repr(value)] for seed, step, name, value in rows if step in kept)
+        outputs.write_metrics_csv(target / "metrics.csv.gz", (r for r in rows if r[1] in kept))
         written.append(target)
     return written
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from remidi.engine.rollout import Frozen, rollout
+from remidi.engine.tracker import ExactTracker
 from remidi.envs.interface import AutoReplay
 from seq_env import SeqEnv, level, stack
 
@@ -23,7 +24,7 @@ def run_tracker(agent_level, frozen_levels, valid=None, mode="prefix", steps=Non
     levels = stack(agent_level)
     steps = steps or int(agent_level.length)
     traj, _ = rollout(jax.random.PRNGKey(0), ENV, None, apply, {}, jnp.zeros(1), levels, steps,
-                      Frozen(levels=frozen_batch, valid=valid), mode)
+                      Frozen(levels=frozen_batch, valid=valid, tracker=ExactTracker(mode)))
     return np.asarray(traj.indist[:, 0])
 
 
@@ -82,3 +83,15 @@ def test_autoreplay_restarts_the_same_level(deterministic_reset):
         seen.append(int(obs)); rewards.append(float(r)); dones.append(bool(d))
     assert seen == [5, 6, 5, 6, 5]
     assert rewards == [0.0, 2.0, 0.0, 2.0] and dones == [False, True, False, True]
+
+
+def test_the_tracker_is_a_component_chosen_from_the_config():
+    from remidi.engine.tracker import CandidateTracker, make_tracker
+
+    assert make_tracker("prefix", 0) == ExactTracker("prefix")
+    assert make_tracker("per_step", 0) == ExactTracker("per_step")
+    assert make_tracker("prefix", 8) == CandidateTracker(budget=8)
+    with pytest.raises(ValueError, match="prefix mode only"):
+        make_tracker("per_step", 8)
+    with pytest.raises(ValueError, match="tracker mode must be one of"):
+        ExactTracker("exact")

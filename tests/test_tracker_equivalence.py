@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from remidi.engine.rollout import Frozen, rollout
+from remidi.engine.tracker import make_tracker
 from remidi.envs import maze as M
 from remidi.envs.lever import lever_task
 
@@ -35,7 +36,7 @@ def run(env, params, agents, frozen_levels, valid, budget, num_actions, combine,
     frozen_params = None
     if combine:  # buffer b's policy prefers action b + 1
         frozen_params = {"bias": 2.0 * jax.nn.one_hot(jnp.arange(copies) + 1, num_actions)}
-    frozen = Frozen(levels=frozen_levels, valid=valid, params=frozen_params, budget=budget)
+    frozen = Frozen(levels=frozen_levels, valid=valid, params=frozen_params, tracker=make_tracker("prefix", budget))
     # the candidate tracker as the engine runs it (these environments reset deterministically):
     # its slots share the envs' reset and environment step; the reference as plainly as it gets
     traj, _ = rollout(jax.random.PRNGKey(seed), env, params, policy(num_actions),

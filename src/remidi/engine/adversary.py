@@ -37,6 +37,7 @@ from flax import struct
 from remidi.engine import buffer as buf
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
+from remidi.engine.tracker import make_tracker
 from remidi.errors import ConfigError
 
 
@@ -145,7 +146,7 @@ class LevelBuffers(RandomLevels):
         valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
         flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
-                      budget=tracker_budget(setup))
+                      tracker=make_tracker(setup.cfg.remidi.tracker, tracker_budget(setup)))
 
     def best_return(self, proposal: Proposal, best_return):
         """For a replayed level, the buffer's record too."""

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 
 from remidi.engine import tracker as trk
 from remidi.engine.distributions import for_task
-from remidi.engine.rollout import combined_logits, rollout
+from remidi.engine.rollout import combine, rollout
 from remidi.engine.train import Runner, Setup, combines, frozen_levels, policy_apply
 from remidi.envs.interface import UEDTask
 
@@ -38,24 +38,24 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
 
 def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
     """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
-    the policy that acts there (under ``remidi.policy=combine``, the combined policy)."""
+    the policy that acts there (under ``remidi.policy=combine``, the combined policy:
+    :func:`~remidi.engine.rollout.combine`)."""
     task, net = setup.task, setup.net
     n = jax.tree.leaves(levels)[0].shape[0]
     keys = jax.random.split(jax.random.PRNGKey(0), n)
     obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(keys, levels, task.params)
-    obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((1, n), bool)
-    _, (logits, _) = policy_apply(setup, runner)({"params": runner.train_state.params}, net.initialize_carry(n),
-                                                 obs_in, reset)
+    obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((n,), bool)
+    apply_fn = policy_apply(setup, runner)
+    carry = net.initialize_carry(n)
+    _, (logits, _) = apply_fn({"params": runner.train_state.params}, carry, obs_in, reset[None])
     logits = logits[0]
     if combines(setup):
-        frozen = frozen_levels(setup, runner)
-        tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
-            task.env, task.params, keys, frozen.levels, frozen.valid, obs)
-        r = setup.cfg.remidi
-        matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, r.num_buffers - 1, r.buffer_capacity)
-        _, (frozen_logits, _) = jax.vmap(lambda p: net.apply({"params": p}, net.initialize_carry(n), obs_in, reset))(
-            frozen.params)
-        logits = combined_logits(matched, frozen_logits[:, 0], logits)
+        # every frozen level stepped at the first observation: the reference tracker
+        frozen = frozen_levels(setup, runner).replace(tracker=trk.ExactTracker())
+        tstate = frozen.tracker.start(task.env, task.params, frozen, keys, obs)
+        copies = jax.tree.leaves(frozen.params)[0].shape[0]
+        frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)
+        _, logits = combine(frozen, tstate, apply_fn, frozen_carry, obs_in, reset, logits)
     return jax.nn.softmax(logits, axis=-1)
 
 

@@ -40,32 +40,32 @@ class Frozen:
     the policy frozen with each buffer, ReMiDi's ``Combine``), a step whose prefix one of those
     buffers' levels produced is acted on by the policy of the earliest such buffer.
 
-    ``budget`` (static) picks the tracker (:mod:`remidi.engine.tracker`): 0, the reference tracker
-    stepping every frozen level; S > 0, the candidate tracker with S slots per env (the
-    environment's reset must ignore its key)."""
+    ``tracker`` (static): the component that judges distinguishability
+    (:mod:`remidi.engine.tracker`: the reference tracker stepping every frozen level, or the
+    candidate tracker with ``budget`` slots per env, whose environment's reset ignores its key)."""
 
     levels: Any
     valid: jax.Array
     params: Any = None
-    budget: int = struct.field(pytree_node=False, default=0)
+    tracker: trk.ExactTracker = struct.field(pytree_node=False, default=trk.ExactTracker())
 
 
 def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params, init_carry, levels,
-            num_steps: int, frozen: Frozen | None = None, tracker_mode: str = "prefix",
-            tracker_env: UnderspecifiedEnv | None = None, dist=CATEGORICAL, deterministic_reset: bool = False):
+            num_steps: int, frozen: Frozen | None = None, tracker_env: UnderspecifiedEnv | None = None,
+            dist=CATEGORICAL, deterministic_reset: bool = False):
     """Roll out the policy on ``levels`` (leaves [N, ...]) of ``env`` for ``num_steps`` steps.
 
-    The tracker plays the frozen levels in ``tracker_env`` (default ``env``; they are training
-    levels, so a larger evaluation environment passes the training one). With ``frozen.params``
-    the actions of indistinguishable steps come from the earliest matching buffer's policy (each
-    frozen policy carries its own recurrent state); ``log_prob`` and ``value`` are always the
-    current policy's (PPO trains only on the steps it acted on, ``~indist``).
+    With ``frozen``, its tracker (``frozen.tracker``) judges at every step whether the prefix so
+    far is indistinguishable from a frozen level; it plays the frozen levels in ``tracker_env``
+    (default ``env``; they are training levels, so a larger evaluation environment passes the
+    training one). With ``frozen.params`` the actions come from :func:`combine` (ReMiDi's
+    Combine); ``log_prob`` and ``value`` are always the current policy's (PPO trains only on the
+    steps it acted on, ``~indist``). Without ``frozen``, ``indist`` is all False.
 
     ``apply_fn({"params": params}, carry, obs[1, N, ...], reset bool[1, N]) -> carry,
     (logits [1, N, P], value [1, N])`` (a flax module's ``apply``); ``dist``
     (:mod:`remidi.engine.distributions`) reads the policy output ``logits`` and samples the
-    actions. With ``frozen`` the tracker runs beside every env; without it ``indist`` is all
-    False. ``deterministic_reset``: the environment's reset ignores its key, so a restart
+    actions. ``deterministic_reset``: the environment's reset ignores its key, so a restart
     restores the episode's first state instead of resetting (:class:`AutoReplay`). Returns
     ``(trajectory, last_value f32[N])``.
     """
@@ -74,11 +74,12 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     num_envs = jax.tree.leaves(levels)[0].shape[0]
     rng, rng_reset = jax.random.split(rng)
     reset_keys = jax.random.split(rng_reset, num_envs)
-    candidates = frozen is not None and frozen.budget > 0
+    tracker = frozen.tracker if frozen is not None else None
     # the candidate tracker's slots and the envs share one reset and one environment step per
     # rollout step (each further copy of the environment's reset or step in the program costs
     # compile time: seconds for Brax); the reset ignores its keys
-    shared = candidates and deterministic_reset and tracker_env is raw_env
+    shared = isinstance(tracker, trk.CandidateTracker) and deterministic_reset and tracker_env is raw_env
+    starts = None
     if shared:
         both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
         frozen_keys = jnp.broadcast_to(reset_keys[:1], (frozen.valid.shape[0],) + reset_keys.shape[1:])
@@ -89,61 +90,39 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
         starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
     else:
         obs, state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, env_params)
-        starts = trk.frozen_starts(tracker_env, env_params, frozen.levels) if candidates else None
-    if candidates:
-        if tracker_mode != "prefix":
-            raise ValueError("the candidate tracker (budget > 0) computes the prefix mode only")
-        tstate = jax.vmap(trk.candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, frozen.budget)
-    elif frozen is not None:
-        tstate = jax.vmap(trk.tracker_reset, in_axes=(None, None, 0, None, None, 0))(
-            tracker_env, env_params, reset_keys, frozen.levels, frozen.valid, obs)
-    else:
-        tstate = None
-
-    combine = frozen is not None and frozen.params is not None
-    if combine:
-        copies = jax.tree.leaves(frozen.params)[0].shape[0]
-        capacity = frozen.valid.shape[0] // copies
+    tstate = tracker.start(tracker_env, env_params, frozen, reset_keys, obs, starts) if tracker is not None else None
+    combining = frozen is not None and frozen.params is not None
 
     def step(carry, key):
         state, obs, reset, (hidden, frozen_hidden), tstate = carry
         k_act, k_env = jax.random.split(key)
-        if tstate is not None:
-            indist = jax.vmap(trk.indistinguishable, in_axes=(0, None))(tstate, tracker_mode)
-        else:
-            indist = jnp.zeros((num_envs,), bool)
+        indist = tracker.explained(tstate) if tracker is not None else jnp.zeros((num_envs,), bool)
         obs_in = jax.tree.map(lambda x: x[None], obs)
         hidden, (logits, value) = apply_fn({"params": params}, hidden, obs_in, reset[None])
         logits, value = logits[0], value[0]
         acting = logits
-        if combine:
-            frozen_hidden, (frozen_logits, _) = jax.vmap(
-                lambda p, h: apply_fn({"params": p}, h, obs_in, reset[None]))(frozen.params, frozen_hidden)
-            matched = jax.vmap(trk.buffer_match, in_axes=(0, None, None))(tstate, copies, capacity)
-            acting = combined_logits(matched, frozen_logits[:, 0], logits)
+        if combining:
+            frozen_hidden, acting = combine(frozen, tstate, apply_fn, frozen_hidden, obs_in, reset, logits)
         action = dist.sample(k_act, acting)
         log_prob = dist.log_prob(logits, action)
         env_keys = jax.random.split(k_env, num_envs)
         if shared:
             next_obs, state, reward, done, tstate = step_with_slots(raw_env, env, env_params, env_keys, state, tstate,
-                                                                    action)
+                                                                    action, tracker)
         else:
             next_obs, state, reward, done, _ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
                 env_keys, state, action, env_params)
-            if candidates:
-                tstate = jax.vmap(trk.candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
-                    tracker_env, env_params, env_keys, tstate, action, next_obs, done)
-            elif tstate is not None:
-                tstate = jax.vmap(trk.tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
-                    tracker_env, env_params, env_keys, tstate, frozen.levels, frozen.valid, action, next_obs, done)
-        overflow = tstate.overflow if candidates else jnp.zeros((num_envs,), jnp.int32)
+            if tracker is not None:
+                tstate = tracker.advance(tracker_env, env_params, frozen, env_keys, tstate, action, next_obs, done)
+        overflow = tracker.overflow(tstate) if tracker is not None else jnp.zeros((num_envs,), jnp.int32)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
                             reward=reward.astype(jnp.float32), done=done, indist=indist, overflow=overflow)
         return (state, next_obs, done, (hidden, frozen_hidden), tstate), record
 
     first = jnp.ones((num_envs,), bool)
     frozen_carry = None
-    if combine:
+    if combining:
+        copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), init_carry)
     carry = (state, obs, first, (init_carry, frozen_carry), tstate)
     (state, obs, reset, (hidden, _), _), traj = jax.lax.scan(step, carry, jax.random.split(rng, num_steps))
@@ -151,7 +130,23 @@ def rollout(rng, env: UnderspecifiedEnv, env_params, apply_fn: Callable, params,
     return traj, last_value[0]
 
 
-def step_with_slots(raw_env, env: AutoReplay, env_params, env_keys, state, tstate, action):
+def combine(frozen: Frozen, tstate, apply_fn: Callable, frozen_hidden, obs_in, reset, logits):
+    """ReMiDi's ``Combine`` (Algorithm 1), the one place it is computed: each frozen buffer's
+    policy (``frozen.params``, leaves [B, ...], each with its recurrent state ``frozen_hidden``
+    [B, ...]) reads the observations ``obs_in`` [1, N, ...]; the earliest buffer one of whose
+    levels produced env n's whole prefix (``frozen.tracker.buffer_match``) acts there, the current
+    policy (``logits`` f32[N, P]) where none did. Returns ``(frozen_hidden, acting logits
+    f32[N, P])``."""
+    copies = jax.tree.leaves(frozen.params)[0].shape[0]
+    capacity = frozen.valid.shape[0] // copies
+    frozen_hidden, (frozen_logits, _) = jax.vmap(
+        lambda p, h: apply_fn({"params": p}, h, obs_in, reset[None]))(frozen.params, frozen_hidden)
+    matched = frozen.tracker.buffer_match(tstate, copies, capacity)
+    return frozen_hidden, combined_logits(matched, frozen_logits[:, 0], logits)
+
+
+def step_with_slots(raw_env, env: AutoReplay, env_params, env_keys, state, tstate, action,
+                    tracker: trk.CandidateTracker):
     """One environment step of the N envs and of their candidate tracker slots together, as one
     batch [N, 1 + S]: each env's slots take its action and the key its own step takes (the first
     half of ``split(env_key)``, as in :meth:`AutoReplay.step_env` and
@@ -165,7 +160,7 @@ def step_with_slots(raw_env, env: AutoReplay, env_params, env_keys, state, tstat
         step_keys, both, actions, env_params)
     own = jax.tree.map(lambda x: x[:, 0], stepped)
     next_obs, state, reward, done, _ = jax.vmap(env.restart_where_done, in_axes=(0, 0, None))(state, own, env_params)
-    tstate = jax.vmap(trk.candidates_advance)(tstate, jax.tree.map(lambda x: x[:, 1:], stepped), next_obs, done)
+    tstate = tracker.advance_stepped(tstate, jax.tree.map(lambda x: x[:, 1:], stepped), next_obs, done)
     return next_obs, state, reward, done, tstate
 
 

@@ -27,12 +27,18 @@ Mode ``"per_step"`` reproduces the authors' looser rule, one boolean AND-ed with
 level matches *this* step" — a prefix can pass that test although no single frozen level
 produced it. It needs every frozen level stepped: the reference tracker only.
 
-All functions act on ONE rollout environment; the rollout vmaps them over its N envs.
+The functions act on ONE rollout environment. The rollout uses them through a *tracker
+component* (:class:`ExactTracker`, :class:`CandidateTracker`; :func:`make_tracker` picks one from
+the config), which vmaps them over its N envs: ``start`` at the rollout's first step,
+``explained`` (bool[N]: the prefix so far is indistinguishable from a frozen level) before each
+action, ``advance`` after each environment step. Another way of judging distinguishability (a
+learned belief model) is one more class with these methods.
 Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``), S = slots.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import jax
@@ -143,3 +149,75 @@ def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Ar
     buffer-major: level f belongs to buffer f // capacity)."""
     owner = jnp.where(state.match, state.index // capacity, -1)  # [S]
     return jnp.any(owner[None, :] == jnp.arange(num_buffers)[:, None], axis=1)
+
+
+# ---------------------------------------------------------------------- the components
+@dataclass(frozen=True)
+class ExactTracker:
+    """The reference tracker over N rollout envs: every frozen level stepped beside each env.
+    ``mode``: ``"prefix"`` (the definition) or ``"per_step"`` (the authors' rule). Its methods
+    take the rollout's ``frozen`` (:class:`~remidi.engine.rollout.Frozen`) and act on leaves [N, ...]."""
+
+    mode: str = "prefix"
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise ValueError(f"tracker mode must be one of {MODES}, got {self.mode!r}")
+
+    def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
+        """The state at the envs' first observations ``obs`` (reset with ``reset_keys`` [N])."""
+        return jax.vmap(tracker_reset, in_axes=(None, None, 0, None, None, 0))(
+            env, params, reset_keys, frozen.levels, frozen.valid, obs)
+
+    def explained(self, state: TrackerState) -> jax.Array:
+        """bool[N]: each env's prefix so far could have come from a frozen level."""
+        return jax.vmap(indistinguishable, in_axes=(0, None))(state, self.mode)
+
+    def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
+        """After the envs took ``action`` with ``env_keys`` [N] and saw ``next_obs``, ``done``."""
+        return jax.vmap(tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
+            env, params, env_keys, state, frozen.levels, frozen.valid, action, next_obs, done)
+
+    def overflow(self, state: TrackerState) -> jax.Array:
+        """i32[N]: frozen levels the tracker could not follow (none: it follows all)."""
+        return jnp.zeros(state.match.shape[:1], jnp.int32)
+
+    def buffer_match(self, state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
+        """bool[N, B]: some level of frozen buffer b produced env n's whole prefix (Combine)."""
+        return jax.vmap(buffer_match, in_axes=(0, None, None))(state, num_buffers, capacity)
+
+
+@dataclass(frozen=True)
+class CandidateTracker(ExactTracker):
+    """The candidate tracker over N rollout envs: ``budget`` slots per env, the frozen levels
+    sharing the env's first observation (mode ``prefix`` only; the environment's reset must
+    ignore its key). ``starts``: the frozen levels' first observations and states
+    (:func:`frozen_starts`), computed once per rollout."""
+
+    budget: int = 64
+
+    def __post_init__(self):
+        if self.mode != "prefix" or self.budget < 1:
+            raise ValueError("the candidate tracker computes the prefix mode only, with budget ≥ 1")
+
+    def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
+        starts = frozen_starts(env, params, frozen.levels) if starts is None else starts
+        return jax.vmap(candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, self.budget)
+
+    def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
+        return jax.vmap(candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
+            env, params, env_keys, state, action, next_obs, done)
+
+    def advance_stepped(self, state: TrackerState, stepped, next_obs, done) -> TrackerState:
+        """:meth:`advance` given the slots' environment step, taken together with the envs'
+        (leaves [N, S, ...]: :func:`~remidi.engine.rollout.step_with_slots`)."""
+        return jax.vmap(candidates_advance)(state, stepped, next_obs, done)
+
+    def overflow(self, state: TrackerState) -> jax.Array:
+        return state.overflow
+
+
+def make_tracker(mode: str = "prefix", budget: int = 0) -> ExactTracker:
+    """The tracker of ``remidi.tracker`` (``mode``) with ``budget`` slots per env: the candidate
+    tracker for a budget > 0, else the reference tracker."""
+    return CandidateTracker(mode=mode, budget=budget) if budget > 0 else ExactTracker(mode=mode)

@@ -160,7 +160,7 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     cfg, task = setup.cfg, setup.task
     carry = setup.net.initialize_carry(cfg.num_envs)
     traj, last_value = rollout(rng, task.env, task.params, policy_apply(setup, runner), runner.train_state.params,
-                               carry, levels, cfg.num_steps, frozen, cfg.remidi.tracker, dist=for_task(task.continuous),
+                               carry, levels, cfg.num_steps, frozen, dist=for_task(task.continuous),
                                deterministic_reset=task.deterministic_reset)
     adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
                                cfg.ppo.gae_lambda)

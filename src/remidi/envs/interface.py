@@ -131,6 +131,9 @@ class UEDTask:
             the same shapes; None for a task without one (ACCEL cannot run on it).
         easy_level: ``rng -> level``, the generator of ACCEL's "easy start" (e.g. mazes without
             walls, ``accel.easy_start``); None for a task without one.
+        level_builder: the task's level-building MDP (:class:`remidi.envs.builder.LevelBuilder`),
+            the environment a learned level generator (PAIRED) acts in; None for a task without
+            one (the generator algorithms cannot run on it).
         deterministic_reset: ``env.reset_to_level`` ignores its key (the level fixes the start,
             as in every environment of this package). Lets ReMiDi use the candidate tracker,
             whose cost per step does not grow with the number of frozen levels; leave False for
@@ -151,6 +154,7 @@ class UEDTask:
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
     mutate_level: Callable[[jax.Array, Any, int], Any] | None = None
     easy_level: Callable[[jax.Array], Any] | None = None
+    level_builder: Any = None
     deterministic_reset: bool = False
     continuous: bool = False
 

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.envs.builder import LevelBuilder
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
 
 
@@ -85,6 +86,32 @@ class LeverGame(UnderspecifiedEnv):
                           visible=jnp.full((self.num_levers,), visible))
 
 
+class LeverBuilder(LevelBuilder):
+    """The lever game's level-building MDP: one action ``a`` in ``[0, 2·num_levers)`` builds the
+    level: correct lever ``a mod num_levers``, visible when ``a < num_levers``, hidden otherwise.
+    The generator sees only the time step and its noise (``design`` is empty)."""
+
+    num_steps = 1
+
+    def __init__(self, num_levers: int = 64):
+        self.num_levers = num_levers
+        self.num_actions = 2 * num_levers
+
+    def empty(self, key) -> LeverLevel:
+        return LeverLevel(correct=jnp.zeros((), jnp.int32), visible=jnp.asarray(True))
+
+    def place(self, design: LeverLevel, t, action) -> LeverLevel:
+        valid = (action >= 0) & (action < self.num_actions)
+        built = LeverLevel(correct=(action % self.num_levers).astype(jnp.int32), visible=action < self.num_levers)
+        return jax.tree.map(lambda new, old: jnp.where(valid, new, old), built, design)
+
+    def show(self, design) -> jax.Array:
+        return jnp.zeros((0,), jnp.float32)
+
+    def built(self, state) -> LeverLevel:
+        return state.design
+
+
 @functools.lru_cache(maxsize=None)
 def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplier: float = 10.0) -> UEDTask:
     """The lever game as a UED task. Cached: the same arguments give the same (immutable) task,
@@ -104,5 +131,6 @@ def lever_task(num_levers: int = 64, visible_prob: float = 0.5, hidden_multiplie
         level_tags=lambda level: {"hidden": ~level.visible},
         expected_return=lambda level, probs: env.expected_return(level, probs, params),
         mutate_level=env.mutate_level,
+        level_builder=LeverBuilder(num_levers),
         deterministic_reset=True,
     )

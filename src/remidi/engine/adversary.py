@@ -139,8 +139,6 @@ class LevelBuffers(RandomLevels):
         """The levels of every buffer before the active one, one batch of F = (K−1)·capacity."""
         if not self.buffer_sequence or setup.cfg.remidi.num_buffers < 2:
             return None
-        from remidi.engine.train import tracker_budget
-
         earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
         k = earlier.valid.shape[0]
         valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
@@ -195,8 +193,6 @@ class LevelBuffers(RandomLevels):
     def metrics(self, setup, runner) -> dict:
         """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active
         one; the active buffer's size."""
-        from remidi.engine.train import tag_counts
-
         out = {}
         valid = runner.buffers.valid  # bool[K, C]
         sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
@@ -241,6 +237,20 @@ class EditingBuffers(LevelBuffers):
     def memory(self, setup, example_level) -> dict:
         return {"edit_next": jnp.asarray(False),
                 "last_replayed": jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level)}
+
+
+def tracker_budget(setup) -> int:
+    """Slots per env of the candidate tracker, or 0 for the reference tracker (see ReMiDiConfig)."""
+    r = setup.cfg.remidi
+    if r.tracker != "prefix" or not setup.task.deterministic_reset:
+        return 0
+    return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
+
+
+def tag_counts(setup, levels, weight) -> dict[str, jax.Array]:
+    """Σ weight over the levels [N] that carry each tag."""
+    tags = jax.vmap(setup.task.level_tags)(levels)
+    return {name: jnp.sum(jnp.where(t, weight, 0.0)) for name, t in tags.items()}
 
 
 def edit_levels(setup, levels, rng):

@@ -43,7 +43,7 @@ from remidi.engine.config import UEDConfig, buffer_config, num_buffers, score_na
 from remidi.engine.distributions import for_task
 from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, compute_gae, create_train_state, ppo_update
-from remidi.engine.adversary import Proposal
+from remidi.engine.adversary import Proposal, tag_counts
 from remidi.engine.rollout import Frozen, Trajectory, rollout
 from remidi.envs.interface import UEDTask
 
@@ -141,14 +141,6 @@ def frozen_levels(setup: Setup, runner: Runner) -> Frozen | None:
     return setup.algo.adversary.frozen(setup, runner)
 
 
-def tracker_budget(setup: Setup) -> int:
-    """Slots per env of the candidate tracker, or 0 for the reference tracker (see ReMiDiConfig)."""
-    r = setup.cfg.remidi
-    if r.tracker != "prefix" or not setup.task.deterministic_reset:
-        return 0
-    return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
-
-
 def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     """Roll out on ``levels`` [N] and compute GAE and scores.
 
@@ -203,12 +195,6 @@ def learn(setup: Setup, runner: Runner, rng, traj: Trajectory, adv, targets) -> 
     train_state, metrics = ppo_update(runner.train_state, carry, batch, rng, setup.cfg.ppo,
                                       policy_apply(setup, runner), for_task(setup.task.continuous))
     return train_state, {name: metrics[name].astype(jnp.float32) for name in PPO_METRICS}
-
-
-def tag_counts(setup: Setup, levels, weight) -> dict[str, jax.Array]:
-    """Σ weight over the levels [N] that carry each tag."""
-    tags = jax.vmap(setup.task.level_tags)(levels)
-    return {name: jnp.sum(jnp.where(t, weight, 0.0)) for name, t in tags.items()}
 
 
 # ---------------------------------------------------------------------------- the step

@@ -39,6 +39,7 @@ from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
 from remidi.experiments.compare import compare
+from remidi.experiments.table import _digits as table_digits
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "docs" / "results" / "data"
@@ -215,8 +216,8 @@ def _f(x: float, digits: int = 2) -> str:
 
 
 def _digits(metric: str) -> int:
-    name = metric.split(":", 1)[1]
-    return 3 if name.startswith("regret/") else 1 if name.startswith("return/") else 2
+    """Decimals of ``"source:name"`` (as ``remidi table`` shows ``name``)."""
+    return table_digits(metric.split(":", 1)[1])
 
 
 def _p(p: float) -> str:

@@ -94,10 +94,12 @@ def _cells(entry: dict | None, digits: int) -> list[str]:
 
 
 def _digits(metric: str) -> int:
+    """Decimals a metric is shown with: 3 for the tabular games' values (near 0.175, 1/64), 2 for
+    shares and solve rates, 1 for returns and everything else."""
     kind = metric.split("/")[0]
     if kind in ("regret", "adversary_prob", "policy"):  # the tabular games' values near 0.175, 1/64
         return 3
-    return 2 if kind in ("replay_fraction", "buffer_fraction", "solve_rate") else 1
+    return 2 if kind in ("replay_fraction", "buffer_fraction") or "solve_rate" in metric else 1
 
 
 def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:

@@ -96,3 +96,20 @@ def test_the_budget_ends_the_episode_and_the_noise_is_not_zero():
         dones.append(bool(done))
         assert float(reward) == 0.0
     assert dones == [False] * (b.num_steps - 1) + [True]
+
+
+def test_the_brax_builder_builds_type_a_on_a_grid_and_both_type_b_signs():
+    from remidi.envs.brax import BraxBuilder
+
+    b = BraxBuilder(num_dims=3, theta_low=0.5, theta_high=1.5, bins=11)
+    assert b.num_steps == 4 and b.num_actions == 11
+    a = b.build(KEY, jnp.array([0, 0, 5, 10]))
+    np.testing.assert_allclose(a.theta, [0.5, 1.0, 1.5], rtol=1e-6)
+    assert not bool(a.type_b)
+    for action, sign in ((1, True), (2, False)):
+        lv = b.build(KEY, jnp.array([action, 0, 0, 0]))  # a type B level's θ stays canonical
+        assert bool(lv.type_b) and bool(lv.sign) == sign
+        np.testing.assert_array_equal(lv.theta, 1.0)
+    kept = b.build(KEY, jnp.array([7, 3, 11, 10]))  # kind 7 and bin 11 change nothing
+    assert not bool(kept.type_b)
+    np.testing.assert_allclose(kept.theta, [0.8, 1.0, 1.5], rtol=1e-6)

@@ -76,3 +76,19 @@ def test_remidi_rejects_hidden_levels_and_learns_visible_ones(tmp_path, plr_visi
     assert m["solve_rate/visible"] > 5 * plr_visible["solve_rate/visible"]
     assert m["regret/visible/mean"] < 0.85 * plr_visible["regret/visible/mean"]
     assert all(v > 0.1 for v in metrics["solve_rate/visible"]["per_seed"])
+
+
+def test_paired_with_perfect_regret_generates_hidden_levels_and_fails_visible_ones(tmp_path):
+    """PAIRED whose antagonist is the exact optimum (``paired.estimator=perfect``): hidden levels
+    carry regret ≈ 20 against ≤ 2 for visible ones, so the generator learns to build hidden
+    levels (half of the generator's first levels are hidden, by chance), and the protagonist,
+    trained on what it generates, stays at chance on visible levels."""
+    m, metrics = run(tmp_path, "paired", "--set", "paired.estimator=perfect")
+    assert m["generated/hidden"] > 0.75
+    assert min(metrics["generated/hidden"]["per_seed"]) > 0.7
+    assert m["solve_rate/visible"] < 0.1
+    assert m["paired/regret"] > 10  # the generator is paid for hidden levels
+    with open(tmp_path / "paired" / "metrics.csv") as fh:
+        first = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "generated/hidden" and r["step"] == "50"]
+    assert max(first) < 0.7 < m["generated/hidden"]  # it learned to: early on the shares are near one half
+    check_hidden_regret(m)

@@ -111,8 +111,8 @@ def test_invalid_configs_name_the_key(change, needle):
 
 
 def test_unknown_algorithm_and_missing_optimal_return():
-    with pytest.raises(ConfigError, match="--algo: unknown value 'paired'"):
-        validate_ued_config(BASE, "paired", TASK)
+    with pytest.raises(ConfigError, match="--algo: unknown value 'poet'"):
+        validate_ued_config(BASE, "poet", TASK)
     no_optimum = dataclasses.replace(TASK, optimal_return=None)
     with pytest.raises(ConfigError, match="perfect_regret needs"):
         validate_ued_config(BASE, "plr", no_optimum)
@@ -260,7 +260,8 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
                      "minimax-return": ("LevelBuffers", True, False, False, False),
                      "remidi": ("LevelBuffers", True, True, False, False),
                      "accel": ("EditingBuffers", True, False, True, False),
-                     "remidi-accel": ("EditingBuffers", True, True, True, False)}
+                     "remidi-accel": ("EditingBuffers", True, True, True, False),
+                     "paired": ("LevelGenerator", False, False, False, True)}
     with pytest.raises(ConfigError, match="would never train the agent"):
         RandomLevels(trains_on_fresh=False)
     with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversary adversary"):
@@ -268,3 +269,31 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
     # non-robust PLR (trains on fresh levels too) is a valid adversary
     assert Algorithm("plr-nonrobust", LevelBuffers(trains_on_fresh=True)).trains_on_fresh
     assert EditingBuffers(buffer_sequence=True) != EditingBuffers()
+
+
+def test_paired_needs_a_level_builder_and_resumes_exactly(tmp_path):
+    """PAIRED's generator and antagonist live in the Runner: a run interrupted and resumed ends
+    where an uninterrupted one does; a task without a level-building MDP is refused in one line."""
+    no_builder = dataclasses.replace(TASK, level_builder=None)
+    with pytest.raises(ConfigError, match=r"^--algo: paired learns a level generator, but this task has no "
+                                          r"level-building MDP \(UEDTask.level_builder\); allowed: dr, plr"):
+        validate_ued_config(TINY, "paired", no_builder)
+    with pytest.raises(ConfigError, match="^paired.estimator: perfect needs the task's optimal return"):
+        validate_ued_config(R(TINY, score="neg_return", paired=R(TINY.paired, estimator="perfect")), "paired",
+                            dataclasses.replace(TASK, optimal_return=None, optimal_discounted_return=None))
+    cfg = R(TINY, num_updates=20)
+    full = driver.train_seeds(TASK, cfg, "paired", [0, 1], progress=False)
+
+    def crash(done, metrics):
+        if done == 10:
+            raise Crash
+
+    with pytest.raises(Crash):
+        driver.train_seeds(TASK, cfg, "paired", [0, 1], out=tmp_path, progress=False, on_block=crash)
+    resumed = driver.train_seeds(TASK, cfg, "paired", [0, 1], out=tmp_path, resume=True, progress=False)
+    for name in full.history:
+        np.testing.assert_array_equal(full.history[name], resumed.history[name], err_msg=name)
+    for a, b in zip(jax.tree.leaves(full.runner), jax.tree.leaves(resumed.runner)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert {"paired/regret", "paired/antagonist_return", "paired/generator_entropy", "generated/hidden"} <= set(full.history)
+    assert full.runner.generator is not None and full.runner.antagonist is not None

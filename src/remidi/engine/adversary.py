@@ -58,6 +58,7 @@ class Proposal:
     slots: jax.Array | None
     train: jax.Array
     edit: jax.Array | None = None
+    generated: object = None  # PAIRED: the generator's episode that built the levels
 
 
 @dataclass(frozen=True)
@@ -91,9 +92,11 @@ class RandomLevels:
         """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's."""
         return best_return
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return):
-        """``(buffers, inserted bool[N])`` after scoring: nothing is kept."""
-        return runner.buffers, jnp.zeros((setup.cfg.num_envs,), bool)
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+        """After scoring: ``(changed Runner fields, inserted bool[N], step metrics)``; nothing is
+        kept. ``mean_return`` f32[N]: the agent's mean episodic return on each level; ``rng`` for
+        an adversary that learns."""
+        return {}, jnp.zeros((setup.cfg.num_envs,), bool), {}
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
         """The Runner fields the adversary changes after the learner: ``active``, ``count``,
@@ -104,9 +107,10 @@ class RandomLevels:
         return {"active": runner.active, "count": count, "frozen_params": runner.frozen_params,
                 "edit_next": runner.edit_next, "last_replayed": runner.last_replayed}
 
-    def memory(self, setup, example_level) -> dict:
-        """Initial values of the Runner fields only this adversary uses (ACCEL's)."""
-        return {"edit_next": None, "last_replayed": None}
+    def memory(self, setup, example_level, example_obs, rng) -> dict:
+        """Initial values of the Runner fields only this adversary uses (ACCEL's, PAIRED's);
+        ``rng``: the runner's key, which an adversary that needs one folds (never splits)."""
+        return {}
 
     def metrics(self, setup, runner) -> dict:
         """What the adversary's buffers hold: nothing without buffers."""
@@ -151,7 +155,7 @@ class LevelBuffers(RandomLevels):
         record = proposal.buffer.extras["max_return"][proposal.slots]
         return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return):
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
         """Replayed levels get their new ``scores`` [N]; fresh levels are inserted into the active
         buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
         bool[N]: scored −inf)."""
@@ -169,7 +173,7 @@ class LevelBuffers(RandomLevels):
             return new_buf, ins
 
         new_buf, inserted = jax.lax.cond(proposal.replay, rescore, insert, None)
-        return buf.replace_buffer(runner.buffers, runner.active, new_buf), inserted
+        return {"buffers": buf.replace_buffer(runner.buffers, runner.active, new_buf)}, inserted, {}
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
         """After ``remidi.steps_per_buffer`` counted updates on the active buffer of a sequence:
@@ -234,7 +238,7 @@ class EditingBuffers(LevelBuffers):
         last = jax.tree.map(lambda c, o: jnp.where(proposal.replay, c, o), proposal.levels, runner.last_replayed)
         return {**out, "edit_next": proposal.replay, "last_replayed": last}
 
-    def memory(self, setup, example_level) -> dict:
+    def memory(self, setup, example_level, example_obs, rng) -> dict:
         return {"edit_next": jnp.asarray(False),
                 "last_replayed": jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level)}
 

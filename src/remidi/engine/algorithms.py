@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
+from remidi.engine.paired import LevelGenerator
 from remidi.errors import ConfigError, one_of
 
 
@@ -79,8 +80,11 @@ ACCEL = Algorithm("accel", EditingBuffers(),
 REMIDI_ACCEL = Algorithm("remidi-accel", EditingBuffers(buffer_sequence=True),
                          description="ReMiDi over ACCEL: ACCEL's edits are new levels for ReMiDi's buffer sequence")
 
+PAIRED = Algorithm("paired", LevelGenerator(),
+                   description="PAIRED: a learned generator builds the levels, paid the regret an antagonist estimates")
+
 #: every algorithm ``--algo`` accepts, by name, in the order the docs and plots list them
-ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL)}
+ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL, PAIRED)}
 #: the algorithms of the paper's comparisons: what ``remidi run`` trains when ``--algo`` is not given
 PAPER_ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 

@@ -57,6 +57,22 @@ class AccelConfig:
 
 
 @dataclass(frozen=True)
+class PairedConfig:
+    """PAIRED's generator and antagonist (algorithms with a learned level generator: ``paired``)."""
+
+    estimator: str = field(default="paired", metadata={
+        "help": "PAIRED: the generator's regret estimate: paired (antagonist's best − protagonist's mean), "
+                "flexible (best of both − mean of both) or perfect (the task's optimum − protagonist's mean)"})
+    clip_negative: bool = field(default=False, metadata={
+        "help": "PAIRED: pay the generator max(regret, 0) instead of the regret"})
+    generator_hidden: int = field(default=64, metadata={
+        "help": "PAIRED: width of the generator's two trunk layers (an MLP over its observation)"})
+    generator_lr: float = field(default=1e-4, metadata={"help": "PAIRED: the generator's Adam learning rate"})
+    generator_ent_coef: float = field(default=0.01, metadata={
+        "help": "PAIRED: the generator's entropy-bonus coefficient"})
+
+
+@dataclass(frozen=True)
 class UEDConfig:
     """A UED run's hyper-parameters (hashable; static under jit)."""
 
@@ -91,6 +107,7 @@ class UEDConfig:
     buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
     remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
     accel: AccelConfig = field(default_factory=AccelConfig)
+    paired: PairedConfig = field(default_factory=PairedConfig)
 
     def __post_init__(self):
         # the learning-rate schedule spans the run: ppo.total_updates is always num_updates

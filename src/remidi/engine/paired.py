@@ -19,8 +19,14 @@ not learned yet. All functions are pure, shapes in their docstrings.
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import jax
 import jax.numpy as jnp
+
+from remidi.engine import buffer as buf
+from remidi.engine.adversary import Proposal, RandomLevels, tag_counts
 
 ESTIMATORS = ("paired", "flexible", "perfect")
 
@@ -54,3 +60,98 @@ def generator_rewards(regret: jax.Array, num_steps: int) -> tuple[jax.Array, jax
     last = jnp.arange(num_steps)[:, None] == num_steps - 1
     rewards = jnp.where(last, regret[None, :], 0.0).astype(jnp.float32)
     return rewards, jnp.broadcast_to(last, (num_steps, n))
+
+
+# ------------------------------------------------------------------------------- the adversary
+def generator_net(setup):
+    """The generator's actor-critic: an MLP over its flattened observation (design, time step,
+    noise), ``paired.generator_hidden`` units per trunk layer, one logit per design action."""
+    from remidi.engine.networks import FeedForwardActorCritic
+
+    builder = setup.task.level_builder
+    width = setup.cfg.paired.generator_hidden
+    return FeedForwardActorCritic(num_actions=builder.num_actions, hidden=(width, width))
+
+
+def generator_ppo(setup):
+    """The generator's PPO settings: the run's, with ``paired.generator_lr`` and
+    ``paired.generator_ent_coef``."""
+    p = setup.cfg.paired
+    return dataclasses.replace(setup.cfg.ppo, lr=p.generator_lr, ent_coef=p.generator_ent_coef)
+
+
+@dataclass(frozen=True)
+class LevelGenerator(RandomLevels):
+    """PAIRED's adversary: a generator policy builds the N levels of each update in the task's
+    level-building MDP (one episode of ``level_builder.num_steps`` design actions each); the
+    protagonist (the agent) trains on all of them; then an antagonist, an agent of the same
+    network with its own parameters, plays them once and learns by PPO, and the generator is paid
+    :func:`regret_estimate` on its last step and learns by PPO (its own network and settings:
+    :func:`generator_net`, :func:`generator_ppo`). All three learn in the same jitted step."""
+
+    trains_on_fresh: bool = True
+
+    def memory(self, setup, example_level, example_obs, rng) -> dict:
+        from remidi.engine.ppo import create_train_state
+
+        builder = setup.task.level_builder
+        gen_obs, _ = builder.reset_to_level(jax.random.PRNGKey(0), None, None)
+        cfg = setup.cfg
+        return {"generator": create_train_state(jax.random.fold_in(rng, 11), generator_net(setup), gen_obs,
+                                                cfg.num_envs, generator_ppo(setup)),
+                "antagonist": create_train_state(jax.random.fold_in(rng, 12), setup.net, example_obs, cfg.num_envs,
+                                                 cfg.ppo)}
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        """One episode of the generator per env; the levels are what its actions built."""
+        from remidi.engine.rollout import rollout
+
+        builder, n = setup.task.level_builder, setup.cfg.num_envs
+        net = generator_net(setup)
+        traj, last_value = rollout(k_levels, builder, None, net.apply, runner.generator.params,
+                                   net.initialize_carry(n), jnp.zeros((n,), jnp.int32), builder.num_steps)
+        # the rollout's reset keys (as rollout splits them): the builder's episode keys
+        reset_keys = jax.random.split(jax.random.split(k_levels)[1], n)
+        levels = jax.vmap(builder.build)(reset_keys, traj.action.T)
+        replay = jnp.asarray(False)
+        return Proposal(replay=replay, levels=levels, buffer=buf.select_buffer(runner.buffers, runner.active),
+                        slots=None, train=jnp.asarray(True), generated=(traj, last_value))
+
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+        """The antagonist plays the levels and learns; the generator is paid and learns."""
+        from remidi.engine.distributions import for_task
+        from remidi.engine.ppo import Batch, compute_gae, ppo_update
+        from remidi.engine.rollout import rollout
+        from remidi.engine import scores as sc
+
+        cfg, task = setup.cfg, setup.task
+        n = cfg.num_envs
+        k_roll, k_ant, k_gen = (jax.random.fold_in(rng, i) for i in (21, 22, 23))
+        dist = for_task(task.continuous)
+        # the antagonist on the same levels
+        carry = setup.net.initialize_carry(n)
+        traj, last_value = rollout(k_roll, task.env, task.params, setup.net.apply, runner.antagonist.params, carry,
+                                   proposal.levels, cfg.num_steps, dist=dist, deterministic_reset=task.deterministic_reset)
+        adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
+                                   cfg.ppo.gae_lambda)
+        antagonist, _ = ppo_update(runner.antagonist, carry, Batch(
+            obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob, values=traj.value,
+            advantages=adv, targets=targets, mask=jnp.ones_like(traj.done)), k_ant, cfg.ppo, setup.net.apply, dist)
+        ant_mean, ant_best, _ = sc.episode_returns(traj.reward, traj.done)
+        optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
+        p = cfg.paired
+        regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)
+        # the generator: paid on its last step, no bootstrap past its episode
+        gen_traj, gen_last = proposal.generated
+        net = generator_net(setup)
+        rewards, dones = generator_rewards(regret, gen_traj.reward.shape[0])
+        g_adv, g_targets = compute_gae(rewards, gen_traj.value, dones, gen_last, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+        generator, g_metrics = ppo_update(runner.generator, net.initialize_carry(n), Batch(
+            obs=gen_traj.obs, reset=gen_traj.reset, actions=gen_traj.action, log_probs=gen_traj.log_prob,
+            values=gen_traj.value, advantages=g_adv, targets=g_targets, mask=jnp.ones_like(dones)),
+            k_gen, generator_ppo(setup), net.apply)
+        metrics = {"paired/regret": jnp.mean(regret), "paired/antagonist_return": jnp.mean(ant_mean),
+                   "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32)}
+        for name, count in tag_counts(setup, proposal.levels, jnp.ones((n,))).items():
+            metrics[f"generated/{name}"] = count / n
+        return {"generator": generator, "antagonist": antagonist}, jnp.zeros((n,), bool), metrics

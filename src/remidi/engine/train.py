@@ -61,6 +61,8 @@ class Runner:
     obs_stats: object = None  # normalize_obs: running observation statistics (engine/normalize.py)
     edit_next: object = None  # ACCEL: bool[], the next update edits the levels this one replayed
     last_replayed: object = None  # ACCEL: the levels of the last replay, leaves [N, ...]
+    generator: object = None  # PAIRED: the level generator's TrainState
+    antagonist: object = None  # PAIRED: the antagonist's TrainState
 
 
 @dataclass(frozen=True)
@@ -127,7 +129,8 @@ def init_runner(setup: Setup, rng) -> Runner:
     if cfg.normalize_obs:
         obs_stats = nrm.init_stats(flatten_obs(jax.tree.map(lambda x: x[None, None], example_obs)).shape[-1])
     return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
-                  frozen_params=frozen_params, obs_stats=obs_stats, **setup.algo.adversary.memory(setup, example_level))
+                  frozen_params=frozen_params, obs_stats=obs_stats,
+                  **setup.algo.adversary.memory(setup, example_level, example_obs, rng))
 
 
 def combines(setup: Setup) -> bool:
@@ -211,7 +214,9 @@ def train_step(setup: Setup, runner: Runner):
     scores = score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
     overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: new level overlapping a frozen one completely
     # 3. the adversary takes the scores: replayed levels rescored, new ones inserted unless they overlap
-    buffers, inserted = adversary.update(setup, runner, proposal, scores, overlap, best_ret)
+    #    (PAIRED: the antagonist plays the levels, the generator is paid its regret estimate)
+    changed, inserted, adversary_metrics = adversary.update(setup, runner, proposal, scores, overlap, best_ret,
+                                                            mean_ret, k_learn)
     # 4. train (masked PPO) if the proposal is trained on
     train_state, ppo_metrics = train(setup, runner, proposal.train, k_learn, traj, adv, targets)
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
@@ -219,11 +224,11 @@ def train_step(setup: Setup, runner: Runner):
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
     # 5. the adversary moves on: a buffer sequence's switch, ACCEL's memory of the replay
     moved = adversary.advance(setup, runner, proposal, train_state.params)
-    runner = Runner(rng=rng, train_state=train_state, buffers=buffers, update=runner.update + 1, obs_stats=obs_stats,
-                    **moved)
+    runner = runner.replace(rng=rng, train_state=train_state, update=runner.update + 1, obs_stats=obs_stats,
+                            **changed, **moved)
     # 6. what the step reports
     return runner, {**step_metrics(setup, runner, proposal, traj, mean_ret, scores, overlap, inserted, frozen),
-                    **{f"ppo/{name}": value for name, value in ppo_metrics.items()}}
+                    **{f"ppo/{name}": value for name, value in ppo_metrics.items()}, **adversary_metrics}
 
 
 def train(setup: Setup, runner: Runner, trained, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:

@@ -14,6 +14,7 @@ from remidi.engine import scores as sc
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
 from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.networks import flatten_obs, make_network
+from remidi.engine.paired import ESTIMATORS, LevelGenerator
 from remidi.engine.train import example_observation, network_for
 from remidi.envs.interface import UEDTask, tree_equal
 
@@ -171,6 +172,22 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     if algo.edits and cfg.accel.easy_start and task.easy_level is None:
         raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
                           "allowed: false")
+    if isinstance(algo.adversary, LevelGenerator):
+        if task.level_builder is None:
+            raise ConfigError(f"--algo: {algo.name} learns a level generator, but this task has no level-building MDP "
+                              f"(UEDTask.level_builder); allowed: "
+                              f"{', '.join(a for a in ALGORITHMS if not isinstance(ALGORITHMS[a].adversary, LevelGenerator))}")
+        p = cfg.paired
+        choice("paired.estimator", p.estimator, ESTIMATORS)
+        if p.estimator == "perfect" and task.optimal_return is None:
+            raise ConfigError("paired.estimator: perfect needs the task's optimal return (UEDTask.optimal_return); "
+                              "allowed: paired, flexible")
+        require(isinstance(p.clip_negative, bool), "paired.clip_negative", "true or false", p.clip_negative)
+        positive_int("paired.generator_hidden", p.generator_hidden)
+        require(p.generator_lr > 0, "paired.generator_lr", "> 0", p.generator_lr)
+        require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)
+        require(not cfg.normalize_obs, "normalize_obs", "false with a learned level generator (the antagonist reads "
+                "raw observations)", cfg.normalize_obs)
     validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
     validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))

@@ -65,6 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from remidi.envs.builder import LevelBuilder
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, tree_select
 from remidi.errors import one_of
 
@@ -252,6 +253,41 @@ class BraxUED(UnderspecifiedEnv):
 
 
 @functools.lru_cache(maxsize=None)
+class BraxBuilder(LevelBuilder):
+    """The Brax domain's level-building MDP, θ discretised: the first action picks the level's
+    type (0: type A; 1: type B, positive sign wins; 2: type B, negative sign wins; any other
+    changes nothing: type A); then one action per action dimension picks its multiplier from
+    ``bins`` evenly spaced values over ``[theta_low, theta_high]`` (ends included; action ``a <
+    bins`` gives ``theta_low + a·(theta_high − theta_low)/(bins − 1)``, any other changes nothing:
+    θ stays 1). A type B level's θ stays 1 (canonical, as the sampler's); the reset noise's seed
+    comes from the episode's key. The sampler's θ are continuous, so a sampled type A level is
+    built to within half a bin."""
+
+    def __init__(self, num_dims: int, theta_low: float = 0.5, theta_high: float = 1.5, bins: int = 11):
+        self.num_dims, self.low, self.high, self.bins = num_dims, theta_low, theta_high, bins
+        self.num_steps = 1 + num_dims
+        self.num_actions = max(3, bins)
+
+    def empty(self, key) -> BraxLevel:
+        return BraxLevel(theta=jnp.ones((self.num_dims,), jnp.float32), type_b=jnp.asarray(False),
+                         sign=jnp.asarray(False), seed=jax.random.bits(key, (2,), jnp.uint32))
+
+    def place(self, design: BraxLevel, t, action) -> BraxLevel:
+        kind = design.replace(type_b=jnp.where(action < 3, (action == 1) | (action == 2), design.type_b),
+                              sign=jnp.where(action < 3, action == 1, design.sign))
+        value = self.low + action.astype(jnp.float32) * (self.high - self.low) / (self.bins - 1)
+        dim = jnp.clip(t - 1, 0, self.num_dims - 1)
+        theta = design.replace(theta=jnp.where((action < self.bins) & ~design.type_b,
+                                               design.theta.at[dim].set(value), design.theta))
+        return jax.tree.map(lambda a, b: jnp.where(t == 0, a, b), kind, theta)
+
+    def show(self, design: BraxLevel) -> jax.Array:
+        return jnp.concatenate([design.theta, jnp.stack([design.type_b, design.sign]).astype(jnp.float32)])
+
+    def built(self, state) -> BraxLevel:
+        return state.design
+
+
 def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float = 0.5,
               theta_high: float = 1.5, type_b_prob: float = 0.5, reference_return: float | None = None,
               num_eval_levels: int = 16, reference_discounted_return: float | None = None) -> UEDTask:
@@ -285,6 +321,7 @@ def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float 
         level_tags=lambda level: {"type_b": level.type_b},
         solved=None,  # a return > 0 is no solve criterion for a walker: no solve_rate, no learnability
         mutate_level=lambda rng, level, edits: env.mutate_level(rng, level, edits, theta_low, theta_high),
+        level_builder=BraxBuilder(env.num_actions, theta_low, theta_high),
         deterministic_reset=True,
         continuous=True,
     )

@@ -28,7 +28,7 @@ def run(tmp_path, algo, *more):
     for name in ("config.json", "metrics.csv", "summary.json", "training.png", "checkpoint.npz"):
         assert (out / name).exists(), name
     metrics = json.loads((out / "summary.json").read_text())["metrics"]
-    if algo != "remidi":  # nothing is ever masked without frozen buffers: at every logged step
+    if algo not in ("remidi", "remidi-paired"):  # nothing is ever masked without frozen levels: at every logged step
         with open(out / "metrics.csv") as fh:
             masked = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "trained_fraction_masked"]
         assert masked and all(v == 0 for v in masked)
@@ -91,4 +91,20 @@ def test_paired_with_perfect_regret_generates_hidden_levels_and_fails_visible_on
     with open(tmp_path / "paired" / "metrics.csv") as fh:
         first = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "generated/hidden" and r["step"] == "50"]
     assert max(first) < 0.7 < m["generated/hidden"]  # it learned to: early on the shares are near one half
+    check_hidden_regret(m)
+
+
+def test_remidi_over_paired_moves_later_generators_to_visible_levels(tmp_path):
+    """ReMiDi over PAIRED (perfect regret): the first generator learns hidden levels as PAIRED's
+    does; after the switch (update 100 of the smoke preset) a fresh generator is paid little for
+    levels the first one's support explains (hidden levels all look alike), builds fewer hidden
+    levels, and the protagonist learns the visible ones PAIRED's never does."""
+    m, metrics = run(tmp_path, "remidi-paired", "--set", "paired.estimator=perfect")
+    with open(tmp_path / "remidi-paired" / "metrics.csv") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["metric"] in ("generated/hidden", "rejected")]
+    at = lambda metric, step: [float(r["value"]) for r in rows if r["metric"] == metric and r["step"] == str(step)]  # noqa: E731
+    assert min(at("generated/hidden", 100)) > 0.6  # the first generator, as PAIRED's
+    assert max(metrics["generated/hidden"]["per_seed"]) < 0.45  # the second one leaves hidden levels
+    assert min(at("rejected", 150)) > 100  # levels the first support explains are rejected
+    assert m["solve_rate/visible"] > 0.1
     check_hidden_regret(m)

@@ -58,3 +58,47 @@ def test_the_generator_is_paid_on_its_last_step_and_never_bootstraps_past_it():
         np.testing.assert_allclose(adv[-1], regret - values[-1], rtol=1e-6)
         # before the last step: the discounted regret to come minus the value (λ = 1: Monte Carlo)
         np.testing.assert_allclose(adv[0], 0.9 ** 3 * regret - values[0], rtol=1e-6)
+
+
+def test_a_complete_overlap_pays_the_configured_regret():
+    import dataclasses
+
+    from remidi.engine.paired import GeneratorSequence
+    from test_ued_engine import TINY
+
+    class Setup:  # what _pay reads
+        cfg = TINY
+
+    regret = jnp.array([3.0, -1.0, 5.0])
+    overlap = jnp.array([True, False, False])
+    seq = GeneratorSequence()
+    np.testing.assert_allclose(seq._pay(Setup, regret, overlap), [-1.0, -1.0, 5.0])  # lowest of the update's
+    Setup.cfg = dataclasses.replace(TINY, paired=dataclasses.replace(TINY.paired, overlap_regret="zero"))
+    np.testing.assert_allclose(seq._pay(Setup, regret, overlap), [0.0, -1.0, 5.0])
+
+
+def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist():
+    import dataclasses
+
+    import jax
+
+    from remidi.engine import train as tr
+    from test_ued_engine import TASK, TINY
+
+    cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=3, steps_per_buffer=2))
+    setup = tr.make_setup(TASK, cfg, "remidi-paired")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    step = jax.jit(lambda r: tr.train_step(setup, r)[0])
+    first_fresh = jax.tree.map(lambda x: x[0], runner.next_generators.params)
+    r1 = step(runner)  # count 1 on buffer 0: the generator learns, no switch
+    assert int(r1.active) == 0
+    assert not all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(r1.generator.params),
+                                                        jax.tree.leaves(runner.generator.params)))
+    r2 = step(r1)  # count 2: switch to buffer 1 with the first fresh generator, optimiser restarted
+    assert int(r2.active) == 1 and int(r2.count) == 0 and int(r2.generator.step) == 0
+    for a, b in zip(jax.tree.leaves(r2.generator.params), jax.tree.leaves(first_fresh)):
+        np.testing.assert_array_equal(a, b)
+    # the antagonist is one for all generators: it kept learning across the switch
+    assert not all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(r2.antagonist.params),
+                                                        jax.tree.leaves(r1.antagonist.params)))
+    assert int(r2.antagonist.step) > int(r1.antagonist.step)

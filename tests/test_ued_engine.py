@@ -261,7 +261,8 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
                      "remidi": ("LevelBuffers", True, True, False, False),
                      "accel": ("EditingBuffers", True, False, True, False),
                      "remidi-accel": ("EditingBuffers", True, True, True, False),
-                     "paired": ("LevelGenerator", False, False, False, True)}
+                     "paired": ("LevelGenerator", False, False, False, True),
+                     "remidi-paired": ("GeneratorSequence", False, True, False, True)}
     with pytest.raises(ConfigError, match="would never train the agent"):
         RandomLevels(trains_on_fresh=False)
     with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversary adversary"):

@@ -140,15 +140,8 @@ class LevelBuffers(RandomLevels):
                         train=replay | self.trains_on_fresh)
 
     def frozen(self, setup, runner) -> Frozen | None:
-        """The levels of every buffer before the active one, one batch of F = (K−1)·capacity."""
-        if not self.buffer_sequence or setup.cfg.remidi.num_buffers < 2:
-            return None
-        earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
-        k = earlier.valid.shape[0]
-        valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
-        flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
-        return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
-                      tracker=make_tracker(setup.cfg.remidi.tracker, tracker_budget(setup)))
+        """A sequence's earlier buffers (:func:`earlier_buffers`); nothing for a single buffer."""
+        return earlier_buffers(setup, runner) if self.buffer_sequence else None
 
     def best_return(self, proposal: Proposal, best_return):
         """For a replayed level, the buffer's record too."""
@@ -181,11 +174,7 @@ class LevelBuffers(RandomLevels):
         the next, staying on the last."""
         out = super().advance(setup, runner, proposal, params)
         count = out["count"]
-        k = runner.buffers.valid.shape[0]
-        if self.buffer_sequence:
-            switch = (count >= setup.cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
-        else:
-            switch = jnp.asarray(False)
+        switch = switches(setup, runner, count) if self.buffer_sequence else jnp.asarray(False)
         frozen_params = runner.frozen_params
         if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
             frozen_params = jax.tree.map(
@@ -195,20 +184,7 @@ class LevelBuffers(RandomLevels):
                 "count": jnp.where(switch, 0, count), "frozen_params": frozen_params}
 
     def metrics(self, setup, runner) -> dict:
-        """Share of each tag among the valid levels of every buffer (``/b<k>``) and of the active
-        one; the active buffer's size."""
-        out = {}
-        valid = runner.buffers.valid  # bool[K, C]
-        sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
-        counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels,
-                                                                                               valid)
-        for name, c in counts.items():  # c: f32[K]
-            fractions = c / sizes
-            for b in range(valid.shape[0]):
-                out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
-            out[f"buffer_fraction/{name}"] = fractions[runner.active]
-        out["buffer_size"] = jnp.sum(valid[runner.active]).astype(jnp.float32)
-        return out
+        return buffer_contents(setup, runner)
 
 
 @dataclass(frozen=True)
@@ -241,6 +217,42 @@ class EditingBuffers(LevelBuffers):
     def memory(self, setup, example_level, example_obs, rng) -> dict:
         return {"edit_next": jnp.asarray(False),
                 "last_replayed": jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level)}
+
+
+def earlier_buffers(setup, runner) -> Frozen | None:
+    """The levels of every buffer of a sequence before the active one, as one batch of
+    F = (K−1)·capacity with the tracker of the config (None with fewer than two buffers)."""
+    if setup.cfg.remidi.num_buffers < 2:
+        return None
+    earlier = jax.tree.map(lambda x: x[:-1], runner.buffers)  # the last buffer is never frozen
+    k = earlier.valid.shape[0]
+    valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
+    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+    return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
+                  tracker=make_tracker(setup.cfg.remidi.tracker, tracker_budget(setup)))
+
+
+def buffer_contents(setup, runner) -> dict:
+    """Share of each tag among the valid levels of every buffer (``buffer_fraction/<tag>/b<k>``)
+    and of the active one (``buffer_fraction/<tag>``); the active buffer's size."""
+    out = {}
+    valid = runner.buffers.valid  # bool[K, C]
+    sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
+    counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(runner.buffers.levels, valid)
+    for name, c in counts.items():  # c: f32[K]
+        fractions = c / sizes
+        for b in range(valid.shape[0]):
+            out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
+        out[f"buffer_fraction/{name}"] = fractions[runner.active]
+    out["buffer_size"] = jnp.sum(valid[runner.active]).astype(jnp.float32)
+    return out
+
+
+def switches(setup, runner, count) -> jax.Array:
+    """bool[]: a sequence moves to its next buffer (or generator): ``count`` (this update's count on
+    the active one) reached ``remidi.steps_per_buffer`` and the active one is not the last."""
+    k = runner.buffers.valid.shape[0]
+    return (count >= setup.cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
 
 
 def tracker_budget(setup) -> int:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
-from remidi.engine.paired import LevelGenerator
+from remidi.engine.paired import GeneratorSequence, LevelGenerator
 from remidi.errors import ConfigError, one_of
 
 
@@ -83,8 +83,13 @@ REMIDI_ACCEL = Algorithm("remidi-accel", EditingBuffers(buffer_sequence=True),
 PAIRED = Algorithm("paired", LevelGenerator(),
                    description="PAIRED: a learned generator builds the levels, paid the regret an antagonist estimates")
 
+REMIDI_PAIRED = Algorithm("remidi-paired", GeneratorSequence(),
+                          description="ReMiDi over PAIRED: a sequence of generators, one antagonist; levels an earlier "
+                                      "generator's support explains pay the generator little and train nothing")
+
 #: every algorithm ``--algo`` accepts, by name, in the order the docs and plots list them
-ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL, PAIRED)}
+ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL, PAIRED,
+                                                        REMIDI_PAIRED)}
 #: the algorithms of the paper's comparisons: what ``remidi run`` trains when ``--algo`` is not given
 PAPER_ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 

@@ -70,6 +70,9 @@ class PairedConfig:
     generator_lr: float = field(default=1e-4, metadata={"help": "PAIRED: the generator's Adam learning rate"})
     generator_ent_coef: float = field(default=0.01, metadata={
         "help": "PAIRED: the generator's entropy-bonus coefficient"})
+    overlap_regret: str = field(default="lowest", metadata={
+        "help": "ReMiDi over PAIRED: what a generator is paid for a level an earlier generator's support explains "
+                "completely: lowest (the lowest regret estimate of the update's levels) or zero"})
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,9 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine import buffer as buf
-from remidi.engine.adversary import Proposal, RandomLevels, tag_counts
+from remidi.engine.adversary import Proposal, RandomLevels, buffer_contents, earlier_buffers, switches, tag_counts
+from remidi.engine.config import buffer_config
+from remidi.engine.rollout import Frozen
 
 ESTIMATORS = ("paired", "flexible", "perfect")
 
@@ -91,16 +93,19 @@ class LevelGenerator(RandomLevels):
 
     trains_on_fresh: bool = True
 
-    def memory(self, setup, example_level, example_obs, rng) -> dict:
+    def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
+        """A fresh generator (and antagonist) from ``rng`` (folded, never split)."""
         from remidi.engine.ppo import create_train_state
 
         builder = setup.task.level_builder
         gen_obs, _ = builder.reset_to_level(jax.random.PRNGKey(0), None, None)
         cfg = setup.cfg
-        return {"generator": create_train_state(jax.random.fold_in(rng, 11), generator_net(setup), gen_obs,
-                                                cfg.num_envs, generator_ppo(setup)),
-                "antagonist": create_train_state(jax.random.fold_in(rng, 12), setup.net, example_obs, cfg.num_envs,
-                                                 cfg.ppo)}
+        out = {"generator": create_train_state(jax.random.fold_in(rng, 11), generator_net(setup), gen_obs,
+                                               cfg.num_envs, generator_ppo(setup))}
+        if antagonist:
+            out["antagonist"] = create_train_state(jax.random.fold_in(rng, 12), setup.net, example_obs, cfg.num_envs,
+                                                   cfg.ppo)
+        return out
 
     def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
         """One episode of the generator per env; the levels are what its actions built."""
@@ -141,10 +146,11 @@ class LevelGenerator(RandomLevels):
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
         regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)
+        paid = self._pay(setup, regret, overlap)
         # the generator: paid on its last step, no bootstrap past its episode
         gen_traj, gen_last = proposal.generated
         net = generator_net(setup)
-        rewards, dones = generator_rewards(regret, gen_traj.reward.shape[0])
+        rewards, dones = generator_rewards(paid, gen_traj.reward.shape[0])
         g_adv, g_targets = compute_gae(rewards, gen_traj.value, dones, gen_last, cfg.ppo.gamma, cfg.ppo.gae_lambda)
         generator, g_metrics = ppo_update(runner.generator, net.initialize_carry(n), Batch(
             obs=gen_traj.obs, reset=gen_traj.reset, actions=gen_traj.action, log_probs=gen_traj.log_prob,
@@ -154,4 +160,86 @@ class LevelGenerator(RandomLevels):
                    "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32)}
         for name, count in tag_counts(setup, proposal.levels, jnp.ones((n,))).items():
             metrics[f"generated/{name}"] = count / n
-        return {"generator": generator, "antagonist": antagonist}, jnp.zeros((n,), bool), metrics
+        kept, inserted = self._keep(setup, runner, proposal, jax.random.fold_in(rng, 24))
+        return {"generator": generator, "antagonist": antagonist, **kept}, inserted, metrics
+
+    def _pay(self, setup, regret, overlap):
+        """f32[N]: what the generator is paid for each level: its regret estimate."""
+        return regret
+
+    def _keep(self, setup, runner, proposal: Proposal, rng):
+        """``(changed Runner fields, inserted bool[N])``: what the adversary keeps of the levels: nothing."""
+        return {}, jnp.zeros((setup.cfg.num_envs,), bool)
+
+
+OVERLAP_REGRETS = ("lowest", "zero")
+
+
+@dataclass(frozen=True)
+class GeneratorSequence(LevelGenerator):
+    """ReMiDi over PAIRED (Algorithm 1 with generators as its adversaries): a sequence of
+    ``remidi.num_buffers`` generators, each used for ``remidi.steps_per_buffer`` updates, then
+    frozen, and a fresh one started (the last stays); one protagonist, trained only on the steps
+    no frozen generator's support explains (the loss mask), and one antagonist for all of them.
+
+    A generator's empirical support is a reservoir of the levels it generated: the active
+    buffer of ``runner.buffers`` (``remidi.buffer_capacity`` levels), filled by reservoir
+    sampling (every generated level gets an i.i.d. uniform key and the reservoir keeps the levels
+    with the highest keys: a uniform sample of all it generated). The frozen generators'
+    reservoirs are the tracker's frozen levels. A generated level whose rollout a frozen level
+    explains at every step (a complete overlap) gives the protagonist no gradient (every step is
+    masked) and pays the generator ``paired.overlap_regret`` (``lowest``: the lowest regret
+    estimate of the update's levels; ``zero``), so later generators learn to leave earlier
+    supports.
+
+    Where it approximates Algorithm 1: the support is a finite sample of the generator's
+    distribution (a level the generator rarely makes may be missing from it, and a later level
+    identical to it is then not recognised); the generator is a policy trained by PPO, not an
+    exact best response; the antagonist's best return estimates the optimum (``perfect`` uses the
+    exact one); one masked protagonist stands for the per-adversary policies and Combine."""
+
+    buffer_sequence: bool = True
+
+    def frozen(self, setup, runner) -> Frozen | None:
+        return earlier_buffers(setup, runner)
+
+    def metrics(self, setup, runner) -> dict:
+        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``)."""
+        return buffer_contents(setup, runner)
+
+    def _pay(self, setup, regret, overlap):
+        low = jnp.min(regret) if setup.cfg.paired.overlap_regret == "lowest" else 0.0
+        return jnp.where(overlap, low, regret)
+
+    def _keep(self, setup, runner, proposal: Proposal, rng):
+        bcfg = dataclasses.replace(buffer_config(setup.cfg, setup.algo), staleness_coef=0.0, prioritization="rank")
+        active = buf.select_buffer(runner.buffers, runner.active)
+        keys = jax.random.uniform(rng, (setup.cfg.num_envs,))
+        new_buf, inserted, _ = buf.insert_batch(active, bcfg, proposal.levels, keys,
+                                                {"max_return": jnp.zeros((setup.cfg.num_envs,))})
+        return {"buffers": buf.replace_buffer(runner.buffers, runner.active, new_buf)}, inserted
+
+    def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
+        """The first generator and the antagonist, and the fresh generators of the later buffers
+        (initialised here, once: initialising in the step would put batched QR decompositions,
+        orthogonal initialisers, into the vmapped program, which hangs jaxlib's CPU runtime)."""
+        out = super().memory(setup, example_level, example_obs, rng, antagonist)
+        later = [super(GeneratorSequence, self).memory(setup, example_level, example_obs, jax.random.fold_in(rng, 100 + k),
+                                                       antagonist=False)["generator"]
+                 for k in range(1, setup.cfg.remidi.num_buffers)]
+        out["next_generators"] = jax.tree.map(lambda *xs: jnp.stack(xs), *[g.replace(apply_fn=None, tx=None)
+                                                                           for g in later]) if later else None
+        return out
+
+    def advance(self, setup, runner, proposal: Proposal, params) -> dict:
+        """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
+        next and start a fresh generator (new parameters and optimiser state)."""
+        out = super().advance(setup, runner, proposal, params)
+        switch = switches(setup, runner, out["count"])
+        fresh = jax.tree.map(lambda x: x[jnp.minimum(runner.active, x.shape[0] - 1)], runner.next_generators)
+        old = runner.generator
+        pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
+        generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
+                                step=pick(fresh.step, old.step))
+        return {**out, "active": jnp.where(switch, runner.active + 1, runner.active),
+                "count": jnp.where(switch, 0, out["count"]), "generator": generator}

@@ -63,6 +63,7 @@ class Runner:
     last_replayed: object = None  # ACCEL: the levels of the last replay, leaves [N, ...]
     generator: object = None  # PAIRED: the level generator's TrainState
     antagonist: object = None  # PAIRED: the antagonist's TrainState
+    next_generators: object = None  # ReMiDi over PAIRED: the fresh generators of the later buffers, leaves [K−1, ...]
 
 
 @dataclass(frozen=True)
@@ -222,10 +223,11 @@ def train_step(setup: Setup, runner: Runner):
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
     if obs_stats is not None:
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
-    # 5. the adversary moves on: a buffer sequence's switch, ACCEL's memory of the replay
+    # 5. the adversary moves on (from the state its update left): a buffer sequence's switch,
+    #    ACCEL's memory of the replay, a fresh generator
+    runner = runner.replace(**changed)
     moved = adversary.advance(setup, runner, proposal, train_state.params)
-    runner = runner.replace(rng=rng, train_state=train_state, update=runner.update + 1, obs_stats=obs_stats,
-                            **changed, **moved)
+    runner = runner.replace(rng=rng, train_state=train_state, update=runner.update + 1, obs_stats=obs_stats, **moved)
     # 6. what the step reports
     return runner, {**step_metrics(setup, runner, proposal, traj, mean_ret, scores, overlap, inserted, frozen),
                     **{f"ppo/{name}": value for name, value in ppo_metrics.items()}, **adversary_metrics}

@@ -14,7 +14,7 @@ from remidi.engine import scores as sc
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
 from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.networks import flatten_obs, make_network
-from remidi.engine.paired import ESTIMATORS, LevelGenerator
+from remidi.engine.paired import ESTIMATORS, OVERLAP_REGRETS, LevelGenerator
 from remidi.engine.train import example_observation, network_for
 from remidi.envs.interface import UEDTask, tree_equal
 
@@ -188,6 +188,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)
         require(not cfg.normalize_obs, "normalize_obs", "false with a learned level generator (the antagonist reads "
                 "raw observations)", cfg.normalize_obs)
+        choice("paired.overlap_regret", p.overlap_regret, OVERLAP_REGRETS)
+        require(cfg.remidi.policy == "masked", "remidi.policy", "masked with a learned level generator (Combine "
+                "over generators is not implemented)", cfg.remidi.policy)
     validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
     validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))

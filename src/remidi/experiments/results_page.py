@@ -90,6 +90,19 @@ CLAIMS = (
           "evaluate:solve_rate/visible", ("lever",), greater=(("remidi", "plr"),)),
     Claim("lever-accel", "beyond the paper (lever)", "ReMiDi over ACCEL solves visible-answer levels more often "
           "than ACCEL", "evaluate:solve_rate/visible", ("lever",), greater=(("remidi-accel", "accel"),)),
+    Claim("lever-paired", "beyond the paper (lever, PAIRED)", "PAIRED whose antagonist is the exact optimum "
+          "(perfect regret) generates hidden-answer levels more often than chance (bound: the generated share of "
+          "hidden levels in the last logged block in [0.5, 1])", "summary:generated/hidden", ("lever",),
+          bounds=(("paired (perfect)", 0.5, 1.0),)),
+    Claim("lever-paired-visible", "beyond the paper (lever, PAIRED)", "PAIRED's protagonist (perfect regret) stays "
+          "near chance on visible levels (bound: solve rate ≤ 0.1)", "evaluate:solve_rate/visible", ("lever",),
+          bounds=(("paired (perfect)", 0.0, 0.1),)),
+    Claim("lever-remidi-paired", "beyond the paper (lever, ReMiDi over PAIRED)", "ReMiDi over PAIRED's protagonist "
+          "solves visible levels more often than PAIRED's (perfect regret both)", "evaluate:solve_rate/visible",
+          ("lever",), greater=(("remidi-paired (perfect)", "paired (perfect)"),)),
+    Claim("lever-remidi-paired-generated", "beyond the paper (lever, ReMiDi over PAIRED)", "ReMiDi over PAIRED's "
+          "last generator builds fewer hidden levels than PAIRED's (perfect regret both)", "summary:generated/hidden",
+          ("lever",), greater=(("paired (perfect)", "remidi-paired (perfect)"),)),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -128,7 +141,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     for folder in sorted(p.parent for p in Path(data).glob("*/*/summary.json")):
         summary = outputs.read_json(folder / "summary.json")
         config = outputs.read_json(folder / "config.json")
-        key = (summary["experiment"], summary["algo"])
+        key = (summary["experiment"], label(summary["algo"], config.get("config", {})))
         run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
@@ -154,6 +167,13 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         run.commits.add((config.get("code") or {}).get("commit"))
         run.wall_s += float(summary.get("wall_s", 0.0))
     return runs
+
+
+def label(algo: str, config: dict) -> str:
+    """How the page names an algorithm's runs: a learned generator's with its regret estimator
+    (``paired (perfect)``), the others by name."""
+    estimator = config.get("paired", {}).get("estimator")
+    return f"{algo} ({estimator})" if algo in ("paired", "remidi-paired") and estimator else algo
 
 
 def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:
@@ -329,10 +349,12 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                   ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
                    "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
                   ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
-    "lever": (["dr", "plr", "minimax-return", "remidi", "accel", "remidi-accel"],
+    "lever": (["dr", "plr", "minimax-return", "remidi", "accel", "remidi-accel", "paired (perfect)",
+               "remidi-paired (perfect)", "paired (paired)"],
               ["evaluate:solve_rate/visible", "evaluate:solve_rate/hidden", "summary:replay_fraction/hidden",
-               "summary:buffer_fraction/hidden"],
-              ["solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden"]),
+               "summary:buffer_fraction/hidden", "summary:generated/hidden", "summary:paired/regret",
+               "summary:paired/antagonist_return"],
+              ["solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden", "generated/hidden"]),
     **{m: (["dr", "plr", "minimax-return", "remidi"],
            ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},
@@ -406,7 +428,8 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
     for folder in folders:
         summary = outputs.read_json(folder / "summary.json")
         exp, algo = summary["experiment"], summary["algo"]
-        target = Path(data) / exp / f"{algo}-s{summary['seeds'][0]}"
+        name = re.sub(r"[^a-z0-9]+", "-", label(algo, outputs.read_json(folder / "config.json").get("config", {}))).strip("-")
+        target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)
         for name in ("config.json", "summary.json", "evaluate.json"):
             if (folder / name).is_file():

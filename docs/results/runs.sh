@@ -1,27 +1,27 @@
 #!/usr/bin/env bash
-# The runs behind docs/results.md (issue #28), one after another, at the one commit they all use.
+# The runs behind docs/results.md, one after another, each block at the commit its claims name.
 #
 #   bash docs/results/runs.sh [RUNS_DIR]      # default /work/runs; rerun it to continue
 #
-# Each run trains at commit $COMMIT from a worktree of its own (so that work on the checkout does
-# not change what the runs execute), then `remidi evaluate --attempts 30` scores its final
+# Each block trains from a worktree of its commit (so that work on the checkout does not change
+# what the runs execute), then `remidi evaluate --attempts 30` scores each run's final
 # checkpoint. Rerunning the script skips finished runs and resumes an interrupted one from its
 # last checkpoint (`remidi run --resume`). When a run has finished, copy its small outputs into
 # the page's data and regenerate the page:
 #
-#   python -m remidi.experiments.results_page --collect RUNS_DIR/<experiment>/<algo>-s<seed>
+#   python -m remidi.experiments.results_page --collect RUNS_DIR/<experiment>/<run>
 set -u
-COMMIT=c32046b
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 R=${1:-/work/runs}
-FROZEN=${FROZEN:-$(dirname "$R")/frozen-$COMMIT}
 PY=${PYTHON:-python}
-if [ ! -d "$FROZEN" ]; then git -C "$HERE" worktree add --detach "$FROZEN" "$COMMIT" || exit 1; fi
-export PYTHONPATH="$FROZEN/src"
-run() {  # run EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [extra --set ...]
-  local exp=$1 algo=$2 s=$3 n=$4 preset=$5; shift 5
-  local out=$R/$exp/$algo-s$s
-  [ "$preset" = reference ] && out=$R/$exp/reference
+at() {  # at COMMIT: the runs that follow train with that commit's code
+  local frozen=$(dirname "$R")/frozen-$1
+  if [ ! -d "$frozen" ]; then git -C "$HERE" worktree add --detach "$frozen" "$1" || exit 1; fi
+  export PYTHONPATH="$frozen/src"
+}
+run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into RUNS_DIR/EXPERIMENT/NAME
+  local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
+  local out=$R/$exp/$name
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
   if [ -f "$out/summary.json" ]; then :
   elif [ -f "$out/config.json" ]; then
@@ -36,18 +36,27 @@ run() {  # run EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [extra --set ...]
     $PY -m remidi evaluate "$out" --attempts 30 >> "$out.log" 2>&1; echo "$(date +%T) evaluated $? $out"
   fi
 }
+
+# issue #28: the paper's claims, every run at one commit
+at c32046b
 for e in tabular-shared tabular-distinct; do  # both algorithms, the preset's 50 seeds, seconds each
   [ -f "$R/$e/all/remidi/summary.json" ] || $PY -m remidi run "$e" --preset paper --out "$R/$e/all" --quiet
 done
-for a in dr plr remidi minimax-return accel remidi-accel; do run lever "$a" 0 10 paper; done
-for s in 0 5; do run tmaze plr $s 5 cpu; run tmaze remidi $s 5 cpu; done
-for s in 0 5; do run blindfold plr $s 5 cpu; run blindfold remidi $s 5 cpu; done
-for s in 0 5; do run tmaze minimax-return $s 5 cpu; done
-for s in 0 5; do run blindfold minimax-return $s 5 cpu; done
-run tmaze dr 0 5 cpu
-run blindfold dr 0 5 cpu
+for a in dr plr remidi minimax-return accel remidi-accel; do run "$a-s0" lever "$a" 0 10 paper; done
+for s in 0 5; do run "plr-s$s" tmaze plr $s 5 cpu; run "remidi-s$s" tmaze remidi $s 5 cpu; done
+for s in 0 5; do run "plr-s$s" blindfold plr $s 5 cpu; run "remidi-s$s" blindfold remidi $s 5 cpu; done
+for s in 0 5; do run "minimax-return-s$s" tmaze minimax-return $s 5 cpu; done
+for s in 0 5; do run "minimax-return-s$s" blindfold minimax-return $s 5 cpu; done
+run dr-s0 tmaze dr 0 5 cpu
+run dr-s0 blindfold dr 0 5 cpu
 # Brax: the references of halfcheetah and ant trained to a plateau first (500 updates were still
 # rising); their values then go into src/remidi/experiments/brax_reference.json, and the Brax runs
 # (PLR⊥, minimax return, ReMiDi, 5 seeds, cpu preset) use the commit that holds them
-run brax-halfcheetah dr 0 1 reference --set num_updates=2000
-run brax-ant dr 0 1 reference --set num_updates=2000
+run reference brax-halfcheetah dr 0 1 reference --set num_updates=2000
+run reference brax-ant dr 0 1 reference --set num_updates=2000
+
+# issue #29: PAIRED and ReMiDi over PAIRED on the lever game, at the commit that stated their claims
+at 76e7226
+run paired-perfect-s0 lever paired 0 10 paper --set paired.estimator=perfect
+run remidi-paired-perfect-s0 lever remidi-paired 0 10 paper --set paired.estimator=perfect
+run paired-paired-s0 lever paired 0 10 paper --set paired.estimator=paired

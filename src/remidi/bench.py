@@ -22,6 +22,11 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   replaying, the updates alternate between a replay (rollout + PPO) and an edit of that replay's
   levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``)
   and no GFLOP/s (the network's count assumes every update trains).
+* ``maze-paired``: PAIRED (``paired``) on the same set-up as ``maze-plr``: every update the
+  generator builds 32 levels (29 design steps each, its 64-unit MLP), the protagonist rolls out
+  and learns as PLR⊥'s replay update does, the antagonist rolls out and learns, and the
+  generator learns; ``paired_step_over_plr_step`` is its cost per environment step against
+  ``maze-plr``'s (no GFLOP/s: the count covers one network).
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
@@ -164,9 +169,11 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
                 if name in metrics}
 
     steps = updates_per_call * cfg.num_envs * cfg.num_steps
-    # the network's operation count assumes every update trains; an editing algorithm's edit
-    # updates do not (no figure rather than a wrong one)
-    flops = None if setup.algo.edits else \
+    # the network's operation count assumes every update trains one network; an editing algorithm's
+    # edit updates do not, a learned generator's updates train three (no figure rather than a wrong one)
+    from remidi.engine.paired import LevelGenerator
+
+    flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) else \
         steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
@@ -231,6 +238,13 @@ def _maze_accel():
     from remidi.envs.maze import maze_task
 
     return _train_workload(maze_task("tmaze"), _maze_config("accel"), "accel", active=0)
+
+
+@register("maze-paired", "PAIRED on the T-maze task: generator, protagonist and antagonist each update")
+def _maze_paired():
+    from remidi.envs.maze import maze_task
+
+    return _train_workload(maze_task("tmaze"), _maze_config("paired"), "paired", active=0)
 
 
 @register("maze-remidi-reference", "maze-remidi with the reference tracker (every frozen level stepped)")
@@ -391,6 +405,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
     if "maze-remidi" in results and "maze-plr" in results:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
+    if "maze-paired" in results and "maze-plr" in results:
+        out["paired_step_over_plr_step"] = per_call("maze-paired") / per_call("maze-plr")
     if "maze-accel" in results and "maze-plr" in results:
         out["accel_step_over_plr_step"] = per_call("maze-accel") / per_call("maze-plr")
     if "maze-remidi-reference" in results and "maze-plr" in results:

@@ -62,5 +62,6 @@ EXPERIMENTS = [make_ued_experiment(
                       ("regret/hidden/worst", "worst-case regret over hidden levels",
                        {"references": [(MMR_HIDDEN, f"minimax regret ({MMR_HIDDEN:g})")]}),
                       ("replay_fraction/hidden", "share of hidden levels among replayed"),
-                      ("buffer_fraction/hidden", "share of hidden levels in the active buffer")),
+                      ("buffer_fraction/hidden", "share of hidden levels in the active buffer"),
+                      ("generated/hidden", "share of hidden levels among generated levels", {"optional": True})),
 )]

@@ -28,12 +28,15 @@ ALGORITHM_STYLES = {
     "mmr": ("#9467bd", "--", "v"),
     "accel": ("#2ca02c", "-.", "P"),
     "remidi-accel": ("#8c564b", "-", "X"),
+    "paired": ("#bcbd22", "-.", "p"),
+    "remidi-paired": ("#e377c2", "-", "*"),
 }
 _SPARE = [("#e377c2", "--", "*"), ("#17becf", ":", "h")]
 
 
 def algorithm_style(name: str) -> dict:
     """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``: fixed per name."""
+    name = name.split(" (", 1)[0]  # the results page's "paired (perfect)": the algorithm's style
     if name in ALGORITHM_STYLES:
         color, linestyle, marker = ALGORITHM_STYLES[name]
     else:  # an algorithm this module does not know: a spare style chosen by the name alone

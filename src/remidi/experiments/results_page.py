@@ -363,7 +363,7 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
 
 def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> list[Path]:
     """Per experiment its training curves (mean ± std over seeds) and per claim an interval plot."""
-    from remidi.experiments.plots import Curve, Panel, algorithm_style, plot_panels
+    from remidi.experiments.plots import Curve, Panel, plot_panels
 
     written = []
     for exp, (algos, _, curves) in SECTIONS.items():
@@ -372,7 +372,7 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
             continue
         panels = []
         for name in curves:
-            lines = [Curve(a, *runs[exp, a].curves[name], algorithm_style(a)) for a in present
+            lines = [Curve(a, *runs[exp, a].curves[name], _style(a)) for a in present
                      if name in runs[exp, a].curves and np.isfinite(runs[exp, a].curves[name][1]).any()]
             panels.append(Panel(name, lines, ylabel=name, xlabel="update",
                                 missing=[a for a in present if a not in {c.label for c in lines}]))
@@ -385,6 +385,15 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
             _interval_figure(path, r, runs)
             written.append(path)
     return written
+
+
+def _style(name: str) -> dict:
+    """The algorithm's plot style; a learned generator with PAIRED's own estimator drawn apart
+    from the same algorithm with perfect regret."""
+    from remidi.experiments.plots import algorithm_style
+
+    style = algorithm_style(name)
+    return {**style, "linestyle": ":", "marker": "1"} if name.endswith("(paired)") else style
 
 
 def _interval_figure(path: Path, result: dict, runs: dict) -> None:

@@ -65,14 +65,15 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
     return train
 
 
-UNIT_INTERVAL = ("solve_rate", "replay_fraction", "buffer_fraction")  # metrics in [0, 1]: fixed y-range
+UNIT_INTERVAL = ("solve_rate", "replay_fraction", "buffer_fraction", "generated")  # metrics in [0, 1]: fixed y-range
 
 
 def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | None = None):
     """``panels``: (metric, title) or (metric, title, options) tuples; one panel per metric, one
     curve per algorithm (fixed style per algorithm, in the run's order; algorithms without the
     metric, or that never define it, left out), saved as ``training.png``. ``options``:
-    ``references`` [(y, label)] dashed lines, ``ylim``; metrics of a share or rate are drawn on
+    ``references`` [(y, label)] dashed lines, ``ylim``, ``optional`` (left out when no algorithm of
+    the run has the metric: a learned generator's); metrics of a share or rate are drawn on
     [0, 1]. ``bars``: (title, metrics): a bar chart of those metrics' final values per algorithm
     (mean ± std over seeds), saved as ``final.png``."""
 
@@ -83,6 +84,8 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
             kind = metric.split("/")[0]
             ylim = options.get("ylim", (-0.03, 1.03) if kind in UNIT_INTERVAL else None)
             curves = algorithm_curves(results, metric)
+            if not curves and options.get("optional"):  # a panel for algorithms this run does not have
+                continue
             drawn = {c.label for c in curves}
             figure.append(Panel(title, curves, metric, "update", references=list(options.get("references", ())),
                                 ylim=ylim, missing=[algo for algo in results if algo not in drawn]))

@@ -63,13 +63,14 @@ def test_the_lever_builder_builds_every_level_in_one_step():
 def test_invalid_placements_change_nothing():
     b = M.MazeBuilder("tmaze")
     d = b.empty(KEY)
-    d = b.place(d, 0, 5)  # kind: 5 is no kind
+    assert bool(b.place(d, 0, 5).special)  # the kind is the action mod 2: 5 a T-maze
+    d = b.place(d, 0, 6)
     assert not bool(d.special)
     d = b.place(d, 1, 20)  # goal on cell 20
     d2 = b.place(d, 2, 20)  # the agent on the goal: nothing
     assert int(d2.agent) == -1
     d = b.place(d, 2, 21)  # the agent on cell 21
-    assert int(b.place(d, 3, 9).agent_dir) == 0  # direction 9: nothing
+    assert int(b.place(d, 3, 9).agent_dir) == 1  # the direction is the action mod 4
     d = b.place(d, 3, 2)
     for t, cell in ((4, 20), (5, 21)):  # walls on the goal and the agent: nothing
         assert not np.asarray(b.place(d, t, cell).wall_map).any()
@@ -110,6 +111,6 @@ def test_the_brax_builder_builds_type_a_on_a_grid_and_both_type_b_signs():
         lv = b.build(KEY, jnp.array([action, 0, 0, 0]))  # a type B level's θ stays canonical
         assert bool(lv.type_b) and bool(lv.sign) == sign
         np.testing.assert_array_equal(lv.theta, 1.0)
-    kept = b.build(KEY, jnp.array([7, 3, 11, 10]))  # kind 7 and bin 11 change nothing
+    kept = b.build(KEY, jnp.array([6, 3, 11, 10]))  # kind 6 mod 3 = type A; bin 11 changes nothing
     assert not bool(kept.type_b)
     np.testing.assert_allclose(kept.theta, [0.8, 1.0, 1.5], rtol=1e-6)

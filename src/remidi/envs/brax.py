@@ -252,11 +252,10 @@ class BraxUED(UnderspecifiedEnv):
                          seed=jax.vmap(seed_data)(jnp.arange(n)))
 
 
-@functools.lru_cache(maxsize=None)
 class BraxBuilder(LevelBuilder):
-    """The Brax domain's level-building MDP, θ discretised: the first action picks the level's
-    type (0: type A; 1: type B, positive sign wins; 2: type B, negative sign wins; any other
-    changes nothing: type A); then one action per action dimension picks its multiplier from
+    """The Brax domain's level-building MDP, θ discretised: the first action ``a`` picks the
+    level's type from ``a mod 3`` (0: type A; 1: type B, positive sign wins; 2: type B, negative
+    sign wins); then one action per action dimension picks its multiplier from
     ``bins`` evenly spaced values over ``[theta_low, theta_high]`` (ends included; action ``a <
     bins`` gives ``theta_low + a·(theta_high − theta_low)/(bins − 1)``, any other changes nothing:
     θ stays 1). A type B level's θ stays 1 (canonical, as the sampler's); the reset noise's seed
@@ -273,8 +272,7 @@ class BraxBuilder(LevelBuilder):
                          sign=jnp.asarray(False), seed=jax.random.bits(key, (2,), jnp.uint32))
 
     def place(self, design: BraxLevel, t, action) -> BraxLevel:
-        kind = design.replace(type_b=jnp.where(action < 3, (action == 1) | (action == 2), design.type_b),
-                              sign=jnp.where(action < 3, action == 1, design.sign))
+        kind = design.replace(type_b=action % 3 != 0, sign=action % 3 == 1)
         value = self.low + action.astype(jnp.float32) * (self.high - self.low) / (self.bins - 1)
         dim = jnp.clip(t - 1, 0, self.num_dims - 1)
         theta = design.replace(theta=jnp.where((action < self.bins) & ~design.type_b,
@@ -288,6 +286,7 @@ class BraxBuilder(LevelBuilder):
         return state.design
 
 
+@functools.lru_cache(maxsize=None)
 def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float = 0.5,
               theta_high: float = 1.5, type_b_prob: float = 0.5, reference_return: float | None = None,
               num_eval_levels: int = 16, reference_discounted_return: float | None = None) -> UEDTask:

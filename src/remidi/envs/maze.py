@@ -363,12 +363,12 @@ class MazeBuilder(LevelBuilder):
     them); the steps, in order:
 
     1. the level's kind, where the task has special levels (``kind`` ``tmaze`` or ``blindfold``):
-       action 0 an ordinary maze, 1 a T-maze (a blind maze); any other action changes nothing
-       (ordinary);
+       action ``a`` with ``a mod 2`` = 0 an ordinary maze, 1 a T-maze (a blind maze): a generator
+       acting uniformly makes each kind half of the time, as the task's sampler does;
     2. the goal's cell (default: cell 0);
     3. the agent's cell; on the goal's cell it changes nothing; an agent never placed stands on
        the first cell that is neither the goal nor a wall;
-    4. the agent's direction: action 0–3 (right, down, left, up); any other changes nothing (0);
+    4. the agent's direction: ``a mod 4`` (right, down, left, up);
     5. ``num_walls`` wall placements (the sampler's 25): a wall on the goal, the agent or a wall
        changes nothing.
 
@@ -394,10 +394,10 @@ class MazeBuilder(LevelBuilder):
         phase = t - self.kind_steps  # −1 the kind, 0 goal, 1 agent, 2 direction, 3… walls
         flat = design.wall_map.reshape(-1)
         occupied = flat[jnp.clip(action, 0, cells - 1)] | (action == design.goal) | (action == design.agent)
-        kind = design.replace(special=jnp.where(action < 2, action == 1, design.special))
+        kind = design.replace(special=action % 2 == 1)
         goal = design.replace(goal=jnp.where(on_grid & (action != design.agent), action, design.goal))
         agent = design.replace(agent=jnp.where(on_grid & (action != design.goal), action, design.agent))
-        direction = design.replace(agent_dir=jnp.where((action >= 0) & (action < 4), action, design.agent_dir))
+        direction = design.replace(agent_dir=action % 4)
         wall = design.replace(wall_map=jnp.where(on_grid & ~occupied, flat.at[jnp.clip(action, 0, cells - 1)].set(True),
                                                  flat).reshape(self.size, self.size))
         index = jnp.clip(phase + 1, 0, 4)  # which of the five designs this step makes

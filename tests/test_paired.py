@@ -102,3 +102,28 @@ def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist():
     assert not all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(r2.antagonist.params),
                                                         jax.tree.leaves(r1.antagonist.params)))
     assert int(r2.antagonist.step) > int(r1.antagonist.step)
+
+
+def test_the_generator_learns_in_the_agents_reward_units(monkeypatch):
+    """PAIRED pays the generator regret × reward_scale (Brax: ÷ 10), as the agents learn from
+    reward × reward_scale; the logged regret stays in the environment's units."""
+    import dataclasses
+
+    import jax
+
+    from remidi.engine import train as tr
+    from test_ued_engine import TASK, TINY
+
+    paid = []
+    real = paired.generator_rewards
+
+    def recording(regret, n):
+        jax.debug.callback(lambda r: paid.append(np.asarray(r)), regret)
+        return real(regret, n)
+
+    monkeypatch.setattr(paired, "generator_rewards", recording)
+    setup = tr.make_setup(TASK, dataclasses.replace(TINY, reward_scale=0.25), "paired")
+    _, metrics = jax.jit(lambda r: tr.train_step(setup, r))(tr.init_runner(setup, jax.random.PRNGKey(0)))
+    jax.effects_barrier()
+    np.testing.assert_allclose(float(np.mean(paid[0])), 0.25 * float(metrics["paired/regret"]), rtol=1e-5)
+    assert abs(float(metrics["paired/regret"])) > 0.1  # a regret of 0 would not tell the scales apart

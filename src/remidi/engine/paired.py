@@ -150,7 +150,9 @@ class LevelGenerator(RandomLevels):
         # the generator: paid on its last step, no bootstrap past its episode
         gen_traj, gen_last = proposal.generated
         net = generator_net(setup)
-        rewards, dones = generator_rewards(paid, gen_traj.reward.shape[0])
+        # in the units the agents learn in (reward × reward_scale: Brax's ±10000 rewards ÷ 10), as
+        # PPO's value loss would otherwise dwarf its policy loss; the metrics stay unscaled
+        rewards, dones = generator_rewards(paid * cfg.reward_scale, gen_traj.reward.shape[0])
         g_adv, g_targets = compute_gae(rewards, gen_traj.value, dones, gen_last, cfg.ppo.gamma, cfg.ppo.gae_lambda)
         generator, g_metrics = ppo_update(runner.generator, net.initialize_carry(n), Batch(
             obs=gen_traj.obs, reset=gen_traj.reset, actions=gen_traj.action, log_probs=gen_traj.log_prob,

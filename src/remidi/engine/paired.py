@@ -123,26 +123,17 @@ class LevelGenerator(RandomLevels):
                         slots=None, train=jnp.asarray(True), generated=(traj, last_value))
 
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
-        """The antagonist plays the levels and learns; the generator is paid and learns."""
-        from remidi.engine.distributions import for_task
+        """The antagonist plays the levels and learns (the agent's rollout and masked PPO, with
+        its parameters and nothing frozen); the generator is paid and learns."""
+        from remidi.engine import train as tr
         from remidi.engine.ppo import Batch, compute_gae, ppo_update
-        from remidi.engine.rollout import rollout
-        from remidi.engine import scores as sc
 
         cfg, task = setup.cfg, setup.task
         n = cfg.num_envs
         k_roll, k_ant, k_gen = (jax.random.fold_in(rng, i) for i in (21, 22, 23))
-        dist = for_task(task.continuous)
-        # the antagonist on the same levels
-        carry = setup.net.initialize_carry(n)
-        traj, last_value = rollout(k_roll, task.env, task.params, setup.net.apply, runner.antagonist.params, carry,
-                                   proposal.levels, cfg.num_steps, dist=dist, deterministic_reset=task.deterministic_reset)
-        adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
-                                   cfg.ppo.gae_lambda)
-        antagonist, _ = ppo_update(runner.antagonist, carry, Batch(
-            obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob, values=traj.value,
-            advantages=adv, targets=targets, mask=jnp.ones_like(traj.done)), k_ant, cfg.ppo, setup.net.apply, dist)
-        ant_mean, ant_best, _ = sc.episode_returns(traj.reward, traj.done)
+        as_antagonist = runner.replace(train_state=runner.antagonist)
+        traj, adv, targets, ant_mean, ant_best = tr.collect(setup, as_antagonist, k_roll, proposal.levels, None)
+        antagonist, _ = tr.learn(setup, as_antagonist, k_ant, traj, adv, targets)
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
         regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)

@@ -39,6 +39,7 @@ from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
 from remidi.experiments.compare import compare
+from remidi.experiments.table import _cells as table_cells
 from remidi.experiments.table import _digits as table_digits
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -285,10 +286,8 @@ def metrics_table(runs: dict, experiment: str, metrics: list[str], algos: list[s
             if not x or all(math.isnan(v) for v in x):  # not logged, or undefined (DR's replay share)
                 cells.append("—")
                 continue
-            d = _digits(m)
-            mean, std = stats.mean_and_sample_std(x)
-            lo, hi = stats.bootstrap_ci(x, np.mean)
-            cells.append(f"{_f(mean, d)} ± {_f(std, d)} [{_f(lo, d)}, {_f(hi, d)}] ({_f(float(stats.iqm(x)), d)})")
+            spread, iqm, ci = table_cells({"per_seed": x}, _digits(m))  # as remidi table shows them
+            cells.append(f"{spread} {ci} ({iqm})")
         lines.append(f"| {algo} | {len(runs[experiment, algo].seeds)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

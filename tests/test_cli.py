@@ -2,6 +2,8 @@
 
 import csv
 import json
+import os
+from pathlib import Path
 
 import pytest
 
@@ -424,3 +426,28 @@ def test_a_full_disk_is_one_line_and_loses_nothing(tmp_path, capsys, monkeypatch
     assert f"{out / 'summary.json'}: No space left on device; files written before are intact" in err_text
     assert f"continue with: remidi run --resume {out}" in err_text
     assert (out / "config.json").exists() and not list(out.glob(".*.tmp"))
+
+
+def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_path):
+    """A copy of src/remidi inside another repository's ignored folder (how a run on a lent GPU
+    gets a frozen commit's code) must not record that repository's commit as the run's code."""
+    import shutil
+    import subprocess
+    import sys
+
+    import remidi
+
+    repo = tmp_path / "other"
+    subprocess.run(["git", "init", "-q", str(repo)], check=True)
+    (repo / ".gitignore").write_text("frozen/\n")
+    subprocess.run(["git", "-C", str(repo), "add", ".gitignore"], check=True)
+    subprocess.run(["git", "-C", str(repo), "-c", "user.email=t@t", "-c", "user.name=t", "commit", "-qm", "x"],
+                   check=True)
+    shutil.copytree(Path(remidi.__file__).parent, repo / "frozen" / "remidi",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    probe = "import json, remidi.files as f; print(json.dumps(f.code_version()))"
+    done = subprocess.run([sys.executable, "-c", probe], cwd=repo, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(repo / "frozen"), "JAX_PLATFORMS": "cpu"})
+    version = json.loads(done.stdout.strip().splitlines()[-1])
+    assert version["commit"] is None and version["dirty"] is None
+    assert version["device"] == "cpu: cpu" and version["jax"]

@@ -37,9 +37,11 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
 
 
 def code_version() -> dict:
-    """What code and libraries a run used, for its ``config.json``: the git commit of the checkout
-    the ``remidi`` package was imported from (``dirty``: uncommitted changes under ``src/``), or
-    ``None`` for an installed copy, and the JAX versions (results depend on XLA's rounding)."""
+    """What code, libraries and device a run used, for its ``config.json``: the git commit of the
+    checkout the ``remidi`` package was imported from (``dirty``: uncommitted changes under
+    ``src/``), or ``None`` for an installed copy or a copy of the sources that git does not track
+    (a package folder inside some other repository), the JAX versions and the kind of the first
+    device (results depend on XLA's rounding, which differs between CPU and GPU)."""
     import subprocess
 
     import jax
@@ -54,6 +56,8 @@ def code_version() -> dict:
             return None
         return done.stdout.strip() if done.returncode == 0 else None
 
-    commit = git("rev-parse", "HEAD")
+    commit = git("rev-parse", "HEAD") if git("ls-files", "--error-unmatch", "__init__.py") else None
     dirty = bool(git("status", "--porcelain", "--", str(src.parent))) if commit else None
-    return {"commit": commit, "dirty": dirty, "jax": jax.__version__, "jaxlib": jaxlib.__version__}
+    device = jax.devices()[0]
+    return {"commit": commit, "dirty": dirty, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
+            "device": f"{device.platform}: {device.device_kind}"}

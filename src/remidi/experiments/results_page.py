@@ -124,6 +124,8 @@ class Run:
     folders: list[str] = field(default_factory=list)
     commits: set = field(default_factory=set)
     wall_s: float = 0.0
+    resumed: bool = False  # some part was resumed: its summary's wall time is its last part's alone
+    devices: set = field(default_factory=set)
     preset: str = ""
 
 
@@ -147,7 +149,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
         if (folder / "evaluate.json").is_file():
-            entry = outputs.read_json(folder / "evaluate.json")["algorithms"][run.algo]
+            entry = outputs.read_json(folder / "evaluate.json")["algorithms"][summary["algo"]]
             _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
         if (folder / "metrics.csv.gz").is_file():
             rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
@@ -167,6 +169,8 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
                            else str(folder))
         run.commits.add((config.get("code") or {}).get("commit"))
         run.wall_s += float(summary.get("wall_s", 0.0))
+        run.resumed |= bool(summary.get("resumed"))
+        run.devices.add((config.get("code") or {}).get("device") or "not recorded")
     return runs
 
 
@@ -325,12 +329,20 @@ def summary_lines(results: list[dict]) -> str:
 
 
 def provenance_table(runs: dict) -> str:
-    lines = ["| experiment | algorithm | preset | seeds | commit | training wall time (all parts) | data |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
+    """One row per experiment and algorithm: preset, seeds, commits, devices, the training wall time
+    summed over its parts (marked † where a part was resumed: its summary holds the time of its
+    last part alone) and its data folders."""
+    lines = ["| experiment | algorithm | preset | seeds | commit | device | training wall time (all parts) | data |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for (exp, algo), run in sorted(runs.items()):
         commits = ", ".join(sorted(str(c)[:7] for c in run.commits))
-        lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {run.wall_s / 60:.1f} min | "
+        devices = ", ".join(sorted(run.devices))
+        wall = f"{run.wall_s / 60:.1f} min" + (" †" if run.resumed else "")
+        lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {devices} | {wall} | "
                      + ", ".join(f"`{f}`" for f in run.folders) + " |")
+    if any(run.resumed for run in runs.values()):
+        lines.append("\n† a part of these runs was resumed from a checkpoint; its wall time counts the last "
+                     "part alone.")
     return "\n".join(lines)
 
 

@@ -52,6 +52,29 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
     return jnp.maximum(regret, 0.0) if clip_negative else regret
 
 
+def regret_by_tag(setup, levels, regret, antagonist_luck, optimal, protagonist_mean) -> dict[str, jax.Array]:
+    """Where the estimate's regret comes from, per tag of the generated levels [N] and for the
+    levels with no tag (``untagged``); NaN where no generated level has it:
+
+    * ``paired/regret/<tag>``: the estimate the generator was paid (before overlap handling);
+    * ``paired/antagonist_luck/<tag>``: the antagonist's best episodic return minus its mean, the
+      part of ``paired``'s estimate that a lucky episode adds (a guessed hidden lever);
+    * ``paired/exact_regret/<tag>``: the task's optimal return minus the protagonist's mean, where
+      the task has an optimum (what ``perfect`` pays), to read the estimate against."""
+    tags = jax.vmap(setup.task.level_tags)(levels)
+    groups = dict(tags)
+    groups["untagged"] = ~jnp.any(jnp.stack(list(tags.values())), axis=0) if tags else jnp.ones_like(regret, bool)
+    values = {"regret": regret, "antagonist_luck": antagonist_luck}
+    if optimal is not None:
+        values["exact_regret"] = optimal - protagonist_mean
+    out = {}
+    for group, members in groups.items():
+        count = jnp.sum(members)
+        for name, x in values.items():
+            out[f"paired/{name}/{group}"] = jnp.where(count > 0, jnp.sum(jnp.where(members, x, 0.0)) / count, jnp.nan)
+    return out
+
+
 def generator_rewards(regret: jax.Array, num_steps: int) -> tuple[jax.Array, jax.Array]:
     """The generator's episode as a reward signal: ``(rewards f32[T, N], dones bool[T, N])`` with
     T = ``num_steps`` (the level-building MDP's budget), the regret ``f32[N]`` on the last step and
@@ -153,6 +176,7 @@ class LevelGenerator(RandomLevels):
                    "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32)}
         for name, count in tag_counts(setup, proposal.levels, jnp.ones((n,))).items():
             metrics[f"generated/{name}"] = count / n
+        metrics.update(regret_by_tag(setup, proposal.levels, regret, ant_best - ant_mean, optimal, mean_return))
         kept, inserted = self._keep(setup, runner, proposal, jax.random.fold_in(rng, 24))
         return {"generator": generator, "antagonist": antagonist, **kept}, inserted, metrics
 

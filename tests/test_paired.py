@@ -147,3 +147,54 @@ def test_the_generator_learns_in_the_agents_reward_units(monkeypatch):
     jax.effects_barrier()
     np.testing.assert_allclose(float(np.mean(paid[0])), 0.25 * float(metrics["paired/regret"]), rtol=1e-5)
     assert abs(float(metrics["paired/regret"])) > 0.1  # a regret of 0 would not tell the scales apart
+
+
+def test_the_reference_generator_reads_a_maze_design_by_conv_and_carries_its_lstm():
+    """paired.generator_network=reference: the reference libraries' adversary (conv 128 over the
+    maze design, the embedded step and the noise into a 256-unit LSTM); its outputs depend on the
+    design and the noise, and its carry restarts where an episode does."""
+    import jax
+
+    from remidi.engine.networks import GeneratorLSTMActorCritic
+    from remidi.envs.maze import maze_task
+
+    builder = maze_task("tmaze").level_builder
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    obs, _ = jax.vmap(lambda k: builder.reset_env_to_level(k, None, None))(keys)
+    obs = jax.tree.map(lambda x: x[None], obs)  # [T=1, N=3, ...]
+    net = GeneratorLSTMActorCritic(num_actions=builder.num_actions)
+    reset = jnp.ones((1, 3), bool)
+    params = net.init(jax.random.PRNGKey(1), net.initialize_carry(3), obs, reset)
+    assert params["params"]["conv"]["kernel"].shape == (3, 3, 4, 128)
+    carry, (logits, value) = net.apply(params, net.initialize_carry(3), obs, reset)
+    assert logits.shape == (1, 3, builder.num_actions) and value.shape == (1, 3)
+    assert carry[0].shape == (3, 256)
+    assert not np.allclose(logits[0, 0], logits[0, 1])  # the noise differs between the episodes
+    # a reset step forgets the carry: the same observation after any carry gives the same output
+    _, (again, _) = net.apply(params, carry, obs, reset)
+    np.testing.assert_allclose(again, logits, rtol=1e-5, atol=1e-6)
+    _, (kept, _) = net.apply(params, carry, obs, jnp.zeros((1, 3), bool))
+    assert not np.allclose(kept, logits)
+
+
+def test_paired_runs_with_the_reference_generator_and_refuses_an_unknown_one():
+    import dataclasses
+
+    import jax
+
+    from remidi.engine import train as tr
+    from remidi.errors import ConfigError
+    from test_ued_engine import TASK, TINY
+
+    cfg = dataclasses.replace(TINY, paired=dataclasses.replace(TINY.paired, generator_network="reference"))
+    setup = tr.make_setup(TASK, cfg, "paired")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    assert "lstm" in runner.generator.params
+    new, metrics = jax.jit(lambda r: tr.train_step(setup, r))(runner)
+    assert np.isfinite(float(metrics["paired/generator_entropy"]))
+    assert int(new.generator.step) > int(runner.generator.step)
+    bad = dataclasses.replace(TINY, paired=dataclasses.replace(TINY.paired, generator_network="big"))
+    from remidi.engine.validation import validate_ued_config
+
+    with pytest.raises(ConfigError, match="paired.generator_network.*mlp, reference"):
+        validate_ued_config(bad, "paired", TASK)

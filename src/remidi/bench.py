@@ -27,6 +27,9 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   and learns as PLR⊥'s replay update does, the antagonist rolls out and learns, and the
   generator learns; ``paired_step_over_plr_step`` is its cost per environment step against
   ``maze-plr``'s (no GFLOP/s: the count covers one network).
+* ``maze-paired-reference``: ``maze-paired`` with the reference libraries' generator
+  (``paired.generator_network=reference``: a 128-channel conv, a 256-unit LSTM);
+  ``paired_reference_step_over_plr_step`` (not run by default).
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
@@ -247,6 +250,15 @@ def _maze_paired():
     return _train_workload(maze_task("tmaze"), _maze_config("paired"), "paired", active=0)
 
 
+@register("maze-paired-reference", "maze-paired with the reference libraries' generator (conv 128, LSTM 256)")
+def _maze_paired_reference():
+    from remidi.envs.maze import maze_task
+
+    cfg = _maze_config("paired")
+    cfg = dataclasses.replace(cfg, paired=dataclasses.replace(cfg.paired, generator_network="reference"))
+    return _train_workload(maze_task("tmaze"), cfg, "paired", active=0)
+
+
 @register("maze-remidi-reference", "maze-remidi with the reference tracker (every frozen level stepped)")
 def _maze_remidi_reference():
     from remidi.envs.maze import maze_task
@@ -407,6 +419,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
     if "maze-paired" in results and "maze-plr" in results:
         out["paired_step_over_plr_step"] = per_call("maze-paired") / per_call("maze-plr")
+    if "maze-paired-reference" in results and "maze-plr" in results:
+        out["paired_reference_step_over_plr_step"] = per_call("maze-paired-reference") / per_call("maze-plr")
     if "maze-accel" in results and "maze-plr" in results:
         out["accel_step_over_plr_step"] = per_call("maze-accel") / per_call("maze-plr")
     if "maze-remidi-reference" in results and "maze-plr" in results:

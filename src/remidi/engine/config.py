@@ -65,8 +65,12 @@ class PairedConfig:
                 "flexible (best of both − mean of both) or perfect (the task's optimum − protagonist's mean)"})
     clip_negative: bool = field(default=False, metadata={
         "help": "PAIRED: pay the generator max(regret, 0) instead of the regret"})
+    generator_network: str = field(default="mlp", metadata={
+        "help": "PAIRED: the generator's network: mlp (an MLP over its observation, sized for a CPU) or reference "
+                "(the reference libraries' adversary: a 128-channel conv over a maze design, the embedded step "
+                "and the noise into a 256-unit LSTM)"})
     generator_hidden: int = field(default=64, metadata={
-        "help": "PAIRED: width of the generator's two trunk layers (an MLP over its observation)"})
+        "help": "PAIRED: width of the generator's two trunk layers (generator_network mlp)"})
     generator_lr: float = field(default=1e-4, metadata={"help": "PAIRED: the generator's Adam learning rate"})
     generator_ent_coef: float = field(default=0.01, metadata={
         "help": "PAIRED: the generator's entropy-bonus coefficient"})

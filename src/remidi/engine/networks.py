@@ -297,6 +297,42 @@ class MLPLSTMActorCritic(nn.Module):
         return carry, (logits, value)
 
 
+class GeneratorLSTMActorCritic(nn.Module):
+    """The level generator of the reference libraries (JaxUED's ``maze_paired.py`` adversary, as
+    DCD's): over a builder's observation (:mod:`remidi.envs.builder`) ``design`` (an image
+    ``[T, N, H, W, C]`` goes through a 3x3 ``VALID`` conv with ``conv_features`` channels and a
+    relu, anything else is flattened), ``time`` (one-hot ``[T, N, num_steps]``, embedded by a
+    linear ``Dense(time_embed)``: an embedding table of the step) and ``noise`` (as it is), all
+    concatenated -> LSTM(``lstm_size``) -> relu policy and value heads (``Dense(32)``).
+    Carry: ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially."""
+
+    num_actions: int
+    lstm_size: int = 256
+    conv_features: int = 128
+    time_embed: int = 10
+    head_hidden: int = 32
+    continuous: bool = False
+
+    @nn.nowrap
+    def initialize_carry(self, batch_size: int) -> tuple[jax.Array, jax.Array]:
+        """Zero LSTM state ``(c, h)``, each ``f32[batch_size, lstm_size]``."""
+        return zero_lstm_carry(batch_size, self.lstm_size)
+
+    @nn.compact
+    def __call__(self, carry, obs, reset):
+        design = obs_field(obs, "design").astype(jnp.float32)
+        time, noise = obs_field(obs, "time"), obs_field(obs, "noise")
+        lead = time.shape[:2]
+        if design.ndim == 5 and min(design.shape[2:4]) >= 3:  # an image [T, N, H, W, C]
+            design = nn.relu(PatchConv(self.conv_features, (3, 3), name="conv")(design))
+        design = design.reshape(lead + (-1,))
+        time = nn.Dense(self.time_embed, kernel_init=_HIDDEN_INIT, bias_init=_ZEROS, name="time_embed")(time)
+        x = jnp.concatenate([design, time, noise.astype(jnp.float32)], axis=-1)
+        carry, y = ResetLSTM(self.lstm_size, name="lstm")(carry, (x, reset))
+        logits, value = ActorCriticHeads(self.num_actions, self.head_hidden, "relu", self.continuous, name="heads")(y)
+        return carry, (logits, value)
+
+
 NETWORKS = {"mlp": FeedForwardActorCritic, "maze_lstm": MazeLSTMActorCritic, "mlp_lstm": MLPLSTMActorCritic}
 
 

@@ -88,14 +88,23 @@ def generator_rewards(regret: jax.Array, num_steps: int) -> tuple[jax.Array, jax
 
 
 # ------------------------------------------------------------------------------- the adversary
-def generator_net(setup):
-    """The generator's actor-critic: an MLP over its flattened observation (design, time step,
-    noise), ``paired.generator_hidden`` units per trunk layer, one logit per design action."""
-    from remidi.engine.networks import FeedForwardActorCritic
+GENERATOR_NETWORKS = ("mlp", "reference")
 
-    builder = setup.task.level_builder
-    width = setup.cfg.paired.generator_hidden
-    return FeedForwardActorCritic(num_actions=builder.num_actions, hidden=(width, width))
+
+def generator_net(setup):
+    """The generator's actor-critic, one logit per design action; ``paired.generator_network``:
+
+    * ``mlp`` (default, sized for a CPU): an MLP over its flattened observation (design, time
+      step, noise), ``paired.generator_hidden`` units per trunk layer;
+    * ``reference``: the reference libraries' adversary (JaxUED, DCD): a 128-channel conv over a
+      maze design, an embedded time step and the noise into a 256-unit LSTM
+      (:class:`remidi.engine.networks.GeneratorLSTMActorCritic`)."""
+    from remidi.engine.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
+
+    builder, p = setup.task.level_builder, setup.cfg.paired
+    if p.generator_network == "reference":
+        return GeneratorLSTMActorCritic(num_actions=builder.num_actions)
+    return FeedForwardActorCritic(num_actions=builder.num_actions, hidden=(p.generator_hidden, p.generator_hidden))
 
 
 def generator_ppo(setup):

@@ -14,7 +14,7 @@ from remidi.engine import scores as sc
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
 from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.networks import flatten_obs, make_network
-from remidi.engine.paired import ESTIMATORS, OVERLAP_REGRETS, LevelGenerator
+from remidi.engine.paired import ESTIMATORS, GENERATOR_NETWORKS, OVERLAP_REGRETS, LevelGenerator
 from remidi.engine.train import example_observation, network_for
 from remidi.envs.interface import UEDTask, tree_equal
 
@@ -183,6 +183,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
             raise ConfigError("paired.estimator: perfect needs the task's optimal return (UEDTask.optimal_return); "
                               "allowed: paired, flexible")
         require(isinstance(p.clip_negative, bool), "paired.clip_negative", "true or false", p.clip_negative)
+        choice("paired.generator_network", p.generator_network, GENERATOR_NETWORKS)
         positive_int("paired.generator_hidden", p.generator_hidden)
         require(p.generator_lr > 0, "paired.generator_lr", "> 0", p.generator_lr)
         require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)

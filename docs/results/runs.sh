@@ -59,4 +59,7 @@ run reference brax-ant dr 0 1 reference --set num_updates=2000
 at 76e7226
 run paired-perfect-s0 lever paired 0 10 paper --set paired.estimator=perfect
 run remidi-paired-perfect-s0 lever remidi-paired 0 10 paper --set paired.estimator=perfect
+# PAIRED's own estimator, exploratory: at the commit that logs where its regret comes from (the
+# antagonist's luck on hidden levels against the exact regret, per tag)
+at 40ca202
 run paired-paired-s0 lever paired 0 10 paper --set paired.estimator=paired

@@ -397,11 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--out", metavar="FIG.png", help="also draw the interval plot into FIG.png")
     compare.set_defaults(func=_cmd_compare)
 
+    from remidi.bench import BENCHMARKS, DEFAULT
+
+    others = [name for name in BENCHMARKS if name not in DEFAULT]
     bench = sub.add_parser("bench", help="throughput benchmarks (env-steps/s, compile time, memory)",
                            description="Time named workloads, each in a fresh process after compiling and "
                                        "warming up (median of --repeats calls), and the ratios between them. "
-                                       "Benchmarks: maze-plr, maze-remidi, maze-env, lever-plr (the default "
-                                       "set), maze-remidi-reference, brax-plr.")
+                                       f"Benchmarks: {', '.join(DEFAULT)} (the default set), {', '.join(others)}.")
     bench.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: the default set)")
     bench.add_argument("--json", action="store_true", help="print only the JSON document (progress on stderr)")
     bench.add_argument("--repeats", type=int, default=3, help="timed calls per benchmark (default 3)")

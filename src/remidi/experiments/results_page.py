@@ -371,6 +371,13 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},
 }
 
+# further tables of an experiment's runs: block name: (experiment, algorithms, metrics)
+EXTRA_TABLES = {
+    "lever-paired-regret": ("lever", ["paired (perfect)", "remidi-paired (perfect)", "paired (paired)"],
+                            [f"summary:paired/{m}/{g}" for g in ("hidden", "untagged")
+                             for m in ("regret", "antagonist_luck", "exact_regret")]),
+}
+
 
 def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> list[Path]:
     """Per experiment its training curves (mean ± std over seeds) and per claim an interval plot."""
@@ -474,6 +481,11 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
     for exp, (algos, metrics, _) in SECTIONS.items():
         out[f"table:{exp}"] = metrics_table(runs, exp, metrics, algos) if any((exp, a) in runs for a in algos) \
             else "_No committed data yet._"
+    for name, (exp, algos, metrics) in EXTRA_TABLES.items():
+        present = [a for a in algos if (exp, a) in runs
+                   and any(m.split(":", 1)[1] in runs[exp, a].values.get("summary", {}) for m in metrics)]
+        out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
+    for exp, (algos, metrics, _) in SECTIONS.items():
         if any((exp, a) in runs for a in algos):
             out[f"seeds:{exp}"] = per_seed_table(runs, exp, metrics[0], algos)
         else:

@@ -104,6 +104,16 @@ CLAIMS = (
     Claim("lever-remidi-paired-generated", "beyond the paper (lever, ReMiDi over PAIRED)", "ReMiDi over PAIRED's "
           "last generator builds fewer hidden levels than PAIRED's (perfect regret both)", "summary:generated/hidden",
           ("lever",), greater=(("paired (perfect)", "remidi-paired (perfect)"),)),
+    Claim("tmaze-paired", "beyond the paper (T-maze, PAIRED)", "PAIRED whose antagonist is the exact optimum "
+          "(perfect regret) generates T-mazes more often than the sampler's half (bound: the generated share of "
+          "T-mazes in the last logged block in [0.5, 1])", "summary:generated/tmaze", ("tmaze",),
+          bounds=(("paired (perfect)", 0.5, 1.0),)),
+    Claim("tmaze-remidi-paired-generated", "beyond the paper (T-maze, ReMiDi over PAIRED)", "ReMiDi over PAIRED's "
+          "last generator builds fewer T-mazes than PAIRED's (perfect regret both)", "summary:generated/tmaze",
+          ("tmaze",), greater=(("paired (perfect)", "remidi-paired (perfect)"),)),
+    Claim("tmaze-remidi-paired-heldout", "beyond the paper (T-maze, ReMiDi over PAIRED)", "ReMiDi over PAIRED "
+          "solves more held-out mazes than PAIRED (perfect regret both)", "evaluate:solve_rate/mean", ("tmaze",),
+          greater=(("remidi-paired (perfect)", "paired (perfect)"),)),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -352,10 +362,10 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
     "tabular-shared": (["mmr", "remidi"], ["summary:regret/h1", "summary:regret/h3", "summary:regret/h5",
                                            "summary:adversary_prob/theta5"],
                        ["regret/h1", "regret/h3", "regret/h5", "adversary_prob/theta5", "adversary_prob/theta6"]),
-    "tmaze": (["dr", "plr", "minimax-return", "remidi"],
+    "tmaze": (["dr", "plr", "minimax-return", "remidi", "paired (perfect)", "remidi-paired (perfect)"],
               ["evaluate:solve_rate/mean", "summary:replay_fraction/tmaze", "evaluate:cvar/solve_rate/100%",
-               "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
-              ["solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze"]),
+               "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate", "summary:generated/tmaze"],
+              ["solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze", "generated/tmaze"]),
     "blindfold": (["dr", "plr", "minimax-return", "remidi"],
                   ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
                    "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],

@@ -63,3 +63,11 @@ run remidi-paired-perfect-s0 lever remidi-paired 0 10 paper --set paired.estimat
 # antagonist's luck on hidden levels against the exact regret, per tag)
 at 40ca202
 run paired-paired-s0 lever paired 0 10 paper --set paired.estimator=paired
+
+# issue #29: PAIRED and ReMiDi over PAIRED on the T-maze (cpu preset, perfect regret), at the commit
+# that stated their claims
+at 569c639
+for s in 0 5; do
+  run "paired-perfect-s$s" tmaze paired $s 5 cpu --set paired.estimator=perfect
+  run "remidi-paired-perfect-s$s" tmaze remidi-paired $s 5 cpu --set paired.estimator=perfect
+done

@@ -6,6 +6,7 @@ perfect-regret score is refused in one line."""
 import csv
 import dataclasses
 import json
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -174,3 +175,31 @@ def test_cartpole_experiment_with_accel_through_the_cli(tmp_path):
     with open(out / "metrics.csv") as fh:
         edits = [float(r["value"]) for r in csv.DictReader(fh) if r["metric"] == "edit"]
     assert edits and max(edits) > 0  # ACCEL edited replayed levels
+
+
+def test_pendulum_experiment_trains_its_continuous_agent_through_the_cli(tmp_path):
+    out = tmp_path / "dr"
+    assert main(["run", "pendulum", "--algo", "dr", "--preset", "smoke", "--out", str(out), *TINY]) == 0
+    m = {k: v["mean"] for k, v in json.loads((out / "summary.json").read_text())["metrics"].items()}
+    assert -16.3 * 32 <= m["return/mean"] < 0  # at most about 16.3 lost per step (angle π, speed 8, torque 2)
+    assert json.loads((out / "config.json").read_text())["config"]["reward_scale"] == 0.1
+
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "gymnax_cartpole.py"
+
+
+def test_the_cartpole_example_is_a_task_in_ten_lines_that_the_cli_runs(monkeypatch, capsys, tmp_path):
+    source = EXAMPLE.read_text()
+    code = [line for line in source[source.index("\nfrom remidi"):].splitlines() if line.strip()]
+    assert len(code) <= 10  # the user's code, blank lines aside: the import and make_task
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent.parent))
+    from remidi.experiments.custom import import_experiment
+
+    exp = import_experiment("examples.gymnax_cartpole:make_task")
+    task = exp.make_task(exp.config_factory())
+    assert len(task.eval_sets) == 9 and task.optimal_return is None and task.deterministic_reset
+    # the engine's default score needs an optimum: refused before anything is written, in one line
+    assert main(["run", "examples.gymnax_cartpole:make_task", "--out", str(tmp_path / "x"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("remidi: error: score: perfect_regret needs the environment's optimal return")
+    assert "\n" not in err and not (tmp_path / "x").exists()

@@ -7,10 +7,10 @@ from remidi.experiments.base import Experiment
 
 
 def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import brax, lever, maze, tabular
+    from remidi.experiments import brax, gymnax, lever, maze, tabular
 
     found: dict[str, Experiment] = {}
-    for module in (tabular, lever, maze, brax):
+    for module in (tabular, lever, maze, brax, gymnax):
         for exp in module.EXPERIMENTS:
             found[exp.name] = exp
     return found

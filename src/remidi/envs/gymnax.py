@@ -1,0 +1,216 @@
+"""Any gymnax environment as a UED task: some of its ``EnvParams`` fields (and optionally the
+start state's seed) are the level.
+
+    from remidi.envs.gymnax import gymnax_task
+
+    task = gymnax_task("CartPole-v1",
+                       level={"gravity": (5.0, 15.0), "masspole": (0.05, 0.5), "length": (0.25, 1.0)},
+                       eval_grid={"gravity": (5.0, 9.8, 15.0), "length": (0.25, 0.5, 1.0)})
+
+A level is a dict ``{field: f32[]}`` over the named fields, plus ``"seed": u32[2]`` (the key of
+gymnax's ``reset_env``) when ``seed_in_level``. :class:`GymnaxUED` delegates to gymnax's own
+``reset_env`` and ``step_env`` with the environment's params, the level's fields written in
+(and the fields derived from them recomputed, e.g. CartPole's ``total_mass``:
+:data:`DERIVED`). An episode ends where gymnax ends it: its ``step_env``'s termination or its
+time limit (``is_truncated``: ``max_steps_in_episode``).
+
+What the task offers the engine:
+
+* ``sample_level``: each field uniform in ``[low, high]``, a fresh seed;
+* ``level_tags``: ``<field>_high`` (the value lies in the upper half of its range) for every
+  field whose range is not a point, plus any named predicates ``tags={name: level -> bool[]}``:
+  reported as replay and buffer shares, they show which part of the range the adversary prefers;
+* ``mutate_level`` (ACCEL): each edit moves one field, drawn at random, by ±``edit_size`` of its
+  range, clipped to the range; the seed is kept;
+* ``eval_sets``: one set per point of ``eval_grid`` (fields left out of the grid at gymnax's
+  default), named ``field=value_field=value``, holding ``eval_seeds`` levels that differ only in
+  their start seed (one level when the seed is not part of the level): the engine reports
+  ``return/<point>`` (and ``solve_rate/<point>`` with ``solved_at``) for each;
+* no optimal return: ``perfect_regret`` is refused; ``pvl``, ``maxmc`` and ``neg_return`` work,
+  and ``learnability`` with ``solved_at`` (an episode is solved when its return is ≥ it).
+
+Determinism: with the seed in the level, a level's episode is a function of the level and the
+actions wherever gymnax's ``step_env`` ignores its key (CartPole, Pendulum, and Acrobot without
+torque noise), as ReMiDi's tracker assumes (``deterministic_reset``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.errors import ConfigError
+
+SEED = "seed"  # the level's key for the start seed (u32[2])
+
+# params fields gymnax computes once from others (a level changing the others must recompute them)
+DERIVED: dict[str, Callable[[Any], Any]] = {
+    "CartPole-v1": lambda p: p.replace(total_mass=p.masscart + p.masspole, polemass_length=p.masspole * p.length),
+}
+
+
+@struct.dataclass
+class GymnaxState:
+    env_state: Any  # gymnax's own state
+    level: dict  # {field: f32[]} (+ "seed": u32[2])
+
+
+class GymnaxUED(UnderspecifiedEnv):
+    """A gymnax environment whose level sets some of its params (see the module's docstring).
+
+    ``fields``: the level's params fields; ``base``: gymnax's ``EnvParams`` the level writes
+    into; ``derive``: ``params -> params`` recomputing fields derived from the level's (or None).
+    The engine passes ``base`` as its ``params``."""
+
+    def __init__(self, env, base, fields: Sequence[str], seed_in_level: bool, derive=None):
+        self.gymnax_env = env
+        self.base = base
+        self.fields = tuple(fields)
+        self.seed_in_level = seed_in_level
+        self.derive = derive
+
+    @property
+    def default_params(self):
+        return self.base
+
+    def action_space(self, params):
+        return self.gymnax_env.action_space(params)
+
+    def params_for(self, level: dict, params):
+        """gymnax's ``EnvParams``: ``params`` with the level's fields written in (and derived)."""
+        out = params.replace(**{name: level[name] for name in self.fields})
+        return self.derive(out) if self.derive is not None else out
+
+    def reset_env_to_level(self, rng, level: dict, params):
+        key = jax.random.wrap_key_data(level[SEED], impl="threefry2x32") if self.seed_in_level else rng
+        obs, state = self.gymnax_env.reset_env(key, self.params_for(level, params))
+        return obs, GymnaxState(env_state=state, level=level)
+
+    def step_env(self, rng, state: GymnaxState, action, params):
+        p = self.params_for(state.level, params)
+        obs, env_state, reward, terminated, _info = self.gymnax_env.step_env(rng, state.env_state, action, p)
+        done = jnp.logical_or(terminated, self.gymnax_env.is_truncated(env_state, p))
+        return obs, state.replace(env_state=env_state), jnp.asarray(reward, jnp.float32), done, {}
+
+
+def point_name(point: Mapping[str, float]) -> str:
+    """A grid point's evaluation-set name: ``gravity=9.8_length=0.5``."""
+    return "_".join(f"{n}={v:g}" for n, v in point.items())
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelSpace:
+    """The level's fields and their uniform ranges ``{field: (low, high)}``."""
+
+    ranges: Mapping[str, tuple[float, float]]
+    seed_in_level: bool = True
+
+    def sample(self, rng) -> dict:
+        """A random level: each field ~ U[low, high] (f32[]), a fresh seed (u32[2])."""
+        k_fields, k_seed = jax.random.split(rng)
+        keys = jax.random.split(k_fields, len(self.ranges))
+        level = {name: jax.random.uniform(k, (), jnp.float32, lo, hi)
+                 for k, (name, (lo, hi)) in zip(keys, self.ranges.items())}
+        if self.seed_in_level:
+            level[SEED] = jax.random.bits(k_seed, (2,), jnp.uint32)
+        return level
+
+    def mutate(self, rng, level: dict, num_edits: int, edit_size: float = 0.1) -> dict:
+        """ACCEL's editor: each of ``num_edits`` edits moves one field (drawn uniformly) by
+        ±``edit_size``·(high − low), clipped to its range; the seed is kept."""
+        names = list(self.ranges)
+        lows = jnp.asarray([self.ranges[n][0] for n in names], jnp.float32)  # [F]
+        highs = jnp.asarray([self.ranges[n][1] for n in names], jnp.float32)
+        k_field, k_sign = jax.random.split(rng)
+        which = jax.random.randint(k_field, (num_edits,), 0, len(names))  # [E]
+        sign = jnp.where(jax.random.bernoulli(k_sign, 0.5, (num_edits,)), 1.0, -1.0)
+        moves = jnp.zeros(len(names)).at[which].add(sign) * edit_size * (highs - lows)  # [F]
+        values = jnp.clip(jnp.stack([level[n] for n in names]) + moves, lows, highs)
+        return {**level, **{n: values[i].astype(level[n].dtype) for i, n in enumerate(names)}}
+
+    def tags(self, level: dict) -> dict[str, jax.Array]:
+        """``{<field>_high: bool[]}``: the field lies in the upper half of its range (fields with
+        a range of one point have no tag)."""
+        return {f"{n}_high": level[n] > (lo + hi) / 2 for n, (lo, hi) in self.ranges.items() if hi > lo}
+
+    def grid(self, points: Mapping[str, Sequence[float]], defaults, seeds: int, rng) -> dict[str, dict]:
+        """``{name: levels}``, one batch per point of the grid (the product of ``points``), each
+        of ``seeds`` levels (leaves [seeds]; one level without the seed in the level) sharing
+        the point's values, with the same seeds at every point. Fields of the level space left
+        out of ``points`` take their value in ``defaults`` (gymnax's ``EnvParams``)."""
+        count = seeds if self.seed_in_level else 1
+        seed_data = jax.random.bits(rng, (count, 2), jnp.uint32)
+        sets = {}
+        for values in itertools.product(*points.values()):
+            point = dict(zip(points, values))
+            name = point_name(point)
+            level = {n: jnp.full((count,), point.get(n, getattr(defaults, n)), jnp.float32) for n in self.ranges}
+            if self.seed_in_level:
+                level[SEED] = seed_data
+            sets[name] = level
+        return sets
+
+
+def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed_in_level: bool = True,
+                params: Mapping[str, Any] | None = None, eval_grid: Mapping[str, Sequence[float]] | None = None,
+                eval_seeds: int = 4, tags: Mapping[str, Callable[[dict], jax.Array]] | None = None,
+                edit_size: float = 0.1, solved_at: float | None = None, derive=None) -> UEDTask:
+    """The gymnax environment ``env_name`` (``gymnax.make``) as a UED task whose level is the
+    params fields of ``level`` (``{field: (low, high)}``, each drawn uniformly) and, with
+    ``seed_in_level``, the start seed.
+
+    ``params``: other params fields, fixed (e.g. ``{"max_steps_in_episode": 200}``);
+    ``eval_grid``: ``{field: values}``, the held-out grid (:meth:`LevelSpace.grid`) of
+    ``eval_seeds`` levels per point; ``tags``: named predicates on a level added to the
+    ``<field>_high`` tags; ``edit_size``: an ACCEL edit's step, a share of the field's range;
+    ``solved_at``: an evaluation episode with a return ≥ this is solved (None: the task has no
+    solve rate and no learnability score); ``derive``: ``params -> params`` recomputing fields
+    derived from the level's (default: :data:`DERIVED`'s entry for the environment).
+    ConfigError (one line) for an unknown environment or field or an empty range."""
+    import gymnax
+
+    try:
+        env, base = gymnax.make(env_name)
+    except ValueError as err:  # gymnax's own error for an unknown name
+        raise ConfigError(f"gymnax: cannot make {env_name!r} ({err})") from None
+    known = {f.name for f in dataclasses.fields(base)}
+    for what, names in (("level", level), ("params", params or {}), ("eval_grid", eval_grid or {})):
+        for name in names:
+            if name not in known:
+                raise ConfigError(f"gymnax: {what} field {name!r} is not a params field of {env_name}; "
+                                  f"allowed: {', '.join(sorted(known))}")
+    if not level:
+        raise ConfigError(f"gymnax: give at least one params field of {env_name} as the level")
+    for name, (lo, hi) in level.items():
+        if not lo <= hi:
+            raise ConfigError(f"gymnax: level field {name}: low must be ≤ high, got ({lo}, {hi})")
+    for name in eval_grid or {}:
+        if name not in level:
+            raise ConfigError(f"gymnax: eval_grid field {name!r} is not a level field; allowed: {', '.join(level)}")
+    base = base.replace(**dict(params or {}))
+    space = LevelSpace(dict(level), seed_in_level)
+    ued = GymnaxUED(env, base, list(level), seed_in_level, derive if derive is not None else DERIVED.get(env_name))
+    space_kind = env.action_space(base)
+    continuous = not hasattr(space_kind, "n")
+    num_actions = int(jnp.prod(jnp.asarray(space_kind.shape))) if continuous else int(space_kind.n)
+    extra = dict(tags or {})
+    return UEDTask(
+        env=ued,
+        params=base,
+        sample_level=space.sample,
+        num_actions=num_actions,
+        max_episode_steps=int(base.max_steps_in_episode),
+        eval_sets=space.grid(eval_grid, base, eval_seeds, jax.random.PRNGKey(0)) if eval_grid else {},
+        level_tags=lambda lv: {**space.tags(lv), **{name: jnp.asarray(f(lv)) for name, f in extra.items()}},
+        solved=None if solved_at is None else (lambda ret: ret >= solved_at),
+        mutate_level=lambda rng, lv, num_edits: space.mutate(rng, lv, num_edits, edit_size),
+        deterministic_reset=seed_in_level,
+        continuous=continuous,
+    )

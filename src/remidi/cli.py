@@ -116,6 +116,10 @@ def _cmd_list(args) -> int:
         print(f"{exp.name}: {exp.description}")
         print(f"  algorithms: {', '.join(exp.algorithms)}"
               + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
+        if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
+            from remidi.engine.scores import SCORES
+
+            print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
         presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                             for p in exp.presets)
         print(f"  presets:    {presets}")
@@ -424,6 +428,10 @@ def main(argv: list[str] | None = None) -> int:
     _RUN_DIR.clear()
     try:
         args = parser.parse_args(argv)
+        if args.command in ("run", "list", "evaluate", "render", "bench"):  # what may name a registered entry
+            from remidi.plugins import load_plugins
+
+            load_plugins()  # REMIDI_PLUGINS and the remidi.plugins entry points: docs/extending.md
         if args.command is None:
             parser.print_help()
             return 2

@@ -14,7 +14,7 @@ _LAZY = {
     "register_score": ("remidi.engine.scores", "register_score"),
 }
 
-__all__ = ["__version__", *_LAZY]
+__all__ = ["__version__", "register_algorithm", "register_score", "run_ued"]
 
 
 def __getattr__(name):

@@ -229,7 +229,8 @@ def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_o
                           f"taken: {', '.join(SCORES)}")
     if not callable(fn):
         raise ConfigError(f"register_score: {name}: fn must be a function of ScoreInputs, got {type(fn).__name__}")
-    flags = dict(needs_optimum=needs_optimum, needs_solved=needs_solved, needs_finished_episodes=needs_finished_episodes)
+    flags = {"needs_optimum": needs_optimum, "needs_solved": needs_solved,
+             "needs_finished_episodes": needs_finished_episodes}
     for key, value in flags.items():
         if not isinstance(value, bool):
             raise ConfigError(f"register_score: {name}: {key} must be true or false, got {value!r}")

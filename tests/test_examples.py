@@ -124,3 +124,26 @@ def test_my_algorithm_example_registers_two_algorithms_and_trains_them(tmp_path,
     assert "buffer_fraction/hidden/b1" not in json.loads((out / "plr-classic" / "summary.json").read_text())["metrics"]
     capsys.readouterr()
     assert main(["run", "--resume", str(out), "--quiet"]) == 0  # finished: nothing left, found by name
+
+
+def test_resuming_a_plugins_run_needs_the_plugin(tmp_path, capsys, monkeypatch, restore_registries):
+    """A process that has not registered the run's algorithm says so in one line; REMIDI_PLUGINS
+    naming the example's module makes `remidi run --resume` find it."""
+    from remidi.cli import main
+    from remidi.engine.algorithms import ALGORITHMS
+
+    example = load_example(EXAMPLE.parent / "my_algorithm.py")
+    out = tmp_path / "algo"
+    assert example.main([str(out), "--updates", "10"]) == 0
+    del ALGORITHMS["plr-classic"], ALGORITHMS["remidi-maxmc"], sys.modules["my_algorithm"]  # a fresh process
+    (out / "remidi-maxmc" / "summary.json").unlink()  # left unfinished
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"remidi: error: --resume: {out / 'plr-classic' / 'config.json'}: the run's algorithm "
+                          "'plr-classic' is unknown here (registered by a plugin? load it again: REMIDI_PLUGINS")
+    assert err.count("\n") == 1
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    monkeypatch.setenv("REMIDI_PLUGINS", "my_algorithm")
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (out / "remidi-maxmc" / "summary.json").exists()

@@ -134,3 +134,39 @@ def test_the_command_line_imports_plugins_first(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv(ENV, "no_such_plugin_xyz")
     assert main(["list"]) == 2
     assert "REMIDI_PLUGINS: cannot import no_such_plugin_xyz (ModuleNotFoundError" in capsys.readouterr().err
+
+
+def test_entry_points_of_the_group_remidi_plugins_are_loaded(monkeypatch, capsys):
+    """An installed package's `remidi.plugins` entry point is loaded by the command line (once);
+    one that fails to load is one line naming it."""
+    import importlib.metadata
+
+    from remidi import plugins
+    from remidi.cli import main
+
+    loaded = []
+
+    class EntryPoint:
+        def __init__(self, name, value, load):
+            self.name, self.value, self._load = name, value, load
+
+        def load(self):
+            return self._load()
+
+    def good():
+        loaded.append("good")
+        remidi.register_score("from-entry-point", lambda x: -x.mean_return)
+
+    def bad():
+        raise ImportError("no module named pkg_that_is_gone")
+
+    eps = [EntryPoint("mine", "my_pkg.plugin", good)]
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: eps if group == plugins.GROUP else [])
+    monkeypatch.setattr(plugins, "_loaded", set())
+    monkeypatch.delenv(plugins.ENV, raising=False)
+    assert main(["list", "lever"]) == 0 and main(["list", "lever"]) == 0
+    assert loaded == ["good"] and "from-entry-point (--set score=NAME)" in capsys.readouterr().out
+    eps.append(EntryPoint("broken", "gone_pkg.plugin", bad))
+    assert main(["list"]) == 2
+    assert capsys.readouterr().err == ("remidi: error: plugin broken (gone_pkg.plugin, entry point group remidi.plugins): "
+                                       "cannot load it (ImportError: no module named pkg_that_is_gone)\n")

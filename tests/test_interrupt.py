@@ -110,6 +110,33 @@ def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, ca
     _same_results(cut, tmp_path / "full")
 
 
+def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys, monkeypatch):
+    """SIGTERM during the last block of the first of two algorithms: that one finishes and writes
+    its results, the second does not start (no block, no checkpoint); status 143, and the resume
+    trains the second."""
+    from remidi import preemption
+    from remidi.cli import main
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def notified(*args, on_block=None, **kwargs):
+        def at(done, metrics):
+            if done == 40:
+                preemption.request()
+        return real(*args, **kwargs, on_block=at)
+
+    monkeypatch.setattr(ued, "train_seeds", notified)
+    out = tmp_path / "two"
+    argv = ["run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]
+    assert main(argv) == 143
+    assert capsys.readouterr().err == f"remidi: terminated (SIGTERM); continue with: remidi run --resume {out}\n"
+    assert (out / "plr" / "summary.json").exists() and not (out / "remidi" / "checkpoint.npz").exists()
+    monkeypatch.setattr(ued, "train_seeds", real)
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (out / "remidi" / "summary.json").exists()
+
+
 @pytest.mark.slow
 def test_sigterm_to_the_program_then_resume_gives_the_uninterrupted_result(tmp_path):
     """The real signal: `remidi run` in a subprocess gets SIGTERM once its first checkpoint is

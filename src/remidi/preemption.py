@@ -24,10 +24,12 @@ _state = {"requested": False, "training": 0}
 
 
 class Preempted(Exception):
-    """The run stopped after a SIGTERM, its checkpoint written at update ``done``."""
+    """The run stopped after a SIGTERM, its checkpoint written at update ``done`` (None: it
+    stopped before training, e.g. the next algorithm of a run after the one that was training
+    when the signal came finished)."""
 
-    def __init__(self, done: int):
-        super().__init__(f"stopped by SIGTERM after update {done}, checkpoint written")
+    def __init__(self, done: int | None):
+        super().__init__("stopped by SIGTERM" + (f" after update {done}, checkpoint written" if done is not None else ""))
         self.done = done
 
 

@@ -281,6 +281,8 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
 
+    if ckpt is not None and preemption.requested():  # SIGTERM came as the previous algorithm finished
+        raise preemption.Preempted(None)
     bar = _progress(num_updates, done, desc, progress and writer)
     with ExitStack() as stack:
         armed = False  # once a block has run (compiled): a SIGTERM checkpoints, then stops

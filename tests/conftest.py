@@ -186,3 +186,17 @@ if _REPORT:
         with open(Path(_REPORT) / f"{worker}.programs.jsonl", "a") as f:
             f.writelines(json.dumps(p) + "\n" for p in _programs)
         _programs.clear()
+
+
+@pytest.fixture
+def restore_registries():
+    """Algorithms and scores registered by a test (remidi.register_algorithm / register_score, an
+    example loaded in-process) are removed again when it ends, so other tests see the library's."""
+    from remidi.engine.algorithms import ALGORITHMS
+    from remidi.engine.scores import SCORES
+
+    saved = dict(ALGORITHMS), dict(SCORES)
+    yield
+    for registry, before in zip((ALGORITHMS, SCORES), saved):
+        registry.clear()
+        registry.update(before)

@@ -1,4 +1,5 @@
-"""examples/bring_your_own_env.py runs, writes its outputs and shows the pattern it is about."""
+"""The examples run, write their outputs and show the pattern they are about:
+bring_your_own_env.py, my_score.py and my_algorithm.py."""
 
 import importlib.util
 import json
@@ -11,8 +12,8 @@ import pytest
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "bring_your_own_env.py"
 
 
-def load_example():
-    spec = importlib.util.spec_from_file_location("bring_your_own_env", EXAMPLE)
+def load_example(path=EXAMPLE):
+    spec = importlib.util.spec_from_file_location(path.stem, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up while it loads
     spec.loader.exec_module(module)
@@ -90,3 +91,59 @@ def test_an_import_path_that_is_no_task_is_one_line(tmp_path, capsys, monkeypatc
     err = capsys.readouterr().err
     assert err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
     assert not (tmp_path / "x").exists()
+
+
+def test_my_score_example_registers_a_score_and_trains_with_it(tmp_path, capsys, restore_registries):
+    """examples/my_score.py: abs_gae is registered at import and a tiny PLR⊥ run ranks its buffer by it."""
+    from remidi.engine.scores import SCORES
+
+    example = load_example(EXAMPLE.parent / "my_score.py")
+    assert SCORES["abs_gae"].fn is example.abs_gae and SCORES["abs_gae"].needs_finished_episodes
+    out = tmp_path / "score"
+    assert example.main([str(out)]) == 0
+    assert json.loads((out / "config.json").read_text())["config"]["score"] == "abs_gae"
+    assert json.loads((out / "summary.json").read_text())["algo"] == "plr"
+    assert "score=abs_gae" in capsys.readouterr().err
+
+
+def test_my_algorithm_example_registers_two_algorithms_and_trains_them(tmp_path, capsys, restore_registries):
+    """examples/my_algorithm.py: plr-classic and remidi-maxmc are registered at import, listed by
+    the lever experiment and trained by a tiny run; a resume finds them by name."""
+    from remidi.cli import main
+    from remidi.engine.algorithms import ALGORITHMS
+
+    example = load_example(EXAMPLE.parent / "my_algorithm.py")
+    assert ALGORITHMS["plr-classic"].trains_on_fresh and ALGORITHMS["remidi-maxmc"].score == "maxmc"
+    out = tmp_path / "algo"
+    assert example.main([str(out)]) == 0
+    for algo in ("plr-classic", "remidi-maxmc"):
+        summary = json.loads((out / algo / "summary.json").read_text())
+        assert summary["algo"] == algo and summary["seeds"] == [0]
+    # remidi-maxmc is a buffer sequence (two buffers: b0, b1); plr-classic one buffer
+    assert "buffer_fraction/hidden/b1" in json.loads((out / "remidi-maxmc" / "summary.json").read_text())["metrics"]
+    assert "buffer_fraction/hidden/b1" not in json.loads((out / "plr-classic" / "summary.json").read_text())["metrics"]
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0  # finished: nothing left, found by name
+
+
+def test_resuming_a_plugins_run_needs_the_plugin(tmp_path, capsys, monkeypatch, restore_registries):
+    """A process that has not registered the run's algorithm says so in one line; REMIDI_PLUGINS
+    naming the example's module makes `remidi run --resume` find it."""
+    from remidi.cli import main
+    from remidi.engine.algorithms import ALGORITHMS
+
+    example = load_example(EXAMPLE.parent / "my_algorithm.py")
+    out = tmp_path / "algo"
+    assert example.main([str(out), "--updates", "10"]) == 0
+    del ALGORITHMS["plr-classic"], ALGORITHMS["remidi-maxmc"], sys.modules["my_algorithm"]  # a fresh process
+    (out / "remidi-maxmc" / "summary.json").unlink()  # left unfinished
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"remidi: error: --resume: {out / 'plr-classic' / 'config.json'}: the run's algorithm "
+                          "'plr-classic' is unknown here (registered by a plugin? load it again: REMIDI_PLUGINS")
+    assert err.count("\n") == 1
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    monkeypatch.setenv("REMIDI_PLUGINS", "my_algorithm")
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (out / "remidi-maxmc" / "summary.json").exists()

@@ -1,5 +1,7 @@
 """Ctrl-C at any moment of `remidi run` (start-up, XLA compiling, training) exits cleanly: status
-130, one line `remidi: interrupted...`, no traceback, no abort, no half-written file."""
+130, one line `remidi: interrupted...`, no traceback, no abort, no half-written file. SIGTERM (a
+scheduler's pre-emption notice) checkpoints the block under way and exits 143; the resumed run
+ends where an uninterrupted one does."""
 
 import json
 import signal
@@ -59,3 +61,121 @@ def test_ctrl_c_exits_130_with_one_line(tmp_path, when):
         with np.load(out / "checkpoint.npz") as saved:  # the last checkpoint is whole
             assert json.loads(str(saved["meta"]))["done"] >= 10
         assert not (out / "summary.json").exists()
+
+
+def _tiny(out, *more):
+    return ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY, *more, "--out", str(out)]
+
+
+def _same_results(a, b):
+    assert (a / "metrics.csv").read_text() == (b / "metrics.csv").read_text()
+    assert json.loads((a / "summary.json").read_text())["metrics"] == json.loads((b / "summary.json").read_text())["metrics"]
+
+
+def _checkpoint_done(folder):
+    import numpy as np
+
+    with np.load(folder / "checkpoint.npz") as saved:
+        return json.loads(str(saved["meta"]))["done"]
+
+
+def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, capsys, monkeypatch):
+    """SIGTERM's request (remidi.preemption, what the command line's handler records) during a
+    block: that block is checkpointed although checkpoint_every has not come (update 20 of
+    checkpoint_every=40), one line names the update and the resume command, status 143; the
+    resumed run's metrics.csv and summary equal the uninterrupted run's."""
+    from remidi import preemption
+    from remidi.cli import main
+    from remidi.experiments import ued
+
+    every = ("--set", "checkpoint_every=40")
+    assert main(_tiny(tmp_path / "full", *every)) == 0
+    real = ued.train_seeds
+
+    def notified(*args, on_block=None, **kwargs):
+        def at(done, metrics):
+            if done == 10:  # the signal lands while the next block runs
+                preemption.request()
+        return real(*args, **kwargs, on_block=at)
+
+    monkeypatch.setattr(ued, "train_seeds", notified)
+    capsys.readouterr()
+    cut = tmp_path / "cut"
+    assert main(_tiny(cut, *every)) == 143
+    err = capsys.readouterr().err
+    assert err == f"remidi: terminated (SIGTERM), checkpoint of update 20 written; continue with: remidi run --resume {cut}\n"
+    assert _checkpoint_done(cut) == 20 and not (cut / "summary.json").exists()
+    monkeypatch.setattr(ued, "train_seeds", real)
+    assert main(["run", "--resume", str(cut), "--quiet"]) == 0
+    _same_results(cut, tmp_path / "full")
+
+
+def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys, monkeypatch):
+    """SIGTERM during the last block of the first of two algorithms: that one finishes and writes
+    its results, the second does not start (no block, no checkpoint); status 143, and the resume
+    trains the second."""
+    from remidi import preemption
+    from remidi.cli import main
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def notified(*args, on_block=None, **kwargs):
+        def at(done, metrics):
+            if done == 40:
+                preemption.request()
+        return real(*args, **kwargs, on_block=at)
+
+    monkeypatch.setattr(ued, "train_seeds", notified)
+    out = tmp_path / "two"
+    argv = ["run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]
+    assert main(argv) == 143
+    assert capsys.readouterr().err == f"remidi: terminated (SIGTERM); continue with: remidi run --resume {out}\n"
+    assert (out / "plr" / "summary.json").exists() and not (out / "remidi" / "checkpoint.npz").exists()
+    monkeypatch.setattr(ued, "train_seeds", real)
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (out / "remidi" / "summary.json").exists()
+
+
+@pytest.mark.slow
+def test_sigterm_to_the_program_then_resume_gives_the_uninterrupted_result(tmp_path):
+    """The real signal: `remidi run` in a subprocess gets SIGTERM once its first checkpoint is
+    written; it exits 143 with one line and the resume hint (having checkpointed the block under
+    way, or at once if training had ended), and `--resume` finishes it to the uninterrupted result."""
+    from remidi.cli import main
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-c", LAUNCH, *_tiny(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=subprocess_env(__name__))
+    start = time.monotonic()
+    while not (out / "checkpoint.npz").exists() and proc.poll() is None and time.monotonic() - start < 240:
+        time.sleep(0.02)
+    assert proc.poll() is None, "the run ended before the signal"
+    proc.send_signal(signal.SIGTERM)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    assert proc.returncode == 143, err
+    assert err.startswith("remidi: terminated (SIGTERM)") and err.count("\n") == 1, err
+    assert err.endswith(f"continue with: remidi run --resume {out}\n") and "Traceback" not in err
+    if "checkpoint of update" in err:  # the usual case: the block under way was checkpointed
+        assert f"checkpoint of update {_checkpoint_done(out)} written" in err
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert main(_tiny(tmp_path / "full")) == 0
+    _same_results(out, tmp_path / "full")
+
+
+def test_sigterm_before_training_exits_143_at_once(tmp_path):
+    """Before a block has run (start-up: importing JAX) nothing newer than the last checkpoint
+    exists: SIGTERM exits at once, status 143, one line."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-c", LAUNCH, *_tiny(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=subprocess_env(__name__, cache=False))
+    time.sleep(0.5)
+    assert proc.poll() is None
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.startswith("remidi: terminated (SIGTERM)") and err.count("\n") == 1 and "checkpoint" not in err, err

@@ -74,16 +74,44 @@ def _exit_on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subp
     os._exit(130)
 
 
+def _terminated_message(checkpointed_at: int | None = None) -> str:
+    """``remidi: terminated (SIGTERM)``, where the checkpoint stands, and how to resume."""
+    message = _interrupted_message().replace("interrupted", "terminated (SIGTERM)"
+                                             + (f", checkpoint of update {checkpointed_at} written"
+                                                if checkpointed_at is not None else ""), 1)
+    return message
+
+
+def _on_sigterm(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
+    """SIGTERM (a scheduler's pre-emption notice, :mod:`remidi.preemption`): while a UED run
+    trains, only recorded: the driver checkpoints the block under way and stops, and :func:`main`
+    exits with status 143. Anywhere else, one line and exit 143 at once, as Ctrl-C does with 130
+    (:func:`_exit_on_sigint`: the last checkpoint is whole, nothing newer exists)."""
+    from remidi import preemption
+
+    if preemption.request():
+        return
+    try:
+        sys.stdout.flush()
+    except Exception:  # a print the signal cut short
+        pass
+    line = ("\n" if sys.stderr.isatty() else "") + _terminated_message() + "\n"
+    os.write(2, line.encode())
+    os._exit(preemption.EXIT_STATUS)
+
+
 def _install_sigint_handler():
-    """Install :func:`_exit_on_sigint` when this process runs the command line (not when a host
-    such as pytest or a notebook has its own Ctrl-C handling, or ignores SIGINT); returns the
-    handler to restore, or None."""
+    """Install :func:`_exit_on_sigint` (SIGINT) and :func:`_on_sigterm` (SIGTERM) when this process
+    runs the command line (not when a host such as pytest or a notebook has its own handling, or
+    ignores the signal); returns the handlers to restore, {signal: previous handler}."""
     if threading.current_thread() is not threading.main_thread():
-        return None
-    previous = signal.getsignal(signal.SIGINT)
-    if previous is not signal.default_int_handler:
-        return None
-    signal.signal(signal.SIGINT, _exit_on_sigint)
+        return {}
+    previous = {}
+    for signum, default, handler in ((signal.SIGINT, signal.default_int_handler, _exit_on_sigint),
+                                     (signal.SIGTERM, signal.SIG_DFL, _on_sigterm)):
+        if signal.getsignal(signum) is default:
+            previous[signum] = default
+            signal.signal(signum, handler)
     return previous
 
 
@@ -116,6 +144,10 @@ def _cmd_list(args) -> int:
         print(f"{exp.name}: {exp.description}")
         print(f"  algorithms: {', '.join(exp.algorithms)}"
               + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
+        if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
+            from remidi.engine.scores import SCORES
+
+            print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
         presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                             for p in exp.presets)
         print(f"  presets:    {presets}")
@@ -417,13 +449,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """The command line. Run as a program (``argv`` None: the ``remidi`` script, ``python -m
-    remidi``), Ctrl-C exits at once with status 130 (:func:`_exit_on_sigint`); called with an
-    ``argv`` list, KeyboardInterrupt is caught and 130 returned."""
-    previous = _install_sigint_handler() if argv is None else None
+    remidi``), Ctrl-C exits at once with status 130 (:func:`_exit_on_sigint`) and SIGTERM with
+    143 after checkpointing a run in training (:func:`_on_sigterm`); called with an ``argv`` list,
+    KeyboardInterrupt is caught and 130 returned.
+
+    Exit status: 0 done, 1 a failed write, 2 bad input, 130 Ctrl-C, 143 SIGTERM (resume the run
+    with ``remidi run --resume DIR``)."""
+    from remidi import preemption
+
+    previous = _install_sigint_handler() if argv is None else {}
     parser = build_parser()
     _RUN_DIR.clear()
+    preemption.reset()
     try:
         args = parser.parse_args(argv)
+        if args.command in ("run", "list", "evaluate", "render", "bench"):  # what may name a registered entry
+            from remidi.plugins import load_plugins
+
+            load_plugins()  # REMIDI_PLUGINS and the remidi.plugins entry points: docs/extending.md
         if args.command is None:
             parser.print_help()
             return 2
@@ -434,6 +477,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(_interrupted_message(), file=sys.stderr)
         return 130
+    except preemption.Preempted as stopped:  # SIGTERM while training: checkpointed at the end of a block
+        print(_terminated_message(stopped.done), file=sys.stderr)
+        return preemption.EXIT_STATUS
     except BrokenPipeError:  # `remidi list | head`: the reader has gone, which is no error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
@@ -441,8 +487,8 @@ def main(argv: list[str] | None = None) -> int:
         print(_write_failed_message(err), file=sys.stderr)
         return 1
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ adversary is a new implementation of that interface, once for every domain.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
@@ -90,6 +91,69 @@ REMIDI_PAIRED = Algorithm("remidi-paired", GeneratorSequence(),
 #: every algorithm ``--algo`` accepts, by name, in the order the docs and plots list them
 ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL, PAIRED,
                                                         REMIDI_PAIRED)}
+BUILTIN_ALGORITHMS = tuple(ALGORITHMS)  # the library's own, in order
+
+
+class RegisteredNames(Sequence):
+    """The names in :data:`ALGORITHMS` now, in order: what an experiment's ``algorithms`` holds,
+    so algorithms registered after the experiment was built (:func:`register_algorithm`) are
+    allowed by ``--algo`` and listed by ``remidi list``."""
+
+    def __getitem__(self, i):
+        return tuple(ALGORITHMS)[i]
+
+    def __len__(self):
+        return len(ALGORITHMS)
+
+    def __add__(self, other):
+        return tuple(self) + tuple(other)
+
+    def __radd__(self, other):
+        return tuple(other) + tuple(self)
+
+    def __eq__(self, other):
+        return isinstance(other, Sequence) and tuple(self) == tuple(other)
+
+    def __hash__(self):
+        return hash(tuple(self))
+
+    def __repr__(self):
+        return repr(tuple(self))
+
+
+def register_algorithm(name: str, adversary: RandomLevels, *, score: str | None = None,
+                       description: str = "") -> Algorithm:
+    """Add an algorithm made of existing components to :data:`ALGORITHMS`: every UED experiment
+    then accepts ``--algo NAME`` (``remidi run``, ``remidi list``, ``remidi evaluate``), and
+    :func:`remidi.run_ued` and the driver accept the name.
+
+    ``adversary``: an adversary of :mod:`remidi.engine.adversary` or :mod:`remidi.engine.paired`
+    (e.g. ``LevelBuffers(trains_on_fresh=True)``, ``LevelBuffers(buffer_sequence=True)``);
+    ``score``: a registered score (:data:`remidi.engine.scores.SCORES`, :func:`register_score`)
+    the algorithm always ranks levels by, or None for the config's ``score``; ``description``:
+    one line for ``remidi list``. Raises ConfigError (one line) for a name already taken or a
+    malformed entry. Returns the registered :class:`Algorithm`.
+    """
+    from remidi.engine.scores import SCORES, check_name
+
+    check_name("algorithm", name)
+    if name in ALGORITHMS:
+        raise ConfigError(f"register_algorithm: an algorithm named {name!r} is already registered; "
+                          f"taken: {', '.join(ALGORITHMS)}")
+    if isinstance(adversary, type):
+        raise ConfigError(f"register_algorithm: {name}: adversary must be an instance, e.g. "
+                          f"{adversary.__name__}(), got the class {adversary.__name__}")
+    if score is not None and score not in SCORES:
+        raise ConfigError(f"register_algorithm: {name}: score must be a registered score or None, got {score!r}; "
+                          f"allowed: {', '.join(SCORES)}")
+    if not isinstance(description, str):
+        raise ConfigError(f"register_algorithm: {name}: description must be a string, "
+                          f"got {type(description).__name__}")
+    algo = Algorithm(name, adversary, score=score, description=description)  # checks the adversary
+    ALGORITHMS[name] = algo
+    return algo
+
+
 #: the algorithms of the paper's comparisons: what ``remidi run`` trains when ``--algo`` is not given
 PAPER_ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 

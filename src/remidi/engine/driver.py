@@ -27,6 +27,7 @@ runs on different hardware do. A sharded run is itself deterministic and resumes
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -38,6 +39,7 @@ import numpy as np
 from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from remidi import preemption
 from remidi.engine import evaluation
 from remidi.engine import train as tr
 from remidi.engine.config import UEDConfig
@@ -279,25 +281,38 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
 
+    if ckpt is not None and preemption.requested():  # SIGTERM came as the previous algorithm finished
+        raise preemption.Preempted(None)
     bar = _progress(num_updates, done, desc, progress and writer)
-    while done < num_updates:
-        length = min(eval_every, num_updates - done)
-        runner, step_metrics = programs.run_block(runner, length)
-        step_metrics = _to_host(step_metrics)
-        eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
-        evals = _to_host(programs.evaluate(runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
-        done += length
-        steps.append(done)
-        history.append({**_block_metrics(step_metrics, num_envs), **evals})
-        per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
-        if bar is not None:
-            bar.update(length)
-        if ckpt is not None and (done % checkpoint_every < length or done == num_updates):
-            host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
-            if writer:  # process 0 writes
-                save_run(ckpt, host_runner, done, steps, history, per_step)
-        if on_block is not None:
-            on_block(done, history[-1])
+    with ExitStack() as stack:
+        armed = False  # once a block has run (compiled): a SIGTERM checkpoints, then stops
+        while done < num_updates:
+            length = min(eval_every, num_updates - done)
+            runner, step_metrics = programs.run_block(runner, length)
+            step_metrics = _to_host(step_metrics)
+            eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
+            evals = _to_host(programs.evaluate(runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
+            done += length
+            steps.append(done)
+            history.append({**_block_metrics(step_metrics, num_envs), **evals})
+            per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
+            if bar is not None:
+                bar.update(length)
+            # SIGTERM (remidi.preemption): checkpoint this block whatever checkpoint_every says, then stop
+            preempted = ckpt is not None and preemption.requested()
+            if ckpt is not None and (done % checkpoint_every < length or done == num_updates or preempted):
+                host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
+                if writer:  # process 0 writes
+                    save_run(ckpt, host_runner, done, steps, history, per_step)
+            if on_block is not None:
+                on_block(done, history[-1])
+            if preempted:
+                if bar is not None:
+                    bar.close()
+                raise preemption.Preempted(done)
+            if ckpt is not None and not armed:
+                stack.enter_context(preemption.checkpointing())
+                armed = True
     if bar is not None:
         bar.close()
     names = history[0].keys()

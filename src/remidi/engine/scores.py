@@ -193,6 +193,69 @@ SCORES: dict[str, Score] = {score.name: score for score in (
 )}
 
 
+BUILTIN_SCORES = tuple(SCORES)  # the scores of the library itself, in order
+
+
+def check_name(kind: str, name) -> None:
+    """ConfigError unless ``name`` can be a registered ``kind``'s name: a non-empty string of
+    letters, digits, ``_``, ``-`` and ``.`` (it is written after ``--algo`` or ``--set score=``,
+    in comma-separated lists and in file names)."""
+    import re
+
+    from remidi.errors import ConfigError
+
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name) or name == "all":
+        raise ConfigError(f"register_{kind}: name must be a non-empty string of letters, digits, _, - and . "
+                          f"(not 'all'), got {name!r}")
+
+
+def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_optimum: bool = False,
+                   needs_solved: bool = False, needs_finished_episodes: bool = False, help: str = "") -> Score:
+    """Add a level score to :data:`SCORES`, so that ``score=NAME`` (``--set score=NAME``) ranks
+    levels by it in every algorithm of the PLR family, and validation checks what it needs.
+
+    ``fn(ScoreInputs) -> f32[N]``: one score per level of a rollout (higher = replayed more); it
+    is traced (jit) inside the train step, so it must be written with ``jax.numpy``. The
+    ``needs_*`` flags are :class:`Score`'s. ``fn`` is tried once on a small abstract rollout (3
+    steps × 2 levels, nothing is computed), so a function of the wrong shape is refused here,
+    not in the middle of a run. Raises ConfigError (one line) for a name already taken or a
+    malformed entry. Returns the registered :class:`Score`.
+    """
+    from remidi.errors import ConfigError
+
+    check_name("score", name)
+    if name in SCORES:
+        raise ConfigError(f"register_score: a score named {name!r} is already registered; "
+                          f"taken: {', '.join(SCORES)}")
+    if not callable(fn):
+        raise ConfigError(f"register_score: {name}: fn must be a function of ScoreInputs, got {type(fn).__name__}")
+    flags = {"needs_optimum": needs_optimum, "needs_solved": needs_solved,
+             "needs_finished_episodes": needs_finished_episodes}
+    for key, value in flags.items():
+        if not isinstance(value, bool):
+            raise ConfigError(f"register_score: {name}: {key} must be true or false, got {value!r}")
+    if not isinstance(help, str):
+        raise ConfigError(f"register_score: {name}: help must be a string, got {type(help).__name__}")
+    score = Score(name, fn, help=help, **flags)
+    steps, n = 3, 2
+    inputs = ScoreInputs(mean_return=jnp.zeros(n), values=jnp.zeros((steps, n)), advantages=jnp.zeros((steps, n)),
+                         max_return=jnp.zeros(n), done=jnp.zeros((steps, n), bool), reward=jnp.zeros((steps, n)),
+                         optimal_return=jnp.zeros(n) if needs_optimum else None,
+                         solved=(lambda r: r > 0) if needs_solved else None)
+    try:
+        out = jax.eval_shape(fn, inputs)
+    except Exception as err:  # the user's function: its own error, one line
+        first = (str(err).strip().splitlines() or [""])[0]
+        raise ConfigError(f"register_score: {name}: fn failed on a rollout of {steps} steps × {n} levels: "
+                          f"{type(err).__name__}{': ' + first if first else ''}") from None
+    if not (hasattr(out, "shape") and tuple(out.shape) == (n,) and jnp.issubdtype(out.dtype, jnp.floating)):
+        got = f"{getattr(out, 'dtype', type(out).__name__)}{list(getattr(out, 'shape', ()))}"
+        raise ConfigError(f"register_score: {name}: fn must return one float score per level (f32[N]); on a "
+                          f"rollout of {steps} steps × {n} levels it returned {got}")
+    SCORES[name] = score
+    return score
+
+
 def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None, reward=None,
                  solved=None) -> jax.Array:
     """f32[N]: the score ``name`` (static; one of :data:`SCORES`) of one rollout."""

@@ -231,8 +231,25 @@ def _saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
         what = f"no {err}" if isinstance(err, KeyError) else (str(err).strip().splitlines() or [""])[0]
         raise ConfigError(f"{flag}: {path} is not a readable run config ({type(err).__name__}: {what})") from None
+    _check_registered(exp, algo, config, f"{flag}: {path}")
     exp.validate(config, algo)
     return exp, algo, preset, seeds, config
+
+
+def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
+    """ConfigError unless the saved run's algorithm and (UED) score are known to this process: one
+    registered by a plugin (remidi.register_algorithm / register_score) must be loaded again."""
+    hint = "registered by a plugin? load it again: REMIDI_PLUGINS=module (docs/extending.md)"
+    if algo not in exp.algorithms:
+        raise ConfigError(f"{where}: the run's algorithm {algo!r} is unknown here ({hint}); "
+                          f"allowed: {', '.join(exp.algorithms)}")
+    score = getattr(config, "score", None)
+    if exp.make_task is not None and isinstance(score, str):
+        from remidi.engine.scores import SCORES
+
+        if score not in SCORES:
+            raise ConfigError(f"{where}: the run's score {score!r} is unknown here ({hint}); "
+                              f"allowed: {', '.join(SCORES)}")
 
 
 def _saved_devices(folder: Path):

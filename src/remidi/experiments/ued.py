@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from remidi.engine.driver import replay_fractions, train_seeds
-from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
+from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames
 from remidi.engine.config import UEDConfig
 from remidi.engine.validation import run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
@@ -120,7 +120,7 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         validate_ued_config(cfg, algo, task_for(cfg))
 
     return Experiment(
-        name=name, description=description, algorithms=tuple(ALGORITHMS), default_algorithms=PAPER_ALGORITHMS,
+        name=name, description=description, algorithms=RegisteredNames(), default_algorithms=PAPER_ALGORITHMS,
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),

@@ -28,6 +28,7 @@ from typing import Any, Callable
 import jax
 
 from remidi.engine.config import UEDConfig
+from remidi.engine.validation import validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, resume_experiment, run_experiment
@@ -43,6 +44,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     task = make_task()
     if not isinstance(task, UEDTask):
         raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")
+    validate_task(task)  # one line naming the field, before anything reads the task
     base = config if config is not None else UEDConfig()
     tags = sorted(task.level_tags(task.sample_level(jax.random.PRNGKey(0))))
     sets = sorted(task.eval_sets)

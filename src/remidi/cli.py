@@ -164,7 +164,7 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 
 
 def _cmd_run(args) -> int:
-    from remidi.experiments import get_experiment
+    from remidi.experiments import get_experiment, saved_experiment
     from remidi.experiments.base import default_preset, parse_algos, resume_experiment, run_experiment
     from remidi.experiments.config import parse_set_items
     from remidi.experiments.tracking import parse_log
@@ -174,7 +174,7 @@ def _cmd_run(args) -> int:
                 or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
-        summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)
+        summaries = resume_experiment(saved_experiment, Path(args.resume), progress=not args.quiet)
         _print_summaries(summaries, Path(args.resume))
         return 0
     if args.experiment is None:

@@ -296,7 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run an experiment (see `remidi list`)",
                          description="Train one or more algorithms on an experiment for several seeds and "
                                      "write config.json, metrics.csv, summary.json and plots.")
-    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask")
+    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask "
+                          "(imported as Python does: from the current folder first)")
     run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
     run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
@@ -309,7 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--devices", type=int, metavar="N",
                      help="shard the seeds over N devices (default 1; N must divide the number of seeds; "
                           "see docs/devices.md)")
-    run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
+    run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR (a user's task is "
+                                                     "imported again from the folder config.json records)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--log", metavar="wandb,tensorboard", help="experiment tracking: Weights & Biases and/or "
                      "TensorBoard (pip install \"remidi[wandb]\" / \"remidi[tensorboard]\"); files under the run "

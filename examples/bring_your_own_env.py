@@ -169,8 +169,11 @@ def main(argv: list[str] | None = None) -> int:
             raise RemidiError(f"--seeds: must be an integer ≥ 1, got {args.seeds}")
         # validates everything first (one-line errors, nothing written), then trains each algorithm
         # and writes config.json, metrics.csv, summary.json, checkpoints and training.png
+        # task_ref: config.json records where the task comes from, so that `remidi evaluate OUT` and
+        # `remidi run --resume OUT` rebuild it, from any folder
         summaries = run_ued(task, cfg, ["plr", "remidi"], seeds=list(range(args.seeds)), out=args.out,
-                            progress=False, resume=args.resume, name="bring_your_own_env")
+                            progress=False, resume=args.resume, name="bring_your_own_env",
+                            task_ref="bring_your_own_env:make_task")
     except RemidiError as err:  # one line, nothing written
         print(f"bring_your_own_env: error: {err}", file=sys.stderr)
         return 2
@@ -190,11 +193,13 @@ def main(argv: list[str] | None = None) -> int:
           f"checkpoint.npz")
     print("next:")
     print(f"  * look at {args.out / 'training.png'} and {args.out / 'remidi' / 'summary.json'}")
+    print(f"  * evaluate the trained agents on more levels (CVaR over the generator): remidi evaluate {args.out}")
     print("  * train longer: python examples/bring_your_own_env.py OTHER_DIR --updates 2000 --seeds 5 "
           "(a GPU helps: see the README's installation section)")
     print("  * make it yours: replace SignpostCorridor, sample_level, optimal_return and the eval_sets / "
           "level_tags in make_task(), then tune make_config() (keys as in `remidi list lever`); or run "
-          "your task from the command line: remidi run yourmodule:make_task --algo plr,remidi --set ...")
+          "your task from the command line, in the folder holding yourmodule.py: "
+          "remidi run yourmodule:make_task --algo plr,remidi --set ...")
     return 0
 
 

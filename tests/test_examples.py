@@ -29,7 +29,9 @@ def test_bring_your_own_env_example(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "next:" in printed and str(out / "training.png") in printed
     assert (out / "training.png").stat().st_size > 10_000
-    assert json.loads((out / "plr" / "config.json").read_text())["config"]["num_updates"] == 200
+    saved = json.loads((out / "plr" / "config.json").read_text())
+    assert saved["config"]["num_updates"] == 200
+    assert saved["task"] == {"import": "bring_your_own_env:make_task", "folder": str(EXAMPLE.parent)}
     shares = {}
     for algo in ("plr", "remidi"):
         for name in ("config.json", "metrics.csv", "summary.json", "checkpoint.npz", "checkpoint.history.npz"):
@@ -72,8 +74,11 @@ def test_a_users_task_runs_from_the_command_line_by_import_path(tmp_path, capsys
     summary = json.loads((out / "summary.json").read_text())
     assert summary["experiment"] == "bring_your_own_env:make_task" and summary["preset"] == "default"
     assert list(summary["metrics"])[:2] == ["solve_rate/hidden", "solve_rate/visible"]
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["task"] == {"import": "bring_your_own_env:make_task", "folder": str(EXAMPLE.parent)}
     capsys.readouterr()
-    assert main(["run", "--resume", str(out), "--quiet"]) == 0  # found again by its import path
+    monkeypatch.chdir(tmp_path)  # found again by its import path, in the recorded folder
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
 
 
 @pytest.mark.parametrize("target, needle", [

@@ -125,8 +125,8 @@ def test_a_scores_declared_needs_are_what_validation_checks():
     from remidi.engine.scores import SCORES
 
     needs = {name: (s.needs_optimum, s.needs_solved, s.needs_finished_episodes) for name, s in SCORES.items()}
-    assert needs == {"perfect_regret": (True, False, False), "pvl": (False, False, True),
-                     "maxmc": (False, False, True), "neg_return": (False, False, False),
+    assert needs == {"perfect_regret": (True, False, True), "pvl": (False, False, True),
+                     "maxmc": (False, False, True), "neg_return": (False, False, True),
                      "learnability": (False, True, True)}
     bare = dataclasses.replace(TASK, optimal_return=None, solved=None)
     with pytest.raises(ConfigError, match=r"^score: learnability needs a solve criterion.*; allowed: pvl, maxmc, "
@@ -163,7 +163,7 @@ def test_an_environment_that_fails_is_reported_once_not_once_per_network():
 
     env, params = gymnax.make("CartPole-v1")
     raw = UEDTask(env=env, params=params, sample_level=lambda rng: params, num_actions=2, max_episode_steps=10)
-    with pytest.raises(ConfigError, match="^task: sampling a level and resetting"):
+    with pytest.raises(ConfigError, match="^task.env: must be a jaxued UnderspecifiedEnv, got a CartPole$"):
         validate_ued_config(R(BASE, score="pvl"), "plr", raw)
 
 
@@ -213,7 +213,13 @@ def test_degenerate_but_valid_runs_are_warned_about():
     (warning,) = run_warnings(R(maze_paper(), score="pvl", num_steps=32), "plr", maze)
     assert "num_steps (32) is shorter than an episode can last (250)" in warning and "\n" not in warning
     assert run_warnings(R(maze_paper(), score="pvl"), "plr", maze) == []  # 256 steps ≥ 250
-    assert run_warnings(R(maze_paper(), num_steps=32), "plr", maze) == []  # perfect regret needs no ending
+    # perfect regret (and minimax return) credit an unfinished episode with its partial return: warned too
+    (warning,) = run_warnings(R(maze_paper(), num_steps=32), "plr", maze)
+    assert warning.startswith("score perfect_regret uses the episodes that end inside a rollout, but num_steps (32)")
+    assert "are scored by the reward collected so far" in warning and "\n" not in warning
+    (warning,) = run_warnings(R(maze_paper(), num_steps=32), "minimax-return", maze)
+    assert warning.startswith("score neg_return ")
+    assert run_warnings(R(maze_paper()), "plr", maze) == []  # 256 steps ≥ 250
     assert run_warnings(R(maze_paper(), score="pvl", num_steps=32), "dr", maze) == []  # DR keeps no buffer
 
     class Noisy(type(TASK.env)):  # a reset that draws from its key, as gymnax's CartPole does

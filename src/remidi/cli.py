@@ -196,7 +196,7 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 
 
 def _cmd_run(args) -> int:
-    from remidi.experiments import get_experiment
+    from remidi.experiments import get_experiment, saved_experiment
     from remidi.experiments.base import default_preset, parse_algos, resume_experiment, run_experiment
     from remidi.experiments.config import parse_set_items
     from remidi.experiments.tracking import parse_log
@@ -206,7 +206,7 @@ def _cmd_run(args) -> int:
                 or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
-        summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)
+        summaries = resume_experiment(saved_experiment, Path(args.resume), progress=not args.quiet)
         _print_summaries(summaries, Path(args.resume))
         return 0
     if args.experiment is None:
@@ -328,7 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run an experiment (see `remidi list`)",
                          description="Train one or more algorithms on an experiment for several seeds and "
                                      "write config.json, metrics.csv, summary.json and plots.")
-    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask")
+    run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask "
+                          "(imported as Python does: from the current folder first)")
     run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
     run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
@@ -341,7 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--devices", type=int, metavar="N",
                      help="shard the seeds over N devices (default 1; N must divide the number of seeds; "
                           "see docs/devices.md)")
-    run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR")
+    run.add_argument("--resume", metavar="DIR", help="continue the interrupted run in DIR (a user's task is "
+                                                     "imported again from the folder config.json records)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--log", metavar="wandb,tensorboard", help="experiment tracking: Weights & Biases and/or "
                      "TensorBoard (pip install \"remidi[wandb]\" / \"remidi[tensorboard]\"); files under the run "

@@ -144,16 +144,25 @@ def _run_folders(run_dir: Path) -> list[Path]:
     return sorted(subs, key=lambda p: (order.index(p.name) if p.name in order else len(order), p.name))
 
 
-def _load(folder: Path) -> _Loaded:
+def _load(folder: Path, task=None) -> _Loaded:
     """The run in ``folder``, its agent restored from the checkpoint (leaves with the seed axis
-    first). ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
+    first); its task rebuilt from config.json (``saved_experiment``), or ``task`` where given.
+    ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
     from remidi.engine import driver
     from remidi.engine import train as tr
     from remidi.engine.checkpoint import CHECKPOINT
-    from remidi.experiments import get_experiment
+    from remidi.experiments import saved_experiment
     from remidi.experiments.base import _saved_run
 
-    exp, algo, _, seeds, config = _saved_run(get_experiment, folder, flag="RUN_DIR")
+    if task is None:
+        lookup = saved_experiment
+    else:
+        from remidi.experiments.custom import task_experiment
+
+        def lookup(name, _record=None):
+            return task_experiment(name, lambda: task)
+
+    exp, algo, _, seeds, config = _saved_run(lookup, folder, flag="RUN_DIR")
     if exp.make_task is None:
         raise ConfigError(f"RUN_DIR: {folder} is a {exp.name} run; evaluate needs a UED run (a trained agent)")
     path = folder / CHECKPOINT
@@ -249,9 +258,13 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
 def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: int = DEFAULTS["cvar_levels"],
                  cvar_attempts: int = DEFAULTS["cvar_attempts"], perfect_sizes=DEFAULTS["perfect_sizes"],
                  perfect_count: int = DEFAULTS["perfect_count"], seed: int = DEFAULTS["seed"],
-                 log: Callable[[str], None] | None = None) -> dict:
+                 log: Callable[[str], None] | None = None, task=None) -> dict:
     """Evaluate every algorithm and seed in ``run_dir`` (module docstring) and write
-    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there. Returns the JSON document."""
+    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there. Returns the JSON document.
+
+    ``task``: the :class:`~remidi.envs.interface.UEDTask` the run trained on, for a run of a user's
+    task that ``config.json`` cannot rebuild (``run_ued`` without ``task_ref``); by default the task
+    is the run's experiment's, or rebuilt from the import path config.json records."""
     import jax
 
     from remidi.envs.maze import MazeEnv, optimal_return
@@ -259,7 +272,7 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
 
     _check_args(attempts, cvar_levels, cvar_attempts, tuple(perfect_sizes), perfect_count, seed)
     run_dir = Path(run_dir)
-    loaded = [_load(folder) for folder in _run_folders(run_dir)]  # every run checked before any is evaluated
+    loaded = [_load(folder, task) for folder in _run_folders(run_dir)]  # every run checked before any is evaluated
     args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
     doc: dict[str, Any] = {"run": str(run_dir), "args": args, "algorithms": {}}

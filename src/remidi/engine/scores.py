@@ -166,8 +166,11 @@ class Score:
     needs_optimum: the task's optimal return (``UEDTask.optimal_return``; with
         ``discounted_regret``, ``optimal_discounted_return`` too).
     needs_solved: the task's solve criterion (``UEDTask.solved``).
-    needs_finished_episodes: it reads only the episodes that end inside a rollout, so a rollout
-        shorter than an episode (``num_steps`` < the episode limit) leaves levels unscored: warned.
+    needs_finished_episodes: it reads the episodes that end inside a rollout, so a rollout shorter
+        than an episode (``num_steps`` < the episode limit) scores some levels without one:
+        warned before the run (``engine/validation.py``'s ``run_warnings``).
+    unfinished: what becomes of a level whose episode does not end inside the rollout, completing
+        the warning's "levels whose episode does not end ...".
     help: one line for ``remidi list``.
     """
 
@@ -176,18 +179,24 @@ class Score:
     needs_optimum: bool = False
     needs_solved: bool = False
     needs_finished_episodes: bool = False
+    unfinished: str = "score -inf and are never inserted"
     help: str = ""
+
+
+PARTIAL = "are scored by the reward collected so far as if the episode had ended"  # the episodic-return scores
 
 
 #: every score ``score=`` accepts, by name
 SCORES: dict[str, Score] = {score.name: score for score in (
     Score("perfect_regret", lambda x: perfect_regret(x.mean_return, x.optimal_return), needs_optimum=True,
+          needs_finished_episodes=True, unfinished=PARTIAL + " (a goal not yet reached looks like a failure)",
           help="optimal return − the agent's mean return"),
     Score("pvl", lambda x: positive_value_loss(x.advantages, x.done), needs_finished_episodes=True,
           help="positive value loss: mean of max(GAE advantage, 0) over finished episodes"),
     Score("maxmc", lambda x: max_mc(x.values, x.max_return, x.done), needs_finished_episodes=True,
           help="best return seen on the level − V(s), over finished episodes"),
-    Score("neg_return", lambda x: negative_return(x.mean_return), help="−mean return (minimax return)"),
+    Score("neg_return", lambda x: negative_return(x.mean_return), needs_finished_episodes=True, unfinished=PARTIAL,
+          help="−mean return (minimax return)"),
     Score("learnability", lambda x: learnability(x.reward, x.done, x.solved), needs_solved=True,
           needs_finished_episodes=True, help="p(1 − p), p the level's solve rate in the rollout (SFL)"),
 )}

@@ -1,13 +1,16 @@
-"""Validation of a run before anything is written: every key of :class:`UEDConfig` against its
+"""Validation of a run before anything is written: the task itself (:func:`validate_task`: its
+fields, and one abstractly traced reset and step), every key of :class:`UEDConfig` against its
 allowed values and the task (one-line ConfigError naming the key), whether the network reads the
 task's observations, and warnings about valid runs that would train degenerately."""
 
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from remidi.engine import buffer as buf
 from remidi.engine import scores as sc
@@ -16,7 +19,164 @@ from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.paired import ESTIMATORS, GENERATOR_NETWORKS, OVERLAP_REGRETS, LevelGenerator
 from remidi.engine.train import example_observation, network_for
-from remidi.envs.interface import UEDTask, tree_equal
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv, tree_equal
+
+
+_VALIDATED: weakref.WeakSet = weakref.WeakSet()  # tasks validate_task passed (UEDTask hashes by identity)
+
+
+def _user_error(err: Exception) -> str:
+    """``Type: first line`` of an error raised by the user's code."""
+    message = str(err).strip().splitlines()[0] if str(err).strip() else ""
+    return f"{type(err).__name__}{': ' + message if message else ''}"
+
+
+def _shapes(tree) -> str:
+    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages)."""
+    return ", ".join(f"{leaf.dtype}{list(leaf.shape)}" for leaf in jax.tree.leaves(tree))
+
+
+def _traced(field: str, what: str, fn, *args):
+    """``jax.eval_shape(fn, *args)``; ConfigError ``task.FIELD: WHAT failed: Type: message`` (one
+    line) when the user's code raises."""
+    from remidi.errors import ConfigError
+
+    try:
+        return jax.eval_shape(fn, *args)
+    except Exception as err:  # noqa: BLE001 (the user's code: report its own error in one line)
+        raise ConfigError(f"task.{field}: {what} failed: {_user_error(err)}") from None
+
+
+def _is_scalar(x, kind: str) -> bool:
+    """``x`` (a ShapeDtypeStruct) is a scalar of ``kind``: "float" or "bool"."""
+    if getattr(x, "shape", None) != ():
+        return False
+    dtype = jnp.dtype(x.dtype)
+    return dtype == jnp.bool_ if kind == "bool" else jnp.issubdtype(dtype, jnp.floating)
+
+
+def validate_task(task: UEDTask) -> None:
+    """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
+    train: field types and ranges (``num_actions`` ≥ 1, ``max_episode_steps`` ≥ 1, the functions
+    callable), then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
+    level, a reset to it and one step: the step's observation has the reset's shapes, its reward is
+    a float scalar and its done a boolean scalar; the level tags are boolean scalars, the optimal
+    returns float scalars, edited and easy levels have the sampled level's shapes; every evaluation
+    set is a batch of such levels (a leading level axis, the same on every leaf) that its
+    environment resets to an observation of the training observation's shapes. Checked once per
+    task object."""
+    from remidi.errors import ConfigError
+
+    if not isinstance(task, UEDTask):
+        raise ConfigError(f"task: must be a remidi UEDTask, got a {type(task).__name__}")
+    if task in _VALIDATED:
+        return
+    for key in ("num_actions", "max_episode_steps"):
+        value = getattr(task, key)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ConfigError(f"task.{key}: must be an integer ≥ 1, got {value!r}")
+    for key in ("deterministic_reset", "continuous"):
+        if not isinstance(getattr(task, key), bool):
+            raise ConfigError(f"task.{key}: must be true or false, got {getattr(task, key)!r}")
+    if not isinstance(task.env, UnderspecifiedEnv):
+        raise ConfigError(f"task.env: must be a jaxued UnderspecifiedEnv, got a {type(task.env).__name__}")
+    for key in ("sample_level", "level_tags"):
+        if not callable(getattr(task, key)):
+            raise ConfigError(f"task.{key}: must be a function, got {getattr(task, key)!r}")
+    for key in ("optimal_return", "optimal_discounted_return", "solved", "expected_return", "mutate_level",
+                "easy_level"):
+        if getattr(task, key) is not None and not callable(getattr(task, key)):
+            raise ConfigError(f"task.{key}: must be a function or None, got {getattr(task, key)!r}")
+    for key in ("eval_sets", "eval_envs"):
+        value = getattr(task, key)
+        if not isinstance(value, dict) or not all(isinstance(name, str) and name for name in value):
+            raise ConfigError(f"task.{key}: must be a dict from set names (non-empty strings) to "
+                              f"{'level batches' if key == 'eval_sets' else 'environments'}, got {value!r:.80}")
+    for name, env in task.eval_envs.items():
+        if name not in task.eval_sets:
+            raise ConfigError(f"task.eval_envs: {name!r} is no evaluation set; allowed: {', '.join(task.eval_sets)}")
+        if not isinstance(env, UnderspecifiedEnv):
+            raise ConfigError(f"task.eval_envs: {name!r} must be a jaxued UnderspecifiedEnv, got a {type(env).__name__}")
+
+    rng = jax.random.PRNGKey(0)
+    def first(k):
+        lv = task.sample_level(k)
+        return lv, task.env.reset_to_level(k, lv, task.params)
+
+    try:  # the sampled level and the first observation (the message existing callers know)
+        level, (obs, state) = jax.eval_shape(first, rng)
+    except Exception as err:  # noqa: BLE001 (the user's environment: report its own error, once)
+        raise ConfigError(f"task: sampling a level and resetting the environment to it failed: {_user_error(err)} "
+                          f"(the environment must be a jaxued UnderspecifiedEnv and sample_level must return one of "
+                          f"its levels)") from None
+    if not jax.tree.leaves(obs):
+        raise ConfigError("task.env: reset_to_level returned an observation without arrays")
+    action = (jax.ShapeDtypeStruct((task.num_actions,), jnp.float32) if task.continuous
+              else jax.ShapeDtypeStruct((), jnp.int32))
+    stepped = _traced("env", "a step of the environment", lambda k, s, a: task.env.step(k, s, a, task.params),
+                      rng, state, action)
+    if not isinstance(stepped, tuple) or len(stepped) != 5:
+        raise ConfigError("task.env: step must return (obs, state, reward, done, info)")
+    next_obs, next_state, reward, done, _ = stepped
+    if jax.tree.structure(next_obs) != jax.tree.structure(obs) or _shapes(next_obs) != _shapes(obs):
+        raise ConfigError(f"task.env: a step's observation ({_shapes(next_obs)}) must have the reset's shapes "
+                          f"({_shapes(obs)})")
+    if jax.tree.structure(next_state) != jax.tree.structure(state) or _shapes(next_state) != _shapes(state):
+        raise ConfigError("task.env: a step's state must have the shapes and dtypes of the reset's state")
+    if not _is_scalar(reward, "float"):
+        raise ConfigError(f"task.env: a step's reward must be a float scalar (f32[]) per environment, got "
+                          f"{_shapes(reward)}")
+    if not _is_scalar(done, "bool"):
+        raise ConfigError(f"task.env: a step's done must be a boolean scalar (bool[]) per environment, got "
+                          f"{_shapes(done)}")
+
+    tags = _traced("level_tags", "tagging a sampled level", task.level_tags, level)
+    if not isinstance(tags, dict) or not all(isinstance(n, str) and _is_scalar(v, "bool") for n, v in tags.items()):
+        raise ConfigError(f"task.level_tags: must map a level to a dict of boolean scalars (bool[]), got {tags!r:.120}")
+    if task.optimal_return is not None:
+        value = _traced("optimal_return", "the optimal return of a sampled level", task.optimal_return, level)
+        if not _is_scalar(value, "float"):
+            raise ConfigError(f"task.optimal_return: must give a float scalar (f32[]) per level, got {_shapes(value)}")
+    if task.optimal_discounted_return is not None:
+        value = _traced("optimal_discounted_return", "the discounted optimal return of a sampled level",
+                        lambda lv: task.optimal_discounted_return(lv, 0.99), level)
+        if not _is_scalar(value, "float"):
+            raise ConfigError(f"task.optimal_discounted_return: must give a float scalar (f32[]) per level, got "
+                              f"{_shapes(value)}")
+    if task.solved is not None:
+        value = _traced("solved", "judging returns", task.solved, jax.ShapeDtypeStruct((3,), jnp.float32))
+        if getattr(value, "shape", None) != (3,) or jnp.dtype(value.dtype) != jnp.bool_:
+            raise ConfigError(f"task.solved: must map returns f32[N] to booleans bool[N], got {_shapes(value)} for N = 3")
+    for key, fn in (("mutate_level", lambda k, lv: task.mutate_level(k, lv, 1)),
+                    ("easy_level", lambda k, lv: task.easy_level(k))):
+        if getattr(task, key) is not None:
+            made = _traced(key, "making a level", fn, rng, level)
+            if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):
+                raise ConfigError(f"task.{key}: must return a level with the sampled level's shapes ({_shapes(level)}), "
+                                  f"got {_shapes(made)}")
+
+    level_leaves = jax.tree.leaves(level)
+    for name, levels in task.eval_sets.items():
+        leaves = jax.tree.leaves(levels)
+        same_tree = jax.tree.structure(levels) == jax.tree.structure(level)
+        counts = {np.shape(leaf)[0] if np.ndim(leaf) else None for leaf in leaves}
+        if (not same_tree or any(np.ndim(a) != len(b.shape) + 1 for a, b in zip(leaves, level_leaves))
+                or len(counts) != 1 or None in counts or 0 in counts):
+            raise ConfigError(f"task.eval_sets: {name!r} must be a batch of levels, every leaf with the level's "
+                              f"shape after one leading axis of the same length ≥ 1 (levels {_shapes(level)}; "
+                              f"got {_shapes(levels) or 'no arrays'})")
+        if name not in task.eval_envs and _shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels)) != _shapes(level):
+            raise ConfigError(f"task.eval_sets: {name!r}'s levels must have the sampled level's shapes "
+                              f"({_shapes(level)}), got {_shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels))}")
+        env = task.eval_envs.get(name, task.env)
+        first = _traced("eval_sets", f"resetting to a level of {name!r}",
+                        lambda k, lvs, env=env: env.reset_to_level(k, jax.tree.map(lambda x: x[0], lvs),
+                                                                   task.params)[0],
+                        rng, levels)
+        if jax.tree.structure(first) != jax.tree.structure(obs) or _shapes(first) != _shapes(obs):
+            raise ConfigError(f"task.eval_sets: {name!r}'s levels give observations {_shapes(first)}, but the network "
+                              f"reads the training levels' {_shapes(obs)}")
+    _VALIDATED.add(task)
 
 
 def _observation_batch(task: UEDTask, flat: bool):
@@ -71,20 +231,22 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
 def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[str]:
     """One-line warnings about a valid run that would train degenerately without saying so:
 
-    * a score that needs finished episodes (``pvl``, ``maxmc``, ``learnability``) on rollouts
-      shorter than the task's episode limit: a level whose episode does not end inside the rollout
-      scores −inf, and with every episode too long the buffer holds one level and replays only it;
+    * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
+      ``engine/scores.py``: every built-in one) on rollouts shorter than the task's episode limit: a
+      level whose episode does not end inside the rollout scores −inf (``pvl``, ``maxmc``,
+      ``learnability``: with every episode too long the buffer holds one level and replays only it)
+      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which);
     * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
       give different first observations): the tracker assumes an episode is a function of the
       level and the actions, so it may judge identical levels distinguishable.
     """
     out = []
     algo = get_algorithm(algo)
-    name = score_name(cfg, algo)
-    if algo.replays and sc.SCORES[name].needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
-        out.append(f"score {name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) is "
-                   f"shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not end "
-                   f"score -inf and are never inserted; raise num_steps or use another score")
+    score = sc.SCORES[score_name(cfg, algo)]
+    if algo.replays and score.needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
+        out.append(f"score {score.name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) "
+                   f"is shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not "
+                   f"end {score.unfinished}; raise num_steps or use another score")
     if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
         level = task.sample_level(jax.random.PRNGKey(0))
         obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
@@ -115,6 +277,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     from remidi.errors import choice, positive_int, require
 
     algo = get_algorithm(algo)
+    validate_task(task)
     for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
         positive_int(key, getattr(cfg, key))
     steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count

@@ -94,6 +94,9 @@ class Experiment:
     make_task: Callable[[Any], Any] | None = None
     # what `remidi run` trains without --algo (None: every algorithm); --algo all trains every one
     default_algorithms: tuple[str, ...] | None = None
+    # a user's task given by import path: {"import": "module:function", "folder": the folder it is
+    # imported from}, recorded in config.json so that --resume and evaluate rebuild it from anywhere
+    task_ref: dict[str, Any] | None = None
 
 
 def default_preset(exp: Experiment) -> str:
@@ -175,8 +178,11 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
                             devices=devices, log=list(log))
 
 
-def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
-    """Continue the run in ``folder`` from its last checkpoint.
+def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path,
+                      progress: bool = True) -> dict[str, dict]:
+    """Continue the run in ``folder`` from its last checkpoint. ``exp_lookup(name, task)``: the
+    experiment of ``config.json``'s ``experiment`` and ``task`` (its user's task's import record,
+    or None): :func:`remidi.experiments.saved_experiment`.
 
     ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
     run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
@@ -190,7 +196,7 @@ def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, pro
     return _resume(exp_lookup, folder, progress)
 
 
-def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
+def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
         if subs:
@@ -221,7 +227,7 @@ def _saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
     path = folder / "config.json"
     try:
         saved = outputs.read_json(path)
-        exp = exp_lookup(saved["experiment"])
+        exp = exp_lookup(saved["experiment"], saved.get("task"))
         config = config_from_dict(type(exp.config_factory()), saved["config"])
         algo, preset, seeds = saved["algo"], saved["preset"], saved["seeds"]
         if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) and s >= 0 for s in seeds)):
@@ -342,6 +348,7 @@ def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seed
         "devices": devices,
         "log": list(log or []),
         "config": config_to_dict(config),
+        **({"task": dict(exp.task_ref)} if exp.task_ref else {}),
         "command": ["remidi", *(argv if argv is not None else sys.argv[1:])],
         "remidi_version": __version__,
         "code": code_version(),

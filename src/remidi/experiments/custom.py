@@ -10,9 +10,15 @@ Two entry points:
       summaries = run_ued(make_task(), cfg, ["plr", "remidi"], seeds=[0, 1], out="runs/mine")
 
 * Command line: ``remidi run mypkg.tasks:make_task [--algo ...] [--set key=value ...]`` imports
-  ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) and runs it
-  on the engine's default :class:`~remidi.engine.config.UEDConfig` with your ``--set`` keys;
-  ``remidi run --resume DIR`` finds it again by that import path.
+  ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) as Python
+  does, from the current folder first, and runs it on the engine's default
+  :class:`~remidi.engine.config.UEDConfig` with your ``--set`` keys.
+
+``config.json`` records where the task comes from (``"task": {"import": "mypkg.tasks:make_task",
+"folder": the folder it was imported from}``), so ``remidi run --resume DIR`` and ``remidi evaluate
+DIR`` rebuild it from any folder. :func:`run_ued` records it when given ``task_ref=
+"mypkg.tasks:make_task"``; without, the run is resumed with ``run_ued(..., resume=True)`` and
+evaluated with ``evaluate_run(DIR, task=...)`` in Python.
 
 Metrics reported and plotted: ``solve_rate/<set>`` (and ``regret/<set>/mean`` when the task gives
 an optimal return) for each evaluation set, ``replay_fraction/<tag>`` and ``buffer_fraction/<tag>``
@@ -21,28 +27,37 @@ for each level tag.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import importlib
+import os
+import sys
 from pathlib import Path
 from typing import Any, Callable
 
 import jax
 
 from remidi.engine.config import UEDConfig
+from remidi.engine.validation import validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, resume_experiment, run_experiment
 from remidi.experiments.ued import make_ued_experiment
 
 PRESET = "default"
+_IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, name) → its experiment
 
 
 def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConfig | None = None,
-                    description: str = "a user's UEDTask") -> Experiment:
+                    description: str = "a user's UEDTask", task_ref: dict | None = None) -> Experiment:
     """An :class:`Experiment` named ``name`` that trains the task ``make_task()`` returns, with
-    ``config`` (default: ``UEDConfig()``) as its only preset, ``default``."""
+    ``config`` (default: ``UEDConfig()``) as its only preset, ``default``. ``task_ref``: where the
+    task comes from (:func:`task_source`), recorded in ``config.json``. The task is validated first
+    (:func:`~remidi.engine.validation.validate_task`)."""
     task = make_task()
     if not isinstance(task, UEDTask):
         raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")
+    validate_task(task)  # one line naming the field, before anything reads the task
     base = config if config is not None else UEDConfig()
     tags = sorted(task.level_tags(task.sample_level(jax.random.PRNGKey(0))))
     sets = sorted(task.eval_sets)
@@ -52,45 +67,113 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     titles = {"solve_rate": "solve rate", "regret": "mean regret", "replay_fraction": "share among replayed levels",
               "buffer_fraction": "share in the active buffer"}
     panels = tuple((m, f"{titles[m.split('/')[0]]}: {m.split('/')[1]}") for m in rates + regrets + shares)
-    return make_ued_experiment(
+    exp = make_ued_experiment(
         name=name, description=description, task_factory=lambda cfg: task, config_factory=lambda: base,
         presets={PRESET: {}}, preset_seeds={PRESET: 2}, summary_metrics=rates + regrets + shares,
         plot_panels_spec=panels or (("mean_return", "mean training return"),),
     )
+    return dataclasses.replace(exp, task_ref=task_ref)
 
 
 def run_ued(task: UEDTask, config: UEDConfig, algos: list[str], seeds: list[int], out: str | Path, *,
-            progress: bool = True, resume: bool = False, name: str = "custom") -> dict[str, dict]:
+            progress: bool = True, resume: bool = False, name: str = "custom",
+            task_ref: str | None = None) -> dict[str, dict]:
     """Train ``task`` with each of ``algos`` (``dr``, ``plr``, ``minimax-return``, ``remidi``) over
     ``seeds`` and write the standard outputs into ``out`` (one sub-folder per algorithm when there
     are several); ``resume=True`` continues the run in ``out`` from its checkpoints. Validates
-    everything first (one-line :class:`~remidi.errors.ConfigError`, nothing written). Returns
-    ``{algo: summary}`` (the ``summary.json`` documents)."""
-    exp = task_experiment(name, lambda: task, config)
+    everything first, the task included (one-line :class:`~remidi.errors.ConfigError`, nothing
+    written). Returns ``{algo: summary}`` (the ``summary.json`` documents).
+
+    ``task_ref``: ``"module:function"`` (or ``"module:attribute"``) giving this task again, recorded
+    in ``config.json`` with the folder the module imports from, so that ``remidi run --resume OUT``
+    and ``remidi evaluate OUT`` can rebuild the task from any folder; checked to import (not
+    called) before anything is written. Without it the command line cannot rebuild the task (it
+    says so): resume with ``resume=True`` here and evaluate with ``evaluate_run(OUT, task=task)``."""
+    record = task_source(task_ref) if task_ref is not None else None
+    exp = task_experiment(name, lambda: task, config, task_ref=record)
     if resume:
-        return resume_experiment(lambda _: exp, Path(out), progress=progress)
+        return resume_experiment(lambda *_: exp, Path(out), progress=progress)
     return run_experiment(exp, algos=list(algos), preset=PRESET, seeds=list(seeds), overrides={}, out=Path(out),
                           progress=progress)
 
 
-def import_experiment(path: str) -> Experiment:
-    """The experiment of ``module:attribute``: the attribute a ``UEDTask`` or a function of no
-    arguments returning one. ConfigError (one line) when it cannot be imported or is neither."""
+def _split(path: str) -> tuple[str, str]:
     module_name, _, attribute = path.partition(":")
     if not module_name or not attribute:
         raise ConfigError(f"experiment: {path!r} is no import path; give module:function (e.g. mypkg.tasks:make_task)")
+    return module_name, attribute
+
+
+@contextlib.contextmanager
+def _folder_on_path(folder: str | None):
+    """``folder`` (default: the current one) first on ``sys.path`` while the block runs, as Python
+    puts a script's folder there: the user's module and what it imports are found in it."""
+    where = str(Path(folder if folder is not None else os.getcwd()).resolve())
+    added = where not in sys.path
+    if added:
+        sys.path.insert(0, where)
     try:
-        module = importlib.import_module(module_name)
-    except Exception as err:  # the user's module: report its own error in one line
-        raise ConfigError(f"experiment: cannot import {module_name} ({type(err).__name__}: {err})") from None
-    target: Any = getattr(module, attribute, None)
-    if target is None:
+        yield where
+    finally:
+        if added and where in sys.path:
+            sys.path.remove(where)
+
+
+def _import(module_name: str, folder: str | None):
+    """Import ``module_name`` from ``folder`` (default: the current one), then from the installed
+    packages; ConfigError (one line) with the module's own error."""
+    with _folder_on_path(folder) as where:
+        try:
+            importlib.invalidate_caches()  # a module written since the last import (a test, a notebook)
+            return importlib.import_module(module_name)
+        except Exception as err:  # the user's module: report its own error in one line
+            detail = (str(err).strip().splitlines() or [""])[0]
+            raise ConfigError(f"experiment: cannot import {module_name} ({type(err).__name__}: {detail}); looked in "
+                              f"{where} and the installed packages") from None
+
+
+def _module_folder(module, module_name: str) -> str:
+    """The folder ``module`` (imported as ``module_name``) is imported from: the one holding its
+    top-level package (``F`` for ``F/pkg/mod.py`` imported as ``pkg.mod``); the current folder for
+    a module without a file."""
+    file = getattr(module, "__file__", None)
+    if not file:
+        return str(Path.cwd().resolve())
+    path = Path(file).resolve()
+    depth = module_name.count(".") + (1 if path.name == "__init__.py" else 0)
+    return str(path.parents[depth])
+
+
+def task_source(path: str, folder: str | None = None) -> dict[str, str]:
+    """``{"import": path, "folder": F}`` for ``module:attribute``, ``F`` the folder the module is
+    imported from (looked up in ``folder``, default the current one, then the installed packages).
+    ConfigError (one line) when the module cannot be imported or lacks the attribute."""
+    module_name, attribute = _split(path)
+    module = _import(module_name, folder)
+    if getattr(module, attribute, None) is None:
         raise ConfigError(f"experiment: {module_name} has no {attribute}")
+    return {"import": path, "folder": _module_folder(module, module_name)}
+
+
+def import_experiment(path: str, folder: str | None = None, name: str | None = None) -> Experiment:
+    """The experiment of ``module:attribute``: the attribute a ``UEDTask`` or a function of no
+    arguments returning one, the module imported from ``folder`` (default: the current folder)
+    first, then from the installed packages. Named ``name`` (default: ``path``). ConfigError (one
+    line) when it cannot be imported or is neither."""
+    module_name, attribute = _split(path)
+    record = task_source(path, folder)
+    known = (path, record["folder"], name or path)
+    if known in _IMPORTED:  # one task object per process: its compiled programs are reused (UEDTask
+        return _IMPORTED[known]  # compares by identity), e.g. by every algorithm of an evaluated run
+    target: Any = getattr(importlib.import_module(module_name), attribute)
     make = target if callable(target) and not isinstance(target, UEDTask) else (lambda: target)
     try:
-        return task_experiment(path, make, description=f"the UEDTask of {path}")
+        with _folder_on_path(record["folder"]):  # what the task builder imports is found beside it
+            exp = task_experiment(name or path, make, description=f"the UEDTask of {path}", task_ref=record)
     except ConfigError:
         raise
     except Exception as err:  # the user's task builder
         detail = (str(err).strip().splitlines() or [""])[0]
         raise ConfigError(f"experiment: building the task of {path} failed ({type(err).__name__}: {detail})") from None
+    _IMPORTED[known] = exp
+    return exp

@@ -1,0 +1,198 @@
+"""A user's UEDTask (#30): checked before anything is written (one line naming the field), the
+short-rollout warning for every score that reads finished episodes, and runs of a user's task that
+the command line resumes and evaluates from any folder (the task rebuilt from its recorded import
+path), or, where they cannot, a one-line message saying what to pass."""
+
+import dataclasses
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+from remidi.cli import main
+from remidi.engine.buffer import BufferConfig
+from remidi.engine.config import ReMiDiConfig, UEDConfig
+from remidi.engine.ppo import PPOConfig
+from remidi.errors import ConfigError
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "bring_your_own_env.py"
+MODULE = "corridor_task_i30"  # the example copied under a name no other test imports
+
+# two updates of PLR⊥ on 4 envs: compiles in seconds
+TINY = UEDConfig(num_updates=2, num_envs=4, num_steps=16, network="mlp", eval_every=1, eval_attempts=1,
+                 checkpoint_every=1, ppo=PPOConfig(epochs=1, minibatches=1),
+                 buffer=BufferConfig(capacity=8, min_fill=0.25), remidi=ReMiDiConfig(num_buffers=1))
+TINY_SETS = ["--set", "num_updates=2", "--set", "eval_every=1", "--set", "checkpoint_every=1", "--set", "num_envs=4",
+             "--set", "num_steps=16", "--set", "eval_attempts=1", "--set", "ppo.epochs=1", "--set", "network=mlp"]
+EVAL_TINY = ["--attempts", "1", "--cvar-levels", "4", "--cvar-attempts", "1"]
+
+
+def write_module(folder: Path, name: str = MODULE, extra: str = "") -> Path:
+    """The example as module ``name`` in ``folder`` (plus ``extra`` source at its end)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.py").write_text(EXAMPLE.read_text() + extra)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory):
+    """The example's module, imported from a folder of its own."""
+    folder = write_module(tmp_path_factory.mktemp("project"))
+    sys.path.insert(0, str(folder))
+    try:
+        module = __import__(MODULE)
+    finally:
+        sys.path.remove(str(folder))
+    return module
+
+
+# ------------------------------------------------------------------------------ A: the task is checked
+class _WideReward:  # mixed into the example's environment by broken()
+    def step_env(self, rng, state, action, params):
+        obs, state, reward, done, info = super().step_env(rng, state, action, params)
+        return obs, state, jnp.stack([reward, reward]), done, info
+
+
+class _IntDone:
+    def step_env(self, rng, state, action, params):
+        obs, state, reward, done, info = super().step_env(rng, state, action, params)
+        return obs, state, reward, done.astype(jnp.int32), info
+
+
+def broken(corridor, kind: str):
+    task = corridor.make_task()
+    env_class = type(task.env)
+    if kind == "num_actions":
+        return dataclasses.replace(task, num_actions=0)
+    if kind == "max_episode_steps":
+        return dataclasses.replace(task, max_episode_steps=0)
+    if kind == "reward":
+        return dataclasses.replace(task, env=type("Wide", (_WideReward, env_class), {})())
+    if kind == "done":
+        return dataclasses.replace(task, env=type("IntDone", (_IntDone, env_class), {})())
+    if kind == "eval_sets":  # one level where a batch belongs
+        return dataclasses.replace(task, eval_sets={"one": corridor.sample_level(jax.random.PRNGKey(0))})
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("num_actions", "task.num_actions: must be an integer ≥ 1, got 0"),
+    ("max_episode_steps", "task.max_episode_steps: must be an integer ≥ 1, got 0"),
+    ("reward", "task.env: a step's reward must be a float scalar (f32[]) per environment, got float32[2]"),
+    ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
+    ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
+])
+def test_a_broken_task_is_one_line_naming_its_field_and_nothing_is_written(corridor, tmp_path, kind, message):
+    from remidi import run_ued
+
+    out = tmp_path / "out"
+    with pytest.raises(ConfigError) as err:
+        run_ued(broken(corridor, kind), TINY, ["plr"], [0], out, progress=False)
+    assert str(err.value).startswith(message) and "\n" not in str(err.value), str(err.value)
+    assert not out.exists()
+
+
+def test_the_command_line_reports_a_broken_task_in_one_line(tmp_path, monkeypatch, capsys):
+    folder = write_module(tmp_path / "proj", "broken_task_i30", extra=(
+        "\n\ndef make_broken():\n    import dataclasses\n    return dataclasses.replace(make_task(), num_actions=0)\n"))
+    monkeypatch.chdir(folder)  # imported from the current folder, as `python -m` would
+    assert main(["run", "broken_task_i30:make_broken", "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == "remidi: error: task.num_actions: must be an integer ≥ 1, got 0\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corridor):
+    """perfect_regret scores an unfinished episode by its partial return, pvl by -inf: both are
+    warned of when num_steps is shorter than an episode can last (the registry says which)."""
+    from remidi.engine.scores import SCORES
+    from remidi.engine.validation import run_warnings
+
+    task = corridor.make_task()  # episodes of at most 14 steps
+    short = dataclasses.replace(TINY, num_steps=4)
+    (warning,) = run_warnings(short, "plr", task)
+    assert warning.startswith("score perfect_regret uses the episodes that end inside a rollout, but num_steps (4) "
+                              "is shorter than an episode can last (14): levels whose episode does not end are "
+                              "scored by the reward collected so far"), warning
+    (warning,) = run_warnings(dataclasses.replace(short, score="pvl"), "plr", task)
+    assert "score -inf and are never inserted" in warning
+    assert run_warnings(dataclasses.replace(TINY, num_steps=14), "plr", task) == []
+    assert all(score.needs_finished_episodes for score in SCORES.values())  # every built-in score reads episodes
+
+
+# ------------------------------------------------------------------------------ B: rebuilt from anywhere
+def test_remidi_run_imports_the_task_from_the_current_folder_and_records_it(tmp_path, monkeypatch):
+    from remidi.experiments import saved_experiment
+    from remidi.experiments.custom import task_source
+
+    folder = write_module(tmp_path / "proj", "cwd_task_i30")
+    monkeypatch.chdir(folder)
+    assert task_source("cwd_task_i30:make_task") == {"import": "cwd_task_i30:make_task", "folder": str(folder.resolve())}
+    exp = saved_experiment("cwd_task_i30:make_task")  # what `remidi run cwd_task_i30:make_task` looks up
+    assert exp.task_ref == {"import": "cwd_task_i30:make_task", "folder": str(folder.resolve())}
+    assert str(folder.resolve()) not in sys.path  # only for the import
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ConfigError, match=r"^experiment: cannot import other_task_i30 \(ModuleNotFoundError: .*\); "
+                                          r"looked in .* and the installed packages$"):
+        saved_experiment("other_task_i30:make_task")
+
+
+@pytest.fixture(scope="module")
+def ued_run(corridor, tmp_path_factory):
+    """A run written by run_ued with task_ref, in the folder holding the task's module."""
+    from remidi import run_ued
+
+    out = tmp_path_factory.mktemp("ued") / "run"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(Path(corridor.__file__).parent)
+        run_ued(corridor.make_task(), TINY, ["plr"], [0], out, progress=False, name="corridor",
+                task_ref=f"{MODULE}:make_task")
+    return out
+
+
+def test_a_run_ued_run_is_evaluated_and_resumed_from_another_folder(corridor, ued_run, tmp_path, monkeypatch,
+                                                                     capsys):
+    saved = json.loads((ued_run / "config.json").read_text())
+    assert saved["experiment"] == "corridor"
+    assert saved["task"] == {"import": f"{MODULE}:make_task", "folder": str(Path(corridor.__file__).parent.resolve())}
+    run = tmp_path / "run"
+    shutil.copytree(ued_run, run)
+    monkeypatch.chdir(tmp_path)  # neither the module's folder nor on sys.path
+    monkeypatch.delitem(sys.modules, MODULE)  # imported again, from the recorded folder
+    assert main(["evaluate", str(run), *EVAL_TINY]) == 0, capsys.readouterr().err
+    doc = json.loads((run / "evaluate.json").read_text())
+    assert set(doc["algorithms"]["plr"]["metrics"]) >= {"solve_rate/hidden", "solve_rate/visible", "cvar/return/100%"}
+    assert main(["run", "--resume", str(run), "--quiet"]) == 0, capsys.readouterr().err
+    assert json.loads((run / "summary.json").read_text())["experiment"] == "corridor"
+
+
+def test_a_run_without_an_import_path_says_what_to_pass_and_evaluates_with_the_task(corridor, ued_run, tmp_path,
+                                                                                    capsys):
+    from remidi.evaluate import evaluate_run
+
+    run = tmp_path / "run"
+    shutil.copytree(ued_run, run)
+    saved = json.loads((run / "config.json").read_text())
+    del saved["task"]  # as run_ued writes it without task_ref
+    (run / "config.json").write_text(json.dumps(saved))
+    for argv in (["evaluate", str(run)], ["run", "--resume", str(run)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "'corridor' is a task given to run_ued without task_ref" in err, err
+        assert "evaluate_run(RUN_DIR, task=...)" in err and "run_ued(..., task_ref='module:function')" in err
+    assert not (run / "evaluate.json").exists()
+    doc = evaluate_run(run, task=corridor.make_task(), attempts=1, cvar_levels=4, cvar_attempts=1)
+    assert doc["algorithms"]["plr"]["seeds"] == [0] and (run / "evaluate.json").exists()
+
+
+def test_run_ued_refuses_a_task_ref_that_does_not_import_before_writing(corridor, tmp_path):
+    from remidi import run_ued
+
+    with pytest.raises(ConfigError, match=f"^experiment: {MODULE} has no make_nothing$"):
+        run_ued(corridor.make_task(), TINY, ["plr"], [0], tmp_path / "out", progress=False,
+                task_ref=f"{MODULE}:make_nothing")
+    assert not (tmp_path / "out").exists()

@@ -219,13 +219,15 @@ def check_name(kind: str, name) -> None:
 
 
 def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_optimum: bool = False,
-                   needs_solved: bool = False, needs_finished_episodes: bool = False, help: str = "") -> Score:
+                   needs_solved: bool = False, needs_finished_episodes: bool = False, help: str = "",
+                   unfinished: str = "are scored by whatever the score makes of a rollout in which no episode "
+                                     "ended") -> Score:
     """Add a level score to :data:`SCORES`, so that ``score=NAME`` (``--set score=NAME``) ranks
     levels by it in every algorithm of the PLR family, and validation checks what it needs.
 
     ``fn(ScoreInputs) -> f32[N]``: one score per level of a rollout (higher = replayed more); it
     is traced (jit) inside the train step, so it must be written with ``jax.numpy``. The
-    ``needs_*`` flags are :class:`Score`'s. ``fn`` is tried once on a small abstract rollout (3
+    ``needs_*`` flags and ``unfinished`` (the short-rollout warning's words) are :class:`Score`'s. ``fn`` is tried once on a small abstract rollout (3
     steps × 2 levels, nothing is computed), so a function of the wrong shape is refused here,
     not in the middle of a run. Raises ConfigError (one line) for a name already taken or a
     malformed entry. Returns the registered :class:`Score`.
@@ -243,9 +245,10 @@ def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_o
     for key, value in flags.items():
         if not isinstance(value, bool):
             raise ConfigError(f"register_score: {name}: {key} must be true or false, got {value!r}")
-    if not isinstance(help, str):
-        raise ConfigError(f"register_score: {name}: help must be a string, got {type(help).__name__}")
-    score = Score(name, fn, help=help, **flags)
+    for key, value in (("help", help), ("unfinished", unfinished)):
+        if not isinstance(value, str):
+            raise ConfigError(f"register_score: {name}: {key} must be a string, got {type(value).__name__}")
+    score = Score(name, fn, help=help, unfinished=unfinished, **flags)
     steps, n = 3, 2
     inputs = ScoreInputs(mean_return=jnp.zeros(n), values=jnp.zeros((steps, n)), advantages=jnp.zeros((steps, n)),
                          max_return=jnp.zeros(n), done=jnp.zeros((steps, n), bool), reward=jnp.zeros((steps, n)),

@@ -93,3 +93,20 @@ def test_a_malformed_summary_is_one_line_exit_2(tmp_path, capsys, text, needle):
     assert main(["table", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err and str(tmp_path / "summary.json") in err, err
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("", "metrics.csv, line 1: the file is empty"),
+    ("seed,step,metric,value\n0,10,solve_rate/mean,0.5\n0,20,solve_rate/mean,abc\n",
+     "metrics.csv, line 3: expected seed,step,metric,value"),
+    ("seed,step,metric,value\n0,10,solve_rate/mean\n", "metrics.csv, line 2: expected seed,step,metric,value"),
+    ("a,b\n", "metrics.csv, line 1: expected the header seed,step,metric,value"),
+])
+def test_last_k_on_a_malformed_metrics_csv_is_one_line_naming_file_and_line(tmp_path, capsys, text, needle):
+    folder = tmp_path / "run"
+    write_run(folder, "tmaze", "plr", {"solve_rate/mean": [0.0, 1.0]})
+    (folder / "metrics.csv").write_text(text)
+    assert main(["table", str(folder), "--last", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
+    assert str(folder / "metrics.csv") in err

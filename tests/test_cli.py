@@ -451,3 +451,15 @@ def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_p
     version = json.loads(done.stdout.strip().splitlines()[-1])
     assert version["commit"] is None and version["dirty"] is None
     assert version["device"] == "cpu: cpu" and version["jax"]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "tabular-shared", "--out", ""], "--out: must name a folder, got ''"),
+    (["run", "tabular-shared", "--out", "  "], "--out: must name a folder, got '  '"),
+    (["run", "--resume", ""], "--resume: must name a folder, got ''"),
+])
+def test_an_empty_out_or_resume_folder_is_refused(tmp_path, capsys, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)  # the run used to go to runs/<experiment>/<timestamp> here
+    code, _, err = run_cli(capsys, *argv, "--quiet", *FAST)
+    assert code == 2 and err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -169,8 +169,11 @@ def _cmd_run(args) -> int:
     from remidi.experiments.config import parse_set_items
     from remidi.experiments.tracking import parse_log
 
+    for flag, value in (("--out", args.out), ("--resume", args.resume)):
+        if value is not None and not value.strip():  # Path("") is the current folder: never what was meant
+            raise RemidiError(f"{flag}: must name a folder, got {value!r}")
     if args.resume is not None:
-        if (args.experiment is not None or args.algo or args.out or args.sets or args.seeds is not None
+        if (args.experiment is not None or args.algo or args.out is not None or args.sets or args.seeds is not None
                 or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
@@ -193,7 +196,7 @@ def _cmd_run(args) -> int:
     if args.seed < 0:
         raise RemidiError(f"--seed: must be an integer ≥ 0, got {args.seed}")
     seeds = list(range(args.seed, args.seed + num_seeds))
-    out = Path(args.out) if args.out else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out is not None else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)
     log = parse_log(args.log)  # a missing package: one line naming the extra, before anything is written
     summaries = run_experiment(exp, algos=algos, preset=args.preset, seeds=seeds,

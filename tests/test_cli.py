@@ -463,3 +463,48 @@ def test_an_empty_out_or_resume_folder_is_refused(tmp_path, capsys, monkeypatch,
     code, _, err = run_cli(capsys, *argv, "--quiet", *FAST)
     assert code == 2 and err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_path, capsys, monkeypatch):
+    """XLA's RESOURCE_EXHAUSTED at allocation or compile: one line naming num_envs and the size,
+    exit 2; the files and folders this run made are removed (a resume would fail the same way),
+    what was there before and the algorithms that finished are kept."""
+    import jax
+
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def out_of_memory(task, cfg, algo, *args, **kwargs):
+        if algo == "remidi":
+            raise jax.errors.JaxRuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating 3221225472 bytes.")
+        return real(task, cfg, algo, *args, **kwargs)
+
+    monkeypatch.setattr(ued, "train_seeds", out_of_memory)
+    base = ["run", "lever", "--seeds", "1", "--quiet", *LEVER_TINY]
+    code, _, err = run_cli(capsys, *base, "--algo", "remidi", "--out", str(tmp_path / "new" / "run"))
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith("remidi: error: num_envs=8: the run does not fit in the device's memory: XLA asked "
+                          "for 3.0 GiB; lower num_envs (--set num_envs=N) or the number of seeds; removed what "
+                          "this run wrote"), err
+    assert list(tmp_path.iterdir()) == []  # not even the parent folder it made
+
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    code, _, err = run_cli(capsys, *base, "--algo", "plr,remidi", "--out", str(out))
+    assert code == 2 and "num_envs=8: the run does not fit" in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "plr"] and (out / "notes.txt").read_text() == "mine"
+    assert (out / "plr" / "summary.json").exists() and f"(kept the finished plr in {out})" in err
+
+    checkpoint = (out / "plr" / "checkpoint.npz").read_bytes()  # a resume keeps the folder as it is
+    (out / "plr" / "summary.json").unlink()
+    monkeypatch.setattr(ued, "train_seeds", lambda *a, **k: out_of_memory(None, None, "remidi"))
+    code, _, err = run_cli(capsys, "run", "--resume", str(out / "plr"), "--quiet")
+    assert code == 2 and err.count("\n") == 1 and f"{out / 'plr'} keeps its last checkpoint" in err, err
+    assert (out / "plr" / "checkpoint.npz").read_bytes() == checkpoint and (out / "plr" / "config.json").exists()
+
+    monkeypatch.setattr(ued, "train_seeds", lambda *a, **k: (_ for _ in ()).throw(MemoryError()))
+    code, _, err = run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "numpy"))
+    assert code == 2 and "num_envs=8: the run does not fit in memory (MemoryError)" in err, err
+    assert not (tmp_path / "numpy").exists()

@@ -4,7 +4,11 @@ An :class:`Experiment` says which algorithms and presets it has, how to build an
 configuration, how to train one algorithm for a set of seeds (returning a :class:`RunResult`)
 and how to plot results. :func:`run_experiment` does the rest identically for all of them:
 validate everything before writing anything, write ``config.json`` first (so a killed run can
-be resumed), then ``metrics.csv``, ``summary.json`` and the plots.
+be resumed), then ``metrics.csv``, ``summary.json`` and the plots. A run too large for the device
+(XLA's ``RESOURCE_EXHAUSTED`` at allocation or compilation, MemoryError: :class:`TooLarge`) is one
+line naming ``num_envs``; a fresh run then removes the files and folders it made (resuming would
+fail the same way), keeping what was there before and the algorithms that finished; a resumed one
+leaves its folder as it is.
 
 With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
 panel per metric, one curve per algorithm, in the order given; tabular: one panel per algorithm)
@@ -17,6 +21,7 @@ shards the seeds over N devices for the experiments that support it (``Experimen
 
 from __future__ import annotations
 
+import re
 import shutil
 import sys
 import tempfile
@@ -167,12 +172,70 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
         outputs.prepare_out_dir(folder, create=False)
     for note in notes:  # only once the run is known to be valid: an error stays the only line
         print(f"remidi: {note}", file=sys.stderr, flush=True)
-    for algo, folder in folders.items():
-        outputs.prepare_out_dir(folder)
-        write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
-                         log=list(log))
-    return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
-                            devices=devices, log=list(log))
+    before = _existing_paths(out)
+    try:
+        for algo, folder in folders.items():
+            outputs.prepare_out_dir(folder)
+            write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
+                             log=list(log))
+        return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
+                                devices=devices, log=list(log))
+    except TooLarge as err:  # resuming would fail the same way: remove what this run wrote, keep finished algorithms
+        finished = [algo for algo, folder in folders.items() if (folder / "summary.json").exists()]
+        _remove_new_paths(out, [folders[algo] for algo in folders if algo not in finished], before)
+        kept = f" (kept the finished {', '.join(finished)} in {out})" if finished else ""
+        raise TooLarge(f"{err}; removed what this run wrote{kept}") from None
+
+
+class TooLarge(ConfigError):
+    """The run does not fit the device: XLA ran out of memory (``RESOURCE_EXHAUSTED``), NumPy raised
+    MemoryError, or an array outgrew XLA's 32-bit indices."""
+
+
+def too_large_message(err: BaseException, config) -> str | None:
+    """One line for an error that says the run is too large for the device, naming ``num_envs``
+    (the usual culprit) and the size XLA asked for; None for any other error."""
+    text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    if isinstance(err, MemoryError):
+        what = "does not fit in memory (MemoryError)"
+    elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "RESOURCE_EXHAUSTED" in text:
+        found = re.search(r"allocat\w* (\d+) bytes", text)
+        asked = f": XLA asked for {int(found.group(1)) / 2**30:,.1f} GiB" if found else ""
+        what = f"does not fit in the device's memory{asked}"
+    elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "2147483647" in text:
+        what = "is too large for XLA (an array with more than 2^31 elements)"
+    else:
+        return None
+    num_envs = getattr(config, "num_envs", None)
+    size = f"num_envs={num_envs}: " if num_envs is not None else ""
+    fix = "lower num_envs (--set num_envs=N)" if num_envs is not None else "use a smaller configuration"
+    return f"{size}the run {what}; {fix} or the number of seeds"
+
+
+def _existing_paths(out: Path) -> set[Path]:
+    """Every path under ``out``, ``out`` itself and its parents, where they exist (before a run writes)."""
+    out = Path(out)
+    return {p for p in out.parents if p.exists()} | ({out, *out.rglob("*")} if out.exists() else set())
+
+
+def _remove_new_paths(out: Path, folders: list[Path], before: set[Path]) -> None:
+    """Remove what a failed fresh run wrote: the files and folders under ``folders`` that were not
+    in ``before``, then ``out`` and the parents it was made in when they are new and left empty.
+    Nothing that existed before the run is touched."""
+    for folder in folders:
+        for path in sorted(Path(folder).rglob("*"), key=lambda p: len(p.parts), reverse=True):
+            if path in before:
+                continue
+            if path.is_dir() and not path.is_symlink():
+                if not any(path.iterdir()):
+                    path.rmdir()
+            else:
+                path.unlink(missing_ok=True)
+    for folder in sorted({Path(out), *map(Path, folders)}, key=lambda p: len(p.parts), reverse=True):
+        for path in (folder, *folder.parents):
+            if path in before or not path.is_dir() or any(path.iterdir()):
+                break
+            path.rmdir()
 
 
 def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool = True) -> dict[str, dict]:
@@ -346,9 +409,12 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
         started = time.perf_counter()
         try:
             result = exp.train(ctx)
-        except BaseException:  # Ctrl-C or an error: close the tracked runs, a resume continues them
+        except BaseException as err:  # Ctrl-C or an error: close the tracked runs, a resume continues them
             if tracker is not None:
                 tracker.close()
+            message = too_large_message(err, config)
+            if message is not None:  # a resumed run keeps its folder: it resumes on a larger device
+                raise TooLarge(message + (f"; {folder} keeps its last checkpoint" if resume else "")) from None
             raise
         # wall time of the training (compilation included) in this invocation: a resumed run counts its last part
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}

@@ -508,3 +508,19 @@ def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_
     code, _, err = run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "numpy"))
     assert code == 2 and "num_envs=8: the run does not fit in memory (MemoryError)" in err, err
     assert not (tmp_path / "numpy").exists()
+
+
+def test_run_help_names_each_experiments_default_algorithms_from_the_registry(capsys, monkeypatch):
+    from remidi.experiments import all_experiments
+
+    monkeypatch.setenv("COLUMNS", "2000")  # one line per option: no word broken at a hyphen
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("--algo"))
+    assert "default: all" not in line
+    for exp in all_experiments().values():
+        default = ", ".join(exp.default_algorithms or exp.algorithms)
+        group = next(part for part in line.split(" — ", 1)[1].split("; ") if exp.name in part.split(": ")[0].split(", "))
+        assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
+        extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
+        assert not extra or f"(all adds {', '.join(extra)})" in group

@@ -25,6 +25,32 @@ class _Parser(argparse.ArgumentParser):
         raise RemidiError(f"{command + ': ' if command else ''}{message} (see {self.prog} --help)")
 
 
+def _algo_help() -> str:
+    """``remidi run --algo``'s help, read from the registry when the help is printed (importing the
+    experiments takes seconds, too long for every command): each experiment's default algorithms
+    and what ``all`` adds."""
+    from remidi.experiments import all_experiments
+    from remidi.experiments.ued import ALGORITHMS, PAPER_ALGORITHMS
+
+    groups: dict[tuple, list[str]] = {}  # (default algorithms, every algorithm) → experiments
+    for exp in all_experiments().values():
+        groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), exp.algorithms), []).append(exp.name)
+    groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS)), []).append("module:function")
+    parts = []
+    for (default, every), names in groups.items():
+        extra = [a for a in every if a not in default]
+        parts.append(f"{', '.join(names)}: {', '.join(default)}" + (f" (all adds {', '.join(extra)})" if extra else ""))
+    return ("algorithm, comma-separated list, or 'all' (every algorithm of the experiment); default: the "
+            "experiment's default set — " + "; ".join(parts))
+
+
+class _RunHelpFormatter(argparse.HelpFormatter):
+    """``remidi run --help``: ``--algo``'s help from the registry (:func:`_algo_help`)."""
+
+    def _get_help_string(self, action):
+        return _algo_help() if action.dest == "algo" else super()._get_help_string(action)
+
+
 _RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume hint
 
 
@@ -296,11 +322,11 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--json", action="store_true", help="print machine-readable JSON")
     solve.set_defaults(func=_cmd_solve)
 
-    run = sub.add_parser("run", help="run an experiment (see `remidi list`)",
+    run = sub.add_parser("run", help="run an experiment (see `remidi list`)", formatter_class=_RunHelpFormatter,
                          description="Train one or more algorithms on an experiment for several seeds and "
                                      "write config.json, metrics.csv, summary.json and plots.")
     run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask")
-    run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
+    run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: the experiment's default set)")
     run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
                                       "as module:function: default, the engine's UEDConfig)")

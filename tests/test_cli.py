@@ -358,10 +358,8 @@ def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     from remidi.experiments import all_experiments
     from remidi.experiments.config import field_names
 
-    code, out, _ = run_cli(capsys, "list")
-    assert code == 0
-    for exp in all_experiments().values():
-        assert f"{exp.name}: {exp.description}" in out
+    code, out, _ = run_cli(capsys, "list", "lever")
+    assert code == 0 and out.startswith(f"lever: {all_experiments()['lever'].description}\n")
     lines = out.splitlines()
     for key in field_names(all_experiments()["lever"].config_factory()):
         row = next(line for line in lines if line.split()[:1] == [key])
@@ -371,6 +369,18 @@ def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     code, out, _ = run_cli(capsys, "list", "tabular-shared")
     assert code == 0 and out.startswith("tabular-shared: ") and "lever" not in out
     assert any(line.split()[:2] == ["log_every", "10"] for line in out.splitlines())
+
+
+def test_list_alone_is_one_line_per_experiment_with_its_presets(capsys):
+    from remidi.experiments import all_experiments
+
+    code, out, err = run_cli(capsys, "list")
+    experiments = list(all_experiments().values())
+    assert code == 0 and len(out.splitlines()) == len(experiments), out
+    for line, exp in zip(out.splitlines(), experiments):
+        assert line.split()[0] == exp.name and exp.description in line, line
+        assert line.endswith(f"(presets: {', '.join(exp.presets)})"), line
+    assert "remidi list NAME" in err
 
 
 def test_every_settable_key_has_a_description():

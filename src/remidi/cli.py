@@ -135,10 +135,14 @@ def _cmd_list(args) -> int:
     from remidi.experiments.base import default_preset, resolve_config
     from remidi.experiments.config import field_names, get_value, key_help
 
-    experiments = [get_experiment(args.experiment)] if args.experiment else list(all_experiments().values())
-    for i, exp in enumerate(experiments):
-        if i:
-            print()
+    if not args.experiment:  # an overview, one line per experiment; the details of one: remidi list NAME
+        experiments = list(all_experiments().values())
+        width = max(len(exp.name) for exp in experiments)
+        for exp in experiments:
+            print(f"{exp.name:<{width}}  {exp.description} (presets: {', '.join(exp.presets)})")
+        print("remidi list NAME: its algorithms, presets and --set keys", file=sys.stderr)
+        return 0
+    for exp in [get_experiment(args.experiment)]:
         print(f"{exp.name}: {exp.description}")
         print(f"  algorithms: {', '.join(exp.algorithms)}"
               + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
@@ -346,9 +350,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
 
     lst = sub.add_parser("list", help="list experiments, algorithms, presets and config keys",
-                         description="List experiments with their algorithms, presets and --set keys (each "
-                                     "with its default and what it means).")
-    lst.add_argument("experiment", nargs="?", help="only this experiment")
+                         description="List the experiments, one line each; with EXPERIMENT, its algorithms, "
+                                     "presets and --set keys (each with its default and what it means).")
+    lst.add_argument("experiment", nargs="?", help="this experiment's details")
     lst.set_defaults(func=_cmd_list)
 
     render = sub.add_parser("render", help="draw held-out mazes, a run's level buffers, or an episode",

@@ -534,3 +534,15 @@ def test_run_help_names_each_experiments_default_algorithms_from_the_registry(ca
         assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
         extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
         assert not extra or f"(all adds {', '.join(extra)})" in group
+
+
+def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys):
+    out = tmp_path / "both"
+    assert run_cli(capsys, "run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+    for folder in (out, out / "mmr"):  # a several-algorithm run, one algorithm's run
+        before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
+        code, stdout, err = run_cli(capsys, "run", "--resume", str(folder), "--quiet")
+        assert code == 0 and err == "", err
+        assert stdout == (f"{folder}: the run is finished (summary.json written); nothing to resume "
+                          f"(its results: remidi table {folder})\n")
+        assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before

@@ -207,7 +207,14 @@ def _cmd_run(args) -> int:
                 or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
-        summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)
+        from remidi.experiments.base import finished_run
+
+        finished = finished_run(Path(args.resume))
+        summaries = resume_experiment(get_experiment, Path(args.resume), progress=not args.quiet)  # checks it
+        if finished:  # resume_experiment trained nothing
+            print(f"{args.resume}: the run is finished (summary.json written); nothing to resume "
+                  f"(its results: remidi table {args.resume})")
+            return 0
         _print_summaries(summaries, Path(args.resume))
         return 0
     if args.experiment is None:

@@ -243,7 +243,8 @@ def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, pro
 
     ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
     run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
-    are redrawn. The run keeps its recorded ``devices``.
+    are redrawn. The run keeps its recorded ``devices``. A finished run (:func:`finished_run`) is
+    checked, then returned as it is: nothing is trained or written.
     """
     folder = Path(folder)
     if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
@@ -251,6 +252,16 @@ def resume_experiment(exp_lookup: Callable[[str], Experiment], folder: Path, pro
             shutil.copytree(folder, Path(scratch) / "run")
             return _resume(exp_lookup, Path(scratch) / "run", progress=False)
     return _resume(exp_lookup, folder, progress)
+
+
+def finished_run(folder: Path) -> bool:
+    """Whether ``folder`` holds a finished run: its summary.json is written (of a several-algorithm
+    run, every algorithm's), so resuming it has nothing to train."""
+    folder = Path(folder)
+    if (folder / "config.json").exists():
+        return (folder / "summary.json").exists()
+    subs = [p for p in folder.iterdir() if (p / "config.json").exists()] if folder.is_dir() else []
+    return bool(subs) and all((p / "summary.json").exists() for p in subs)
 
 
 def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
@@ -262,6 +273,8 @@ def _resume(exp_lookup: Callable[[str], Experiment], folder: Path, progress: boo
     exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)
     devices = _saved_devices(folder)
     _check_devices(exp, devices, len(seeds))
+    if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
+        return {algo: outputs.read_json(folder / "summary.json")}
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
 
@@ -348,12 +361,15 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
     for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
+    finished = finished_run(folder)
     for sub, exp, algo, preset, seeds, config in runs:
         if (sub / "summary.json").exists():
             summaries[algo] = outputs.read_json(sub / "summary.json")
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
                                               progress=progress, devices=devices[sub], log=logs[sub]))
+    if finished:  # nothing trained: the folder stays as it is
+        return summaries
     exp, config = runs[0][1], runs[0][5]
     results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
     exp.plot(folder, results, config)

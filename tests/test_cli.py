@@ -546,3 +546,17 @@ def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys):
         assert stdout == (f"{folder}: the run is finished (summary.json written); nothing to resume "
                           f"(its results: remidi table {folder})\n")
         assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
+    from remidi.cli import _print_summaries
+
+    long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than the old 32-character column
+    _print_summaries({"plr": {"experiment": "tmaze", "preset": "smoke", "seeds": [0, 1], "metrics": {
+        "solve_rate/mean": {"mean": 0.5, "std": 0.1, "per_seed": [0.4, 0.6]},
+        long: {"mean": 12.25, "std": 1.0, "per_seed": [11.25, 13.25]},
+        "x": {"mean": None, "std": None, "per_seed": [None, None]}}}}, "out")
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")]
+    assert len(rows) == 3
+    ends = {len(row.split(" ± ")[0]) for row in rows}  # where each mean (or n/a) ends
+    assert ends == {2 + len(long) + 1 + 10}, rows

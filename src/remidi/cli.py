@@ -184,12 +184,18 @@ def _mean_and_spread(m: dict) -> str:
     return f"{m['mean']:10.4f}" + ("" if _undefined(m["std"]) else f" ± {m['std']:.4f}")
 
 
+def _print_metrics(metrics: dict[str, dict]) -> None:
+    """One line per metric, ``name  mean ± std``, the values in one column however long the names."""
+    width = max((len(name) for name in metrics), default=0)
+    for name, m in metrics.items():
+        print(f"  {name:<{width}} {_mean_and_spread(m)}")
+
+
 def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     for algo, summary in summaries.items():
         n = len(summary["seeds"])
         print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {n} seed{'s' if n != 1 else ''}): final metrics")
-        for name, m in summary["metrics"].items():
-            print(f"  {name:32s} {_mean_and_spread(m)}")
+        _print_metrics(summary["metrics"])
     print(f"\nwrote {out}")
 
 
@@ -267,8 +273,7 @@ def _cmd_evaluate(args) -> int:
     for algo, entry in doc["algorithms"].items():
         n = len(entry["seeds"])
         print(f"\n{algo} ({n} seed{'s' if n != 1 else ''}, checkpoint of update {entry['update']})")
-        for name, m in entry["metrics"].items():
-            print(f"  {name:32s} {_mean_and_spread(m)}")
+        _print_metrics(entry["metrics"])
     print(f"\nwrote {Path(args.run_dir) / 'evaluate.json'}, evaluate.csv, evaluate.png")
     return 0
 

@@ -418,8 +418,9 @@ def build_parser() -> argparse.ArgumentParser:
                                        "the mean ± sample standard deviation over seeds (ddof 1), the "
                                        "interquartile mean and the 95% percentile-bootstrap interval of the mean.")
     table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
-    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: the first three of the "
-                                                         "first run's summary)")
+    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: per experiment, its first "
+                                                         "metric and level shares replay_fraction/TAG, "
+                                                         "buffer_fraction/TAG; else its first three)")
     table.add_argument("--last", type=int, metavar="K", help="per seed, the mean of each metric's last K logged "
                                                             "points (metrics.csv) instead of its final value")
     table.set_defaults(func=_cmd_table)

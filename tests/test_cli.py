@@ -560,3 +560,18 @@ def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
     assert len(rows) == 3
     ends = {len(row.split(" ± ")[0]) for row in rows}  # where each mean (or n/a) ends
     assert ends == {2 + len(long) + 1 + 10}, rows
+
+
+def test_a_run_whose_rollouts_cannot_fit_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
+    """The rollouts' observations alone (seeds × num_steps × num_envs × one observation and three
+    floats) against the device's memory: a lower bound, checked with the rest of the input."""
+    from remidi.experiments import base
+
+    monkeypatch.setattr(base, "_device_memory", lambda: (64 * 2**20, "a 64 MiB test device"))
+    argv = ["run", "lever", "--algo", "plr", "--seeds", "1", "--quiet", *LEVER_TINY, "--set", "num_envs=100000"]
+    code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "run"))
+    # lever: a 65-float observation (260 bytes) and 12 bytes: 4 steps × 100000 envs × 272 bytes = 104 MiB
+    assert code == 2 and err == ("remidi: error: num_envs=100000: the rollouts alone need 104 MiB (1 seed × num_steps "
+                                 "4 × num_envs 100000 × 272 bytes), more than the 64 MiB of a 64 MiB test device; "
+                                 "lower num_envs (--set num_envs=N), num_steps or the number of seeds\n"), err
+    assert list(tmp_path.iterdir()) == []

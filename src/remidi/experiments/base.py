@@ -4,11 +4,12 @@ An :class:`Experiment` says which algorithms and presets it has, how to build an
 configuration, how to train one algorithm for a set of seeds (returning a :class:`RunResult`)
 and how to plot results. :func:`run_experiment` does the rest identically for all of them:
 validate everything before writing anything, write ``config.json`` first (so a killed run can
-be resumed), then ``metrics.csv``, ``summary.json`` and the plots. A run too large for the device
-(XLA's ``RESOURCE_EXHAUSTED`` at allocation or compilation, MemoryError: :class:`TooLarge`) is one
-line naming ``num_envs``; a fresh run then removes the files and folders it made (resuming would
-fail the same way), keeping what was there before and the algorithms that finished; a resumed one
-leaves its folder as it is.
+be resumed), then ``metrics.csv``, ``summary.json`` and the plots. A UED run whose rollouts alone
+cannot fit the device's memory is refused with the rest of the input (:func:`_check_memory`, a
+lower bound); one that runs out of memory all the same (XLA's ``RESOURCE_EXHAUSTED`` at
+allocation or compilation, MemoryError: :class:`TooLarge`) is one line naming ``num_envs``; a
+fresh run then removes the files and folders it made (resuming would fail the same way), keeping
+what was there before and the algorithms that finished; a resumed one leaves its folder as it is.
 
 With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
 panel per metric, one curve per algorithm, in the order given; tabular: one panel per algorithm)
@@ -159,6 +160,7 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
         raise ConfigError(f"--seed: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
                           f"{min(seeds)}..{max(seeds)}; lower --seed or --seeds")
     _check_devices(exp, devices, len(seeds))
+    _check_memory(exp, config, len(seeds), devices)
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch
             return _write_and_train(exp, algos, preset, seeds, config, Path(scratch) / "run", [], False, argv, devices)
@@ -200,7 +202,7 @@ def too_large_message(err: BaseException, config) -> str | None:
         what = "does not fit in memory (MemoryError)"
     elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "RESOURCE_EXHAUSTED" in text:
         found = re.search(r"allocat\w* (\d+) bytes", text)
-        asked = f": XLA asked for {int(found.group(1)) / 2**30:,.1f} GiB" if found else ""
+        asked = f": XLA asked for {_size(int(found.group(1)))}" if found else ""
         what = f"does not fit in the device's memory{asked}"
     elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "2147483647" in text:
         what = "is too large for XLA (an array with more than 2^31 elements)"
@@ -210,6 +212,56 @@ def too_large_message(err: BaseException, config) -> str | None:
     size = f"num_envs={num_envs}: " if num_envs is not None else ""
     fix = "lower num_envs (--set num_envs=N)" if num_envs is not None else "use a smaller configuration"
     return f"{size}the run {what}; {fix} or the number of seeds"
+
+
+def _size(num_bytes: float) -> str:
+    """``3.0 GiB``, ``104 MiB``."""
+    return f"{num_bytes / 2**30:,.1f} GiB" if num_bytes >= 2**30 else f"{num_bytes / 2**20:,.0f} MiB"
+
+
+def _device_memory() -> tuple[int | None, str]:
+    """``(bytes, what)``: the memory of the first device JAX sees (an accelerator's limit, a CPU's
+    physical memory); None where it cannot be told."""
+    import os
+
+    import jax
+
+    device = jax.local_devices()[0]
+    stats = device.memory_stats() or {}
+    if stats.get("bytes_limit"):
+        return int(stats["bytes_limit"]), f"the {device.device_kind} ({device.platform})"
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"), "this machine's memory"
+    except (ValueError, OSError, AttributeError):
+        return None, "this machine's memory"
+
+
+def _check_memory(exp: Experiment, config, num_seeds: int, devices: int) -> None:
+    """Refuse a UED run before anything is written when its rollouts alone cannot fit one device: a
+    block stores, per seed on the device, ``num_steps × num_envs`` observations and a reward, value
+    and log-probability each (a lower bound of what training holds: parameters, buffers and the
+    compiled program come on top). A run that passes can still run out of memory (then
+    :class:`TooLarge`, after allocating)."""
+    num_envs, num_steps = getattr(config, "num_envs", None), getattr(config, "num_steps", None)
+    if exp.make_task is None or not isinstance(num_envs, int) or not isinstance(num_steps, int):
+        return
+    import jax
+
+    try:  # shapes only: nothing is allocated or compiled
+        task = exp.make_task(config)
+        obs, _ = jax.eval_shape(lambda k: task.env.reset_to_level(k, task.sample_level(k), task.params),
+                                jax.random.PRNGKey(0))
+        per_step = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(obs)) + 3 * 4
+    except Exception:  # noqa: BLE001 - a task this cannot size: training reports its own errors
+        return
+    seeds = max(1, num_seeds // max(1, devices))
+    need = seeds * num_steps * num_envs * per_step
+    have, what = _device_memory()
+    if have is not None and need > have:
+        raise TooLarge(f"num_envs={num_envs}: the rollouts alone need {_size(need)} ({seeds} seed"
+                       f"{'s' if seeds != 1 else ''} × num_steps {num_steps} × num_envs {num_envs} × {per_step} "
+                       f"bytes), more than the {_size(have)} of {what}; lower num_envs "
+                       f"(--set num_envs=N), num_steps or the number of seeds")
 
 
 def _existing_paths(out: Path) -> set[Path]:

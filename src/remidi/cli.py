@@ -142,33 +142,33 @@ def _cmd_list(args) -> int:
             print(f"{exp.name:<{width}}  {exp.description} (presets: {', '.join(exp.presets)})")
         print("remidi list NAME: its algorithms, presets and --set keys", file=sys.stderr)
         return 0
-    for exp in [get_experiment(args.experiment)]:
-        print(f"{exp.name}: {exp.description}")
-        print(f"  algorithms: {', '.join(exp.algorithms)}"
-              + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
-        presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
-                            for p in exp.presets)
-        print(f"  presets:    {presets}")
-        for name, reasons in exp.preset_reasons.items():
-            print(f"  {name}: deviates from paper in")
-            width = max(len(key) for key in reasons)
-            cfg = resolve_config(exp, name, {})
-            for key, why in reasons.items():
-                print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
-        default = default_preset(exp)
-        configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
-        print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
-              f"differs) and meaning:")
-        rows = []
-        for key in field_names(exp.config_factory()):
-            value = get_value(configs[default], key)
-            others = [f"{name}: {_format_value(get_value(cfg, key))}" for name, cfg in configs.items()
-                      if name != default and get_value(cfg, key) != value]
-            rows.append((key, _format_value(value) + (f" [{', '.join(others)}]" if others else ""),
-                         key_help(configs[default], key)))
-        widths = [max(len(row[c]) for row in rows) for c in (0, 1)]
-        for key, shown, meaning in rows:
-            print(f"    {key:<{widths[0]}}  {shown:<{widths[1]}}  {meaning}".rstrip())
+    exp = get_experiment(args.experiment)
+    print(f"{exp.name}: {exp.description}")
+    print(f"  algorithms: {', '.join(exp.algorithms)}"
+          + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
+    presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
+                        for p in exp.presets)
+    print(f"  presets:    {presets}")
+    for name, reasons in exp.preset_reasons.items():
+        print(f"  {name}: deviates from paper in")
+        width = max(len(key) for key in reasons)
+        cfg = resolve_config(exp, name, {})
+        for key, why in reasons.items():
+            print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
+    default = default_preset(exp)
+    configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
+    print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
+          f"differs) and meaning:")
+    rows = []
+    for key in field_names(exp.config_factory()):
+        value = get_value(configs[default], key)
+        others = [f"{name}: {_format_value(get_value(cfg, key))}" for name, cfg in configs.items()
+                  if name != default and get_value(cfg, key) != value]
+        rows.append((key, _format_value(value) + (f" [{', '.join(others)}]" if others else ""),
+                     key_help(configs[default], key)))
+    widths = [max(len(row[c]) for row in rows) for c in (0, 1)]
+    for key, shown, meaning in rows:
+        print(f"    {key:<{widths[0]}}  {shown:<{widths[1]}}  {meaning}".rstrip())
     return 0
 
 

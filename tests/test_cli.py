@@ -518,6 +518,11 @@ def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_
     code, _, err = run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "numpy"))
     assert code == 2 and "num_envs=8: the run does not fit in memory (MemoryError)" in err, err
     assert not (tmp_path / "numpy").exists()
+    (tmp_path / "kept" / "data").mkdir(parents=True)  # a folder holding no run, with the user's files in it
+    (tmp_path / "kept" / "data" / "x.txt").write_text("mine")
+    assert run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "kept"))[0] == 2
+    assert [str(p.relative_to(tmp_path)) for p in sorted((tmp_path / "kept").rglob("*"))] == ["kept/data",
+                                                                                            "kept/data/x.txt"]
 
 
 def test_run_help_names_each_experiments_default_algorithms_from_the_registry(capsys, monkeypatch):

@@ -174,7 +174,7 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
         outputs.prepare_out_dir(folder, create=False)
     for note in notes:  # only once the run is known to be valid: an error stays the only line
         print(f"remidi: {note}", file=sys.stderr, flush=True)
-    before = _existing_paths(out)
+    before = _existing_paths(out, list(folders.values()))
     try:
         for algo, folder in folders.items():
             outputs.prepare_out_dir(folder)
@@ -264,23 +264,26 @@ def _check_memory(exp: Experiment, config, num_seeds: int, devices: int) -> None
                        f"(--set num_envs=N), num_steps or the number of seeds")
 
 
-def _existing_paths(out: Path) -> set[Path]:
-    """Every path under ``out``, ``out`` itself and its parents, where they exist (before a run writes)."""
-    out = Path(out)
-    return {p for p in out.parents if p.exists()} | ({out, *out.rglob("*")} if out.exists() else set())
+def _existing_paths(out: Path, folders: list[Path]) -> set[Path]:
+    """What exists before a run writes: ``out``'s parents, ``out`` and each of ``folders`` with the
+    entries directly in them."""
+    found = {p for p in Path(out).parents if p.exists()}
+    for folder in map(Path, dict.fromkeys([Path(out), *folders])):
+        if folder.is_dir():
+            found |= {folder, *folder.iterdir()}
+    return found
 
 
 def _remove_new_paths(out: Path, folders: list[Path], before: set[Path]) -> None:
-    """Remove what a failed fresh run wrote: the files and folders under ``folders`` that were not
-    in ``before``, then ``out`` and the parents it was made in when they are new and left empty.
-    Nothing that existed before the run is touched."""
-    for folder in folders:
-        for path in sorted(Path(folder).rglob("*"), key=lambda p: len(p.parts), reverse=True):
+    """Remove what a failed fresh run wrote: the entries of ``folders`` that were not in ``before``
+    (new sub-folders with all they hold), then ``out``, the folders and the parents they were made
+    in when they are new and left empty. Nothing that existed before the run is touched."""
+    for folder in map(Path, folders):
+        for path in (list(folder.iterdir()) if folder.is_dir() else []):
             if path in before:
                 continue
             if path.is_dir() and not path.is_symlink():
-                if not any(path.iterdir()):
-                    path.rmdir()
+                shutil.rmtree(path)
             else:
                 path.unlink(missing_ok=True)
     for folder in sorted({Path(out), *map(Path, folders)}, key=lambda p: len(p.parts), reverse=True):

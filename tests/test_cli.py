@@ -358,10 +358,8 @@ def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     from remidi.experiments import all_experiments
     from remidi.experiments.config import field_names
 
-    code, out, _ = run_cli(capsys, "list")
-    assert code == 0
-    for exp in all_experiments().values():
-        assert f"{exp.name}: {exp.description}" in out
+    code, out, _ = run_cli(capsys, "list", "lever")
+    assert code == 0 and out.startswith(f"lever: {all_experiments()['lever'].description}\n")
     lines = out.splitlines()
     for key in field_names(all_experiments()["lever"].config_factory()):
         row = next(line for line in lines if line.split()[:1] == [key])
@@ -371,6 +369,18 @@ def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     code, out, _ = run_cli(capsys, "list", "tabular-shared")
     assert code == 0 and out.startswith("tabular-shared: ") and "lever" not in out
     assert any(line.split()[:2] == ["log_every", "10"] for line in out.splitlines())
+
+
+def test_list_alone_is_one_line_per_experiment_with_its_presets(capsys):
+    from remidi.experiments import all_experiments
+
+    code, out, err = run_cli(capsys, "list")
+    experiments = list(all_experiments().values())
+    assert code == 0 and len(out.splitlines()) == len(experiments), out
+    for line, exp in zip(out.splitlines(), experiments):
+        assert line.split()[0] == exp.name and exp.description in line, line
+        assert line.endswith(f"(presets: {', '.join(exp.presets)})"), line
+    assert "remidi list NAME" in err
 
 
 def test_every_settable_key_has_a_description():
@@ -451,3 +461,122 @@ def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_p
     version = json.loads(done.stdout.strip().splitlines()[-1])
     assert version["commit"] is None and version["dirty"] is None
     assert version["device"] == "cpu: cpu" and version["jax"]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["run", "tabular-shared", "--out", ""], "--out: must name a folder, got ''"),
+    (["run", "tabular-shared", "--out", "  "], "--out: must name a folder, got '  '"),
+    (["run", "--resume", ""], "--resume: must name a folder, got ''"),
+])
+def test_an_empty_out_or_resume_folder_is_refused(tmp_path, capsys, monkeypatch, argv, needle):
+    monkeypatch.chdir(tmp_path)  # the run used to go to runs/<experiment>/<timestamp> here
+    code, _, err = run_cli(capsys, *argv, "--quiet", *FAST)
+    assert code == 2 and err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_path, capsys, monkeypatch):
+    """XLA's RESOURCE_EXHAUSTED at allocation or compile: one line naming num_envs and the size,
+    exit 2; the files and folders this run made are removed (a resume would fail the same way),
+    what was there before and the algorithms that finished are kept."""
+    import jax
+
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def out_of_memory(task, cfg, algo, *args, **kwargs):
+        if algo == "remidi":
+            raise jax.errors.JaxRuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating 3221225472 bytes.")
+        return real(task, cfg, algo, *args, **kwargs)
+
+    monkeypatch.setattr(ued, "train_seeds", out_of_memory)
+    base = ["run", "lever", "--seeds", "1", "--quiet", *LEVER_TINY]
+    code, _, err = run_cli(capsys, *base, "--algo", "remidi", "--out", str(tmp_path / "new" / "run"))
+    assert code == 2 and err.count("\n") == 1, err
+    assert err.startswith("remidi: error: num_envs=8: the run does not fit in the device's memory: XLA asked "
+                          "for 3.0 GiB; lower num_envs (--set num_envs=N) or the number of seeds; removed what "
+                          "this run wrote"), err
+    assert list(tmp_path.iterdir()) == []  # not even the parent folder it made
+
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    code, _, err = run_cli(capsys, *base, "--algo", "plr,remidi", "--out", str(out))
+    assert code == 2 and "num_envs=8: the run does not fit" in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "plr"] and (out / "notes.txt").read_text() == "mine"
+    assert (out / "plr" / "summary.json").exists() and f"(kept the finished plr in {out})" in err
+
+    checkpoint = (out / "plr" / "checkpoint.npz").read_bytes()  # a resume keeps the folder as it is
+    (out / "plr" / "summary.json").unlink()
+    monkeypatch.setattr(ued, "train_seeds", lambda *a, **k: out_of_memory(None, None, "remidi"))
+    code, _, err = run_cli(capsys, "run", "--resume", str(out / "plr"), "--quiet")
+    assert code == 2 and err.count("\n") == 1 and f"{out / 'plr'} keeps its last checkpoint" in err, err
+    assert (out / "plr" / "checkpoint.npz").read_bytes() == checkpoint and (out / "plr" / "config.json").exists()
+
+    monkeypatch.setattr(ued, "train_seeds", lambda *a, **k: (_ for _ in ()).throw(MemoryError()))
+    code, _, err = run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "numpy"))
+    assert code == 2 and "num_envs=8: the run does not fit in memory (MemoryError)" in err, err
+    assert not (tmp_path / "numpy").exists()
+    (tmp_path / "kept" / "data").mkdir(parents=True)  # a folder holding no run, with the user's files in it
+    (tmp_path / "kept" / "data" / "x.txt").write_text("mine")
+    assert run_cli(capsys, *base, "--algo", "plr", "--out", str(tmp_path / "kept"))[0] == 2
+    assert [str(p.relative_to(tmp_path)) for p in sorted((tmp_path / "kept").rglob("*"))] == ["kept/data",
+                                                                                            "kept/data/x.txt"]
+
+
+def test_run_help_names_each_experiments_default_algorithms_from_the_registry(capsys, monkeypatch):
+    from remidi.experiments import all_experiments
+
+    monkeypatch.setenv("COLUMNS", "2000")  # one line per option: no word broken at a hyphen
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    line = next(line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("--algo"))
+    assert "default: all" not in line
+    for exp in all_experiments().values():
+        default = ", ".join(exp.default_algorithms or exp.algorithms)
+        group = next(part for part in line.split(" — ", 1)[1].split("; ") if exp.name in part.split(": ")[0].split(", "))
+        assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
+        extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
+        assert not extra or f"(all adds {', '.join(extra)})" in group
+
+
+def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys):
+    out = tmp_path / "both"
+    assert run_cli(capsys, "run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+    for folder in (out, out / "mmr"):  # a several-algorithm run, one algorithm's run
+        before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
+        code, stdout, err = run_cli(capsys, "run", "--resume", str(folder), "--quiet")
+        assert code == 0 and err == "", err
+        assert stdout == (f"{folder}: the run is finished (summary.json written); nothing to resume "
+                          f"(its results: remidi table {folder})\n")
+        assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
+    from remidi.cli import _print_summaries
+
+    long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than the old 32-character column
+    _print_summaries({"plr": {"experiment": "tmaze", "preset": "smoke", "seeds": [0, 1], "metrics": {
+        "solve_rate/mean": {"mean": 0.5, "std": 0.1, "per_seed": [0.4, 0.6]},
+        long: {"mean": 12.25, "std": 1.0, "per_seed": [11.25, 13.25]},
+        "x": {"mean": None, "std": None, "per_seed": [None, None]}}}}, "out")
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")]
+    assert len(rows) == 3
+    ends = {len(row.split(" ± ")[0]) for row in rows}  # where each mean (or n/a) ends
+    assert ends == {2 + len(long) + 1 + 10}, rows
+
+
+def test_a_run_whose_rollouts_cannot_fit_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
+    """The rollouts' observations alone (seeds × num_steps × num_envs × one observation and three
+    floats) against the device's memory: a lower bound, checked with the rest of the input."""
+    from remidi.experiments import base
+
+    monkeypatch.setattr(base, "_device_memory", lambda: (64 * 2**20, "a 64 MiB test device"))
+    argv = ["run", "lever", "--algo", "plr", "--seeds", "1", "--quiet", *LEVER_TINY, "--set", "num_envs=100000"]
+    code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "run"))
+    # lever: a 65-float observation (260 bytes) and 12 bytes: 4 steps × 100000 envs × 272 bytes = 104 MiB
+    assert code == 2 and err == ("remidi: error: num_envs=100000: the rollouts alone need 104 MiB (1 seed × num_steps "
+                                 "4 × num_envs 100000 × 272 bytes), more than the 64 MiB of a 64 MiB test device; "
+                                 "lower num_envs (--set num_envs=N), num_steps or the number of seeds\n"), err
+    assert list(tmp_path.iterdir()) == []

@@ -135,3 +135,16 @@ def test_cvar_levels_leave_out_levels_no_agent_can_solve():
     levels = _solvable_levels(task, 32, seed=0)
     assert levels.wall_map.shape[0] == 32
     assert (np.asarray(jax.jit(jax.vmap(M.optimal_return))(levels)) > 0).all()
+
+
+def test_evaluate_png_is_titled_with_the_experiment_and_the_run(tmp_path, monkeypatch):
+    from remidi import evaluate
+    from remidi.experiments import plots
+
+    titles = []
+    monkeypatch.setattr(plots, "plot_bars", lambda path, title, *args, **kwargs: titles.append(title))
+    entry = {"update": 300, "seeds": [0, 1], "metrics": {"solve_rate/visible": {"per_seed": [0.5, 1.0]}}}
+    doc = {"run": "/work/runs/lever/20261124-2338", "experiment": "lever", "args": {},
+           "algorithms": {"plr": entry, "remidi": entry}}
+    evaluate._plot(tmp_path / "evaluate.png", doc)
+    assert titles == ["lever: solve rate of lever/20261124-2338's final checkpoint, update 300"]

@@ -88,7 +88,7 @@ def test_tabular_plot_reference_in_legend_and_coinciding_curves_once(figures, tm
                for algo in ("mmr", "remidi")}
     exp.plot(tmp_path, results, exp.config_factory())
     regret = figures["regret.png"].axes[0]
-    assert legend(regret) == ["h1", "h3", "h5", "exact BLP: 0.175 (h1, h3), 1 (h5)"]
+    assert legend(regret) == ["observation h1", "observation h3", "observation h5", "exact BLP: 0.175 (h1, h3), 1 (h5)"]
     assert not regret.texts  # no text drawn over the curves
     adversary = figures["adversary.png"].axes[0]
     assert legend(adversary) == ["theta1, theta3, theta4", "theta2", "theta5, theta6"]
@@ -111,3 +111,24 @@ def test_several_algorithm_run_records_and_keeps_the_given_order(tmp_path):
         path.write_text(json.dumps({k: v for k, v in json.loads(path.read_text()).items() if k != "algos"}))
     order = sorted(("remidi", "plr", "dr"), key=lambda a: _run_order(tmp_path / a, lever, a))
     assert order == ["dr", "plr", "remidi"]
+
+
+def test_tabular_regret_curves_are_told_apart_and_labelled_in_words(figures, tmp_path):
+    """Under BLP h1 and h3 both end at 0.175: the two curves differ in line style and marker (the
+    markers at shifted points), and the axes read as words, not metric keys."""
+    exp = get_experiment("tabular-shared")
+    steps = np.arange(10, 170, 10)
+    same = np.tile(np.linspace(0.5, 0.175, len(steps)), (2, 1))
+    history = {"regret/h1": same, "regret/h3": same, "regret/h5": same + 0.8,
+               **{f"adversary_prob/theta{i}": np.full_like(same, 1 / 6) for i in range(1, 7)}}
+    reference = {"blp_regret": {"h1": 0.175, "h3": 0.175, "h5": 1.0}}
+    exp.plot(tmp_path, {"remidi": RunResult(steps=steps, history=history, extra={"reference": reference})},
+             exp.config_factory())
+    regret = figures["regret.png"].axes[0]
+    lines = {line.get_label(): line for line in regret.get_lines() if line.get_label().startswith("observation")}
+    assert list(lines) == ["observation h1", "observation h3", "observation h5"]
+    h1, h3 = lines["observation h1"], lines["observation h3"]
+    assert (h1.get_linestyle(), h1.get_marker()) != (h3.get_linestyle(), h3.get_marker())
+    assert h1.get_markevery() != h3.get_markevery()  # the markers of coinciding curves do not cover each other
+    for fig, ax in ((figures["regret.png"], regret), (figures["adversary.png"], figures["adversary.png"].axes[0])):
+        assert "/" not in ax.get_ylabel() and "<" not in ax.get_ylabel(), ax.get_ylabel()

@@ -110,7 +110,9 @@ def sheet_size(rows: int, columns: int, tile: int, size: int = 13, row_header: b
     """(width, height) of a render sheet (see remidi.render's module docstring)."""
     tile_px = (size + 2) * tile
     row_h = (render.ROW_HEADER if row_header else 0) + render.CAPTION + tile_px + render.PAD
-    return render.PAD + columns * (tile_px + render.PAD), render.HEADER + rows * row_h + render.PAD
+    width = render.PAD + columns * (tile_px + render.PAD)
+    key = render.key_height(width) if row_header else 0  # a buffer sheet's colour key
+    return width, render.HEADER + key + rows * row_h + render.PAD
 
 
 # ------------------------------------------------------------------------------------- maze
@@ -157,12 +159,20 @@ def test_render_buffers_one_row_per_buffer_active_marked(runs, capsys):
     assert (img.shape[1], img.shape[0]) == sheet_size(NUM_BUFFERS, 4, 4, row_header=True)
     tile_px = 15 * 4
     row_h = render.ROW_HEADER + render.CAPTION + tile_px + render.PAD
-    band = lambda k: img[render.HEADER + k * row_h + 1, -3]  # noqa: E731 (right end of row k's header band)
+    head = render.HEADER + render.key_height(img.shape[1])
+    band = lambda k: img[head + k * row_h + 1, -3]  # noqa: E731 (right end of row k's header band)
     assert tuple(band(1)) == render.ACTIVE_BAND  # buffer 1 is the active one
     assert tuple(band(0)) == tuple(band(2)) == render.BACKGROUND
 
+    # the colour key under the title: a swatch of every colour the sheet uses, with its name
+    assert render.key_height(img.shape[1]) >= render.KEY_ROW
+    key = img[render.HEADER:head].reshape(-1, 3)
+    for colour, _ in render.KEY:
+        assert (key == colour).all(axis=1).sum() >= (render.SWATCH - 2) ** 2, colour
+    assert {label for _, label in render.KEY} >= {"wall", "floor", "goal", "active buffer"}
+
     def tile(k, c):
-        top = render.HEADER + k * row_h + render.ROW_HEADER + render.CAPTION
+        top = head + k * row_h + render.ROW_HEADER + render.CAPTION
         left = render.PAD + c * (tile_px + render.PAD)
         return img[top:top + tile_px, left:left + tile_px]
 

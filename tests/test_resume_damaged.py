@@ -83,6 +83,7 @@ DAMAGE = {
 def test_resume_of_a_damaged_run_is_one_line_and_changes_nothing(runs, tmp_path, capsys, case):
     folder = tmp_path / "run"
     shutil.copytree(runs / "remidi", folder)
+    (folder / "summary.json").unlink()  # unfinished (killed after its last checkpoint): a finished run is not resumed
     damage, needle = DAMAGE[case]
     if damage is None:
         shutil.copy(runs / "plr" / "checkpoint.npz", folder / "checkpoint.npz")
@@ -102,6 +103,7 @@ def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp
     resume deletes those (and only those) before it writes."""
     folder = tmp_path / "run"
     shutil.copytree(runs / "remidi", folder)
+    (folder / "summary.json").unlink()  # unfinished (killed after its last checkpoint): a finished run is not resumed
     stale = [folder / ".checkpoint.npz.k1ll3d.tmp", folder / ".checkpoint.history.npz.x9.tmp"]
     for path in stale:
         path.write_bytes(b"\0" * 4096)

@@ -93,3 +93,39 @@ def test_a_malformed_summary_is_one_line_exit_2(tmp_path, capsys, text, needle):
     assert main(["table", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err and str(tmp_path / "summary.json") in err, err
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("", "metrics.csv, line 1: the file is empty"),
+    ("seed,step,metric,value\n0,10,solve_rate/mean,0.5\n0,20,solve_rate/mean,abc\n",
+     "metrics.csv, line 3: expected seed,step,metric,value"),
+    ("seed,step,metric,value\n0,10,solve_rate/mean\n", "metrics.csv, line 2: expected seed,step,metric,value"),
+    ("a,b\n", "metrics.csv, line 1: expected the header seed,step,metric,value"),
+])
+def test_last_k_on_a_malformed_metrics_csv_is_one_line_naming_file_and_line(tmp_path, capsys, text, needle):
+    folder = tmp_path / "run"
+    write_run(folder, "tmaze", "plr", {"solve_rate/mean": [0.0, 1.0]})
+    (folder / "metrics.csv").write_text(text)
+    assert main(["table", str(folder), "--last", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
+    assert str(folder / "metrics.csv") in err
+
+
+def test_default_columns_are_the_claims_metrics_the_headline_and_the_level_shares(tmp_path, capsys):
+    """tmaze's summary lists the held-out solve rates before the replay shares that carry the
+    paper's claim (Fig. 7a): the default columns are solve_rate/mean and the shares, per experiment;
+    a game without shares (tabular) keeps its first three."""
+    rates = {f"solve_rate/{name}": [0.5, 0.5] for name in ("SixteenRooms", "Labyrinth", "StandardMaze")}
+    write_run(tmp_path / "t", "tmaze", "plr", {"solve_rate/mean": [0.5, 0.5], **rates,
+                                               "replay_fraction/tmaze": [0.9, 1.0], "buffer_fraction/tmaze": [0.8, 1.0]})
+    write_run(tmp_path / "b", "blindfold", "plr", {"solve_rate/mean": [0.5, 0.5], **rates,
+                                                   "replay_fraction/blind": [0.9, 1.0],
+                                                   "buffer_fraction/blind": [0.8, 1.0]})
+    write_run(tmp_path / "g", "tabular-shared", "mmr", {f"regret/h{i}": [0.5, 0.5] for i in (1, 3, 5, 7)})
+    assert main(["table", str(tmp_path / "t"), str(tmp_path / "b"), str(tmp_path / "g")]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    shown = [cell for cell in head.strip("| ").split(" | ") if not cell.endswith((" IQM", " 95% CI"))]
+    assert shown == ["experiment", "algorithm", "solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze",
+                     "replay_fraction/blind", "buffer_fraction/blind", "regret/h1", "regret/h3", "regret/h5",
+                     "seeds", "preset", "wall time"], head

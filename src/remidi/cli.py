@@ -25,6 +25,32 @@ class _Parser(argparse.ArgumentParser):
         raise RemidiError(f"{command + ': ' if command else ''}{message} (see {self.prog} --help)")
 
 
+def _algo_help() -> str:
+    """``remidi run --algo``'s help, read from the registry when the help is printed (importing the
+    experiments takes seconds, too long for every command): each experiment's default algorithms
+    and what ``all`` adds."""
+    from remidi.experiments import all_experiments
+    from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
+
+    groups: dict[tuple, list[str]] = {}  # (default algorithms, every algorithm) → experiments
+    for exp in all_experiments().values():
+        groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), tuple(exp.algorithms)), []).append(exp.name)
+    groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS)), []).append("module:function")
+    parts = []
+    for (default, every), names in groups.items():
+        extra = [a for a in every if a not in default]
+        parts.append(f"{', '.join(names)}: {', '.join(default)}" + (f" (all adds {', '.join(extra)})" if extra else ""))
+    return ("algorithm, comma-separated list, or 'all' (every algorithm of the experiment); default: the "
+            "experiment's default set — " + "; ".join(parts))
+
+
+class _RunHelpFormatter(argparse.HelpFormatter):
+    """``remidi run --help``: ``--algo``'s help from the registry (:func:`_algo_help`)."""
+
+    def _get_help_string(self, action):
+        return _algo_help() if action.dest == "algo" else super()._get_help_string(action)
+
+
 _RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume hint
 
 
@@ -137,40 +163,44 @@ def _cmd_list(args) -> int:
     from remidi.experiments.base import default_preset, resolve_config
     from remidi.experiments.config import field_names, get_value, key_help
 
-    experiments = [get_experiment(args.experiment)] if args.experiment else list(all_experiments().values())
-    for i, exp in enumerate(experiments):
-        if i:
-            print()
-        print(f"{exp.name}: {exp.description}")
-        print(f"  algorithms: {', '.join(exp.algorithms)}"
-              + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
-        if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
-            from remidi.engine.scores import SCORES
+    if not args.experiment:  # an overview, one line per experiment; the details of one: remidi list NAME
+        experiments = list(all_experiments().values())
+        width = max(len(exp.name) for exp in experiments)
+        for exp in experiments:
+            print(f"{exp.name:<{width}}  {exp.description} (presets: {', '.join(exp.presets)})")
+        print("remidi list NAME: its algorithms, presets and --set keys", file=sys.stderr)
+        return 0
+    exp = get_experiment(args.experiment)
+    print(f"{exp.name}: {exp.description}")
+    print(f"  algorithms: {', '.join(exp.algorithms)}"
+          + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
+    if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
+        from remidi.engine.scores import SCORES
 
-            print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
-        presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
-                            for p in exp.presets)
-        print(f"  presets:    {presets}")
-        for name, reasons in exp.preset_reasons.items():
-            print(f"  {name}: deviates from paper in")
-            width = max(len(key) for key in reasons)
-            cfg = resolve_config(exp, name, {})
-            for key, why in reasons.items():
-                print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
-        default = default_preset(exp)
-        configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
-        print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
-              f"differs) and meaning:")
-        rows = []
-        for key in field_names(exp.config_factory()):
-            value = get_value(configs[default], key)
-            others = [f"{name}: {_format_value(get_value(cfg, key))}" for name, cfg in configs.items()
-                      if name != default and get_value(cfg, key) != value]
-            rows.append((key, _format_value(value) + (f" [{', '.join(others)}]" if others else ""),
-                         key_help(configs[default], key)))
-        widths = [max(len(row[c]) for row in rows) for c in (0, 1)]
-        for key, shown, meaning in rows:
-            print(f"    {key:<{widths[0]}}  {shown:<{widths[1]}}  {meaning}".rstrip())
+        print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
+    presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
+                        for p in exp.presets)
+    print(f"  presets:    {presets}")
+    for name, reasons in exp.preset_reasons.items():
+        print(f"  {name}: deviates from paper in")
+        width = max(len(key) for key in reasons)
+        cfg = resolve_config(exp, name, {})
+        for key, why in reasons.items():
+            print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
+    default = default_preset(exp)
+    configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
+    print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "
+          f"differs) and meaning:")
+    rows = []
+    for key in field_names(exp.config_factory()):
+        value = get_value(configs[default], key)
+        others = [f"{name}: {_format_value(get_value(cfg, key))}" for name, cfg in configs.items()
+                  if name != default and get_value(cfg, key) != value]
+        rows.append((key, _format_value(value) + (f" [{', '.join(others)}]" if others else ""),
+                     key_help(configs[default], key)))
+    widths = [max(len(row[c]) for row in rows) for c in (0, 1)]
+    for key, shown, meaning in rows:
+        print(f"    {key:<{widths[0]}}  {shown:<{widths[1]}}  {meaning}".rstrip())
     return 0
 
 
@@ -186,12 +216,18 @@ def _mean_and_spread(m: dict) -> str:
     return f"{m['mean']:10.4f}" + ("" if _undefined(m["std"]) else f" ± {m['std']:.4f}")
 
 
+def _print_metrics(metrics: dict[str, dict]) -> None:
+    """One line per metric, ``name  mean ± std``, the values in one column however long the names."""
+    width = max((len(name) for name in metrics), default=0)
+    for name, m in metrics.items():
+        print(f"  {name:<{width}} {_mean_and_spread(m)}")
+
+
 def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     for algo, summary in summaries.items():
         n = len(summary["seeds"])
         print(f"\n{summary['experiment']} / {algo} ({summary['preset']}, {n} seed{'s' if n != 1 else ''}): final metrics")
-        for name, m in summary["metrics"].items():
-            print(f"  {name:32s} {_mean_and_spread(m)}")
+        _print_metrics(summary["metrics"])
     print(f"\nwrote {out}")
 
 
@@ -201,12 +237,22 @@ def _cmd_run(args) -> int:
     from remidi.experiments.config import parse_set_items
     from remidi.experiments.tracking import parse_log
 
+    for flag, value in (("--out", args.out), ("--resume", args.resume)):
+        if value is not None and not value.strip():  # Path("") is the current folder: never what was meant
+            raise RemidiError(f"{flag}: must name a folder, got {value!r}")
     if args.resume is not None:
-        if (args.experiment is not None or args.algo or args.out or args.sets or args.seeds is not None
+        if (args.experiment is not None or args.algo or args.out is not None or args.sets or args.seeds is not None
                 or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
-        summaries = resume_experiment(saved_experiment, Path(args.resume), progress=not args.quiet)
+        from remidi.experiments.base import finished_run
+
+        finished = finished_run(Path(args.resume))
+        summaries = resume_experiment(saved_experiment, Path(args.resume), progress=not args.quiet)  # checks it
+        if finished:  # resume_experiment trained nothing
+            print(f"{args.resume}: the run is finished (summary.json written); nothing to resume "
+                  f"(its results: remidi table {args.resume})")
+            return 0
         _print_summaries(summaries, Path(args.resume))
         return 0
     if args.experiment is None:
@@ -225,7 +271,7 @@ def _cmd_run(args) -> int:
     if args.seed < 0:
         raise RemidiError(f"--seed: must be an integer ≥ 0, got {args.seed}")
     seeds = list(range(args.seed, args.seed + num_seeds))
-    out = Path(args.out) if args.out else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out is not None else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)
     log = parse_log(args.log)  # a missing package: one line naming the extra, before anything is written
     summaries = run_experiment(exp, algos=algos, preset=args.preset, seeds=seeds,
@@ -259,8 +305,7 @@ def _cmd_evaluate(args) -> int:
     for algo, entry in doc["algorithms"].items():
         n = len(entry["seeds"])
         print(f"\n{algo} ({n} seed{'s' if n != 1 else ''}, checkpoint of update {entry['update']})")
-        for name, m in entry["metrics"].items():
-            print(f"  {name:32s} {_mean_and_spread(m)}")
+        _print_metrics(entry["metrics"])
     print(f"\nwrote {Path(args.run_dir) / 'evaluate.json'}, evaluate.csv, evaluate.png")
     return 0
 
@@ -325,12 +370,12 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--json", action="store_true", help="print machine-readable JSON")
     solve.set_defaults(func=_cmd_solve)
 
-    run = sub.add_parser("run", help="run an experiment (see `remidi list`)",
+    run = sub.add_parser("run", help="run an experiment (see `remidi list`)", formatter_class=_RunHelpFormatter,
                          description="Train one or more algorithms on an experiment for several seeds and "
                                      "write config.json, metrics.csv, summary.json and plots.")
     run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask "
                           "(imported as Python does: from the current folder first)")
-    run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: all)")
+    run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: the experiment's default set)")
     run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
                                       "as module:function: default, the engine's UEDConfig)")
@@ -351,9 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_cmd_run)
 
     lst = sub.add_parser("list", help="list experiments, algorithms, presets and config keys",
-                         description="List experiments with their algorithms, presets and --set keys (each "
-                                     "with its default and what it means).")
-    lst.add_argument("experiment", nargs="?", help="only this experiment")
+                         description="List the experiments, one line each; with EXPERIMENT, its algorithms, "
+                                     "presets and --set keys (each with its default and what it means).")
+    lst.add_argument("experiment", nargs="?", help="this experiment's details")
     lst.set_defaults(func=_cmd_list)
 
     render = sub.add_parser("render", help="draw held-out mazes, a run's level buffers, or an episode",
@@ -407,8 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
                                        "the mean ± sample standard deviation over seeds (ddof 1), the "
                                        "interquartile mean and the 95% percentile-bootstrap interval of the mean.")
     table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
-    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: the first three of the "
-                                                         "first run's summary)")
+    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: per experiment, its first "
+                                                         "metric and level shares replay_fraction/TAG, "
+                                                         "buffer_fraction/TAG; else its first three)")
     table.add_argument("--last", type=int, metavar="K", help="per seed, the mean of each metric's last K logged "
                                                             "points (metrics.csv) instead of its final value")
     table.set_defaults(func=_cmd_table)

@@ -25,9 +25,10 @@ latest) and evaluated on
   whose optimum is positive). ``perfect<S>/solve_rate``, ``perfect<S>/return``,
   ``perfect<S>/regret`` (optimal minus mean return).
 
-Writes ``RUN_DIR/evaluate.json`` (the arguments, and per algorithm the update its checkpoint is
-from and every metric's mean, std and per-seed values), ``RUN_DIR/evaluate.csv`` (long format:
-algo, seed, metric, value) and ``RUN_DIR/evaluate.png`` (the main metrics per algorithm).
+Writes ``RUN_DIR/evaluate.json`` (the run, its experiment, the arguments, and per algorithm the
+update its checkpoint is from and every metric's mean, std and per-seed values),
+``RUN_DIR/evaluate.csv`` (long format: algo, seed, metric, value) and ``RUN_DIR/evaluate.png``
+(the main metrics per algorithm, titled with the experiment and the run).
 Every bad argument, or a folder that is not a UED run with a checkpoint, is a one-line error
 before anything is computed or written.
 """
@@ -110,6 +111,7 @@ class _Loaded:
     setup: Any
     runner: Any
     update: int
+    experiment: str = ""
 
 
 def _check_args(attempts, cvar_levels, cvar_attempts, perfect_sizes, perfect_count, seed) -> None:
@@ -171,7 +173,7 @@ def _load(folder: Path, task=None) -> _Loaded:
     setup = tr.make_setup(exp.make_task(config), config, algo)
     runner, meta = driver.load_run_state(setup, seeds, path, flag="RUN_DIR")
     return _Loaded(folder=folder, algo=algo, seeds=list(seeds), setup=setup, runner=runner,
-                   update=int(meta.get("done", -1)))
+                   update=int(meta.get("done", -1)), experiment=exp.name)
 
 
 def _solvable_levels(task, count: int, seed: int):
@@ -275,7 +277,7 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
     loaded = [_load(folder, task) for folder in _run_folders(run_dir)]  # every run checked before any is evaluated
     args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
-    doc: dict[str, Any] = {"run": str(run_dir), "args": args, "algorithms": {}}
+    doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args, "algorithms": {}}
     rows = []
     cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels: the algorithms of one run share both
     mazes: dict[int, tuple] = {}  # size → (env, perfect mazes, their optimal returns), built once
@@ -326,8 +328,12 @@ def _plot(path: Path, doc: dict) -> None:
     shown = [n for n in names if n.split("/")[0] == kind or n.startswith("cvar/" + kind)
              or (n.startswith("perfect") and n.endswith("/" + kind))]
     series = {algo: np.array([entry["metrics"][n]["per_seed"] for n in shown], float) for algo, entry in algos.items()}
-    plot_bars(path, f"remidi evaluate: {kind.replace('_', ' ')}", shown, series, kind,
-              ylim=(0.0, 1.0) if kind == "solve_rate" else None)
+    run = Path(doc["run"])
+    name = str(run) if len(run.parts) <= 2 else str(Path(*run.parts[-2:]))  # e.g. tmaze/20261124-2338
+    updates = sorted({entry["update"] for entry in algos.values()})
+    at = f", update {updates[0]}" if len(updates) == 1 else ""
+    plot_bars(path, f"{doc.get('experiment') or 'run'}: {kind.replace('_', ' ')} of {name}'s final checkpoint{at}",
+              shown, series, kind, ylim=(0.0, 1.0) if kind == "solve_rate" else None)
 
 
 def main_args(parser) -> None:

@@ -13,7 +13,8 @@ sheets are assembled with NumPy and Pillow and written atomically. Geometry (so 
 checked): a sheet is ``HEADER`` pixels of title, then its rows; a row is its own header band
 (``ROW_HEADER``, buffer sheets only), a caption band (``CAPTION``) and the tiles, followed by
 ``PAD``; tiles are ``(size + 2) · tile`` pixels square (the maze plus its border) with ``PAD``
-pixels between and around them.
+pixels between and around them. A buffer sheet has a colour key under its title (:data:`KEY`):
+:func:`key_height` pixels, ``KEY_ROW`` per line of swatches that fits the sheet's width.
 
 Every bad input raises :class:`~remidi.errors.RemidiError` (one line) before anything is written.
 """
@@ -46,6 +47,12 @@ TEXT = (0, 0, 0)
 ACTIVE_BAND = (255, 214, 90)  # header band of the active buffer
 ACTIVE_FRAME = (230, 140, 0)  # frame around the active buffer's tiles
 UNSEEN = (24, 28, 70)  # a cell of the agent's view that it cannot see
+KEY_ROW = 14  # one line of the colour key
+SWATCH = 10  # a colour key's swatch, pixels square
+# the colour key of a buffer sheet: jaxued's MazeRenderer's colours, then the active buffer's marks
+KEY = (((100, 100, 100), "wall"), ((0, 0, 0), "floor"), ((0, 255, 0), "goal"),
+       ((255, 0, 0), "agent (pointing where it faces)"),
+       ((76, 76, 76), "its 5x5 view (cells lightened 30%)"), (ACTIVE_BAND, "active buffer"))
 MIN_FRAME_WIDTH = 320  # pixels: an episode frame is at least this wide, so its captions fit
 FRAME_MS = 150
 LAST_FRAME_MS = 2000
@@ -121,16 +128,50 @@ def _render_levels(levels, size: int, tile: int) -> np.ndarray:
     return np.asarray(jax.vmap(renderer.render_level, in_axes=(0, None))(levels, env.default_params))
 
 
-def _sheet(title: str, rows: list[dict], columns: int, tile_px: int, row_header: bool) -> np.ndarray:
+def _key_lines(width: int) -> list[list[tuple[int, tuple, str]]]:
+    """:data:`KEY` laid out in lines that fit ``width`` pixels: ``[(x, colour, label)]`` per line
+    (an entry wider than the sheet gets a line of its own, clipped)."""
+    lines, x = [[]], PAD
+    for colour, label in KEY:
+        w = SWATCH + 4 + int(_font().getlength(label)) + 12
+        if lines[-1] and x + w > width:
+            lines.append([])
+            x = PAD
+        lines[-1].append((x, colour, label))
+        x += w
+    return lines
+
+
+def key_height(width: int) -> int:
+    """Pixels of the colour key of a buffer sheet ``width`` pixels wide."""
+    return KEY_ROW * len(_key_lines(width))
+
+
+def _draw_key(canvas: np.ndarray, top: int) -> None:
+    for i, line in enumerate(_key_lines(canvas.shape[1])):
+        y = top + i * KEY_ROW
+        for x, colour, label in line:
+            s = (KEY_ROW - SWATCH) // 2
+            canvas[y + s:y + s + SWATCH, x:x + SWATCH] = (128, 128, 128)  # a grey edge: black floor on white
+            canvas[y + s + 1:y + s + SWATCH - 1, x + 1:x + SWATCH - 1] = colour
+            right = min(canvas.shape[1], x + SWATCH + 2 + int(_font().getlength(label)) + 8)
+            _text(canvas, (x + SWATCH + 2, y), max(0, right - x - SWATCH - 2), KEY_ROW, label)
+
+
+def _sheet(title: str, rows: list[dict], columns: int, tile_px: int, row_header: bool,
+           key: bool = False) -> np.ndarray:
     """Assemble a sheet. ``rows``: ``{"tiles": u8[n, P, P, 3] (n ≤ columns), "captions": [str],
-    "label": str, "active": bool}``."""
+    "label": str, "active": bool}``; ``key``: the colour key under the title."""
     row_h = (ROW_HEADER if row_header else 0) + CAPTION + tile_px + PAD
     width = PAD + columns * (tile_px + PAD)
-    height = HEADER + len(rows) * row_h + PAD
+    head = HEADER + (key_height(width) if key else 0)
+    height = head + len(rows) * row_h + PAD
     canvas = np.full((height, width, 3), BACKGROUND, np.uint8)
     _text(canvas, (0, 0), width, HEADER, title)
+    if key:
+        _draw_key(canvas, HEADER)
     for r, row in enumerate(rows):
-        top = HEADER + r * row_h
+        top = head + r * row_h
         if row_header:
             _text(canvas, (0, top), width, ROW_HEADER, row.get("label", ""),
                   background=ACTIVE_BAND if row.get("active") else None)
@@ -313,7 +354,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
         n += len(slots)
     title = (f"{run.experiment} / {run.algo}, seed {seed}: level buffers at update {meta.get('done', '?')} "
              f"(active: buffer {active})")
-    _save_png(path, _sheet(title, rows, columns, tile_px, row_header=True))
+    _save_png(path, _sheet(title, rows, columns, tile_px, row_header=True, key=True))
     return path
 
 

@@ -4,7 +4,12 @@ An :class:`Experiment` says which algorithms and presets it has, how to build an
 configuration, how to train one algorithm for a set of seeds (returning a :class:`RunResult`)
 and how to plot results. :func:`run_experiment` does the rest identically for all of them:
 validate everything before writing anything, write ``config.json`` first (so a killed run can
-be resumed), then ``metrics.csv``, ``summary.json`` and the plots.
+be resumed), then ``metrics.csv``, ``summary.json`` and the plots. A UED run whose rollouts alone
+cannot fit the device's memory is refused with the rest of the input (:func:`_check_memory`, a
+lower bound); one that runs out of memory all the same (XLA's ``RESOURCE_EXHAUSTED`` at
+allocation or compilation, MemoryError: :class:`TooLarge`) is one line naming ``num_envs``; a
+fresh run then removes the files and folders it made (resuming would fail the same way), keeping
+what was there before and the algorithms that finished; a resumed one leaves its folder as it is.
 
 With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
 panel per metric, one curve per algorithm, in the order given; tabular: one panel per algorithm)
@@ -17,6 +22,7 @@ shards the seeds over N devices for the experiments that support it (``Experimen
 
 from __future__ import annotations
 
+import re
 import shutil
 import sys
 import tempfile
@@ -157,6 +163,7 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
         raise ConfigError(f"--seed: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
                           f"{min(seeds)}..{max(seeds)}; lower --seed or --seeds")
     _check_devices(exp, devices, len(seeds))
+    _check_memory(exp, config, len(seeds), devices)
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch
             return _write_and_train(exp, algos, preset, seeds, config, Path(scratch) / "run", [], False, argv, devices)
@@ -170,12 +177,123 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
         outputs.prepare_out_dir(folder, create=False)
     for note in notes:  # only once the run is known to be valid: an error stays the only line
         print(f"remidi: {note}", file=sys.stderr, flush=True)
-    for algo, folder in folders.items():
-        outputs.prepare_out_dir(folder)
-        write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
-                         log=list(log))
-    return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
-                            devices=devices, log=list(log))
+    before = _existing_paths(out, list(folders.values()))
+    try:
+        for algo, folder in folders.items():
+            outputs.prepare_out_dir(folder)
+            write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
+                             log=list(log))
+        return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
+                                devices=devices, log=list(log))
+    except TooLarge as err:  # resuming would fail the same way: remove what this run wrote, keep finished algorithms
+        finished = [algo for algo, folder in folders.items() if (folder / "summary.json").exists()]
+        _remove_new_paths(out, [folders[algo] for algo in folders if algo not in finished], before)
+        kept = f" (kept the finished {', '.join(finished)} in {out})" if finished else ""
+        raise TooLarge(f"{err}; removed what this run wrote{kept}") from None
+
+
+class TooLarge(ConfigError):
+    """The run does not fit the device: XLA ran out of memory (``RESOURCE_EXHAUSTED``), NumPy raised
+    MemoryError, or an array outgrew XLA's 32-bit indices."""
+
+
+def too_large_message(err: BaseException, config) -> str | None:
+    """One line for an error that says the run is too large for the device, naming ``num_envs``
+    (the usual culprit) and the size XLA asked for; None for any other error."""
+    text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    if isinstance(err, MemoryError):
+        what = "does not fit in memory (MemoryError)"
+    elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "RESOURCE_EXHAUSTED" in text:
+        found = re.search(r"allocat\w* (\d+) bytes", text)
+        asked = f": XLA asked for {_size(int(found.group(1)))}" if found else ""
+        what = f"does not fit in the device's memory{asked}"
+    elif type(err).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "2147483647" in text:
+        what = "is too large for XLA (an array with more than 2^31 elements)"
+    else:
+        return None
+    num_envs = getattr(config, "num_envs", None)
+    size = f"num_envs={num_envs}: " if num_envs is not None else ""
+    fix = "lower num_envs (--set num_envs=N)" if num_envs is not None else "use a smaller configuration"
+    return f"{size}the run {what}; {fix} or the number of seeds"
+
+
+def _size(num_bytes: float) -> str:
+    """``3.0 GiB``, ``104 MiB``."""
+    return f"{num_bytes / 2**30:,.1f} GiB" if num_bytes >= 2**30 else f"{num_bytes / 2**20:,.0f} MiB"
+
+
+def _device_memory() -> tuple[int | None, str]:
+    """``(bytes, what)``: the memory of the first device JAX sees (an accelerator's limit, a CPU's
+    physical memory); None where it cannot be told."""
+    import os
+
+    import jax
+
+    device = jax.local_devices()[0]
+    stats = device.memory_stats() or {}
+    if stats.get("bytes_limit"):
+        return int(stats["bytes_limit"]), f"the {device.device_kind} ({device.platform})"
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"), "this machine's memory"
+    except (ValueError, OSError, AttributeError):
+        return None, "this machine's memory"
+
+
+def _check_memory(exp: Experiment, config, num_seeds: int, devices: int) -> None:
+    """Refuse a UED run before anything is written when its rollouts alone cannot fit one device: a
+    block stores, per seed on the device, ``num_steps × num_envs`` observations and a reward, value
+    and log-probability each (a lower bound of what training holds: parameters, buffers and the
+    compiled program come on top). A run that passes can still run out of memory (then
+    :class:`TooLarge`, after allocating)."""
+    num_envs, num_steps = getattr(config, "num_envs", None), getattr(config, "num_steps", None)
+    if exp.make_task is None or not isinstance(num_envs, int) or not isinstance(num_steps, int):
+        return
+    import jax
+
+    try:  # shapes only: nothing is allocated or compiled
+        task = exp.make_task(config)
+        obs, _ = jax.eval_shape(lambda k: task.env.reset_to_level(k, task.sample_level(k), task.params),
+                                jax.random.PRNGKey(0))
+        per_step = sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(obs)) + 3 * 4
+    except Exception:  # noqa: BLE001 - a task this cannot size: training reports its own errors
+        return
+    seeds = max(1, num_seeds // max(1, devices))
+    need = seeds * num_steps * num_envs * per_step
+    have, what = _device_memory()
+    if have is not None and need > have:
+        raise TooLarge(f"num_envs={num_envs}: the rollouts alone need {_size(need)} ({seeds} seed"
+                       f"{'s' if seeds != 1 else ''} × num_steps {num_steps} × num_envs {num_envs} × {per_step} "
+                       f"bytes), more than the {_size(have)} of {what}; lower num_envs "
+                       f"(--set num_envs=N), num_steps or the number of seeds")
+
+
+def _existing_paths(out: Path, folders: list[Path]) -> set[Path]:
+    """What exists before a run writes: ``out``'s parents, ``out`` and each of ``folders`` with the
+    entries directly in them."""
+    found = {p for p in Path(out).parents if p.exists()}
+    for folder in map(Path, dict.fromkeys([Path(out), *folders])):
+        if folder.is_dir():
+            found |= {folder, *folder.iterdir()}
+    return found
+
+
+def _remove_new_paths(out: Path, folders: list[Path], before: set[Path]) -> None:
+    """Remove what a failed fresh run wrote: the entries of ``folders`` that were not in ``before``
+    (new sub-folders with all they hold), then ``out``, the folders and the parents they were made
+    in when they are new and left empty. Nothing that existed before the run is touched."""
+    for folder in map(Path, folders):
+        for path in (list(folder.iterdir()) if folder.is_dir() else []):
+            if path in before:
+                continue
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink(missing_ok=True)
+    for folder in sorted({Path(out), *map(Path, folders)}, key=lambda p: len(p.parts), reverse=True):
+        for path in (folder, *folder.parents):
+            if path in before or not path.is_dir() or any(path.iterdir()):
+                break
+            path.rmdir()
 
 
 def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path,
@@ -186,7 +304,8 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
 
     ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
     run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
-    are redrawn. The run keeps its recorded ``devices``.
+    are redrawn. The run keeps its recorded ``devices``. A finished run (:func:`finished_run`) is
+    checked, then returned as it is: nothing is trained or written.
     """
     folder = Path(folder)
     if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
@@ -194,6 +313,16 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
             shutil.copytree(folder, Path(scratch) / "run")
             return _resume(exp_lookup, Path(scratch) / "run", progress=False)
     return _resume(exp_lookup, folder, progress)
+
+
+def finished_run(folder: Path) -> bool:
+    """Whether ``folder`` holds a finished run: its summary.json is written (of a several-algorithm
+    run, every algorithm's), so resuming it has nothing to train."""
+    folder = Path(folder)
+    if (folder / "config.json").exists():
+        return (folder / "summary.json").exists()
+    subs = [p for p in folder.iterdir() if (p / "config.json").exists()] if folder.is_dir() else []
+    return bool(subs) and all((p / "summary.json").exists() for p in subs)
 
 
 def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
@@ -205,6 +334,8 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
     exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)
     devices = _saved_devices(folder)
     _check_devices(exp, devices, len(seeds))
+    if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
+        return {algo: outputs.read_json(folder / "summary.json")}
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
 
@@ -308,12 +439,15 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
     for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
+    finished = finished_run(folder)
     for sub, exp, algo, preset, seeds, config in runs:
         if (sub / "summary.json").exists():
             summaries[algo] = outputs.read_json(sub / "summary.json")
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
                                               progress=progress, devices=devices[sub], log=logs[sub]))
+    if finished:  # nothing trained: the folder stays as it is
+        return summaries
     exp, config = runs[0][1], runs[0][5]
     results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
     exp.plot(folder, results, config)
@@ -370,9 +504,12 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
         started = time.perf_counter()
         try:
             result = exp.train(ctx)
-        except BaseException:  # Ctrl-C or an error: close the tracked runs, a resume continues them
+        except BaseException as err:  # Ctrl-C or an error: close the tracked runs, a resume continues them
             if tracker is not None:
                 tracker.close()
+            message = too_large_message(err, config)
+            if message is not None:  # a resumed run keeps its folder: it resumes on a larger device
+                raise TooLarge(message + (f"; {folder} keeps its last checkpoint" if resume else "")) from None
             raise
         # wall time of the training (compilation included) in this invocation: a resumed run counts its last part
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}

@@ -95,12 +95,15 @@ def metric_rows(steps: np.ndarray, history: Mapping[str, np.ndarray], seeds: Ite
                 yield seed, int(step), name, float(values[s, t])
 
 
+METRICS_HEADER = ["seed", "step", "metric", "value"]
+
+
 def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
     """Long-format rows ``(seed, step, metric, value)``; gzipped (reproducibly: no time stamp)
     when ``path`` ends in ``.gz``."""
     def write_rows(fh):
         w = csv.writer(fh)
-        w.writerow(["seed", "step", "metric", "value"])
+        w.writerow(METRICS_HEADER)
         for seed, step, name, value in rows:
             w.writerow([seed, step, name, repr(float(value))])
 
@@ -115,11 +118,26 @@ def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
 
 
 def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
-    """The rows :func:`write_metrics_csv` wrote (``.gz``: gzipped)."""
+    """The rows :func:`write_metrics_csv` wrote (``.gz``: gzipped); ConfigError (one line naming
+    the file and the line) for an empty file, another header, or a row that is not
+    ``seed,step,metric,value`` with integer seed and step and a number value."""
+    rows = []
     with (gzip.open(path, "rt", newline="") if Path(path).suffix == ".gz" else open(path, newline="")) as fh:
         r = csv.reader(fh)
-        next(r)
-        return [(int(seed), int(step), name, float(value)) for seed, step, name, value in r]
+        header = next(r, None)
+        if header is None:
+            raise ConfigError(f"{path}, line 1: the file is empty (expected the header {','.join(METRICS_HEADER)})")
+        if header != METRICS_HEADER:
+            raise ConfigError(f"{path}, line 1: expected the header {','.join(METRICS_HEADER)}, "
+                              f"got {','.join(header)!r}")
+        for row in r:
+            try:
+                seed, step, name, value = row
+                rows.append((int(seed), int(step), name, float(value)))
+            except ValueError:
+                raise ConfigError(f"{path}, line {r.line_num}: expected seed,step,metric,value with integer "
+                                  f"seed and step and a number value, got {','.join(row)!r}") from None
+    return rows
 
 
 def summarize(final: Mapping[str, np.ndarray]) -> dict[str, dict[str, Any]]:

@@ -44,6 +44,19 @@ def algorithm_style(name: str) -> dict:
     return {"color": color, "linestyle": linestyle, "marker": marker}
 
 
+SERIES_LINES = ("-", "--", ":", "-.")
+SERIES_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
+def series_style(i: int) -> dict:
+    """Matplotlib keywords of the ``i``-th curve of a panel whose curves are not algorithms (the
+    tabular games' observations): the colour cycle's ``i``-th colour with its own line style and
+    marker, so curves that coincide stay visible (the markers are shifted per curve)."""
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return {"color": colors[i % len(colors)], "linestyle": SERIES_LINES[i % len(SERIES_LINES)],
+            "marker": SERIES_MARKERS[i % len(SERIES_MARKERS)]}
+
+
 @dataclass
 class Curve:
     """One line: ``values`` f[S, T] over seeds and log points, drawn as mean ± std. ``style``:
@@ -124,9 +137,10 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean, std = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
             style = dict(curve.style)
-            if style.get("marker"):  # at most ~8 markers, shifted per curve so coinciding curves show both
+            if style.get("marker"):  # at most ~8 markers, spread over the curves so coinciding ones show each
                 every = max(1, len(mean) // 8)
-                style["markevery"] = (i % every, every) if every > 1 else 1
+                shift = i * every // len(curves) if len(curves) <= every else i % every
+                style["markevery"] = (shift, every) if every > 1 else 1
                 style.setdefault("markersize", 4)
             ax.plot(curve.steps, mean, label=curve.label, linewidth=1.6, **style)
             ax.fill_between(curve.steps, mean - std, mean + std, color=style.get("color"), alpha=0.15, linewidth=0)

@@ -122,15 +122,34 @@ def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
     return outputs.summarize(per_seed)  # a seed without a defined point makes the mean NaN: n/a
 
 
+SHARES = ("replay_fraction", "buffer_fraction")  # the level shares that carry the UED experiments' claims
+
+
+def default_metrics(docs: list[dict]) -> list[str]:
+    """The columns without ``--metrics``: per experiment (in the order of the runs), its summary's
+    first metric (the headline: solve_rate/mean, return/undisturbed, ...) and its first two level
+    shares (``replay_fraction/<tag>``, ``buffer_fraction/<tag>``: what PLR⊥ replays is the paper's
+    claim); an experiment without shares (the tabular games): its first three metrics."""
+    first: dict[str, dict] = {}
+    for doc in docs:
+        first.setdefault(doc["experiment"], doc)
+    metrics: list[str] = []
+    for doc in first.values():
+        names = list(doc["metrics"])
+        shares = [name for name in names if name.split("/")[0] in SHARES][:2]
+        metrics += names[:1] + shares if shares else names[:3]
+    return list(dict.fromkeys(metrics))
+
+
 def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int | None = None) -> str:
-    """The table as Markdown, then a blank line and :data:`NOTE`; ``metrics`` default to the first
-    three of the first summary; with ``last``, each metric is the mean of its last ``last`` logged
+    """The table as Markdown, then a blank line and :data:`NOTE`; ``metrics`` default to
+    :func:`default_metrics`; with ``last``, each metric is the mean of its last ``last`` logged
     points (:func:`windowed`)."""
     if not docs:
         raise ConfigError("RUN: no finished runs given")
     if last is not None and (not isinstance(last, int) or last < 1):
         raise ConfigError(f"--last: must be an integer ≥ 1, got {last!r}")
-    metrics = metrics or list(docs[0]["metrics"])[:3]
+    metrics = metrics or default_metrics(docs)
     known = {name for d in docs for name in d["metrics"]}
     unknown = [m for m in metrics if m not in known]
     if unknown:

@@ -13,7 +13,7 @@ import numpy as np
 
 from remidi.errors import ConfigError, choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import Curve, Panel, plot_panels
+from remidi.experiments.plots import Curve, Panel, plot_panels, series_style
 from remidi.solvers.onestep import OneStepGame, solve_blp
 from remidi.tabular.games import paper_game
 from remidi.tabular.learner import TabularUEDConfig, train
@@ -102,16 +102,17 @@ def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig) -> 
     refs = [(v, label) for v in sorted(by_value)]  # one legend entry for all of them
     regret_panels, adversary_panels = [], []
     for algo, result in results.items():
-        regret_curves = [Curve(name.split("/", 1)[1], result.steps, values)
-                         for name, values in result.history.items()
-                         if name.startswith("regret/") and name != "regret/max"]
+        names = [name for name in result.history if name.startswith("regret/") and name != "regret/max"]
+        # h1 and h3 both end at 0.175 under BLP: each observation its own line style and marker
+        regret_curves = [Curve(f"observation {name.split('/', 1)[1]}", result.steps, result.history[name],
+                               series_style(i)) for i, name in enumerate(names)]
         regret_panels.append(Panel(f"{algo}: greatest regret per observation", regret_curves,
-                                   "regret/<observation>", "iteration", refs))
+                                   "greatest regret over the observation's levels", "iteration", refs))
         adversary_curves = [Curve(name.split("/", 1)[1], result.steps, values)
                             for name, values in result.history.items() if name.startswith("adversary_prob/")]
         adversary_panels.append(Panel(f"{algo}: adversary level probabilities", adversary_curves,
-                                      "adversary_prob/<level>", "iteration", ylim=(-0.02, 1.02),
-                                      merge_coinciding=True))
+                                      "probability the adversary samples the level", "iteration",
+                                      ylim=(-0.02, 1.02), merge_coinciding=True))
     plot_panels(folder / "regret.png", regret_panels)
     plot_panels(folder / "adversary.png", adversary_panels)
 

@@ -203,3 +203,14 @@ def test_the_cartpole_example_is_a_task_in_ten_lines_that_the_cli_runs(monkeypat
     err = capsys.readouterr().err.strip()
     assert err.startswith("remidi: error: score: perfect_regret needs the environment's optimal return")
     assert "\n" not in err and not (tmp_path / "x").exists()
+
+
+def test_all_algorithms_of_a_gymnax_experiment_are_those_its_task_supports():
+    """A gymnax task has no level-building MDP: `--algo all` leaves the learned generators out
+    (it was refused by validation), while the maze and lever experiments keep them."""
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import parse_algos
+
+    every = parse_algos(get_experiment("cartpole"), "all")
+    assert "accel" in every and "paired" not in every and "remidi-paired" not in every
+    assert "paired" in parse_algos(get_experiment("lever"), "all")

@@ -97,13 +97,20 @@ BUILTIN_ALGORITHMS = tuple(ALGORITHMS)  # the library's own, in order
 class RegisteredNames(Sequence):
     """The names in :data:`ALGORITHMS` now, in order: what an experiment's ``algorithms`` holds,
     so algorithms registered after the experiment was built (:func:`register_algorithm`) are
-    allowed by ``--algo`` and listed by ``remidi list``."""
+    allowed by ``--algo`` and listed by ``remidi list``. ``where(Algorithm) -> bool`` keeps the
+    ones the experiment's task supports (a task with no level-building MDP: no learned generator)."""
+
+    def __init__(self, where=None):
+        self.where = where
+
+    def _names(self) -> tuple[str, ...]:
+        return tuple(name for name, algo in ALGORITHMS.items() if self.where is None or self.where(algo))
 
     def __getitem__(self, i):
-        return tuple(ALGORITHMS)[i]
+        return self._names()[i]
 
     def __len__(self):
-        return len(ALGORITHMS)
+        return len(self._names())
 
     def __add__(self, other):
         return tuple(self) + tuple(other)

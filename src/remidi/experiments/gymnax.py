@@ -158,6 +158,7 @@ def _experiment(d: Domain):
                             for t in tags)),
         derive=make_derive(points),
         bar_chart=("final return per held-out grid point", tuple(f"return/{p}" for p in points) + ("return/mean",)),
+        builds_levels=False,  # gymnax tasks have no level-building MDP: no PAIRED
     )
 
 

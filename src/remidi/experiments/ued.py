@@ -16,6 +16,7 @@ import numpy as np
 from remidi.engine.driver import replay_fractions, train_seeds
 from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames
 from remidi.engine.config import UEDConfig
+from remidi.engine.paired import LevelGenerator
 from remidi.engine.validation import run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
@@ -105,7 +106,10 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
                         summary_metrics, plot_panels_spec, derive=None, bar_chart=None,
-                        preset_reasons=None) -> Experiment:
+                        preset_reasons=None, builds_levels: bool = True) -> Experiment:
+    """A UED experiment over the task ``task_factory(cfg)`` builds. ``builds_levels``: whether
+    its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
+    a learned level generator are not among its algorithms (``--algo all`` leaves them out)."""
     tasks: dict[UEDConfig, UEDTask] = {}
 
     def task_for(cfg: UEDConfig) -> UEDTask:
@@ -120,7 +124,9 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         validate_ued_config(cfg, algo, task_for(cfg))
 
     return Experiment(
-        name=name, description=description, algorithms=RegisteredNames(), default_algorithms=PAPER_ALGORITHMS,
+        name=name, description=description, default_algorithms=PAPER_ALGORITHMS,
+        algorithms=RegisteredNames(None if builds_levels else lambda algo: not isinstance(algo.adversary,
+                                                                                          LevelGenerator)),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),

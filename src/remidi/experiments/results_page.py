@@ -30,6 +30,7 @@ import math
 import re
 import shutil
 import sys
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -181,6 +182,14 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         run.wall_s += float(summary.get("wall_s", 0.0))
         run.resumed |= bool(summary.get("resumed"))
         run.devices.add((config.get("code") or {}).get("device") or "not recorded")
+    for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
+        for name, (_, values) in run.curves.items():
+            if values.shape[0] != len(run.seeds):  # logged by some parts only: no per-seed alignment
+                continue
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a seed that never logged it: NaN
+                means = np.nanmean(values, axis=1)
+            run.values.setdefault("run", {})[name] = dict(zip(run.seeds, map(float, means)))
     return runs
 
 
@@ -384,7 +393,7 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
 # further tables of an experiment's runs: block name: (experiment, algorithms, metrics)
 EXTRA_TABLES = {
     "lever-paired-regret": ("lever", ["paired (perfect)", "remidi-paired (perfect)", "paired (paired)"],
-                            [f"summary:paired/{m}/{g}" for g in ("hidden", "untagged")
+                            [f"run:paired/{m}/{g}" for g in ("hidden", "untagged")
                              for m in ("regret", "antagonist_luck", "exact_regret")]),
 }
 
@@ -471,7 +480,8 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         for name in ("config.json", "summary.json", "evaluate.json"):
             if (folder / name).is_file():
                 shutil.copyfile(folder / name, target / name)
-        keep = set(SECTIONS.get(exp, ([], [], []))[2])
+        keep = set(SECTIONS.get(exp, ([], [], []))[2]) | {m.split(":", 1)[1] for e, _, metrics in EXTRA_TABLES.values()
+                                                           if e == exp for m in metrics if m.startswith("run:")}
         rows = [r for r in outputs.read_metrics_csv(folder / "metrics.csv") if r[2] in keep]
         steps = sorted({r[1] for r in rows})
         kept = {steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(len(steps), MAX_POINTS)).round()
@@ -493,7 +503,7 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
             else "_No committed data yet._"
     for name, (exp, algos, metrics) in EXTRA_TABLES.items():
         present = [a for a in algos if (exp, a) in runs
-                   and any(m.split(":", 1)[1] in runs[exp, a].values.get("summary", {}) for m in metrics)]
+                   and any(m.split(":", 1)[1] in runs[exp, a].values.get(m.split(":", 1)[0], {}) for m in metrics)]
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
     for exp, (algos, metrics, _) in SECTIONS.items():
         if any((exp, a) in runs for a in algos):

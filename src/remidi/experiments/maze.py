@@ -17,6 +17,7 @@ from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.maze import HELD_OUT_NAMES, TRAIN_SIZE, maze_task
+from remidi.envs.noisy import noisy_blindfold_task
 from remidi.errors import probability, require
 from remidi.experiments.ued import make_ued_experiment
 
@@ -90,6 +91,8 @@ def task_factory(kind: str):
         cells = TRAIN_SIZE * TRAIN_SIZE
         require(isinstance(cfg.maze.num_walls, int) and 0 <= cfg.maze.num_walls <= cells - 2, "maze.num_walls",
                 f"an integer in [0, {cells - 2}]", cfg.maze.num_walls)
+        if kind == "blindfold-noisy":
+            return noisy_blindfold_task(cfg.maze.prob, cfg.maze.num_walls)
         return maze_task(kind, cfg.maze.prob, cfg.maze.num_walls)
 
     return factory
@@ -119,4 +122,9 @@ EXPERIMENTS = [
                 "paper §6.3, Figs. 6a, 7a: random mazes mixed with T-mazes whose goal side is hidden"),
     _experiment("blindfold", "blind", "blind levels",
                 "paper §6.3, Figs. 6b, 7b: random mazes, half of them blindfolded (all-zero observations)"),
+    # issue #31: a blind level's noise comes from its seed (in the level), so the exact tracker
+    # stays exact, yet no two blind levels show the same observations: none is a complete overlap
+    _experiment("blindfold-noisy", "blind", "blind levels",
+                "issue #31: the blindfold mazes whose blind levels show a noisy TV (every cell's channels "
+                "drawn at random each step from the level's seed) instead of zeros"),
 ]

@@ -1,0 +1,223 @@
+"""Stochastic test domains (issue #31): observation noise that ReMiDi's exact tracker cannot see through.
+
+ReMiDi's tracker (:mod:`remidi.engine.tracker`) is exact for environments that are
+deterministic given the level. Randomness outside the level can be brought inside it, as a
+*seed* the level carries ("seed in the level"): the environment stays deterministic given the
+level and the tracker stays exact. Where the randomness is in what the agent *sees*, that is
+of no use: two draws of the same irreducible situation show different observations, so no
+level is ever a complete overlap of another and ReMiDi's later buffers accept the irreducible
+levels again (it falls back to PLR⊥). Two such domains:
+
+* ``lever-noisy`` (:func:`noisy_lever_task`): the lever game whose observation also carries a
+  noise code, ``noise_bits`` random bits (16: 65536 codes) drawn from the level's seed, saying
+  nothing about the answer.
+* ``blindfold-noisy`` (:func:`noisy_blindfold_task`): the blindfold mazes whose blind levels show
+  a "noisy TV" instead of zeros: every cell's channels (object, colour, state, in their ranges,
+  divided by 10 as the maze's observations are) and the direction drawn at random at each step,
+  from a key derived from the level's seed and the episode's step counter.
+
+A level of these tasks is a :class:`SeededLevel` (the plain task's level and a u32 seed, drawn
+by the sampler independently of the level); :func:`seeded_task` lifts a plain task's sampler,
+optimal returns, tags, editor, easy levels, evaluation sets and level builder onto them. The
+noise never depends on the answer (the correct lever, the goal), only on the seed (and the
+step), so hidden levels stay irreducible and visible levels stay solvable.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.envs.builder import LevelBuilder
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+
+__all__ = ["SeededLevel", "SeededState", "SeededEnv", "SeededBuilder", "NoisyLeverGame", "NoisyMazeEnv",
+           "seeded_task", "noisy_lever_task", "noisy_blindfold_task", "draw_seed", "NOISE_BITS"]
+
+NOISE_BITS = 16
+# the maze's observation channels (object, colour, state) take integer values below these
+# (MiniGrid's 11 object types, 6 colours, 3 states), divided by 10 in the normalised observation
+MAZE_CHANNELS = (11, 6, 3)
+
+
+@struct.dataclass
+class SeededLevel:
+    level: Any  # the plain task's level
+    seed: jax.Array  # u32[]: the level's randomness (its observation noise)
+
+
+@struct.dataclass
+class SeededState:
+    inner: Any  # the plain environment's state
+    seed: jax.Array  # u32[]
+
+
+def draw_seed(rng) -> jax.Array:
+    """u32[]: a level seed, uniform over 2³²."""
+    return jax.random.bits(rng, (), jnp.uint32)
+
+
+def seed_key(seed) -> jax.Array:
+    """The PRNG key of a level seed (the noise is a function of the seed only)."""
+    return jax.random.PRNGKey(jnp.asarray(seed, jnp.uint32))
+
+
+class SeededEnv(UnderspecifiedEnv):
+    """A plain environment whose levels carry a seed; subclasses add noise to the observations
+    with :meth:`noisy` (a function of the seed and the plain state only: deterministic given the
+    level)."""
+
+    def __init__(self, base: UnderspecifiedEnv):
+        self.base = base
+
+    def __hash__(self):
+        return hash((type(self), self.base))
+
+    def __eq__(self, other):
+        return type(other) is type(self) and other.base == self.base
+
+    @property
+    def default_params(self):
+        return self.base.default_params
+
+    def action_space(self, params):
+        return self.base.action_space(params)
+
+    def noisy(self, obs, state: SeededState):
+        raise NotImplementedError
+
+    def reset_env_to_level(self, rng, level: SeededLevel, params):
+        obs, inner = self.base.reset_env_to_level(rng, level.level, params)
+        state = SeededState(inner=inner, seed=jnp.asarray(level.seed, jnp.uint32))
+        return self.noisy(obs, state), state
+
+    def step_env(self, rng, state: SeededState, action, params):
+        obs, inner, reward, done, info = self.base.step_env(rng, state.inner, action, params)
+        state = state.replace(inner=inner)
+        return self.noisy(obs, state), state, reward, done, info
+
+
+class NoisyLeverGame(SeededEnv):
+    """The lever game (:class:`~remidi.envs.lever.LeverGame`) whose observation ends with
+    ``noise_bits`` entries in {0, 1}: the level's noise code, drawn from its seed."""
+
+    def __init__(self, base, noise_bits: int = NOISE_BITS):
+        super().__init__(base)
+        self.noise_bits = noise_bits
+
+    def __hash__(self):
+        return hash((type(self), self.base, self.noise_bits))
+
+    def __eq__(self, other):
+        return super().__eq__(other) and other.noise_bits == self.noise_bits
+
+    def code(self, seed) -> jax.Array:
+        """f32[noise_bits]: the noise code of a seed."""
+        return jax.random.bernoulli(seed_key(seed), 0.5, (self.noise_bits,)).astype(jnp.float32)
+
+    def noisy(self, obs, state: SeededState):
+        return jnp.concatenate([obs, self.code(state.seed)])
+
+
+class NoisyMazeEnv(SeededEnv):
+    """The maze (:class:`~remidi.envs.maze.MazeEnv`) whose blind levels show a noisy TV: each
+    cell's channels and the direction drawn at random at each step, from the key
+    ``fold_in(key(seed), step)``; other levels are the plain maze's."""
+
+    def noisy(self, obs, state: SeededState):
+        key = jax.random.fold_in(seed_key(state.seed), state.inner.inner.time)
+        k_image, k_dir = jax.random.split(key)
+        shape = obs.image.shape  # [view, view, 3]
+        highs = jnp.asarray(MAZE_CHANNELS, jnp.int32)
+        image = jax.random.randint(k_image, shape, 0, jnp.broadcast_to(highs, shape)).astype(obs.image.dtype) / 10.0
+        direction = jax.random.randint(k_dir, (), 0, 4).astype(obs.agent_dir.dtype)
+        blind = state.inner.blind
+        return obs.replace(image=jnp.where(blind, image.astype(obs.image.dtype), obs.image),
+                           agent_dir=jnp.where(blind, direction, obs.agent_dir))
+
+
+class SeededBuilder(LevelBuilder):
+    """A plain task's level-building MDP whose finished levels carry a seed drawn from the
+    building episode's key (no design action chooses it)."""
+
+    def __init__(self, base: LevelBuilder):
+        self.base = base
+        self.num_steps, self.num_actions, self.noise_dim = base.num_steps, base.num_actions, base.noise_dim
+
+    def empty(self, key):
+        return self.base.empty(key)
+
+    def place(self, design, t, action):
+        return self.base.place(design, t, action)
+
+    def show(self, design):
+        return self.base.show(design)
+
+    def built(self, state) -> SeededLevel:
+        return SeededLevel(level=self.base.built(state), seed=draw_seed(jax.random.fold_in(state.key, 7)))
+
+
+def _seed_batch(levels, salt: int) -> SeededLevel:
+    """An evaluation set's levels (leaves [L, ...]) with fixed seeds drawn from ``salt``."""
+    count = jax.tree.leaves(levels)[0].shape[0]
+    return SeededLevel(level=levels, seed=jax.random.bits(jax.random.PRNGKey(salt), (count,), jnp.uint32))
+
+
+def _seeded(sampler: Callable | None):
+    if sampler is None:
+        return None
+
+    def sample(rng):
+        k_level, k_seed = jax.random.split(rng)
+        return SeededLevel(level=sampler(k_level), seed=draw_seed(k_seed))
+
+    return sample
+
+
+def seeded_task(task: UEDTask, wrap: Callable[[UnderspecifiedEnv], SeededEnv]) -> UEDTask:
+    """``task`` on :class:`SeededLevel`: its environments wrapped by ``wrap``, each sampled level
+    given a fresh seed (independent of the level), every level function reading the plain level.
+    An edited level (ACCEL) is a new level and draws a new seed; evaluation sets get fixed seeds."""
+    mutate = None
+    if task.mutate_level is not None:
+        def mutate(rng, level: SeededLevel, num_edits: int) -> SeededLevel:
+            k_edit, k_seed = jax.random.split(rng)
+            return SeededLevel(level=task.mutate_level(k_edit, level.level, num_edits), seed=draw_seed(k_seed))
+    plain = lambda f: None if f is None else (lambda level, *args: f(level.level, *args))  # noqa: E731
+    return dataclasses.replace(
+        task,
+        env=wrap(task.env),
+        sample_level=_seeded(task.sample_level),
+        optimal_return=plain(task.optimal_return),
+        optimal_discounted_return=plain(task.optimal_discounted_return),
+        eval_sets={name: _seed_batch(levels, i) for i, (name, levels) in enumerate(task.eval_sets.items())},
+        eval_envs={name: wrap(env) for name, env in task.eval_envs.items()},
+        level_tags=lambda level: task.level_tags(level.level),
+        expected_return=plain(task.expected_return),
+        mutate_level=mutate,
+        easy_level=_seeded(task.easy_level),
+        level_builder=None if task.level_builder is None else SeededBuilder(task.level_builder),
+    )
+
+
+@functools.lru_cache(maxsize=None)
+def noisy_lever_task(num_levers: int = 64, noise_bits: int = NOISE_BITS, visible_prob: float = 0.5,
+                     hidden_multiplier: float = 10.0) -> UEDTask:
+    """The lever game with a ``noise_bits``-bit noise code in every observation. Cached."""
+    from remidi.envs.lever import lever_task
+
+    return seeded_task(lever_task(num_levers, visible_prob, hidden_multiplier),
+                       lambda env: NoisyLeverGame(env, noise_bits))
+
+
+@functools.lru_cache(maxsize=None)
+def noisy_blindfold_task(prob: float = 0.5, num_walls: int = 25) -> UEDTask:
+    """The blindfold mazes whose blind levels show a noisy TV. Cached."""
+    from remidi.envs.maze import maze_task
+
+    return seeded_task(maze_task("blindfold", prob, num_walls), NoisyMazeEnv)

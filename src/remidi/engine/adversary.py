@@ -19,7 +19,9 @@ Implementations, each the one before plus what it adds:
 * :class:`RandomLevels`: DR, fresh levels from the task's generator every update;
 * :class:`LevelBuffers`: the PLR family: a buffer of scored levels replayed with probability
   ``buffer.replay_prob``; with ``buffer_sequence`` (ReMiDi) a sequence of ``remidi.num_buffers``
-  buffers switched after ``remidi.steps_per_buffer``, the earlier ones frozen;
+  buffers switched after ``remidi.steps_per_buffer``, the earlier ones frozen; with
+  ``remidi.rehearsal`` an update may instead rehearse a frozen buffer's levels
+  (:func:`rehearse_frozen`);
 * :class:`EditingBuffers`: ACCEL: the update after a replay edits the replayed levels instead.
 
 Their state lives in named :class:`~remidi.engine.train.Runner` fields (``buffers``, ``active``,
@@ -49,7 +51,9 @@ class Proposal:
     generator, or edited); train: bool[], the learner trains on this update's rollout; buffer: the
     active buffer as sampled (its replay counters advanced; as it was for an adversary without
     replay); slots: i32[N], the replayed levels' slots in it (None without replay); edit: bool[],
-    the levels are edits of the last replay's (None for an adversary that does not edit).
+    the levels are edits of the last replay's (None for an adversary that does not edit);
+    rehearse: bool[], the levels come from a frozen buffer (``remidi.rehearsal``, see
+    :func:`rehearse_frozen`): trained on at every step, given to no buffer (None without rehearsal).
     """
 
     replay: jax.Array
@@ -59,6 +63,13 @@ class Proposal:
     train: jax.Array
     edit: jax.Array | None = None
     generated: object = None  # PAIRED: the generator's episode that built the levels
+    rehearse: jax.Array | None = None
+
+    def explained(self, indist: jax.Array) -> jax.Array:
+        """bool[T, N]: the steps the learner and the buffer treat as explained by a frozen level:
+        the tracker's ``indist``, none on a rehearsal (its levels are frozen levels, so the tracker
+        explains every step; rehearsal trains on them exactly to keep that behaviour)."""
+        return indist if self.rehearse is None else indist & ~self.rehearse
 
 
 @dataclass(frozen=True)
@@ -136,8 +147,11 @@ class LevelBuffers(RandomLevels):
         new = self._fresh(setup, k_levels)
         sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, setup.cfg.num_envs)
         levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
-        return Proposal(replay=replay, levels=levels, buffer=sampled, slots=slots,
-                        train=replay | self.trains_on_fresh)
+        proposal = Proposal(replay=replay, levels=levels, buffer=sampled, slots=slots,
+                            train=replay | self.trains_on_fresh)
+        if self.buffer_sequence and setup.cfg.remidi.rehearsal > 0:
+            proposal = rehearse_frozen(setup, runner, proposal, jax.random.fold_in(k_branch, 1))
+        return proposal
 
     def frozen(self, setup, runner) -> Frozen | None:
         """A sequence's earlier buffers (:func:`earlier_buffers`); nothing for a single buffer."""
@@ -151,7 +165,7 @@ class LevelBuffers(RandomLevels):
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
         """Replayed levels get their new ``scores`` [N]; fresh levels are inserted into the active
         buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
-        bool[N]: scored −inf)."""
+        bool[N]: scored −inf); a rehearsal changes no buffer."""
         n = setup.cfg.num_envs
         bcfg = buffer_config(setup.cfg, setup.algo)
 
@@ -165,7 +179,14 @@ class LevelBuffers(RandomLevels):
                                                {"max_return": best_return})
             return new_buf, ins
 
-        new_buf, inserted = jax.lax.cond(proposal.replay, rescore, insert, None)
+        if proposal.rehearse is None:
+            new_buf, inserted = jax.lax.cond(proposal.replay, rescore, insert, None)
+        else:
+            def keep(_):
+                return buf.select_buffer(runner.buffers, runner.active), jnp.zeros((n,), bool)
+
+            branch = jnp.where(proposal.rehearse, 2, proposal.replay.astype(jnp.int32))
+            new_buf, inserted = jax.lax.switch(branch, (insert, rescore, keep), None)
         return {"buffers": buf.replace_buffer(runner.buffers, runner.active, new_buf)}, inserted, {}
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
@@ -205,8 +226,13 @@ class EditingBuffers(LevelBuffers):
         replay = base.replay & ~edit
         edited = edit_levels(setup, runner.last_replayed, jax.random.fold_in(k_levels, 1))
         levels = jax.tree.map(lambda e, chosen: jnp.where(edit, e, chosen), edited, base.levels)
-        return Proposal(replay=replay, levels=levels, buffer=base.buffer, slots=base.slots,
-                        train=replay | self.trains_on_fresh, edit=edit)
+        train = replay | self.trains_on_fresh
+        rehearse = base.rehearse
+        if rehearse is not None:  # an edit update never rehearses (the edits of the last replay come first)
+            rehearse = rehearse & ~edit
+            train = train | rehearse
+        return Proposal(replay=replay, levels=levels, buffer=base.buffer, slots=base.slots, train=train, edit=edit,
+                        rehearse=rehearse)
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
         """After a replay the next update edits its levels."""
@@ -230,6 +256,34 @@ def earlier_buffers(setup, runner) -> Frozen | None:
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
     return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                   tracker=make_tracker(setup.cfg.remidi.tracker, tracker_budget(setup)))
+
+
+def rehearse_frozen(setup, runner, proposal: Proposal, rng) -> Proposal:
+    """``remidi.rehearsal``: with that probability, once an earlier buffer of the sequence holds
+    levels, ``proposal`` gives way to a rehearsal: N levels drawn uniformly (with replacement) from
+    the valid levels of one of the non-empty earlier buffers, chosen uniformly. A rehearsal trains
+    on every step (:meth:`Proposal.explained`), is no replay of the active buffer (``replay``
+    False: nothing is rescored, inserted or sampled, and ``remidi.count=replays`` does not count
+    it), and reads the frozen buffers without changing them (no clock tick, no ``last_seen``).
+
+    Uniform, not by the frozen buffer's replay distribution: its scores stopped being updated when
+    it was frozen, and rehearsal is meant to keep the behaviour on the whole of an earlier
+    adversary's support, not on the levels that had the most regret then."""
+    n = setup.cfg.num_envs
+    k_draw, k_buffer, k_slots = jax.random.split(rng, 3)
+    valid = runner.buffers.valid  # bool[K, C]
+    k, capacity = valid.shape
+    eligible = (jnp.arange(k) < runner.active) & jnp.any(valid, axis=1)  # frozen and not empty
+    rehearse = jnp.any(eligible) & (jax.random.uniform(k_draw) < setup.cfg.remidi.rehearsal)
+    which = jax.random.choice(k_buffer, k, p=jnp.where(jnp.any(eligible), eligible / jnp.maximum(jnp.sum(eligible), 1),
+                                                         1.0 / k))
+    chosen = valid[which]
+    slots = jax.random.choice(k_slots, capacity, (n,), replace=True,
+                              p=jnp.where(jnp.any(chosen), chosen / jnp.maximum(jnp.sum(chosen), 1), 1.0 / capacity))
+    frozen = buf.get_levels(buf.select_buffer(runner.buffers, which), slots)
+    levels = jax.tree.map(lambda f, o: jnp.where(rehearse, f, o), frozen, proposal.levels)
+    return proposal.replace(levels=levels, replay=proposal.replay & ~rehearse, train=proposal.train | rehearse,
+                            rehearse=rehearse)
 
 
 def buffer_contents(setup, runner) -> dict:

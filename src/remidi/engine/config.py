@@ -44,6 +44,12 @@ class ReMiDiConfig:
     # buffer acts on the trajectories realisable under that buffer's levels
     policy: str = field(default="masked", metadata={
         "help": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)"})
+    # rehearsal (issue #31; the paper's §7 limitation): once a buffer is frozen, an update trains
+    # with this probability on N levels of a uniformly chosen earlier buffer, drawn uniformly from
+    # its levels, on every step (no mask); no buffer changes (adversary.py, rehearse_frozen)
+    rehearsal: float = field(default=0.0, metadata={
+        "help": "ReMiDi: probability that an update, once a buffer is frozen, trains unmasked on a batch of an "
+                "earlier (frozen) buffer's levels instead (0: the paper's ReMiDi)"})
 
 
 @dataclass(frozen=True)

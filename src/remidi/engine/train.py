@@ -5,14 +5,15 @@ adversary (:mod:`remidi.engine.adversary`) or a small function below:
 
 1. ``adversary.propose``: the N levels of this update (DR: fresh random levels; the PLR family: a
    replay from the active buffer with probability ``buffer.replay_prob``, else fresh levels;
-   ACCEL: after a replay, edits of the replayed levels), and whether the learner trains on them.
+   ACCEL: after a replay, edits of the replayed levels; ReMiDi with ``remidi.rehearsal``: a
+   frozen buffer's levels), and whether the learner trains on them.
 2. :func:`collect`: roll the policy out once on them, with the distinguishability tracker against
    ``adversary.frozen`` (ReMiDi's earlier buffers), then :func:`score_rollout`.
 3. ``adversary.update``: replayed levels get their new scores; new levels go into the active
    buffer by score, except those whose rollout was indistinguishable from a frozen level at every
    step ("complete overlap"), scored −inf and therefore never inserted.
 4. :func:`train`: masked PPO on the rollout if the proposal is trained on, the loss masked to the
-   distinguishable steps.
+   distinguishable steps (a rehearsal of frozen levels, ``remidi.rehearsal``: on every step).
 5. ``adversary.advance``: a buffer sequence's switch after ``remidi.steps_per_buffer`` updates
    (freeze the active buffer, move to the next, stay on the last); ACCEL's memory of the replay.
 6. :func:`step_metrics`: the step's scalars, and PPO's diagnostics (:data:`BLOCK_REDUCTIONS` says
@@ -211,6 +212,7 @@ def train_step(setup: Setup, runner: Runner):
     proposal = adversary.propose(setup, runner, k_branch, k_levels, k_sample)
     # 2. one rollout (with the tracker against the frozen levels), then score
     traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, proposal.levels, frozen)
+    traj = traj.replace(indist=proposal.explained(traj.indist))  # a rehearsal of frozen levels: no step explained
     best_ret = adversary.best_return(proposal, best_ret)
     scores = score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
     overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: new level overlapping a frozen one completely
@@ -270,6 +272,8 @@ def step_metrics(setup: Setup, runner: Runner, chosen: Proposal, traj: Trajector
         metrics["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)
     if chosen.edit is not None:
         metrics["edit"] = chosen.edit.astype(jnp.float32)
+    if chosen.rehearse is not None:  # remidi.rehearsal: the update trained on a frozen buffer's levels
+        metrics["rehearsal"] = chosen.rehearse.astype(jnp.float32)
     for name, c in tag_counts(setup, chosen.levels, jnp.where(chosen.replay, 1.0, 0.0)).items():
         metrics[f"replayed/{name}"] = c
     return metrics

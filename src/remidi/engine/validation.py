@@ -14,6 +14,7 @@ import numpy as np
 
 from remidi.engine import buffer as buf
 from remidi.engine import scores as sc
+from remidi.engine.adversary import LevelBuffers
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
 from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.networks import flatten_obs, make_network
@@ -257,6 +258,11 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[s
     return out
 
 
+def rehearses(algo: Algorithm) -> bool:
+    """``algo`` can take ``remidi.rehearsal``: a sequence of level buffers (ReMiDi, ReMiDi over ACCEL)."""
+    return isinstance(algo.adversary, LevelBuffers) and algo.buffer_sequence
+
+
 def validate_section(prefix: str, validate) -> None:
     """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
     section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
@@ -327,6 +333,15 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
                 "observations normalised by statistics gathered after they were frozen)", r.policy)
         require(r.tracker == "prefix", "remidi.tracker", "prefix with remidi.policy=combine (a policy per "
                 "buffer acts where that buffer's levels produced the whole prefix)", r.tracker)
+    require(isinstance(r.rehearsal, (int, float)) and not isinstance(r.rehearsal, bool) and 0 <= r.rehearsal <= 1,
+            "remidi.rehearsal", "a probability in [0, 1]", r.rehearsal)
+    if r.rehearsal > 0:
+        sequences = [a for a in ALGORITHMS if rehearses(ALGORITHMS[a])]
+        if not rehearses(algo):
+            raise ConfigError(f"remidi.rehearsal: {algo.name} has no sequence of level buffers to rehearse; allowed: 0, "
+                              f"or a probability with --algo {' or '.join(sequences)}")
+        require(r.policy == "masked", "remidi.policy", "masked with remidi.rehearsal (under combine the frozen "
+                "policies act on the earlier buffers' levels, so the trained one never does)", r.policy)
     positive_int("accel.num_edits", cfg.accel.num_edits)
     require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
     if algo.edits and task.mutate_level is None:

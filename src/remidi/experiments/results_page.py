@@ -115,6 +115,14 @@ CLAIMS = (
     Claim("tmaze-remidi-paired-heldout", "beyond the paper (T-maze, ReMiDi over PAIRED)", "ReMiDi over PAIRED "
           "solves more held-out mazes than PAIRED (perfect regret both)", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi-paired (perfect)", "paired (perfect)"),)),
+    Claim("lever-noisy-exact", "beyond the paper (lever-noisy, #31)", "with an uninformative noise code in every "
+          "observation, ReMiDi's exact tracker stops rejecting: its last buffer holds mostly hidden-answer levels "
+          "(bound: the hidden share of the active buffer at the end in [0.5, 1])", "summary:buffer_fraction/hidden",
+          ("lever-noisy",), bounds=(("remidi", 0.5, 1.0),)),
+    Claim("blindfold-noisy-exact", "beyond the paper (blindfold-noisy, #31)", "with noise instead of a blank view "
+          "on blind levels, ReMiDi's exact tracker stops rejecting: its last buffer holds at least the generator's "
+          "half of blind levels (bound: the blind share of the active buffer at the end in [0.5, 1])",
+          "summary:buffer_fraction/blind", ("blindfold-noisy",), bounds=(("remidi", 0.5, 1.0),)),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -385,6 +393,13 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                "summary:buffer_fraction/hidden", "summary:generated/hidden", "summary:paired/regret",
                "summary:paired/antagonist_return"],
               ["solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden", "generated/hidden"]),
+    "lever-noisy": (["plr", "remidi"],
+                    ["evaluate:solve_rate/visible", "evaluate:solve_rate/hidden", "summary:replay_fraction/hidden",
+                     "summary:buffer_fraction/hidden"],
+                    ["solve_rate/visible", "replay_fraction/hidden", "buffer_fraction/hidden"]),
+    "blindfold-noisy": (["plr", "remidi"],
+                        ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "summary:buffer_fraction/blind"],
+                        ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
     **{m: (["dr", "plr", "minimax-return", "remidi"],
            ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},

@@ -78,3 +78,9 @@ for s in 0 5; do
   run "paired-perfect-s$s" tmaze paired $s 5 cpu --set paired.estimator=perfect
   run "remidi-paired-perfect-s$s" tmaze remidi-paired $s 5 cpu --set paired.estimator=perfect
 done
+
+# issue #31: the exact tracker on the noisy domains (PLR⊥ and ReMiDi), at the commit that stated
+# their claims: lever-noisy at the lever's paper preset (10 seeds), blindfold-noisy at cpu (5 + 5)
+at 6303b59
+for a in plr remidi; do run "$a-s0" lever-noisy "$a" 0 10 paper; done
+for s in 0 5; do for a in plr remidi; do run "$a-s$s" blindfold-noisy "$a" $s 5 cpu; done; done

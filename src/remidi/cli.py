@@ -58,26 +58,43 @@ def _write_failed_message(err: OSError) -> str:
     """One line for a failed write (``No space left on device``, ...): what failed, that the files
     written before are whole (every write is atomic), and how to continue a run."""
     what = f"{err.filename}: " if err.filename else ""
-    line = f"remidi: error: {what}{err.strerror or type(err).__name__}; files written before are intact"
-    run_dir = Path(_RUN_DIR[-1]) if _RUN_DIR else None
-    if run_dir is not None and ((run_dir / "config.json").exists() or any(run_dir.glob("*/config.json"))):
-        line += f"; continue with: remidi run --resume {run_dir}"
-    return line
+    return f"remidi: error: {what}{err.strerror or type(err).__name__}; files written before are intact" + _resume_hint()
 
 
-def _interrupted_message() -> str:
-    """``remidi: interrupted`` and, once the run folder holds a resumable run, how to resume it."""
-    message = "remidi: interrupted"
-    if _RUN_DIR:
-        folder = _RUN_DIR[-1]
-        try:
-            resumable = (folder / "config.json").exists() or any((sub / "config.json").exists()
-                                                                 for sub in folder.iterdir() if sub.is_dir())
-        except OSError:
-            resumable = False
-        if resumable:
-            message += f"; continue with: remidi run --resume {folder}"
-    return message
+def _resume_hint() -> str:
+    """``; continue with: remidi run --resume DIR`` once the run folder in progress holds a
+    resumable run (its config.json, or a sub-folder's), else nothing."""
+    if not _RUN_DIR:
+        return ""
+    folder = Path(_RUN_DIR[-1])
+    try:
+        resumable = (folder / "config.json").exists() or any(folder.glob("*/config.json"))
+    except OSError:
+        resumable = False
+    return f"; continue with: remidi run --resume {folder}" if resumable else ""
+
+
+def _interrupted_message(what: str = "interrupted") -> str:
+    """``remidi: interrupted`` (or ``what`` happened) and, once the run folder holds a resumable
+    run, how to resume it."""
+    return f"remidi: {what}" + _resume_hint()
+
+
+def _terminated_message(checkpointed_at: int | None = None) -> str:
+    """``remidi: terminated (SIGTERM)``, where the checkpoint stands, and how to resume."""
+    written = f", checkpoint of update {checkpointed_at} written" if checkpointed_at is not None else ""
+    return _interrupted_message(f"terminated (SIGTERM){written}")
+
+
+def _exit_at_once(message: str, status: int) -> None:  # pragma: no cover - runs in a subprocess
+    """Print ``message`` (on a line of its own after a progress bar) and end the process with
+    ``status`` without unwinding: see :func:`_exit_on_sigint` for why that is safe."""
+    try:
+        sys.stdout.flush()
+    except Exception:  # a print the signal cut short
+        pass
+    os.write(2, (("\n" if sys.stderr.isatty() else "") + message + "\n").encode())
+    os._exit(status)
 
 
 def _exit_on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
@@ -91,21 +108,7 @@ def _exit_on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subp
     (temporary file, then rename): an interrupted run keeps its last complete checkpoint and
     ``remidi run --resume DIR`` continues from it.
     """
-    try:
-        sys.stdout.flush()
-    except Exception:  # a print the interrupt cut short
-        pass
-    line = ("\n" if sys.stderr.isatty() else "") + _interrupted_message() + "\n"  # after a progress bar
-    os.write(2, line.encode())
-    os._exit(130)
-
-
-def _terminated_message(checkpointed_at: int | None = None) -> str:
-    """``remidi: terminated (SIGTERM)``, where the checkpoint stands, and how to resume."""
-    message = _interrupted_message().replace("interrupted", "terminated (SIGTERM)"
-                                             + (f", checkpoint of update {checkpointed_at} written"
-                                                if checkpointed_at is not None else ""), 1)
-    return message
+    _exit_at_once(_interrupted_message(), 130)
 
 
 def _on_sigterm(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
@@ -115,15 +118,8 @@ def _on_sigterm(signum, frame) -> None:  # pragma: no cover - runs in a subproce
     (:func:`_exit_on_sigint`: the last checkpoint is whole, nothing newer exists)."""
     from remidi import preemption
 
-    if preemption.request():
-        return
-    try:
-        sys.stdout.flush()
-    except Exception:  # a print the signal cut short
-        pass
-    line = ("\n" if sys.stderr.isatty() else "") + _terminated_message() + "\n"
-    os.write(2, line.encode())
-    os._exit(preemption.EXIT_STATUS)
+    if not preemption.request():
+        _exit_at_once(_terminated_message(), preemption.EXIT_STATUS)
 
 
 def _install_sigint_handler():

@@ -43,20 +43,19 @@ def test_the_three_regret_estimates_equal_a_hand_computation():
 def test_regret_by_tag_splits_the_estimate_and_the_antagonists_luck_by_level_tag():
     """Four levels, two hidden: each tag's mean of the estimate, of the antagonist's best − mean,
     and of the exact regret, by hand; a tag no level carries is NaN, never 0."""
-    from types import SimpleNamespace
+    import jax
 
     levels = jnp.array([0, 1, 1, 0])  # 1: hidden
-    task = SimpleNamespace(level_tags=lambda level: {"hidden": level == 1, "never": level < 0})
-    setup = SimpleNamespace(task=task)
+    tags = jax.vmap(lambda level: {"hidden": level == 1, "never": level < 0})(levels)
     regret = jnp.array([1.0, 4.0, 6.0, 3.0])
     luck = jnp.array([0.0, 2.0, 1.0, 0.5])
-    out = {k: float(v) for k, v in paired.regret_by_tag(setup, levels, regret, luck, jnp.array([5.0, 9, 9, 5]),
+    out = {k: float(v) for k, v in paired.regret_by_tag(tags, regret, luck, jnp.array([5.0, 9, 9, 5]),
                                                          jnp.array([4.0, 1, 3, 2])).items()}
     assert out["paired/regret/hidden"] == 5.0 and out["paired/regret/untagged"] == 2.0
     assert out["paired/antagonist_luck/hidden"] == 1.5 and out["paired/antagonist_luck/untagged"] == 0.25
     assert out["paired/exact_regret/hidden"] == 7.0 and out["paired/exact_regret/untagged"] == 2.0
     assert np.isnan(out["paired/regret/never"]) and np.isnan(out["paired/antagonist_luck/never"])
-    no_optimum = paired.regret_by_tag(setup, levels, regret, luck, None, jnp.zeros(4))
+    no_optimum = paired.regret_by_tag(tags, regret, luck, None, jnp.zeros(4))
     assert not any("exact_regret" in k for k in no_optimum)
 
 

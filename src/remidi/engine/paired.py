@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine import buffer as buf
-from remidi.engine.adversary import Proposal, RandomLevels, buffer_contents, earlier_buffers, switches, tag_counts
+from remidi.engine.adversary import Proposal, RandomLevels, buffer_contents, earlier_buffers, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
 
@@ -52,16 +52,16 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
     return jnp.maximum(regret, 0.0) if clip_negative else regret
 
 
-def regret_by_tag(setup, levels, regret, antagonist_luck, optimal, protagonist_mean) -> dict[str, jax.Array]:
-    """Where the estimate's regret comes from, per tag of the generated levels [N] and for the
-    levels with no tag (``untagged``); NaN where no generated level has it:
+def regret_by_tag(tags, regret, antagonist_luck, optimal, protagonist_mean) -> dict[str, jax.Array]:
+    """Where the estimate's regret comes from, per tag of the generated levels (``tags``: the task's
+    ``level_tags`` of the N levels, ``{name: bool[N]}``) and for the levels with no tag
+    (``untagged``); NaN where no generated level has it:
 
     * ``paired/regret/<tag>``: the estimate the generator was paid (before overlap handling);
     * ``paired/antagonist_luck/<tag>``: the antagonist's best episodic return minus its mean, the
       part of ``paired``'s estimate that a lucky episode adds (a guessed hidden lever);
     * ``paired/exact_regret/<tag>``: the task's optimal return minus the protagonist's mean, where
       the task has an optimum (what ``perfect`` pays), to read the estimate against."""
-    tags = jax.vmap(setup.task.level_tags)(levels)
     groups = dict(tags)
     groups["untagged"] = ~jnp.any(jnp.stack(list(tags.values())), axis=0) if tags else jnp.ones_like(regret, bool)
     values = {"regret": regret, "antagonist_luck": antagonist_luck}
@@ -183,9 +183,10 @@ class LevelGenerator(RandomLevels):
             k_gen, generator_ppo(setup), net.apply)
         metrics = {"paired/regret": jnp.mean(regret), "paired/antagonist_return": jnp.mean(ant_mean),
                    "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32)}
-        for name, count in tag_counts(setup, proposal.levels, jnp.ones((n,))).items():
-            metrics[f"generated/{name}"] = count / n
-        metrics.update(regret_by_tag(setup, proposal.levels, regret, ant_best - ant_mean, optimal, mean_return))
+        tags = jax.vmap(task.level_tags)(proposal.levels)  # {name: bool[N]}
+        for name, t in tags.items():
+            metrics[f"generated/{name}"] = jnp.sum(jnp.where(t, 1.0, 0.0)) / n
+        metrics.update(regret_by_tag(tags, regret, ant_best - ant_mean, optimal, mean_return))
         kept, inserted = self._keep(setup, runner, proposal, jax.random.fold_in(rng, 24))
         return {"generator": generator, "antagonist": antagonist, **kept}, inserted, metrics
 

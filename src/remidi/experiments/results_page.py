@@ -514,17 +514,13 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
            "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
                                        for r in results if r["verdict"] != "pending") or "_No verdict yet._"}
     for exp, (algos, metrics, _) in SECTIONS.items():
-        out[f"table:{exp}"] = metrics_table(runs, exp, metrics, algos) if any((exp, a) in runs for a in algos) \
-            else "_No committed data yet._"
+        present = any((exp, a) in runs for a in algos)
+        out[f"table:{exp}"] = metrics_table(runs, exp, metrics, algos) if present else "_No committed data yet._"
+        out[f"seeds:{exp}"] = per_seed_table(runs, exp, metrics[0], algos) if present else "_No committed data yet._"
     for name, (exp, algos, metrics) in EXTRA_TABLES.items():
         present = [a for a in algos if (exp, a) in runs
                    and any(m.split(":", 1)[1] in runs[exp, a].values.get(m.split(":", 1)[0], {}) for m in metrics)]
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
-    for exp, (algos, metrics, _) in SECTIONS.items():
-        if any((exp, a) in runs for a in algos):
-            out[f"seeds:{exp}"] = per_seed_table(runs, exp, metrics[0], algos)
-        else:
-            out[f"seeds:{exp}"] = "_No committed data yet._"
     return out, results
 
 

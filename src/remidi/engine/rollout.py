@@ -42,11 +42,14 @@ class Frozen:
 
     ``tracker`` (static): the component that judges distinguishability
     (:mod:`remidi.engine.tracker`: the reference tracker stepping every frozen level, or the
-    candidate tracker with ``budget`` slots per env, whose environment's reset ignores its key)."""
+    candidate tracker with ``budget`` slots per env, whose environment's reset ignores its key;
+    or :class:`~remidi.engine.belief.BeliefTracker`, which reads the frozen adversaries' learned
+    models from ``belief``, a :class:`~remidi.engine.belief.FrozenBeliefs`)."""
 
     levels: Any
     valid: jax.Array
     params: Any = None
+    belief: Any = None
     tracker: trk.ExactTracker = struct.field(pytree_node=False, default=trk.ExactTracker())
 
 

@@ -1,0 +1,302 @@
+"""A learned belief model P(h | Λ) for ReMiDi's distinguishability test in stochastic environments.
+
+The exact trackers (:mod:`remidi.engine.tracker`) replay frozen levels and compare observations:
+exact when the environment is deterministic given the level, useless when the environment's
+randomness is in what the agent sees (:mod:`remidi.envs.noisy`). The paper's appendix proposes
+instead to learn, with each adversary Λᵢ, a model of the trajectories it produces, and to call a
+trajectory prefix *distinguishable* when its likelihood under every earlier adversary's model is
+below a threshold. This module is that model, for discrete observations:
+
+* an :class:`ObsCoding` reads an observation pytree as E *entries*, each a category in
+  ``[0, K)`` (the lever's one-hot vector: K = 2 per entry; the maze's egocentric image, integers
+  divided by 10: ``round(10·x)``, K = 11; its direction: K = 4);
+* the model is a GRU over the episode's (observation, action) pairs whose state ``h_t`` (zeros at
+  an episode's start) predicts the next observation as E independent categoricals (a
+  *factorised* categorical); the first observation of an episode is predicted from the zero
+  state, i.e. it is the adversary's distribution of first observations;
+* :func:`step_logliks` gives ``log P(o_t | o_<t, a_<t)`` per step of a batch of trajectories
+  (episodes delimited by ``reset``), :func:`prefix_scores` the mean log-likelihood per step of
+  each episode's prefix so far (the score a threshold is compared with), :func:`fit_step` one
+  Optax update on a batch, masked to the chosen steps;
+* :func:`calibrate` turns held-out scores of the same adversary into the threshold with a stated
+  false-distinguishable rate (``remidi.belief_false_rate``);
+* :class:`BeliefTracker` is the tracker component (``start`` / ``explained`` / ``advance``
+  over N envs, as :class:`~remidi.engine.tracker.ExactTracker`) reading the frozen adversaries'
+  models and thresholds from ``frozen.belief`` (:class:`FrozenBeliefs`): a prefix is explained
+  when its score under SOME valid frozen model is at least that model's threshold.
+
+All functions are pure over pytrees (params are a dict of arrays) and jit/vmap-friendly; the
+coding, sizes and optimiser are static. Shapes: T steps, N envs, E entries, K categories,
+A actions, H hidden units, B frozen models.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+
+# ---------------------------------------------------------------------------- observations
+@dataclass(frozen=True)
+class ObsCoding:
+    """How an observation pytree reads as E categorical entries (static, hashable).
+
+    Per leaf of the observation (in ``jax.tree.leaves`` order): ``scales[i]`` (an entry's
+    category is ``round(x · scale)``, clipped to ``[0, categories[i])``). ``categories``: K of
+    each leaf; the model uses ``max(categories)`` for every entry (an unused category simply
+    gets no mass). ``sizes``: the number of entries of each leaf (its size)."""
+
+    scales: tuple[float, ...]
+    categories: tuple[int, ...]
+    sizes: tuple[int, ...]
+
+    @property
+    def num_entries(self) -> int:
+        return sum(self.sizes)
+
+    @property
+    def num_categories(self) -> int:
+        return max(self.categories)
+
+    def encode(self, obs) -> jax.Array:
+        """i32[..., E]: the categories of an observation with any leading batch dims (the
+        leaves' trailing dims are the ones of one observation, of ``sizes``)."""
+        leaves = jax.tree.leaves(obs)
+        out = []
+        for leaf, scale, k, size in zip(leaves, self.scales, self.categories, self.sizes):
+            lead = leaf.shape[:leaf.ndim - _event_ndim(leaf, size)]
+            flat = jnp.reshape(leaf, lead + (size,)).astype(jnp.float32)
+            out.append(jnp.clip(jnp.round(flat * scale), 0, k - 1).astype(jnp.int32))
+        return jnp.concatenate(out, axis=-1)
+
+
+def _event_ndim(leaf, size: int) -> int:
+    """How many trailing dims of ``leaf`` make up one observation of ``size`` entries."""
+    n, prod = 0, 1
+    while prod < size:
+        n += 1
+        prod *= leaf.shape[leaf.ndim - n]
+    if prod != size:
+        raise ValueError(f"an observation leaf of shape {leaf.shape} does not end in {size} entries")
+    return n
+
+
+def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
+    """The coding of the task's observation ``example_obs`` (one unbatched observation).
+
+    ``categories`` maps a leaf's field name to ``(scale, K)``; unnamed leaves: the maze's
+    ``image`` is ``(10, 11)`` (MiniGrid's object, colour and state ids divided by 10, K the most
+    object types), ``agent_dir`` ``(1, 4)``, and any other leaf ``(1, 2)`` (one-hot vectors and
+    bits, as the lever's)."""
+    defaults = {"image": (10.0, 11), "agent_dir": (1.0, 4)}
+    defaults.update(categories or {})
+    scales, ks, sizes = [], [], []
+    for path, leaf in jax.tree_util.tree_leaves_with_path(example_obs):
+        name = getattr(path[-1], "name", None) if path else None
+        scale, k = defaults.get(name, (1.0, 2))
+        scales.append(float(scale))
+        ks.append(int(k))
+        sizes.append(int(max(1, jnp.size(leaf))))
+    return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes))
+
+
+# ---------------------------------------------------------------------------- the model
+@dataclass(frozen=True)
+class BeliefModel:
+    """A GRU next-observation model over ``coding``'s entries and ``num_actions`` discrete
+    actions with ``hidden`` units (static, hashable: pass it as a static argument)."""
+
+    coding: ObsCoding
+    num_actions: int
+    hidden: int = 64
+
+    @property
+    def input_size(self) -> int:
+        return self.coding.num_entries * self.coding.num_categories + self.num_actions
+
+    def init(self, rng) -> dict:
+        """The parameters: GRU kernels ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], biases ``b`` f32[3H],
+        ``bh`` f32[H] (the candidate's recurrent bias), head ``wo`` f32[H, E·K], ``bo`` f32[E·K]."""
+        d, h, ek = self.input_size, self.hidden, self.coding.num_entries * self.coding.num_categories
+        k1, k2, k3 = jax.random.split(rng, 3)
+        return {"wx": jax.random.normal(k1, (d, 3 * h)) / jnp.sqrt(d),
+                "wh": jax.random.normal(k2, (h, 3 * h)) / jnp.sqrt(h),
+                "b": jnp.zeros((3 * h,)), "bh": jnp.zeros((h,)),
+                "wo": jax.random.normal(k3, (h, ek)) * 0.1 / jnp.sqrt(h), "bo": jnp.zeros((ek,))}
+
+    def initial_hidden(self, batch_shape=()) -> jax.Array:
+        """f32[..., H]: the state at an episode's start (zeros)."""
+        return jnp.zeros(tuple(batch_shape) + (self.hidden,))
+
+    def loglik(self, params, hidden, cats) -> jax.Array:
+        """f32[...]: log P(observation with categories ``cats`` i32[..., E] | state ``hidden`` f32[..., H])."""
+        e, k = self.coding.num_entries, self.coding.num_categories
+        logits = (hidden @ params["wo"] + params["bo"]).reshape(hidden.shape[:-1] + (e, k))
+        logp = jax.nn.log_softmax(logits, axis=-1)
+        return jnp.sum(jnp.take_along_axis(logp, cats[..., None], axis=-1)[..., 0], axis=-1)
+
+    def cell(self, params, hidden, cats, action) -> jax.Array:
+        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` i32[...]."""
+        k = self.coding.num_categories
+        x = jnp.concatenate([jax.nn.one_hot(cats, k).reshape(cats.shape[:-1] + (-1,)),
+                             jax.nn.one_hot(action, self.num_actions)], axis=-1)
+        gx = x @ params["wx"] + params["b"]
+        gh = hidden @ params["wh"]
+        h = self.hidden
+        z = jax.nn.sigmoid(gx[..., :h] + gh[..., :h])
+        r = jax.nn.sigmoid(gx[..., h:2 * h] + gh[..., h:2 * h])
+        n = jnp.tanh(gx[..., 2 * h:] + r * (gh[..., 2 * h:] + params["bh"]))
+        return (1.0 - z) * n + z * hidden
+
+
+def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
+    """f32[T, N]: ``log P(obs[t] | the episode's observations and actions before t)``.
+
+    ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
+    episode: the state restarts from zeros; an env's first step must be one)."""
+    cats = model.coding.encode(obs)  # [T, N, E]
+    n = action.shape[1]
+
+    def body(hidden, inp):
+        c, a, r = inp
+        hidden = jnp.where(r[:, None], 0.0, hidden)
+        ll = model.loglik(params, hidden, c)
+        return model.cell(params, hidden, c, a), ll
+
+    _, ll = jax.lax.scan(body, model.initial_hidden((n,)), (cats, action, reset))
+    return ll
+
+
+def prefix_scores(ll, reset) -> jax.Array:
+    """f32[T, N]: the mean of ``ll`` f32[T, N] over each episode's steps so far (step t included)."""
+
+    def body(carry, inp):
+        total, count = carry
+        step_ll, r = inp
+        total = jnp.where(r, 0.0, total) + step_ll
+        count = jnp.where(r, 0, count) + 1
+        return (total, count), total / count
+
+    zeros = jnp.zeros(ll.shape[1:])
+    _, scores = jax.lax.scan(body, (zeros, zeros.astype(jnp.int32)), (ll, reset))
+    return scores
+
+
+def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
+    """f32[]: the mean negative log-likelihood per step over the steps of ``mask`` bool[T, N]
+    (all if None); 0 when no step is masked in."""
+    ll = step_logliks(model, params, obs, action, reset)
+    mask = jnp.ones(ll.shape, bool) if mask is None else mask
+    return -jnp.sum(jnp.where(mask, ll, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
+
+
+def make_optimizer(lr: float = 3e-3, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
+    """The belief model's optimiser: Adam after global gradient-norm clipping."""
+    return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(lr))
+
+
+def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
+             mask=None):
+    """One Optax update on a batch of trajectories (as :func:`belief_loss`). Returns
+    ``(params, opt_state, loss f32[])`` (the loss before the update). An all-masked batch gives a
+    zero gradient."""
+    loss, grads = jax.value_and_grad(lambda p: belief_loss(model, p, obs, action, reset, mask))(params)
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    return optax.apply_updates(params, updates), opt_state, loss
+
+
+# ---------------------------------------------------------------------------- calibration
+def calibrate(scores, false_rate: float, valid=None, slack: float = 1e-3) -> jax.Array:
+    """f32[]: the threshold τ at which at most a fraction ``false_rate`` of the held-out prefix
+    ``scores`` (f32[...], of trajectories of the model's own adversary; ``valid`` bool[...] picks
+    them) lie strictly below: the ⌊false_rate·n⌋-th smallest score, lowered by ``slack`` nats
+    (scores recomputed step by step differ from the batch's by rounding). A prefix is then
+    *explained* when its score is ≥ τ. With no valid score τ = +inf: the model explains nothing."""
+    scores = jnp.ravel(scores)
+    valid = jnp.ones(scores.shape, bool) if valid is None else jnp.ravel(valid)
+    n = jnp.sum(valid)
+    ordered = jnp.sort(jnp.where(valid, scores, jnp.inf))
+    k = jnp.floor(false_rate * n).astype(jnp.int32)
+    tau = ordered[jnp.minimum(k, scores.shape[0] - 1)] - slack
+    return jnp.where(n > 0, tau, jnp.inf)
+
+
+# ---------------------------------------------------------------------------- the tracker
+@struct.dataclass
+class FrozenBeliefs:
+    """The frozen adversaries' models: ``params`` leaves [B, ...], ``threshold`` f32[B],
+    ``valid`` bool[B] (the adversary has been frozen)."""
+
+    params: Any
+    threshold: jax.Array
+    valid: jax.Array
+
+
+@struct.dataclass
+class BeliefState:
+    """The tracker state of one env (leaves [N, ...] in the component) over B frozen models."""
+
+    hidden: jax.Array  # f32[B, H]: each model's state before the current observation
+    total: jax.Array  # f32[B]: the episode's summed log-likelihood so far under each model
+    count: jax.Array  # i32[]: the episode's steps so far
+    last: jax.Array  # i32[E]: the current observation's categories (the next step's input)
+    match: jax.Array  # bool[B]: model b explains the prefix (its score reaches its threshold)
+
+
+@dataclass(frozen=True)
+class BeliefTracker:
+    """The tracker component judging distinguishability by learned belief models (the frozen
+    adversaries' models in ``frozen.belief``, :class:`FrozenBeliefs`): env n's prefix is
+    explained when its mean log-likelihood per step under SOME valid frozen model is at least
+    that model's threshold. Methods as :class:`~remidi.engine.tracker.ExactTracker`'s, on
+    leaves [N, ...]; the frozen levels themselves are not stepped."""
+
+    model: BeliefModel
+
+    def _judge(self, frozen, total, count) -> jax.Array:
+        """bool[N, B]: each valid frozen model's threshold is reached by the env's prefix score."""
+        b = frozen.belief
+        score = total / jnp.maximum(count, 1)[:, None]
+        return b.valid[None, :] & (score >= b.threshold[None, :])
+
+    def _logliks(self, frozen, hidden, cats) -> jax.Array:
+        """f32[N, B]: each frozen model's log-likelihood of ``cats`` [N, E] from ``hidden`` [N, B, H]."""
+        return jax.vmap(lambda p, h: self.model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(
+            frozen.belief.params, hidden)
+
+    def start(self, env, params, frozen, reset_keys, obs, starts=None) -> BeliefState:
+        """The state at the envs' first observations ``obs`` (leaves [N, ...])."""
+        n = reset_keys.shape[0]
+        cats = self.model.coding.encode(obs)  # [N, E]
+        hidden = self.model.initial_hidden((n, frozen.belief.threshold.shape[0]))
+        total, count = self._logliks(frozen, hidden, cats), jnp.ones((n,), jnp.int32)
+        return BeliefState(hidden=hidden, total=total, count=count, last=cats,
+                           match=self._judge(frozen, total, count))
+
+    def explained(self, state: BeliefState) -> jax.Array:
+        """bool[N]: some frozen model explains each env's prefix so far."""
+        return jnp.any(state.match, axis=-1)
+
+    def advance(self, env, params, frozen, env_keys, state: BeliefState, action, next_obs, done) -> BeliefState:
+        """After the envs took ``action`` i32[N] and saw ``next_obs`` (the next episode's first
+        observation where ``done`` bool[N])."""
+        cats = self.model.coding.encode(next_obs)  # [N, E]
+        stepped = jax.vmap(lambda p, h: self.model.cell(p, h, state.last, action), in_axes=(0, 1), out_axes=1)(
+            frozen.belief.params, state.hidden)  # [N, B, H]
+        hidden = jnp.where(done[:, None, None], 0.0, stepped)
+        total = jnp.where(done[:, None], 0.0, state.total) + self._logliks(frozen, hidden, cats)
+        count = jnp.where(done, 0, state.count) + 1
+        return BeliefState(hidden=hidden, total=total, count=count, last=cats,
+                           match=self._judge(frozen, total, count))
+
+    def overflow(self, state: BeliefState) -> jax.Array:
+        return jnp.zeros(state.count.shape, jnp.int32)
+
+    def buffer_match(self, state: BeliefState, num_buffers: int, capacity: int) -> jax.Array:
+        """bool[N, B]: frozen model b explains env n's prefix (Combine: one model per buffer)."""
+        return state.match[:, :num_buffers]

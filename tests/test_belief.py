@@ -1,0 +1,230 @@
+"""The learned belief model (issue #31, :mod:`remidi.engine.belief`): it learns a deterministic
+sequence, its calibrated threshold gives the stated false-distinguishable rate on held-out
+trajectories, its tracker agrees with the exact tracker on the (deterministic) lever game, and on
+the noisy lever game it explains fresh hidden levels that the exact tracker cannot."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from remidi.engine import belief as bl
+from remidi.engine.rollout import Frozen, rollout
+from remidi.engine.tracker import ExactTracker
+from remidi.envs.lever import LeverLevel, lever_task
+from remidi.envs.noisy import SeededLevel, draw_seed, noisy_lever_task
+
+LEVERS = 8
+FALSE_RATE = 0.05
+
+
+def fit(model, params, obs, action, reset, steps, lr=1e-2):
+    """``steps`` full-batch updates (one jitted scan); returns ``(params, losses f32[steps])``."""
+    opt = bl.make_optimizer(lr)
+
+    @jax.jit
+    def run(params):
+        def body(carry, _):
+            p, s = carry
+            p, s, loss = bl.fit_step(model, opt, p, s, obs, action, reset)
+            return (p, s), loss
+
+        (params, _), losses = jax.lax.scan(body, (params, opt.init(params)), None, length=steps)
+        return params, losses
+
+    return run(params)
+
+
+# ------------------------------------------------------------------------------ the model
+def test_coding_reads_the_lever_and_the_maze():
+    task = lever_task(LEVERS)
+    obs = task.env.observation(LeverLevel(correct=jnp.asarray(3), visible=jnp.asarray(True)))
+    coding = bl.coding_for(obs)
+    assert (coding.num_entries, coding.num_categories) == (LEVERS + 1, 2)
+    np.testing.assert_array_equal(coding.encode(obs), np.eye(LEVERS + 1, dtype=int)[4])
+    np.testing.assert_array_equal(coding.encode(jnp.stack([obs, obs])).shape, (2, LEVERS + 1))
+    from remidi.envs.maze import maze_task
+
+    maze = maze_task("maze")
+    level = maze.sample_level(jax.random.PRNGKey(0))
+    mobs, _ = maze.env.reset_to_level(jax.random.PRNGKey(0), level, maze.params)
+    mcoding = bl.coding_for(mobs)
+    assert (mcoding.num_entries, mcoding.num_categories) == (5 * 5 * 3 + 1, 11)
+    cats = np.asarray(mcoding.encode(mobs))
+    np.testing.assert_array_equal(cats[:-1], np.round(np.asarray(mobs.image).reshape(-1) * 10))
+    assert cats[-1] == int(mobs.agent_dir)
+
+
+def test_the_model_learns_a_deterministic_sequence():
+    # every env shows the same 4-step episode of 6-bit observations, twice (episodes of 4)
+    pattern = jnp.asarray([[1, 0, 0, 1, 1, 0], [0, 1, 0, 0, 1, 1], [1, 1, 1, 0, 0, 0], [0, 0, 1, 1, 0, 1]], jnp.float32)
+    t, n = 8, 4
+    obs = jnp.broadcast_to(jnp.concatenate([pattern, pattern])[:, None], (t, n, 6))
+    action = jnp.zeros((t, n), jnp.int32)
+    reset = jnp.broadcast_to((jnp.arange(t) % 4 == 0)[:, None], (t, n))
+    model = bl.BeliefModel(bl.coding_for(obs[0, 0]), num_actions=2, hidden=16)
+    params, losses = fit(model, model.init(jax.random.PRNGKey(0)), obs, action, reset, steps=300, lr=3e-2)
+    ll = bl.step_logliks(model, params, obs, action, reset)
+    assert float(losses[0]) > 3.0  # 6 bits at chance: 6·log 2 ≈ 4.2 nats per step
+    assert float(jnp.exp(jnp.min(ll))) > 0.95  # every step's observation is near-certain
+    # a different second observation is surprising under the learnt model
+    odd = obs.at[1].set(pattern[2])
+    assert float(bl.step_logliks(model, params, odd, action, reset)[1, 0]) < -5.0
+
+
+def test_an_all_masked_batch_gives_no_update():
+    obs = jnp.ones((3, 2, 4))
+    action = jnp.zeros((3, 2), jnp.int32)
+    reset = jnp.zeros((3, 2), bool).at[0].set(True)
+    model = bl.BeliefModel(bl.coding_for(obs[0, 0]), num_actions=2, hidden=8)
+    params = model.init(jax.random.PRNGKey(1))
+    opt = bl.make_optimizer()
+    new, _, loss = bl.fit_step(model, opt, params, opt.init(params), obs, action, reset, jnp.zeros((3, 2), bool))
+    assert float(loss) == 0.0
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(a, b), new, params)
+
+
+def test_prefix_scores_restart_with_each_episode():
+    ll = jnp.asarray([[-1.0], [-3.0], [-2.0], [-4.0]])
+    reset = jnp.asarray([[True], [False], [True], [False]])
+    np.testing.assert_allclose(bl.prefix_scores(ll, reset)[:, 0], [-1.0, -2.0, -2.0, -3.0])
+
+
+# ------------------------------------------------------------------------------ calibration
+def test_calibrate_is_the_lower_quantile():
+    scores = jnp.arange(100.0)
+    assert float(bl.calibrate(scores, 0.05, slack=0.0)) == 5.0  # 5 of 100 lie strictly below
+    valid = jnp.arange(100) >= 50
+    assert float(bl.calibrate(scores, 0.1, valid, slack=0.0)) == 55.0
+    assert float(bl.calibrate(scores, 0.1, jnp.zeros(100, bool))) == np.inf
+
+
+def bits(key, n, t, probs):
+    """f32[t, n, len(probs)]: independent bits with the given probabilities at every step."""
+    return (jax.random.uniform(key, (t, n, probs.shape[0])) < probs).astype(jnp.float32)
+
+
+def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
+    # an adversary whose observations are 12 independent biased bits per step (episodes of 3):
+    # fit on one sample, calibrate on a second, measure the rate on a third
+    probs = jnp.linspace(0.1, 0.45, 12)
+    t, n = 6, 512
+    action = jnp.zeros((t, n), jnp.int32)
+    reset = jnp.broadcast_to((jnp.arange(t) % 3 == 0)[:, None], (t, n))
+    train, held, test = (bits(jax.random.PRNGKey(i), n, t, probs) for i in range(3))
+    model = bl.BeliefModel(bl.coding_for(train[0, 0]), num_actions=2, hidden=16)
+    params, _ = fit(model, model.init(jax.random.PRNGKey(0)), train, action, reset, steps=150)
+
+    def scores(obs):
+        return bl.prefix_scores(bl.step_logliks(model, params, obs, action, reset), reset)
+
+    tau = bl.calibrate(scores(held), FALSE_RATE)
+    rate = float(jnp.mean(scores(test) < tau))
+    # 3072 prefixes (512 independent episodes of 3): a few standard errors around the stated rate
+    assert abs(rate - FALSE_RATE) < 0.025, rate
+    other = bits(jax.random.PRNGKey(9), n, t, 1.0 - probs)  # another adversary's trajectories
+    assert float(jnp.mean(scores(other) < tau)) > 0.9
+
+
+# ------------------------------------------------------------------------------ the tracker
+def uniform_policy(variables, carry, obs, reset):
+    return carry, (jnp.zeros(reset.shape + (LEVERS,)), jnp.zeros(reset.shape))
+
+
+def roll(task, levels, steps, key, frozen=None):
+    traj, _ = rollout(key, task.env, task.params, uniform_policy, {}, jnp.zeros(1), levels, steps, frozen,
+                      deterministic_reset=task.deterministic_reset)
+    return traj
+
+
+def from_buffer(buffer, key, n):
+    """n levels drawn uniformly from the buffer's levels (leaves [C, ...])."""
+    size = jax.tree.leaves(buffer)[0].shape[0]
+    return jax.tree.map(lambda x: x[jax.random.randint(key, (n,), 0, size)], buffer)
+
+
+def learn_adversary(task, buffer, hidden=16, steps=200, n=256, t=4):
+    """A belief model of the adversary ``buffer`` (levels drawn uniformly from it), fit on one
+    rollout sample and calibrated on another: ``(tracker, FrozenBeliefs with one model)``."""
+    example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)
+    model = bl.BeliefModel(bl.coding_for(example), num_actions=task.num_actions, hidden=hidden)
+    data = roll(task, from_buffer(buffer, jax.random.PRNGKey(1), n), t, jax.random.PRNGKey(2))
+    params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=steps)
+    held = roll(task, from_buffer(buffer, jax.random.PRNGKey(4), n), t, jax.random.PRNGKey(5))
+    ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
+    tau = bl.calibrate(bl.prefix_scores(ll, held.reset), FALSE_RATE)
+    frozen = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
+                              valid=jnp.ones((1,), bool))
+    return bl.BeliefTracker(model), frozen
+
+
+def lever_level(correct, visible, seed=None):
+    level = LeverLevel(correct=jnp.asarray(correct, jnp.int32), visible=jnp.asarray(visible, bool))
+    return level if seed is None else SeededLevel(level=level, seed=jnp.asarray(seed, jnp.uint32))
+
+
+@functools.lru_cache(maxsize=None)
+def lever_buffer():
+    """A frozen lever buffer: 24 hidden levels and 4 visible ones for each of levers 0 and 1."""
+    correct = jnp.concatenate([jnp.arange(24) % LEVERS, jnp.zeros(4, jnp.int32), jnp.ones(4, jnp.int32)])
+    visible = jnp.arange(32) >= 24
+    return lever_level(correct, visible)
+
+
+def test_on_the_lever_game_the_belief_tracker_agrees_with_the_exact_tracker():
+    task = lever_task(LEVERS)
+    buffer = lever_buffer()
+    tracker, beliefs = learn_adversary(task, buffer)
+    fresh = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(7), 512))
+    exact = roll(task, fresh, 4, jax.random.PRNGKey(8),
+                 Frozen(levels=buffer, valid=jnp.ones(32, bool), tracker=ExactTracker()))
+    learnt = roll(task, fresh, 4, jax.random.PRNGKey(8),
+                  Frozen(levels=buffer, valid=jnp.ones(32, bool), tracker=tracker, belief=beliefs))
+    disagree = float(jnp.mean(exact.indist != learnt.indist))
+    # the stated fraction: the false-distinguishable rate (every level here is frequent in the
+    # buffer, so the learnt model in fact agrees everywhere)
+    assert disagree <= FALSE_RATE, disagree
+    assert 0.3 < float(jnp.mean(exact.indist)) < 0.8  # hidden levels and two visible ones are explained
+
+
+def test_on_the_noisy_lever_game_the_belief_tracker_explains_fresh_hidden_levels():
+    task = noisy_lever_task(LEVERS)
+    c = 64
+    keys = jax.random.split(jax.random.PRNGKey(11), c)
+    buffer = lever_level(jnp.arange(c) % LEVERS, jnp.zeros(c, bool), jax.vmap(draw_seed)(keys))  # hidden only
+    tracker, beliefs = learn_adversary(task, buffer)
+    n = 256
+    seeds = jax.vmap(draw_seed)(jax.random.split(jax.random.PRNGKey(12), n))
+    hidden = lever_level(jnp.arange(n) % LEVERS, jnp.zeros(n, bool), seeds)  # fresh seeds
+    visible = lever_level(jnp.arange(n) % LEVERS, jnp.ones(n, bool), seeds)
+
+    def explained(levels, tr, belief=None):
+        frozen = Frozen(levels=buffer, valid=jnp.ones(c, bool), tracker=tr, belief=belief)
+        return float(jnp.mean(roll(task, levels, 2, jax.random.PRNGKey(13), frozen).indist))
+
+    assert explained(hidden, ExactTracker()) < 0.05  # the exact tracker sees different noise codes
+    learnt_hidden = explained(hidden, tracker, beliefs)
+    assert learnt_hidden > 0.8, learnt_hidden  # the noise bits are uninformative: learnt as ~uniform
+    assert explained(visible, tracker, beliefs) == 0.0
+
+
+@pytest.mark.parametrize("done", [False, True])
+def test_the_tracker_restarts_the_episode_when_it_ends(done):
+    # one model, one env: the per-step advance equals the batch computation on the same steps
+    coding = bl.ObsCoding(scales=(1.0,), categories=(2,), sizes=(3,))
+    model = bl.BeliefModel(coding, num_actions=2, hidden=4)
+    params = model.init(jax.random.PRNGKey(0))
+    beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=jnp.asarray([-1e9]),
+                               valid=jnp.ones((1,), bool))
+    frozen = Frozen(levels=None, valid=jnp.ones((1,), bool), belief=beliefs)
+    tracker = bl.BeliefTracker(model)
+    obs = jnp.asarray([[[1.0, 0.0, 1.0]], [[0.0, 1.0, 1.0]]])  # [T=2, N=1, 3]
+    action = jnp.asarray([[1], [0]])
+    reset = jnp.asarray([[True], [done]])
+    state = tracker.start(None, None, frozen, jnp.zeros((1, 2), jnp.uint32), obs[0])
+    state = tracker.advance(None, None, frozen, None, state, action[0], obs[1], reset[1])
+    batch = bl.prefix_scores(bl.step_logliks(model, params, obs, action, reset), reset)
+    np.testing.assert_allclose(state.total[0, 0] / state.count[0], batch[1, 0], rtol=1e-5)
+    assert bool(tracker.explained(state)[0])

@@ -30,12 +30,14 @@ Their state lives in named :class:`~remidi.engine.train.Runner` fields (``buffer
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.engine import belief as bl
 from remidi.engine import buffer as buf
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
@@ -196,6 +198,9 @@ class LevelBuffers(RandomLevels):
         out = super().advance(setup, runner, proposal, params)
         count = out["count"]
         switch = switches(setup, runner, count) if self.buffer_sequence else jnp.asarray(False)
+        if runner.belief is not None:  # remidi.tracker=belief: the active buffer's model is frozen with it
+            out["belief"] = bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
+                                      setup.cfg.remidi.belief_false_rate)
         frozen_params = runner.frozen_params
         if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
             frozen_params = jax.tree.map(
@@ -254,6 +259,10 @@ def earlier_buffers(setup, runner) -> Frozen | None:
     k = earlier.valid.shape[0]
     valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+    if runner.belief is not None:  # remidi.tracker=belief: the earlier buffers' learned models judge
+        return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
+                      tracker=bl.BeliefTracker(belief_model(setup)),
+                      belief=bl.frozen_beliefs(runner.belief, runner.active))
     return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                   tracker=make_tracker(setup.cfg.remidi.tracker, tracker_budget(setup)))
 
@@ -284,6 +293,51 @@ def rehearse_frozen(setup, runner, proposal: Proposal, rng) -> Proposal:
     levels = jax.tree.map(lambda f, o: jnp.where(rehearse, f, o), frozen, proposal.levels)
     return proposal.replace(levels=levels, replay=proposal.replay & ~rehearse, train=proposal.train | rehearse,
                             rehearse=rehearse)
+
+
+def uses_belief(setup) -> bool:
+    """The run judges distinguishability by learned models (``remidi.tracker=belief``): a buffer
+    sequence of at least two buffers."""
+    r = setup.cfg.remidi
+    return setup.algo.buffer_sequence and setup.algo.replays and r.tracker == "belief" and r.num_buffers >= 2
+
+
+@functools.lru_cache(maxsize=None)
+def _belief_model(task, hidden: int) -> bl.BeliefModel:
+    from remidi.engine.train import example_observation
+
+    obs = jax.eval_shape(lambda: example_observation(task)[0])
+    return bl.BeliefModel(bl.coding_for(obs), num_actions=task.num_actions, hidden=hidden)
+
+
+def belief_model(setup) -> bl.BeliefModel:
+    """The belief model of the run's task (its observations' coding, its actions) and config."""
+    return _belief_model(setup.task, setup.cfg.remidi.belief_hidden)
+
+
+def belief_optimizer(setup):
+    """The belief models' optimiser (``remidi.belief_lr``)."""
+    return bl.make_optimizer(setup.cfg.remidi.belief_lr)
+
+
+def belief_memory(setup, rng):
+    """The initial :class:`~remidi.engine.belief.BeliefMemory` of a run that uses one (else None);
+    ``rng``: the runner's key, folded."""
+    if not uses_belief(setup):
+        return None
+    cfg = setup.cfg
+    return bl.init_memory(belief_model(setup), belief_optimizer(setup), cfg.remidi.num_buffers,
+                          cfg.remidi.belief_calibration, cfg.num_steps * cfg.num_envs, jax.random.fold_in(rng, 31))
+
+
+def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
+    """The active buffer's model learns from a replay of its levels (:func:`~remidi.engine.belief.learn`).
+    Returns ``(changed Runner fields, step metrics)``: nothing without a belief tracker."""
+    if runner.belief is None:
+        return {}, {}
+    memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
+                            proposal.replay, setup.cfg.remidi.belief_epochs)
+    return {"belief": memory}, {"belief/loss": loss}
 
 
 def buffer_contents(setup, runner) -> dict:

@@ -195,7 +195,7 @@ def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> ja
     return -jnp.sum(jnp.where(mask, ll, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
 
 
-def make_optimizer(lr: float = 3e-3, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
+def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
     """The belief model's optimiser: Adam after global gradient-norm clipping."""
     return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(lr))
 
@@ -300,3 +300,81 @@ class BeliefTracker:
     def buffer_match(self, state: BeliefState, num_buffers: int, capacity: int) -> jax.Array:
         """bool[N, B]: frozen model b explains env n's prefix (Combine: one model per buffer)."""
         return state.match[:, :num_buffers]
+
+
+# ---------------------------------------------------------------------------- in a run
+@struct.dataclass
+class BeliefMemory:
+    """What a ReMiDi run with ``remidi.tracker=belief`` carries (``Runner.belief``): one model per
+    buffer (adversary), trained while its buffer is active and frozen with it.
+
+    ``params`` leaves [K, ...] (model k: buffer k's adversary); ``opt_state``: the active model's
+    optimiser state (restarted at each switch); ``threshold`` f32[K] (+inf until calibrated at
+    the model's freeze); ``scores`` f32[R, T·N]: the prefix scores of the active adversary's last
+    R replays, each under the model as it was before fitting on that replay (held out from it);
+    ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next)."""
+
+    params: Any
+    opt_state: Any
+    threshold: jax.Array
+    scores: jax.Array
+    written: jax.Array
+
+
+def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batch: int, rng) -> BeliefMemory:
+    """Fresh models for ``num_buffers`` adversaries (independent initialisations from ``rng``),
+    a calibration record of ``rows`` replays of ``batch`` = T·N prefix scores each."""
+    params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
+    first = jax.tree.map(lambda x: x[0], params)
+    return BeliefMemory(params=params, opt_state=optimizer.init(first),
+                        threshold=jnp.full((num_buffers,), jnp.inf), scores=jnp.zeros((rows, batch)),
+                        written=jnp.zeros((), jnp.int32))
+
+
+def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
+    """The models of the buffers before ``active`` (B = K − 1 entries, the last never frozen)."""
+    k = memory.threshold.shape[0]
+    return FrozenBeliefs(params=jax.tree.map(lambda x: x[:-1], memory.params), threshold=memory.threshold[:-1],
+                         valid=jnp.arange(k - 1) < active)
+
+
+def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, trained,
+          epochs: int = 1) -> tuple[BeliefMemory, jax.Array]:
+    """The active adversary's model learns from a rollout of its levels (``trained`` bool[]: the
+    rollout replayed the active buffer; otherwise nothing changes): record the rollout's prefix
+    scores under the model before the update (held out), then ``epochs`` :func:`fit_step` on all
+    its steps. ``traj``: a :class:`~remidi.engine.rollout.Trajectory` (leaves [T, N, ...]). Returns
+    ``(memory, loss f32[]: the first epoch's, NaN when not trained)``."""
+
+    def fit(m: BeliefMemory):
+        params = jax.tree.map(lambda x: x[active], m.params)
+        ll = step_logliks(model, params, traj.obs, traj.action, traj.reset)
+        scores = prefix_scores(ll, traj.reset).reshape(-1)
+        rows = m.scores.shape[0]
+
+        def epoch(carry, _):
+            p, o = carry
+            p, o, loss = fit_step(model, optimizer, p, o, traj.obs, traj.action, traj.reset)
+            return (p, o), loss
+
+        (params, opt_state), losses = jax.lax.scan(epoch, (params, m.opt_state), None, length=epochs)
+        loss = losses[0]
+        return m.replace(params=jax.tree.map(lambda all_, p: all_.at[active].set(p), m.params, params),
+                         opt_state=opt_state, scores=m.scores.at[m.written % rows].set(scores),
+                         written=m.written + 1), loss
+
+    return jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
+
+
+def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float) -> BeliefMemory:
+    """At a buffer switch (``switch`` bool[]) the active model is frozen: its threshold is
+    calibrated on the recorded scores (:func:`calibrate`; +inf, explaining nothing, if no replay
+    was recorded), the record emptied and the optimiser restarted for the next model."""
+    rows = memory.scores.shape[0]
+    valid = jnp.broadcast_to((jnp.arange(rows) < memory.written)[:, None], memory.scores.shape)
+    tau = calibrate(memory.scores, false_rate, valid)
+    k = memory.threshold.shape[0]
+    nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], memory.params)
+    switched = memory.replace(threshold=memory.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
+                              written=jnp.zeros((), jnp.int32))
+    return jax.tree.map(lambda a, b: jnp.where(switch, a, b), switched, memory)

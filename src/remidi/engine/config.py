@@ -33,12 +33,27 @@ class ReMiDiConfig:
         "help": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' "
                 "unit) or replays"})
     tracker: str = field(default="prefix", metadata={
-        "help": "ReMiDi: prefix (one frozen level made the whole prefix) or per_step (authors' rule)"})
+        "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule) or belief "
+                "(a learned model per buffer judges the prefix: for environments whose observations are random "
+                "given the level; engine/belief.py)"})
     # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
     # env's first observation are stepped, at most this many; 0 steps every frozen level (the
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
     tracker_budget: int = field(default=64, metadata={
         "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
+    # remidi.tracker=belief (engine/belief.py): each buffer's adversary has a learned model of its
+    # trajectories, trained on the replays of its buffer and frozen with it; its threshold is the
+    # belief_false_rate quantile of the prefix scores of its last belief_calibration replays
+    belief_false_rate: float = field(default=0.05, metadata={
+        "help": "ReMiDi, tracker=belief: share of the adversary's own trajectory prefixes its frozen model may call "
+                "distinguishable (sets the threshold)"})
+    belief_hidden: int = field(default=64, metadata={"help": "ReMiDi, tracker=belief: the model's GRU units"})
+    belief_lr: float = field(default=1e-2, metadata={"help": "ReMiDi, tracker=belief: the model's Adam learning rate"})
+    belief_epochs: int = field(default=4, metadata={
+        "help": "ReMiDi, tracker=belief: the model's updates on each replay of its buffer"})
+    belief_calibration: int = field(default=16, metadata={
+        "help": "ReMiDi, tracker=belief: replays whose prefix scores (held out: scored before the model fits on "
+                "them) calibrate the threshold at the freeze"})
     # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
     # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
     # buffer acts on the trajectories realisable under that buffer's levels

@@ -44,7 +44,7 @@ from remidi.engine.config import UEDConfig, buffer_config, num_buffers, score_na
 from remidi.engine.distributions import for_task
 from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, compute_gae, create_train_state, ppo_update
-from remidi.engine.adversary import Proposal, tag_counts
+from remidi.engine.adversary import Proposal, belief_learns, belief_memory, tag_counts
 from remidi.engine.rollout import Frozen, Trajectory, rollout
 from remidi.envs.interface import UEDTask
 
@@ -65,6 +65,7 @@ class Runner:
     generator: object = None  # PAIRED: the level generator's TrainState
     antagonist: object = None  # PAIRED: the antagonist's TrainState
     next_generators: object = None  # ReMiDi over PAIRED: the fresh generators of the later buffers, leaves [K−1, ...]
+    belief: object = None  # remidi.tracker=belief: the buffers' learned models (engine/belief.py BeliefMemory)
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ def init_runner(setup: Setup, rng) -> Runner:
     if cfg.normalize_obs:
         obs_stats = nrm.init_stats(flatten_obs(jax.tree.map(lambda x: x[None, None], example_obs)).shape[-1])
     return Runner(rng=rng, train_state=train_state, buffers=buffers, active=zero, count=zero, update=zero,
-                  frozen_params=frozen_params, obs_stats=obs_stats,
+                  frozen_params=frozen_params, obs_stats=obs_stats, belief=belief_memory(setup, rng),
                   **setup.algo.adversary.memory(setup, example_level, example_obs, rng))
 
 
@@ -220,6 +221,9 @@ def train_step(setup: Setup, runner: Runner):
     #    (PAIRED: the antagonist plays the levels, the generator is paid its regret estimate)
     changed, inserted, adversary_metrics = adversary.update(setup, runner, proposal, scores, overlap, best_ret,
                                                             mean_ret, k_learn)
+    #    (remidi.tracker=belief: the active buffer's model learns from a replay of its levels)
+    learnt, belief_metrics = belief_learns(setup, runner, proposal, traj)
+    changed = {**changed, **learnt}
     # 4. train (masked PPO) if the proposal is trained on
     train_state, ppo_metrics = train(setup, runner, proposal.train, k_learn, traj, adv, targets)
     obs_stats = runner.obs_stats  # the statistics absorb this rollout's observations
@@ -232,7 +236,8 @@ def train_step(setup: Setup, runner: Runner):
     runner = runner.replace(rng=rng, train_state=train_state, update=runner.update + 1, obs_stats=obs_stats, **moved)
     # 6. what the step reports
     return runner, {**step_metrics(setup, runner, proposal, traj, mean_ret, scores, overlap, inserted, frozen),
-                    **{f"ppo/{name}": value for name, value in ppo_metrics.items()}, **adversary_metrics}
+                    **{f"ppo/{name}": value for name, value in ppo_metrics.items()}, **adversary_metrics,
+                    **belief_metrics}
 
 
 def train(setup: Setup, runner: Runner, trained, rng, traj: Trajectory, adv, targets) -> tuple[TrainState, dict]:
@@ -252,6 +257,7 @@ def train(setup: Setup, runner: Runner, trained, rng, traj: Trajectory, adv, tar
 #: metric not listed) or "nanmean" (the mean over the updates where it is defined, NaN if none).
 #: ``replayed/<tag>`` counts become the block's ``replay_fraction/<tag>``.
 BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "sum", "active_buffer": "last",
+                    "belief/loss": "nanmean",
                     **{f"ppo/{name}": "nanmean" for name in PPO_METRICS}}
 
 

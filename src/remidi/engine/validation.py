@@ -326,7 +326,18 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
             "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
     choice("remidi.count", r.count, ("updates", "replays"))
-    choice("remidi.tracker", r.tracker, MODES)
+    choice("remidi.tracker", r.tracker, MODES + ("belief",))
+    if r.tracker == "belief":
+        require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)",
+                r.belief_false_rate)
+        positive_int("remidi.belief_hidden", r.belief_hidden)
+        positive_int("remidi.belief_calibration", r.belief_calibration)
+        positive_int("remidi.belief_epochs", r.belief_epochs)
+        require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
+        require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
+                "(the belief model reads discrete actions)", r.tracker)
+        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix or per_step with a learned "
+                "generator (ReMiDi over PAIRED: the belief tracker is not wired into its adversary yet)", r.tracker)
     choice("remidi.policy", r.policy, POLICIES)
     if r.policy == "combine":
         require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "

@@ -32,6 +32,7 @@ A actions, H hidden units, B frozen models.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -101,7 +102,7 @@ def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
         scale, k = defaults.get(name, (1.0, 2))
         scales.append(float(scale))
         ks.append(int(k))
-        sizes.append(int(max(1, jnp.size(leaf))))
+        sizes.append(max(1, math.prod(leaf.shape)))
     return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes))
 
 

@@ -282,3 +282,31 @@ def test_remidi_with_the_belief_tracker_keeps_noisy_hidden_levels_out_of_its_lat
     assert m["active_buffer"] == 1
     assert m["buffer_fraction/hidden/b0"] > 0.9
     assert m["buffer_fraction/hidden"] < 0.1
+
+
+def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
+    # interrupted after update 10, past the switch at update 8: the frozen model and its
+    # threshold, the active model, its optimiser and its calibration record come back from the checkpoint
+    import json
+
+    from remidi.cli import main
+    from remidi.experiments import ued
+
+    base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY]
+    assert main([*base, "--out", str(tmp_path / "full")]) == 0
+    real = ued.train_seeds
+
+    def interrupted(*args, on_block=None, **kwargs):
+        def ctrl_c(done, metrics):
+            if done == 10:
+                raise KeyboardInterrupt
+        return real(*args, **kwargs, on_block=ctrl_c)
+
+    monkeypatch.setattr(ued, "train_seeds", interrupted)
+    assert main([*base, "--out", str(tmp_path / "cut")]) == 130
+    monkeypatch.setattr(ued, "train_seeds", real)
+    assert main(["run", "--resume", str(tmp_path / "cut"), "--quiet"]) == 0
+    assert (tmp_path / "cut" / "metrics.csv").read_text() == (tmp_path / "full" / "metrics.csv").read_text()
+    full = json.loads((tmp_path / "full" / "summary.json").read_text())
+    cut = json.loads((tmp_path / "cut" / "summary.json").read_text())
+    assert full["metrics"] == cut["metrics"]

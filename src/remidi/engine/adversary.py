@@ -200,7 +200,7 @@ class LevelBuffers(RandomLevels):
         switch = switches(setup, runner, count) if self.buffer_sequence else jnp.asarray(False)
         if runner.belief is not None:  # remidi.tracker=belief: the active buffer's model is frozen with it
             out["belief"] = bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
-                                      setup.cfg.remidi.belief_false_rate)
+                                      setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin)
         frozen_params = runner.frozen_params
         if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
             frozen_params = jax.tree.map(

@@ -367,13 +367,14 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     return jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
 
 
-def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float) -> BeliefMemory:
+def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3) -> BeliefMemory:
     """At a buffer switch (``switch`` bool[]) the active model is frozen: its threshold is
     calibrated on the recorded scores (:func:`calibrate`; +inf, explaining nothing, if no replay
-    was recorded), the record emptied and the optimiser restarted for the next model."""
+    was recorded) and lowered by ``margin`` nats per step, the record emptied and the optimiser
+    restarted for the next model."""
     rows = memory.scores.shape[0]
     valid = jnp.broadcast_to((jnp.arange(rows) < memory.written)[:, None], memory.scores.shape)
-    tau = calibrate(memory.scores, false_rate, valid)
+    tau = calibrate(memory.scores, false_rate, valid, slack=margin)
     k = memory.threshold.shape[0]
     nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], memory.params)
     switched = memory.replace(threshold=memory.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),

@@ -47,6 +47,9 @@ class ReMiDiConfig:
     belief_false_rate: float = field(default=0.05, metadata={
         "help": "ReMiDi, tracker=belief: share of the adversary's own trajectory prefixes its frozen model may call "
                 "distinguishable (sets the threshold)"})
+    belief_margin: float = field(default=1e-3, metadata={
+        "help": "ReMiDi, tracker=belief: nats per step the threshold is lowered below the calibrated quantile "
+                "(a tolerance for score differences the model should not care about)"})
     belief_hidden: int = field(default=64, metadata={"help": "ReMiDi, tracker=belief: the model's GRU units"})
     belief_lr: float = field(default=1e-2, metadata={"help": "ReMiDi, tracker=belief: the model's Adam learning rate"})
     belief_epochs: int = field(default=4, metadata={

@@ -333,6 +333,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         positive_int("remidi.belief_hidden", r.belief_hidden)
         positive_int("remidi.belief_calibration", r.belief_calibration)
         positive_int("remidi.belief_epochs", r.belief_epochs)
+        require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
         require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
         require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
                 "(the belief model reads discrete actions)", r.tracker)

@@ -93,6 +93,31 @@ def test_prefix_scores_restart_with_each_episode():
 
 
 # ------------------------------------------------------------------------------ calibration
+def test_the_calibration_record_skips_the_untrained_models_first_replay():
+    """learn(): the first replay after a switch is fitted on but its (untrained) scores are not
+    recorded; from the second on each replay's pre-fit scores are; a replay-less update changes
+    nothing; freeze() with fewer than two replays gives +inf (explain nothing)."""
+    from remidi.engine.rollout import Trajectory
+
+    model = bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bl.make_optimizer()
+    t, n = 2, 3
+    zeros = jnp.zeros((t, n))
+    traj = Trajectory(obs=jnp.ones((t, n, 3)), reset=jnp.ones((t, n), bool), action=jnp.zeros((t, n), jnp.int32),
+                      log_prob=zeros, value=zeros, reward=zeros, done=jnp.ones((t, n), bool),
+                      indist=jnp.zeros((t, n), bool), overflow=jnp.zeros((t, n), jnp.int32))
+    memory = bl.init_memory(model, opt, 2, 4, t * n, jax.random.PRNGKey(0))
+    same, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(False))
+    assert int(same.fits) == 0 and int(same.written) == 0
+    once, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(True))
+    assert (int(once.fits), int(once.written)) == (1, 0) and float(jnp.abs(once.scores).sum()) == 0.0
+    assert np.isinf(float(bl.freeze(opt, once, 0, jnp.asarray(True), 0.05).threshold[0]))
+    twice, _ = bl.learn(model, opt, once, 0, traj, jnp.asarray(True))
+    assert (int(twice.fits), int(twice.written)) == (2, 1) and float(twice.scores[0].max()) < 0
+    frozen = bl.freeze(opt, twice, 0, jnp.asarray(True), 0.05)
+    assert np.isfinite(float(frozen.threshold[0])) and (int(frozen.fits), int(frozen.written)) == (0, 0)
+
+
 def test_calibrate_is_the_lower_quantile():
     scores = jnp.arange(100.0)
     assert float(bl.calibrate(scores, 0.05, slack=0.0)) == 5.0  # 5 of 100 lie strictly below
@@ -247,6 +272,12 @@ def test_a_belief_run_keeps_its_models_in_the_checkpoint_and_calibrates_at_the_s
         names = [n for n in data.files if ".belief." in n]
         threshold = data[next(n for n in names if n.endswith(".belief.threshold"))]
     assert any(n.endswith(".belief.params['wx']") for n in names)
+    import json
+
+    metrics = json.loads((out / "summary.json").read_text())["metrics"]
+    for name in ("belief/explained", "belief/exact_explained", "belief/agreement"):  # after the switch: measured
+        assert 0.0 <= metrics[name]["mean"] <= 1.0, name
+    assert metrics["belief/uniform_score"]["mean"] < metrics["belief/threshold"]["mean"] < 0
     # seed axis first: buffer 0's model was calibrated at the switch, the last one never is
     assert np.isfinite(threshold[..., 0]).all() and np.isinf(threshold[..., -1]).all()
 
@@ -312,3 +343,44 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
     full = json.loads((tmp_path / "full" / "summary.json").read_text())
     cut = json.loads((tmp_path / "cut" / "summary.json").read_text())
     assert full["metrics"] == cut["metrics"]
+
+
+# ------------------------------------------------------------------------------ the audit
+@pytest.mark.parametrize("threshold", [-jnp.inf, jnp.inf])
+def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_same_rollout(threshold):
+    """``belief/*`` evaluation metrics (engine/evaluation.py ``tracker_audit``): a frozen model
+    with threshold −inf explains every step (agreement = the exact tracker's explained share),
+    one with +inf none (agreement = 1 − that share); NaN while nothing is frozen; the exact
+    tracker's share is the one a plain ReMiDi run's tracker gives on the same levels and key."""
+    import dataclasses
+
+    from remidi.engine import evaluation
+    from remidi.engine import train as tr
+    from remidi.engine.adversary import earlier_buffers
+
+    from test_ued_engine import TASK, TINY
+
+    r = dataclasses.replace
+    cfg = r(TINY, remidi=r(TINY.remidi, tracker="belief"))
+    setup = tr.make_setup(TASK, cfg, "remidi")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    assert all(np.isnan(float(v)) for v in evaluation.tracker_audit(setup, runner, jax.random.PRNGKey(1)).values())
+    # buffer 0 frozen full of the task's levels (the lever game: many fresh levels repeat one of them)
+    bufs = runner.buffers
+    c = bufs.valid.shape[1]
+    levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(2), c))
+    bufs = bufs.replace(levels=jax.tree.map(lambda all_, x: all_.at[0].set(x), bufs.levels, levels),
+                        valid=bufs.valid.at[0].set(True))
+    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))
+    runner = runner.replace(buffers=bufs, active=jnp.asarray(1), belief=belief)
+    out = {k: float(v) for k, v in evaluation.tracker_audit(setup, runner, jax.random.PRNGKey(1)).items()}
+    plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")
+    k_levels, k_roll = jax.random.split(jax.random.PRNGKey(1))
+    fresh = jax.vmap(TASK.sample_level)(jax.random.split(k_levels, cfg.num_envs))
+    exact = tr.collect(plain, runner.replace(belief=None), k_roll, fresh,
+                       earlier_buffers(plain, runner.replace(belief=None)))[0].indist
+    share = float(np.mean(np.asarray(exact)))
+    assert 0 < share < 1  # the check below can tell the two judgements apart
+    assert out["belief/exact_explained"] == pytest.approx(share)
+    assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)
+    assert out["belief/agreement"] == pytest.approx(share if threshold < 0 else 1 - share)

@@ -18,6 +18,12 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   overflow.
 * ``maze-remidi-reference``: ``maze-remidi`` with the reference tracker (every frozen level
   stepped beside every env), for the ratio of the two trackers (not run by default: slow).
+* ``maze-remidi-belief``: ``maze-remidi`` with the learned belief tracker
+  (``remidi.tracker=belief``, engine/belief.py): each step every env's prefix is scored by the
+  three frozen buffers' GRU models instead of stepping frozen levels, and the active buffer's
+  model fits on every replay (``remidi.belief_epochs`` updates);
+  ``remidi_belief_step_over_remidi_step`` is its cost per environment step against the exact
+  candidate tracker's (not run by default).
 * ``maze-accel``: ACCEL (``accel``) on the same set-up as ``maze-plr``: with every update
   replaying, the updates alternate between a replay (rollout + PPO) and an edit of that replay's
   levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``)
@@ -173,10 +179,12 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     steps = updates_per_call * cfg.num_envs * cfg.num_steps
     # the network's operation count assumes every update trains one network; an editing algorithm's
-    # edit updates do not, a learned generator's updates train three (no figure rather than a wrong one)
+    # edit updates do not, a learned generator's updates train three, a belief tracker adds its models'
+    # work (no figure rather than a wrong one)
     from remidi.engine.paired import LevelGenerator
 
-    flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) else \
+    flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
+        cfg.remidi.tracker == "belief" and setup.algo.buffer_sequence else \
         steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
@@ -265,6 +273,16 @@ def _maze_remidi_reference():
 
     cfg = _maze_config("remidi", budget=0)
     return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1, updates_per_call=1)
+
+
+@register("maze-remidi-belief", "maze-remidi with the learned belief tracker (remidi.tracker=belief): three frozen "
+                               "models judge, the active one learns from each replay")
+def _maze_remidi_belief():
+    from remidi.envs.maze import maze_task
+
+    cfg = _maze_config("remidi")
+    cfg = dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, tracker="belief"))
+    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
 
 
 @register("brax-plr", "PLR⊥ update on brax-hopper's paper preset: 256 envs × 100 steps, PPO 4 × 32")
@@ -417,6 +435,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
     if "maze-remidi" in results and "maze-plr" in results:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
+    if "maze-remidi-belief" in results and "maze-remidi" in results:
+        out["remidi_belief_step_over_remidi_step"] = per_call("maze-remidi-belief") / per_call("maze-remidi")
     if "maze-paired" in results and "maze-plr" in results:
         out["paired_step_over_plr_step"] = per_call("maze-paired") / per_call("maze-plr")
     if "maze-paired-reference" in results and "maze-plr" in results:

@@ -210,7 +210,7 @@ class LevelBuffers(RandomLevels):
                 "count": jnp.where(switch, 0, count), "frozen_params": frozen_params}
 
     def metrics(self, setup, runner) -> dict:
-        return buffer_contents(setup, runner)
+        return {**buffer_contents(setup, runner), **belief_contents(setup, runner)}
 
 
 @dataclass(frozen=True)
@@ -338,6 +338,20 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
                             proposal.replay, setup.cfg.remidi.belief_epochs)
     return {"belief": memory}, {"belief/loss": loss}
+
+
+def belief_contents(setup, runner) -> dict:
+    """``remidi.tracker=belief``: ``belief/threshold`` (the threshold of the last frozen model, NaN
+    before the first switch), ``belief/heldout_score`` (the active model's mean held-out prefix
+    score since the switch) and ``belief/uniform_score`` (a model that knows nothing: a frozen
+    model whose scores sit near it explains almost anything), all in nats per step."""
+    if runner.belief is None:
+        return {}
+    memory = runner.belief
+    last = jnp.maximum(runner.active - 1, 0)
+    return {"belief/threshold": jnp.where(runner.active > 0, memory.threshold[last], jnp.nan),
+            "belief/heldout_score": bl.heldout_score(memory),
+            "belief/uniform_score": jnp.float32(bl.uniform_score(belief_model(setup)))}
 
 
 def buffer_contents(setup, runner) -> dict:

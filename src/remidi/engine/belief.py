@@ -313,13 +313,17 @@ class BeliefMemory:
     optimiser state (restarted at each switch); ``threshold`` f32[K] (+inf until calibrated at
     the model's freeze); ``scores`` f32[R, T·N]: the prefix scores of the active adversary's last
     R replays, each under the model as it was before fitting on that replay (held out from it);
-    ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next)."""
+    ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next);
+    ``fits`` i32[]: replays the active model has learnt from since the switch. The first replay's
+    scores are not recorded: they are those of the untrained model, whose scores sit near the
+    uniform model's, and a threshold calibrated on them would let every prefix through."""
 
     params: Any
     opt_state: Any
     threshold: jax.Array
     scores: jax.Array
     written: jax.Array
+    fits: jax.Array
 
 
 def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batch: int, rng) -> BeliefMemory:
@@ -329,7 +333,7 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batc
     first = jax.tree.map(lambda x: x[0], params)
     return BeliefMemory(params=params, opt_state=optimizer.init(first),
                         threshold=jnp.full((num_buffers,), jnp.inf), scores=jnp.zeros((rows, batch)),
-                        written=jnp.zeros((), jnp.int32))
+                        written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
 
 
 def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
@@ -343,7 +347,8 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
           epochs: int = 1) -> tuple[BeliefMemory, jax.Array]:
     """The active adversary's model learns from a rollout of its levels (``trained`` bool[]: the
     rollout replayed the active buffer; otherwise nothing changes): record the rollout's prefix
-    scores under the model before the update (held out), then ``epochs`` :func:`fit_step` on all
+    scores under the model before the update (held out; not for the model's first replay since
+    the switch, whose scores are the untrained model's), then ``epochs`` :func:`fit_step` on all
     its steps. ``traj``: a :class:`~remidi.engine.rollout.Trajectory` (leaves [T, N, ...]). Returns
     ``(memory, loss f32[]: the first epoch's, NaN when not trained)``."""
 
@@ -360,17 +365,36 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
 
         (params, opt_state), losses = jax.lax.scan(epoch, (params, m.opt_state), None, length=epochs)
         loss = losses[0]
+        record = m.fits > 0
+        row = jnp.where(record, m.written % rows, rows)  # rows: out of bounds, dropped
         return m.replace(params=jax.tree.map(lambda all_, p: all_.at[active].set(p), m.params, params),
-                         opt_state=opt_state, scores=m.scores.at[m.written % rows].set(scores),
-                         written=m.written + 1), loss
+                         opt_state=opt_state, scores=m.scores.at[row].set(scores, mode="drop"),
+                         written=m.written + record.astype(jnp.int32), fits=m.fits + 1), loss
 
     return jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
+
+
+def heldout_score(memory: BeliefMemory) -> jax.Array:
+    """f32[]: the mean of the recorded held-out prefix scores of the active model's replays (the
+    units of its threshold; NaN before the first replay since the switch)."""
+    rows = memory.scores.shape[0]
+    recorded = (jnp.arange(rows) < memory.written)[:, None]
+    total = jnp.sum(jnp.where(recorded, memory.scores, 0.0))
+    return total / jnp.where(memory.written > 0, jnp.minimum(memory.written, rows) * memory.scores.shape[1], jnp.nan)
+
+
+def uniform_score(model: BeliefModel) -> float:
+    """The per-step log-likelihood of a model that knows nothing (every entry uniform over its
+    leaf's categories): a frozen model whose held-out scores are near this one explains anything
+    its adversary could show, and its threshold lets nearly every prefix through."""
+    c = model.coding
+    return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories))
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3) -> BeliefMemory:
     """At a buffer switch (``switch`` bool[]) the active model is frozen: its threshold is
     calibrated on the recorded scores (:func:`calibrate`; +inf, explaining nothing, if no replay
-    was recorded) and lowered by ``margin`` nats per step, the record emptied and the optimiser
+    was recorded: the model learnt from at most one replay) and lowered by ``margin`` nats per step, the record emptied and the optimiser
     restarted for the next model."""
     rows = memory.scores.shape[0]
     valid = jnp.broadcast_to((jnp.arange(rows) < memory.written)[:, None], memory.scores.shape)
@@ -378,5 +402,5 @@ def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, m
     k = memory.threshold.shape[0]
     nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], memory.params)
     switched = memory.replace(threshold=memory.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
-                              written=jnp.zeros((), jnp.int32))
+                              written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
     return jax.tree.map(lambda a, b: jnp.where(switch, a, b), switched, memory)

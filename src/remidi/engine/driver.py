@@ -127,7 +127,8 @@ def _run_block(setup: tr.Setup, runner, length: int):
 
 @partial(jax.jit, static_argnums=0)
 def _evaluate(setup: tr.Setup, runner, keys):
-    return over_seeds(lambda r, k: {**evaluation.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r)})(runner, keys)
+    return over_seeds(lambda r, k: {**evaluation.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r),
+                                    **evaluation.tracker_audit(setup, r, jax.random.fold_in(k, 7))})(runner, keys)
 
 
 def check_devices(devices: int, num_seeds: int) -> None:

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from remidi.engine import tracker as trk
 from remidi.engine.distributions import for_task
 from remidi.engine.rollout import combine, rollout
-from remidi.engine.train import Runner, Setup, combines, frozen_levels, policy_apply
+from remidi.engine.train import Runner, Setup, collect, combines, frozen_levels, policy_apply
 from remidi.envs.interface import UEDTask
 
 
@@ -117,3 +117,28 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
             out[f"regret/{name}/mean"] = jnp.mean(regret)
             out[f"regret/{name}/worst"] = jnp.max(regret)
     return out
+
+
+def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
+    """``remidi.tracker=belief``: the learned models' judgement against the exact tracker's on the
+    same rollout, one batch of ``num_envs`` fresh levels of the task's generator played by the
+    current policy for ``num_steps`` steps (both rollouts take the same key and the trackers do
+    not act, so their steps are the same): ``belief/explained`` and ``belief/exact_explained``
+    (the share of steps whose prefix each tracker calls indistinguishable from an earlier
+    adversary's) and ``belief/agreement`` (the share of steps they judge alike); NaN while no
+    buffer is frozen. Empty for every other run."""
+    if runner.belief is None:
+        return {}
+    cfg = setup.cfg
+    k_levels, k_roll = jax.random.split(rng)
+    levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))
+    frozen = frozen_levels(setup, runner).replace(params=None)  # the current policy acts in both
+    r = cfg.remidi  # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
+    budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity) if setup.task.deterministic_reset else 0
+    exact = frozen.replace(belief=None, tracker=trk.make_tracker("prefix", budget))
+    belief = collect(setup, runner, k_roll, levels, frozen)[0].indist
+    reference = collect(setup, runner, k_roll, levels, exact)[0].indist
+    nan = jnp.where(runner.active > 0, 0.0, jnp.nan)
+    return {"belief/explained": jnp.mean(belief.astype(jnp.float32)) + nan,
+            "belief/exact_explained": jnp.mean(reference.astype(jnp.float32)) + nan,
+            "belief/agreement": jnp.mean((belief == reference).astype(jnp.float32)) + nan}

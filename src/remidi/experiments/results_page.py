@@ -123,6 +123,21 @@ CLAIMS = (
           "on blind levels, ReMiDi's exact tracker stops rejecting: its last buffer holds at least the generator's "
           "half of blind levels (bound: the blind share of the active buffer at the end in [0.5, 1])",
           "summary:buffer_fraction/blind", ("blindfold-noisy",), bounds=(("remidi", 0.5, 1.0),)),
+    Claim("lever-noisy-belief", "beyond the paper (lever-noisy, #31)", "ReMiDi with the learned belief tracker "
+          "(remidi.tracker=belief, belief_margin 2 nats per step, chosen on the smoke preset's seeds 0–1) keeps "
+          "hidden-answer levels out of its last buffer (bound: the hidden share of the active buffer at the end "
+          "in [0, 0.1])", "summary:buffer_fraction/hidden", ("lever-noisy",),
+          bounds=(("remidi (belief, margin 2)", 0.0, 0.1),)),
+    Claim("lever-noisy-belief-visible", "beyond the paper (lever-noisy, #31)", "ReMiDi with the learned belief "
+          "tracker (margin 2) solves visible-answer levels more often than PLR⊥", "evaluate:solve_rate/visible",
+          ("lever-noisy",), greater=(("remidi (belief, margin 2)", "plr"),)),
+    Claim("lever-belief-agreement", "beyond the paper (lever, #31)", "on the deterministic lever game the learned "
+          "belief tracker (defaults) judges steps as the exact tracker does (bound: the share of steps of the last "
+          "audit rollout both judge alike in [0.95, 1])", "summary:belief/agreement", ("lever",),
+          bounds=(("remidi (belief)", 0.95, 1.0),)),
+    Claim("lever-belief-visible", "beyond the paper (lever, #31)", "on the deterministic lever game ReMiDi with the "
+          "learned belief tracker (defaults) solves visible-answer levels more often than PLR⊥",
+          "evaluate:solve_rate/visible", ("lever",), greater=(("remidi (belief)", "plr"),)),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -203,9 +218,23 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
 
 def label(algo: str, config: dict) -> str:
     """How the page names an algorithm's runs: a learned generator's with its regret estimator
-    (``paired (perfect)``), the others by name."""
+    (``paired (perfect)``); a buffer sequence's with what differs from its exact single-policy
+    form (``remidi (belief, margin 2)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``); the
+    others by name."""
     estimator = config.get("paired", {}).get("estimator")
-    return f"{algo} ({estimator})" if algo in ("paired", "remidi-paired") and estimator else algo
+    if algo in ("paired", "remidi-paired") and estimator:
+        return f"{algo} ({estimator})"
+    r = config.get("remidi", {})
+    parts = []
+    if r.get("tracker") == "belief":
+        parts.append("belief")
+        if r.get("belief_margin", 1e-3) != 1e-3:
+            parts.append(f"margin {r['belief_margin']:g}")
+    if r.get("policy") == "combine":
+        parts.append("combine")
+    if r.get("rehearsal"):
+        parts.append(f"rehearsal {r['rehearsal']:g}")
+    return f"{algo} ({', '.join(parts)})" if algo.startswith("remidi") and parts else algo
 
 
 def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:
@@ -387,15 +416,15 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                   ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
                    "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
                   ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
-    "lever": (["dr", "plr", "minimax-return", "remidi", "accel", "remidi-accel", "paired (perfect)",
-               "remidi-paired (perfect)", "paired (paired)"],
+    "lever": (["dr", "plr", "minimax-return", "remidi", "remidi (belief)", "accel", "remidi-accel",
+               "paired (perfect)", "remidi-paired (perfect)", "paired (paired)"],
               ["evaluate:solve_rate/visible", "evaluate:solve_rate/hidden", "summary:replay_fraction/hidden",
                "summary:buffer_fraction/hidden", "summary:generated/hidden", "summary:paired/regret",
-               "summary:paired/antagonist_return"],
+               "summary:paired/antagonist_return", "summary:belief/agreement"],
               ["solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden", "generated/hidden"]),
-    "lever-noisy": (["plr", "remidi"],
+    "lever-noisy": (["plr", "remidi", "remidi (belief)", "remidi (belief, margin 2)"],
                     ["evaluate:solve_rate/visible", "evaluate:solve_rate/hidden", "summary:replay_fraction/hidden",
-                     "summary:buffer_fraction/hidden"],
+                     "summary:buffer_fraction/hidden", "summary:belief/explained", "summary:belief/exact_explained"],
                     ["solve_rate/visible", "replay_fraction/hidden", "buffer_fraction/hidden"]),
     "blindfold-noisy": (["plr", "remidi"],
                         ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "summary:buffer_fraction/blind"],

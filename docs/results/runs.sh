@@ -84,3 +84,11 @@ done
 at 6303b59
 for a in plr remidi; do run "$a-s0" lever-noisy "$a" 0 10 paper; done
 for s in 0 5; do for a in plr remidi; do run "$a-s$s" blindfold-noisy "$a" $s 5 cpu; done; done
+
+# issue #31: the learned belief tracker (remidi.tracker=belief), at the commit that stated its
+# claims: on the deterministic lever (defaults: agreement with the exact tracker) and on
+# lever-noisy (defaults, and belief_margin 2), the lever's paper preset, 10 seeds
+at 428dc27
+run remidi-belief-s0 lever remidi 0 10 paper --set remidi.tracker=belief
+run remidi-belief-margin2-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief --set remidi.belief_margin=2
+run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief

@@ -95,6 +95,9 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
             # ranked and scored on independent episodes, so the worst 1% may score above the mean
             worst = [m[f"cvar/solve_rate/{a}"]["per_seed"][s] for a in ("1%", "10%", "100%")]
             assert all(0 <= w <= 1 for w in worst)
+        for s in range(2):  # the generator's levels by kind: the mean over all lies between the two kinds'
+            kinds = [m[f"generator/solve_rate/{k}"]["per_seed"][s] for k in ("hidden", "not-hidden")]
+            assert min(kinds) - 1e-9 <= m["cvar/solve_rate/100%"]["per_seed"][s] <= max(kinds) + 1e-9
         assert not any(name.startswith("perfect") for name in m)  # only maze runs get perfect mazes
     with open(run / "evaluate.csv") as fh:
         rows = list(csv.DictReader(fh))

@@ -15,7 +15,10 @@ latest) and evaluated on
   set of rollouts ranks the levels (per level its solve rate, or mean return), the second scores
   them, so the worst levels' luck in ranking does not bias their score downward; then the mean
   score over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
-  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts);
+  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts); where the task tags its
+  levels (``level_tags``: T-mazes, blind levels, hidden answers), the scoring rollouts' mean over
+  the levels of one kind alone and over the others: ``generator/solve_rate/<tag>``,
+  ``generator/solve_rate/not-<tag>`` (and ``generator/return/...``);
 * **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
   ``--perfect-sizes`` (default 21 and 51), each a *perfect* maze (exactly one path between any
   two open cells, carved by a randomised depth-first search from ``--seed``), the agent and the
@@ -234,8 +237,10 @@ def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: 
     return jax.jit(jax.vmap(one_seed))
 
 
-def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.ndarray]) -> dict[str, np.ndarray]:
-    """Per-seed metrics f[S] from the raw evaluations."""
+def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.ndarray],
+               tags: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """Per-seed metrics f[S] from the raw evaluations; ``tags``: the CVaR levels' tags
+    (``task.level_tags``, bool[N] each) for ``generator/<kind>/<tag>``."""
     task = setup.task
     out = {name: np.asarray(v, float) for name, v in raw.items() if not name.startswith(("cvar_raw/", "perfect_raw/"))}
     rates = [name for name in out if name.startswith("solve_rate/")]
@@ -247,6 +252,11 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
             scoring = np.asarray(raw[f"cvar_raw/score/{kind}"], float)  # [S, N], independent episodes
             for alpha, label in ALPHAS:
                 out[f"cvar/{kind}/{label}"] = np.array([cvar(v, alpha, r) for v, r in zip(scoring, ranking)])
+            for tag, tagged in (tags or {}).items():  # the generator's levels of one kind alone
+                if tagged.any():
+                    out[f"generator/{kind}/{tag}"] = scoring[:, tagged].mean(axis=1)
+                if (~tagged).any():
+                    out[f"generator/{kind}/not-{tag}"] = scoring[:, ~tagged].mean(axis=1)
     for size, optimal in perfect_optimal.items():
         returns = np.asarray(raw[f"perfect_raw/{size}"], float)  # [S, L, attempts]
         if task.solved is not None:
@@ -299,7 +309,8 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
                 f"checkpoint of update {run.update})")
         keys = jax.vmap(jax.random.PRNGKey)(np.asarray(run.seeds, np.uint32) + np.uint32(seed))
         raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
-        metrics = _summarise(raw, run.setup, optimal)
+        tags = {name: np.asarray(t, bool) for name, t in jax.vmap(task.level_tags)(levels).items()}
+        metrics = _summarise(raw, run.setup, optimal, tags)
         doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
                                        "metrics": outputs.summarize(metrics)}
         rows += [(run.algo, s, name, float(values[i])) for name, values in metrics.items()

@@ -133,3 +133,15 @@ def test_render_replaces_blocks_and_refuses_unknown_ones():
     assert rp.stale_blocks(page, {"x": "new", "y": "| t |"}) == ["x", "y"]
     with pytest.raises(ConfigError, match="unknown generated block 'x'"):
         rp.render(page, {"y": ""})
+
+
+def test_labels_name_what_differs_from_the_exact_single_policy_form():
+    assert rp.label("remidi", {}) == "remidi"
+    assert rp.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 2.0}}) == "remidi (belief, margin 2)"
+    assert rp.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 1e-3}}) == "remidi (belief)"
+    assert rp.label("remidi", {"remidi": {"policy": "combine"}}) == "remidi (combine)"
+    assert rp.label("remidi-accel", {"remidi": {"rehearsal": 0.1}}) == "remidi-accel (rehearsal 0.1)"
+    assert rp.label("remidi", {"remidi": {"policy": "masked"}},
+                    ["remidi", "run", "tmaze", "--set", "remidi.policy=masked"]) == "remidi (masked)"
+    assert rp.label("plr", {"remidi": {"policy": "combine"}}) == "plr"  # only a buffer sequence has these forms
+    assert rp.label("paired", {"paired": {"estimator": "perfect"}}) == "paired (perfect)"

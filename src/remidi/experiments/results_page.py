@@ -138,6 +138,28 @@ CLAIMS = (
     Claim("lever-belief-visible", "beyond the paper (lever, #31)", "on the deterministic lever game ReMiDi with the "
           "learned belief tracker (defaults) solves visible-answer levels more often than PLR⊥",
           "evaluate:solve_rate/visible", ("lever",), greater=(("remidi (belief)", "plr"),)),
+    Claim("blindfold-keep-combine", "beyond the paper (blindfold, #31)", "ReMiDi's exact multi-policy form "
+          "(remidi.policy=combine) solves more of the generator's blind levels than the masked single policy (both "
+          "trained at one commit)",
+          "evaluate:generator/solve_rate/blind", ("blindfold",), greater=(("remidi (combine)", "remidi (masked)"),),
+          min_seeds=5),
+    Claim("blindfold-keep-rehearsal", "beyond the paper (blindfold, #31)", "rehearsal of the frozen buffers "
+          "(remidi.rehearsal 0.1 and 0.3) makes the masked single policy solve more of the generator's blind levels",
+          "evaluate:generator/solve_rate/blind", ("blindfold",),
+          greater=(("remidi (rehearsal 0.1)", "remidi (masked)"), ("remidi (rehearsal 0.3)", "remidi (masked)")), min_seeds=5),
+    Claim("blindfold-keep-heldout", "beyond the paper (blindfold, #31)", "combine and rehearsal (0.1) keep "
+          "ReMiDi's lead over PLR⊥ on the held-out mazes", "evaluate:solve_rate/mean", ("blindfold",),
+          greater=(("remidi (combine)", "plr"), ("remidi (rehearsal 0.1)", "plr")), min_seeds=5),
+    Claim("tmaze-keep-combine", "beyond the paper (T-maze, #31)", "ReMiDi's exact multi-policy form "
+          "(remidi.policy=combine) solves more of the generator's T-mazes than the masked single policy",
+          "evaluate:generator/solve_rate/tmaze", ("tmaze",), greater=(("remidi (combine)", "remidi (masked)"),), min_seeds=5),
+    Claim("tmaze-keep-rehearsal", "beyond the paper (T-maze, #31)", "rehearsal of the frozen buffers "
+          "(remidi.rehearsal 0.1 and 0.3) makes the masked single policy solve more of the generator's T-mazes",
+          "evaluate:generator/solve_rate/tmaze", ("tmaze",),
+          greater=(("remidi (rehearsal 0.1)", "remidi (masked)"), ("remidi (rehearsal 0.3)", "remidi (masked)")), min_seeds=5),
+    Claim("tmaze-keep-heldout", "beyond the paper (T-maze, #31)", "combine and rehearsal (0.1) keep ReMiDi's lead "
+          "over PLR⊥ on the held-out mazes", "evaluate:solve_rate/mean", ("tmaze",),
+          greater=(("remidi (combine)", "plr"), ("remidi (rehearsal 0.1)", "plr")), min_seeds=5),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -178,7 +200,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     for folder in sorted(p.parent for p in Path(data).glob("*/*/summary.json")):
         summary = outputs.read_json(folder / "summary.json")
         config = outputs.read_json(folder / "config.json")
-        key = (summary["experiment"], label(summary["algo"], config.get("config", {})))
+        key = (summary["experiment"], label(summary["algo"], config.get("config", {}), config.get("command")))
         run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
@@ -216,10 +238,12 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     return runs
 
 
-def label(algo: str, config: dict) -> str:
+def label(algo: str, config: dict, command: list | None = None) -> str:
     """How the page names an algorithm's runs: a learned generator's with its regret estimator
     (``paired (perfect)``); a buffer sequence's with what differs from its exact single-policy
-    form (``remidi (belief, margin 2)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``); the
+    form (``remidi (belief, margin 2)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
+    ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
+    baseline run beside its variants, kept apart from the plain runs of earlier claims); the
     others by name."""
     estimator = config.get("paired", {}).get("estimator")
     if algo in ("paired", "remidi-paired") and estimator:
@@ -232,6 +256,8 @@ def label(algo: str, config: dict) -> str:
             parts.append(f"margin {r['belief_margin']:g}")
     if r.get("policy") == "combine":
         parts.append("combine")
+    elif "remidi.policy=masked" in (command or []):
+        parts.append("masked")
     if r.get("rehearsal"):
         parts.append(f"rehearsal {r['rehearsal']:g}")
     return f"{algo} ({', '.join(parts)})" if algo.startswith("remidi") and parts else algo
@@ -408,13 +434,17 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
     "tabular-shared": (["mmr", "remidi"], ["summary:regret/h1", "summary:regret/h3", "summary:regret/h5",
                                            "summary:adversary_prob/theta5"],
                        ["regret/h1", "regret/h3", "regret/h5", "adversary_prob/theta5", "adversary_prob/theta6"]),
-    "tmaze": (["dr", "plr", "minimax-return", "remidi", "paired (perfect)", "remidi-paired (perfect)"],
+    "tmaze": (["dr", "plr", "minimax-return", "remidi", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
+               "remidi (rehearsal 0.3)", "paired (perfect)", "remidi-paired (perfect)"],
               ["evaluate:solve_rate/mean", "summary:replay_fraction/tmaze", "evaluate:cvar/solve_rate/100%",
-               "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate", "summary:generated/tmaze"],
+               "evaluate:cvar/solve_rate/10%", "evaluate:generator/solve_rate/tmaze",
+               "evaluate:perfect21/solve_rate", "summary:generated/tmaze"],
               ["solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze", "generated/tmaze"]),
-    "blindfold": (["dr", "plr", "minimax-return", "remidi"],
+    "blindfold": (["dr", "plr", "minimax-return", "remidi", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
+                   "remidi (rehearsal 0.3)"],
                   ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
-                   "evaluate:cvar/solve_rate/10%", "evaluate:perfect21/solve_rate"],
+                   "evaluate:cvar/solve_rate/10%", "evaluate:generator/solve_rate/blind",
+                   "evaluate:perfect21/solve_rate"],
                   ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
     "lever": (["dr", "plr", "minimax-return", "remidi", "remidi (belief)", "accel", "remidi-accel",
                "paired (perfect)", "remidi-paired (perfect)", "paired (paired)"],
@@ -518,7 +548,8 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
     for folder in folders:
         summary = outputs.read_json(folder / "summary.json")
         exp, algo = summary["experiment"], summary["algo"]
-        name = re.sub(r"[^a-z0-9]+", "-", label(algo, outputs.read_json(folder / "config.json").get("config", {}))).strip("-")
+        doc = outputs.read_json(folder / "config.json")
+        name = re.sub(r"[^a-z0-9]+", "-", label(algo, doc.get("config", {}), doc.get("command"))).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)
         for name in ("config.json", "summary.json", "evaluate.json"):

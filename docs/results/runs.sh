@@ -92,3 +92,14 @@ at 428dc27
 run remidi-belief-s0 lever remidi 0 10 paper --set remidi.tracker=belief
 run remidi-belief-margin2-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief --set remidi.belief_margin=2
 run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief
+
+# issue #31: keeping earlier skills (the masked policy, combine, rehearsal 0.1 and 0.3), blindfold
+# and T-maze, cpu preset, 5 seeds each, all at the commit that stated their claims (a GPU job:
+# each run is about an hour on a 2-core CPU)
+at ab55b8c
+for e in blindfold tmaze; do
+  run remidi-masked-s0 $e remidi 0 5 cpu --set remidi.policy=masked
+  run remidi-combine-s0 $e remidi 0 5 cpu --set remidi.policy=combine
+  run remidi-rehearsal0.1-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.1
+  run remidi-rehearsal0.3-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.3
+done

@@ -95,7 +95,7 @@ run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief
 
 # issue #31: keeping earlier skills (the masked policy, combine, rehearsal 0.1 and 0.3), blindfold
 # and T-maze, cpu preset, 5 seeds each, all at the commit that stated their claims (a GPU job:
-# each run is about an hour on a 2-core CPU)
+# the preset notes ≈ 20 minutes per seed and algorithm on a 2-core CPU, so 40 seed-runs here)
 at ab55b8c
 for e in blindfold tmaze; do
   run remidi-masked-s0 $e remidi 0 5 cpu --set remidi.policy=masked

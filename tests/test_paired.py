@@ -197,3 +197,37 @@ def test_paired_runs_with_the_reference_generator_and_refuses_an_unknown_one():
 
     with pytest.raises(ConfigError, match="paired.generator_network.*mlp, reference"):
         validate_ued_config(bad, "paired", TASK)
+
+
+def test_paired_normalises_both_agents_observations_with_the_protagonists_statistics(monkeypatch):
+    """normalize_obs (every Brax preset) with a learned generator: the antagonist acts and learns
+    on observations normalised by the runner's statistics, which absorb the protagonist's rollout
+    alone (T·N observations per update)."""
+    import dataclasses
+
+    import jax
+
+    from remidi.engine import train as tr
+    from remidi.engine.validation import validate_ued_config
+    from test_ued_engine import TASK, TINY
+
+    cfg = dataclasses.replace(TINY, normalize_obs=True, network="mlp")
+    validate_ued_config(cfg, "paired", TASK)
+    setup = tr.make_setup(TASK, cfg, "paired")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    seen = []  # the statistics' count each rollout (protagonist's and antagonist's) normalised with
+    real = tr.collect
+
+    def spy(setup_, r, rng, levels, frozen):
+        jax.debug.callback(lambda c: seen.append(float(c)), r.obs_stats.count)
+        return real(setup_, r, rng, levels, frozen)
+
+    monkeypatch.setattr(tr, "collect", spy)
+    step = jax.jit(lambda r: tr.train_step(setup, r))
+    r1, m1 = step(runner)
+    r2, _ = step(r1)
+    jax.effects_barrier()
+    per_update = cfg.num_envs * cfg.num_steps
+    assert float(r2.obs_stats.count) == 2 * per_update  # the antagonist's rollouts add nothing
+    assert sorted(seen) == [0, 0, per_update, per_update]  # both agents of an update read the same statistics
+    assert int(r2.antagonist.step) > int(runner.antagonist.step) and np.isfinite(float(m1["paired/regret"]))

@@ -163,6 +163,8 @@ class LevelGenerator(RandomLevels):
         cfg, task = setup.cfg, setup.task
         n = cfg.num_envs
         k_roll, k_ant, k_gen = (jax.random.fold_in(rng, i) for i in (21, 22, 23))
+        # under normalize_obs the antagonist reads observations normalised by the protagonist's
+        # running statistics (both play these levels), which only the protagonist's rollout updates
         as_antagonist = runner.replace(train_state=runner.antagonist)
         traj, adv, targets, ant_mean, ant_best = tr.collect(setup, as_antagonist, k_roll, proposal.levels, None)
         antagonist, _ = tr.learn(setup, as_antagonist, k_ant, traj, adv, targets)

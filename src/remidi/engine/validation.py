@@ -377,8 +377,6 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         positive_int("paired.generator_hidden", p.generator_hidden)
         require(p.generator_lr > 0, "paired.generator_lr", "> 0", p.generator_lr)
         require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)
-        require(not cfg.normalize_obs, "normalize_obs", "false with a learned level generator (the antagonist reads "
-                "raw observations)", cfg.normalize_obs)
         choice("paired.overlap_regret", p.overlap_regret, OVERLAP_REGRETS)
         require(cfg.remidi.policy == "masked", "remidi.policy", "masked with a learned level generator (Combine "
                 "over generators is not implemented)", cfg.remidi.policy)

@@ -106,16 +106,16 @@ def test_the_calibration_record_skips_the_untrained_models_first_replay():
     traj = Trajectory(obs=jnp.ones((t, n, 3)), reset=jnp.ones((t, n), bool), action=jnp.zeros((t, n), jnp.int32),
                       log_prob=zeros, value=zeros, reward=zeros, done=jnp.ones((t, n), bool),
                       indist=jnp.zeros((t, n), bool), overflow=jnp.zeros((t, n), jnp.int32))
-    memory = bl.init_memory(model, opt, 2, 4, t * n, jax.random.PRNGKey(0))
+    memory = bl.init_memory(model, opt, 2, 4, t, n, jax.random.PRNGKey(0))
     same, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(False))
     assert int(same.fits) == 0 and int(same.written) == 0
     once, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(True))
     assert (int(once.fits), int(once.written)) == (1, 0) and float(jnp.abs(once.scores).sum()) == 0.0
-    assert np.isinf(float(bl.freeze(opt, once, 0, jnp.asarray(True), 0.05).threshold[0]))
+    assert np.isinf(bl.freeze(opt, once, 0, jnp.asarray(True), 0.05).threshold[0]).all()
     twice, _ = bl.learn(model, opt, once, 0, traj, jnp.asarray(True))
     assert (int(twice.fits), int(twice.written)) == (2, 1) and float(twice.scores[0].max()) < 0
     frozen = bl.freeze(opt, twice, 0, jnp.asarray(True), 0.05)
-    assert np.isfinite(float(frozen.threshold[0])) and (int(frozen.fits), int(frozen.written)) == (0, 0)
+    assert np.isfinite(frozen.threshold[0]).all() and (int(frozen.fits), int(frozen.written)) == (0, 0)
 
 
 def test_calibrate_is_the_lower_quantile():
@@ -129,6 +129,30 @@ def test_calibrate_is_the_lower_quantile():
 def bits(key, n, t, probs):
     """f32[t, n, len(probs)]: independent bits with the given probabilities at every step."""
     return (jax.random.uniform(key, (t, n, probs.shape[0])) < probs).astype(jnp.float32)
+
+
+def test_thresholds_per_prefix_length_bucket():
+    """Short prefixes spread wider than long ones: each length bucket (1, 2–3, 4–7, ...) gets its
+    own lower quantile; an empty bucket takes the pooled one; the tracker reads the bucket of each
+    env's prefix length; prefix_lengths counts within episodes."""
+    np.testing.assert_array_equal(bl.prefix_lengths(jnp.array([[1], [0], [0], [1], [0]], bool))[:, 0], [1, 2, 3, 1, 2])
+    assert bl.num_length_buckets(1) == 1 and bl.num_length_buckets(256) == 9
+    np.testing.assert_array_equal(bl.length_bucket(jnp.array([1, 2, 3, 4, 7, 8, 300]), 4), [0, 1, 1, 2, 2, 3, 3])
+    rng = np.random.default_rng(0)
+    lengths = np.repeat([1, 2, 5], 1000)
+    scores = np.concatenate([rng.normal(-20, 5, 1000), rng.normal(-10, 2, 1000), rng.normal(-5, 0.5, 1000)])
+    tau = np.asarray(bl.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
+    for b, (lo, hi) in enumerate([(0, 1000), (1000, 2000), (2000, 3000)]):
+        assert np.mean(scores[lo:hi] < tau[b]) == pytest.approx(0.05, abs=0.002)
+    assert tau[3] == pytest.approx(float(bl.calibrate(jnp.asarray(scores), 0.05, slack=0.0)))  # no prefix of 8+
+    assert tau[0] < tau[1] < tau[2]
+    # the tracker: one frozen model, a prefix score of -8 passes at length 2 (τ ≈ -13) but not at length 5 (τ ≈ -6)
+    tracker = bl.BeliefTracker(bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
+    frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(params=None, threshold=jnp.asarray(tau)[None],
+                                                                      valid=jnp.array([True])))
+    count = jnp.array([2, 5])
+    match = tracker._judge(frozen, -8.0 * count[:, None].astype(jnp.float32), count)
+    np.testing.assert_array_equal(np.asarray(match)[:, 0], [True, False])
 
 
 def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
@@ -278,8 +302,8 @@ def test_a_belief_run_keeps_its_models_in_the_checkpoint_and_calibrates_at_the_s
     for name in ("belief/explained", "belief/exact_explained", "belief/agreement"):  # after the switch: measured
         assert 0.0 <= metrics[name]["mean"] <= 1.0, name
     assert metrics["belief/uniform_score"]["mean"] < metrics["belief/threshold"]["mean"] < 0
-    # seed axis first: buffer 0's model was calibrated at the switch, the last one never is
-    assert np.isfinite(threshold[..., 0]).all() and np.isinf(threshold[..., -1]).all()
+    # [seed, buffer, length bucket]: buffer 0's model was calibrated at the switch, the last one never is
+    assert np.isfinite(threshold[:, 0]).all() and np.isinf(threshold[:, -1]).all()
 
 
 @pytest.mark.parametrize("extra, needle", [
@@ -371,7 +395,7 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(2), c))
     bufs = bufs.replace(levels=jax.tree.map(lambda all_, x: all_.at[0].set(x), bufs.levels, levels),
                         valid=bufs.valid.at[0].set(True))
-    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))
+    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))  # every length
     runner = runner.replace(buffers=bufs, active=jnp.asarray(1), belief=belief)
     out = {k: float(v) for k, v in evaluation.tracker_audit(setup, runner, jax.random.PRNGKey(1)).items()}
     plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")

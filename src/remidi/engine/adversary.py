@@ -327,7 +327,7 @@ def belief_memory(setup, rng):
         return None
     cfg = setup.cfg
     return bl.init_memory(belief_model(setup), belief_optimizer(setup), cfg.remidi.num_buffers,
-                          cfg.remidi.belief_calibration, cfg.num_steps * cfg.num_envs, jax.random.fold_in(rng, 31))
+                          cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31))
 
 
 def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
@@ -341,15 +341,18 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
 
 
 def belief_contents(setup, runner) -> dict:
-    """``remidi.tracker=belief``: ``belief/threshold`` (the threshold of the last frozen model, NaN
+    """``remidi.tracker=belief``: ``belief/threshold`` and ``belief/threshold/long`` (the last
+    frozen model's thresholds for one-step prefixes and for the longest prefix-length bucket, NaN
     before the first switch), ``belief/heldout_score`` (the active model's mean held-out prefix
     score since the switch) and ``belief/uniform_score`` (a model that knows nothing: a frozen
     model whose scores sit near it explains almost anything), all in nats per step."""
     if runner.belief is None:
         return {}
     memory = runner.belief
-    last = jnp.maximum(runner.active - 1, 0)
-    return {"belief/threshold": jnp.where(runner.active > 0, memory.threshold[last], jnp.nan),
+    last = memory.threshold[jnp.maximum(runner.active - 1, 0)]  # f32[L]
+    frozen = runner.active > 0
+    return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
+            "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan),
             "belief/heldout_score": bl.heldout_score(memory),
             "belief/uniform_score": jnp.float32(bl.uniform_score(belief_model(setup)))}
 

@@ -212,6 +212,29 @@ def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params
 
 
 # ---------------------------------------------------------------------------- calibration
+def prefix_lengths(reset) -> jax.Array:
+    """i32[T, N]: the number of steps of each episode's prefix so far (step t included)."""
+
+    def body(count, r):
+        count = jnp.where(r, 0, count) + 1
+        return count, count
+
+    _, lengths = jax.lax.scan(body, jnp.zeros(reset.shape[1:], jnp.int32), reset)
+    return lengths
+
+
+def num_length_buckets(max_length: int) -> int:
+    """How many prefix-length buckets prefixes of at most ``max_length`` steps fill: lengths
+    1, 2–3, 4–7, 8–15, ... (powers of two)."""
+    return max(1, int(max_length).bit_length())
+
+
+def length_bucket(length, num_buckets: int) -> jax.Array:
+    """i32[...]: the bucket of each prefix length ≥ 1 (⌊log₂ length⌋, the last bucket for longer ones)."""
+    lg = jnp.floor(jnp.log2(jnp.maximum(length, 1).astype(jnp.float32))).astype(jnp.int32)
+    return jnp.minimum(lg, num_buckets - 1)
+
+
 def calibrate(scores, false_rate: float, valid=None, slack: float = 1e-3) -> jax.Array:
     """f32[]: the threshold τ at which at most a fraction ``false_rate`` of the held-out prefix
     ``scores`` (f32[...], of trajectories of the model's own adversary; ``valid`` bool[...] picks
@@ -227,11 +250,32 @@ def calibrate(scores, false_rate: float, valid=None, slack: float = 1e-3) -> jax
     return jnp.where(n > 0, tau, jnp.inf)
 
 
+def calibrate_by_length(scores, lengths, false_rate: float, num_buckets: int, valid=None,
+                        slack: float = 1e-3) -> jax.Array:
+    """f32[L]: :func:`calibrate` separately for the prefixes of each length bucket
+    (:func:`length_bucket` of ``lengths`` i32[...], as ``scores``). A prefix's score is a mean
+    over its steps, so short prefixes (the first observation alone) spread far wider than long
+    ones, and one threshold over all lengths would be set by the short ones and let long prefixes
+    of other adversaries through. A bucket with no held-out prefix takes the threshold of all
+    lengths together."""
+    scores, lengths = jnp.ravel(scores), jnp.ravel(lengths)
+    valid = jnp.ones(scores.shape, bool) if valid is None else jnp.ravel(valid)
+    pooled = calibrate(scores, false_rate, valid, slack)
+    bucket = length_bucket(lengths, num_buckets)
+
+    def one(b):
+        mine = valid & (bucket == b)
+        return jnp.where(jnp.any(mine), calibrate(scores, false_rate, mine, slack), pooled)
+
+    return jax.vmap(one)(jnp.arange(num_buckets))
+
+
 # ---------------------------------------------------------------------------- the tracker
 @struct.dataclass
 class FrozenBeliefs:
-    """The frozen adversaries' models: ``params`` leaves [B, ...], ``threshold`` f32[B],
-    ``valid`` bool[B] (the adversary has been frozen)."""
+    """The frozen adversaries' models: ``params`` leaves [B, ...], ``threshold`` f32[B, L] (per
+    prefix-length bucket, :func:`length_bucket`) or f32[B] (one for all lengths), ``valid``
+    bool[B] (the adversary has been frozen)."""
 
     params: Any
     threshold: jax.Array
@@ -263,7 +307,11 @@ class BeliefTracker:
         """bool[N, B]: each valid frozen model's threshold is reached by the env's prefix score."""
         b = frozen.belief
         score = total / jnp.maximum(count, 1)[:, None]
-        return b.valid[None, :] & (score >= b.threshold[None, :])
+        if b.threshold.ndim == 1:
+            tau = b.threshold[None, :]
+        else:  # each env's threshold for its prefix's length: [N, B]
+            tau = b.threshold[:, length_bucket(count, b.threshold.shape[1])].T
+        return b.valid[None, :] & (score >= tau)
 
     def _logliks(self, frozen, hidden, cats) -> jax.Array:
         """f32[N, B]: each frozen model's log-likelihood of ``cats`` [N, E] from ``hidden`` [N, B, H]."""
@@ -310,9 +358,10 @@ class BeliefMemory:
     buffer (adversary), trained while its buffer is active and frozen with it.
 
     ``params`` leaves [K, ...] (model k: buffer k's adversary); ``opt_state``: the active model's
-    optimiser state (restarted at each switch); ``threshold`` f32[K] (+inf until calibrated at
-    the model's freeze); ``scores`` f32[R, T·N]: the prefix scores of the active adversary's last
-    R replays, each under the model as it was before fitting on that replay (held out from it);
+    optimiser state (restarted at each switch); ``threshold`` f32[K, L] (per prefix-length
+    bucket, :func:`calibrate_by_length`; +inf until calibrated at the model's freeze);
+    ``scores`` f32[R, T·N] and ``lengths`` i32[R, T·N]: the prefix scores (and prefix lengths) of
+    the active adversary's last R replays, each under the model as it was before fitting on that replay (held out from it);
     ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next);
     ``fits`` i32[]: replays the active model has learnt from since the switch. The first replay's
     scores are not recorded: they are those of the untrained model, whose scores sit near the
@@ -322,17 +371,22 @@ class BeliefMemory:
     opt_state: Any
     threshold: jax.Array
     scores: jax.Array
+    lengths: jax.Array
     written: jax.Array
     fits: jax.Array
 
 
-def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batch: int, rng) -> BeliefMemory:
+def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_steps: int, num_envs: int,
+                rng) -> BeliefMemory:
     """Fresh models for ``num_buffers`` adversaries (independent initialisations from ``rng``),
-    a calibration record of ``rows`` replays of ``batch`` = T·N prefix scores each."""
+    a calibration record of ``rows`` replays of T·N prefix scores each (T = ``num_steps``, which
+    also bounds the prefix lengths: :func:`num_length_buckets`)."""
     params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
     first = jax.tree.map(lambda x: x[0], params)
+    batch = num_steps * num_envs
     return BeliefMemory(params=params, opt_state=optimizer.init(first),
-                        threshold=jnp.full((num_buffers,), jnp.inf), scores=jnp.zeros((rows, batch)),
+                        threshold=jnp.full((num_buffers, num_length_buckets(num_steps)), jnp.inf),
+                        scores=jnp.zeros((rows, batch)), lengths=jnp.ones((rows, batch), jnp.int32),
                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
 
 
@@ -367,8 +421,10 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
         loss = losses[0]
         record = m.fits > 0
         row = jnp.where(record, m.written % rows, rows)  # rows: out of bounds, dropped
+        lengths = prefix_lengths(traj.reset).reshape(-1)
         return m.replace(params=jax.tree.map(lambda all_, p: all_.at[active].set(p), m.params, params),
                          opt_state=opt_state, scores=m.scores.at[row].set(scores, mode="drop"),
+                         lengths=m.lengths.at[row].set(lengths, mode="drop"),
                          written=m.written + record.astype(jnp.int32), fits=m.fits + 1), loss
 
     return jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
@@ -393,12 +449,14 @@ def uniform_score(model: BeliefModel) -> float:
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3) -> BeliefMemory:
     """At a buffer switch (``switch`` bool[]) the active model is frozen: its threshold is
-    calibrated on the recorded scores (:func:`calibrate`; +inf, explaining nothing, if no replay
-    was recorded: the model learnt from at most one replay) and lowered by ``margin`` nats per step, the record emptied and the optimiser
+    calibrated on the recorded scores per prefix-length bucket (:func:`calibrate_by_length`;
+    +inf, explaining nothing, if no replay was recorded: the model learnt from at most one
+    replay) and lowered by ``margin`` nats per step, the record emptied and the optimiser
     restarted for the next model."""
     rows = memory.scores.shape[0]
     valid = jnp.broadcast_to((jnp.arange(rows) < memory.written)[:, None], memory.scores.shape)
-    tau = calibrate(memory.scores, false_rate, valid, slack=margin)
+    tau = calibrate_by_length(memory.scores, memory.lengths, false_rate, memory.threshold.shape[1], valid,
+                              slack=margin)
     k = memory.threshold.shape[0]
     nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], memory.params)
     switched = memory.replace(threshold=memory.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),

@@ -103,3 +103,9 @@ for e in blindfold tmaze; do
   run remidi-rehearsal0.1-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.1
   run remidi-rehearsal0.3-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.3
 done
+
+# issue #31: the learned belief tracker on the mazes (cpu preset, 5 seeds; GPU jobs), at the
+# commit that stated their claims
+at e113661
+run remidi-belief-s0 blindfold-noisy remidi 0 5 cpu --set remidi.tracker=belief
+run remidi-belief-s0 tmaze remidi 0 5 cpu --set remidi.tracker=belief

@@ -18,6 +18,11 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   overflow.
 * ``maze-remidi-reference``: ``maze-remidi`` with the reference tracker (every frozen level
   stepped beside every env), for the ratio of the two trackers (not run by default: slow).
+* ``maze-remidi-combine``: ``maze-remidi`` with ``remidi.policy=combine`` (Algorithm 1's
+  multi-policy form: the three frozen buffers' policies each read every step's observation and
+  the earliest buffer whose levels explain the prefix acts); ``remidi_combine_step_over_remidi_step``
+  (not run by default). Rehearsal (``remidi.rehearsal``) needs no workload of its own: a
+  rehearsal update costs what a replay update costs (one rollout and one PPO update).
 * ``maze-remidi-belief``: ``maze-remidi`` with the learned belief tracker
   (``remidi.tracker=belief``, engine/belief.py): each step every env's prefix is scored by the
   three frozen buffers' GRU models instead of stepping frozen levels, and the active buffer's
@@ -180,11 +185,11 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
     steps = updates_per_call * cfg.num_envs * cfg.num_steps
     # the network's operation count assumes every update trains one network; an editing algorithm's
     # edit updates do not, a learned generator's updates train three, a belief tracker adds its models'
-    # work (no figure rather than a wrong one)
+    # work and Combine the frozen policies' (no figure rather than a wrong one)
     from remidi.engine.paired import LevelGenerator
 
     flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
-        cfg.remidi.tracker == "belief" and setup.algo.buffer_sequence else \
+        setup.algo.buffer_sequence and (cfg.remidi.tracker == "belief" or cfg.remidi.policy == "combine") else \
         steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
@@ -273,6 +278,16 @@ def _maze_remidi_reference():
 
     cfg = _maze_config("remidi", budget=0)
     return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1, updates_per_call=1)
+
+
+@register("maze-remidi-combine", "maze-remidi with remidi.policy=combine: each frozen buffer's policy reads every "
+                                "step, the earliest whose levels explain the prefix acts")
+def _maze_remidi_combine():
+    from remidi.envs.maze import maze_task
+
+    cfg = _maze_config("remidi")
+    cfg = dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, policy="combine"))
+    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
 
 
 @register("maze-remidi-belief", "maze-remidi with the learned belief tracker (remidi.tracker=belief): three frozen "
@@ -435,6 +450,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
     if "maze-remidi" in results and "maze-plr" in results:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
+    if "maze-remidi-combine" in results and "maze-remidi" in results:
+        out["remidi_combine_step_over_remidi_step"] = per_call("maze-remidi-combine") / per_call("maze-remidi")
     if "maze-remidi-belief" in results and "maze-remidi" in results:
         out["remidi_belief_step_over_remidi_step"] = per_call("maze-remidi-belief") / per_call("maze-remidi")
     if "maze-paired" in results and "maze-plr" in results:

@@ -144,8 +144,12 @@ def test_thresholds_per_prefix_length_bucket():
     tau = np.asarray(bl.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
     for b, (lo, hi) in enumerate([(0, 1000), (1000, 2000), (2000, 3000)]):
         assert np.mean(scores[lo:hi] < tau[b]) == pytest.approx(0.05, abs=0.002)
-    assert tau[3] == pytest.approx(float(bl.calibrate(jnp.asarray(scores), 0.05, slack=0.0)))  # no prefix of 8+
+    assert tau[3] == tau[2]  # no prefix of 8+ steps: the bucket below's threshold
     assert tau[0] < tau[1] < tau[2]
+    # a bucket with fewer prefixes than 1/α takes the one below; the first one the pooled threshold
+    few = np.asarray(bl.calibrate_by_length(jnp.asarray([-1.0, -2.0, -3.0] + [-9.0] * 40),
+                                            jnp.asarray([1, 1, 1] + [2] * 40), 0.05, 2, slack=0.0))
+    assert few[0] == pytest.approx(-9.0) and few[1] == pytest.approx(-9.0)
     # the tracker: one frozen model, a prefix score of -8 passes at length 2 (τ ≈ -13) but not at length 5 (τ ≈ -6)
     tracker = bl.BeliefTracker(bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
     frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(params=None, threshold=jnp.asarray(tau)[None],
@@ -153,6 +157,35 @@ def test_thresholds_per_prefix_length_bucket():
     count = jnp.array([2, 5])
     match = tracker._judge(frozen, -8.0 * count[:, None].astype(jnp.float32), count)
     np.testing.assert_array_equal(np.asarray(match)[:, 0], [True, False])
+
+
+def test_the_judgement_is_monotone_and_calibrated_for_it():
+    """A prefix stays distinguishable for the rest of its episode (as realisability does), and
+    calibrate_monotone lowers the per-length thresholds until at most α of held-out prefixes
+    have a shorter prefix below its threshold."""
+    tracker = bl.BeliefTracker(bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
+    state = bl.BeliefState(hidden=jnp.zeros((1, 1, 2)), total=jnp.zeros((1, 1)), count=jnp.ones((1,), jnp.int32),
+                           last=jnp.zeros((1, 1), jnp.int32), match=jnp.array([[False]]))
+    frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(
+        params=jax.tree.map(lambda x: x[None], tracker.model.init(jax.random.PRNGKey(0))),
+        threshold=jnp.array([-1e9]), valid=jnp.array([True])))  # every score reaches it
+    cont = tracker.advance(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
+                           jnp.array([False]))
+    assert not bool(cont.match[0, 0])  # the prefix failed before: still distinguishable
+    new = tracker.advance(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
+                          jnp.array([True]))
+    assert bool(new.match[0, 0])  # a new episode is judged afresh
+    # held-out: 400 episodes of 8 steps whose per-step scores wander; the monotone false rate is α
+    rng = np.random.default_rng(1)
+    steps = rng.normal(-5, 2, (1, 8, 400))
+    scores = np.cumsum(steps, axis=1) / np.arange(1, 9)[None, :, None]
+    lengths = np.broadcast_to(np.arange(1, 9)[None, :, None], scores.shape)
+    tau = np.asarray(bl.calibrate_monotone(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4))  # 1e-3: rounding
+    below = scores < tau[np.asarray(bl.length_bucket(jnp.asarray(lengths), 4))]
+    flagged = np.maximum.accumulate(below, axis=1)  # some prefix so far below its threshold
+    assert np.mean(flagged) <= 0.05 + 1e-9 and np.mean(flagged) > 0.03
+    per_bucket = np.asarray(bl.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
+    assert (tau <= per_bucket + 1e-6).all() and (tau < per_bucket).any()  # lowered for the monotone rule
 
 
 def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
@@ -320,6 +353,25 @@ def test_belief_keys_are_validated(tmp_path, capsys, extra, needle):
     assert code == 2 and needle in capsys.readouterr().err
 
 
+def test_a_task_whose_observations_the_model_cannot_read_is_refused(tmp_path, capsys):
+    """CartPole's float observations would round to 0/1 and every prefix would look alike: one
+    line naming the key and the value, before anything is written; the maze's and the lever's
+    discrete observations pass (coding_problem)."""
+    from remidi.cli import main
+
+    out = tmp_path / "r"
+    assert main(["run", "cartpole", "--algo", "remidi", "--preset", "smoke", "--seeds", "1", "--quiet",
+                 "--out", str(out), "--set", "remidi.tracker=belief"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "remidi.tracker: belief cannot read this task" in err and "-0.01" in err
+    assert not out.exists()
+    from remidi.envs.maze import maze_task
+
+    for task in (lever_task(LEVERS), maze_task("tmaze")):
+        obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), task.sample_level(jax.random.PRNGKey(0)), task.params)
+        assert bl.coding_problem(bl.coding_for(obs), obs) is None
+
+
 @pytest.mark.slow  # one end-to-end smoke run (≈ 30 s on a 2-core CPU)
 def test_remidi_with_the_belief_tracker_keeps_noisy_hidden_levels_out_of_its_later_buffer(tmp_path):
     """``remidi run lever-noisy --algo remidi --preset smoke --seeds 1 --set remidi.tracker=belief
@@ -404,6 +456,12 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     exact = tr.collect(plain, runner.replace(belief=None), k_roll, fresh,
                        earlier_buffers(plain, runner.replace(belief=None)))[0].indist
     share = float(np.mean(np.asarray(exact)))
+    # the audit's two rollouts (belief-judged and exact-judged) are the same steps
+    frozen = earlier_buffers(setup, runner).replace(params=None)
+    one = tr.collect(setup, runner, k_roll, fresh, frozen)[0]
+    two = tr.collect(setup, runner, k_roll, fresh, frozen.replace(belief=None, tracker=ExactTracker()))[0]
+    for a, b in ((one.action, two.action), (one.done, two.done), (one.obs, two.obs)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert 0 < share < 1  # the check below can tell the two judgements apart
     assert out["belief/exact_explained"] == pytest.approx(share)
     assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)

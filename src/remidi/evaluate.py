@@ -17,7 +17,7 @@ latest) and evaluated on
   score over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
   ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts); where the task tags its
   levels (``level_tags``: T-mazes, blind levels, hidden answers), the scoring rollouts' mean over
-  the levels of one kind alone and over the others: ``generator/solve_rate/<tag>``,
+  the (solvable) generator levels of one kind alone and over the others: ``generator/solve_rate/<tag>``,
   ``generator/solve_rate/not-<tag>`` (and ``generator/return/...``);
 * **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
   ``--perfect-sizes`` (default 21 and 51), each a *perfect* maze (exactly one path between any

@@ -327,7 +327,8 @@ def belief_memory(setup, rng):
         return None
     cfg = setup.cfg
     return bl.init_memory(belief_model(setup), belief_optimizer(setup), cfg.remidi.num_buffers,
-                          cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31))
+                          cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31),
+                          max_length=setup.task.max_episode_steps)
 
 
 def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
@@ -342,7 +343,8 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
 
 def belief_contents(setup, runner) -> dict:
     """``remidi.tracker=belief``: ``belief/threshold`` and ``belief/threshold/long`` (the last
-    frozen model's thresholds for one-step prefixes and for the longest prefix-length bucket, NaN
+    frozen model's thresholds for one-step prefixes and for the longest prefix-length bucket, which
+    holds the longest bucket's with enough held-out prefixes, :func:`~remidi.engine.belief.calibrate_by_length`; NaN
     before the first switch), ``belief/heldout_score`` (the active model's mean held-out prefix
     score since the switch) and ``belief/uniform_score`` (a model that knows nothing: a frozen
     model whose scores sit near it explains almost anything), all in nats per step."""

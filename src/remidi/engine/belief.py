@@ -106,6 +106,25 @@ def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
     return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes))
 
 
+def coding_problem(coding: ObsCoding, obs) -> str | None:
+    """Why ``coding`` cannot read the observation ``obs`` (one unbatched observation, concrete
+    values) without losing information, or None: every value of a leaf must be a category
+    ``c / scale`` with ``c`` an integer in ``[0, K)``. The message names the leaf and a value."""
+    import numpy as np
+
+    for (path, leaf), scale, k in zip(jax.tree_util.tree_leaves_with_path(obs), coding.scales, coding.categories):
+        x = np.asarray(leaf, np.float64).ravel()
+        c = x * scale
+        bad = (np.abs(c - np.round(c)) > 1e-4) | (c < -1e-4) | (c > k - 1 + 1e-4)
+        if bad.any():
+            name = jax.tree_util.keystr(path)
+            where = f"the observation field {name}" if name else "the observation"
+            return (f"{where} holds {x[bad][0]:.4g}, which is no category "
+                    f"round(x·{scale:g}) in [0, {k}) (the belief model reads discrete observations: one-hot or "
+                    f"integer-coded entries)")
+    return None
+
+
 # ---------------------------------------------------------------------------- the model
 @dataclass(frozen=True)
 class BeliefModel:
@@ -238,7 +257,7 @@ def length_bucket(length, num_buckets: int) -> jax.Array:
 def calibrate(scores, false_rate: float, valid=None, slack: float = 1e-3) -> jax.Array:
     """f32[]: the threshold τ at which at most a fraction ``false_rate`` of the held-out prefix
     ``scores`` (f32[...], of trajectories of the model's own adversary; ``valid`` bool[...] picks
-    them) lie strictly below: the ⌊false_rate·n⌋-th smallest score, lowered by ``slack`` nats
+    them) lie strictly below: the (⌊false_rate·n⌋ + 1)-th smallest score, lowered by ``slack`` nats
     (scores recomputed step by step differ from the batch's by rounding). A prefix is then
     *explained* when its score is ≥ τ. With no valid score τ = +inf: the model explains nothing."""
     scores = jnp.ravel(scores)
@@ -256,18 +275,56 @@ def calibrate_by_length(scores, lengths, false_rate: float, num_buckets: int, va
     (:func:`length_bucket` of ``lengths`` i32[...], as ``scores``). A prefix's score is a mean
     over its steps, so short prefixes (the first observation alone) spread far wider than long
     ones, and one threshold over all lengths would be set by the short ones and let long prefixes
-    of other adversaries through. A bucket with no held-out prefix takes the threshold of all
-    lengths together."""
+    of other adversaries through. A bucket with too few held-out prefixes for its quantile (fewer
+    than ⌈1/false_rate⌉, one for a rate of 0) takes the threshold of the bucket below it (the
+    first bucket: the threshold of all lengths together)."""
     scores, lengths = jnp.ravel(scores), jnp.ravel(lengths)
     valid = jnp.ones(scores.shape, bool) if valid is None else jnp.ravel(valid)
     pooled = calibrate(scores, false_rate, valid, slack)
     bucket = length_bucket(lengths, num_buckets)
+    needed = math.ceil(1.0 / false_rate) if false_rate > 0 else 1
 
     def one(b):
         mine = valid & (bucket == b)
-        return jnp.where(jnp.any(mine), calibrate(scores, false_rate, mine, slack), pooled)
+        return calibrate(scores, false_rate, mine, slack), jnp.sum(mine) >= needed
 
-    return jax.vmap(one)(jnp.arange(num_buckets))
+    taus, enough = jax.vmap(one)(jnp.arange(num_buckets))
+
+    def inherit(previous, x):
+        tau, ok = x
+        tau = jnp.where(ok, tau, previous)
+        return tau, tau
+
+    return jax.lax.scan(inherit, pooled, (taus, enough))[1]
+
+
+def episode_minimum(z, lengths) -> jax.Array:
+    """f32[T, N]: the running minimum of ``z`` f32[T, N] over each episode's prefix so far
+    (``lengths`` i32[T, N], :func:`prefix_lengths`: 1 starts an episode)."""
+
+    def body(low, inp):
+        zt, length = inp
+        low = jnp.where(length == 1, zt, jnp.minimum(low, zt))
+        return low, low
+
+    return jax.lax.scan(body, jnp.full(z.shape[1:], jnp.inf), (z, lengths))[1]
+
+
+def calibrate_monotone(scores, lengths, false_rate: float, num_buckets: int, valid=None,
+                       margin: float = 1e-3) -> jax.Array:
+    """f32[L]: thresholds per prefix-length bucket for the *monotone* judgement the tracker makes
+    (a prefix is explained when it and every shorter prefix of its episode reach their
+    thresholds: a prefix an adversary cannot produce has no extension it can produce). Per bucket
+    :func:`calibrate_by_length`; then all are lowered together until at most ``false_rate`` of
+    the held-out prefixes have a shorter prefix below its threshold (the ``false_rate`` quantile
+    of ``min over the episode so far of (score − τ)``), and by ``margin`` nats per step.
+    ``scores``, ``lengths``, ``valid``: [R, T, N] (rows of T steps of N envs, time-major)."""
+    tau = calibrate_by_length(scores, lengths, false_rate, num_buckets, valid)
+    z = scores - tau[length_bucket(lengths, num_buckets)]
+    low = jax.vmap(episode_minimum)(z, lengths)  # [R, T, N]
+    shift = calibrate(low, false_rate, valid, slack=0.0)
+    shift = jnp.where(jnp.isfinite(shift), jnp.minimum(shift, 0.0), 0.0)
+    return tau + shift - margin
 
 
 # ---------------------------------------------------------------------------- the tracker
@@ -290,16 +347,18 @@ class BeliefState:
     total: jax.Array  # f32[B]: the episode's summed log-likelihood so far under each model
     count: jax.Array  # i32[]: the episode's steps so far
     last: jax.Array  # i32[E]: the current observation's categories (the next step's input)
-    match: jax.Array  # bool[B]: model b explains the prefix (its score reaches its threshold)
+    match: jax.Array  # bool[B]: model b explains the prefix (it and every shorter one reach their thresholds)
 
 
 @dataclass(frozen=True)
 class BeliefTracker:
     """The tracker component judging distinguishability by learned belief models (the frozen
     adversaries' models in ``frozen.belief``, :class:`FrozenBeliefs`): env n's prefix is
-    explained when its mean log-likelihood per step under SOME valid frozen model is at least
-    that model's threshold. Methods as :class:`~remidi.engine.tracker.ExactTracker`'s, on
-    leaves [N, ...]; the frozen levels themselves are not stepped."""
+    explained by model b when its mean log-likelihood per step under b, and that of every shorter
+    prefix of the episode, reaches b's threshold for its length (monotone, as realisability is:
+    once distinguishable, the rest of the episode is); explained when some valid model explains
+    it. Methods as :class:`~remidi.engine.tracker.ExactTracker`'s, on leaves [N, ...]; the frozen
+    levels themselves are not stepped."""
 
     model: BeliefModel
 
@@ -340,8 +399,9 @@ class BeliefTracker:
         hidden = jnp.where(done[:, None, None], 0.0, stepped)
         total = jnp.where(done[:, None], 0.0, state.total) + self._logliks(frozen, hidden, cats)
         count = jnp.where(done, 0, state.count) + 1
+        fresh = self._judge(frozen, total, count)
         return BeliefState(hidden=hidden, total=total, count=count, last=cats,
-                           match=self._judge(frozen, total, count))
+                           match=jnp.where(done[:, None], fresh, state.match & fresh))
 
     def overflow(self, state: BeliefState) -> jax.Array:
         return jnp.zeros(state.count.shape, jnp.int32)
@@ -360,7 +420,7 @@ class BeliefMemory:
     ``params`` leaves [K, ...] (model k: buffer k's adversary); ``opt_state``: the active model's
     optimiser state (restarted at each switch); ``threshold`` f32[K, L] (per prefix-length
     bucket, :func:`calibrate_by_length`; +inf until calibrated at the model's freeze);
-    ``scores`` f32[R, T·N] and ``lengths`` i32[R, T·N]: the prefix scores (and prefix lengths) of
+    ``scores`` f32[R, T, N] and ``lengths`` i32[R, T, N]: the prefix scores (and prefix lengths) of
     the active adversary's last R replays, each under the model as it was before fitting on that replay (held out from it);
     ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next);
     ``fits`` i32[]: replays the active model has learnt from since the switch. The first replay's
@@ -377,16 +437,18 @@ class BeliefMemory:
 
 
 def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_steps: int, num_envs: int,
-                rng) -> BeliefMemory:
+                rng, max_length: int | None = None) -> BeliefMemory:
     """Fresh models for ``num_buffers`` adversaries (independent initialisations from ``rng``),
-    a calibration record of ``rows`` replays of T·N prefix scores each (T = ``num_steps``, which
-    also bounds the prefix lengths: :func:`num_length_buckets`)."""
+    a calibration record of ``rows`` replays of T·N prefix scores each (T = ``num_steps``); the
+    prefix lengths, at most ``min(T, max_length)`` (the episode limit), set the length buckets
+    (:func:`num_length_buckets`)."""
     params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
     first = jax.tree.map(lambda x: x[0], params)
-    batch = num_steps * num_envs
+    batch = (num_steps, num_envs)
     return BeliefMemory(params=params, opt_state=optimizer.init(first),
-                        threshold=jnp.full((num_buffers, num_length_buckets(num_steps)), jnp.inf),
-                        scores=jnp.zeros((rows, batch)), lengths=jnp.ones((rows, batch), jnp.int32),
+                        threshold=jnp.full((num_buffers, num_length_buckets(min(num_steps, max_length or num_steps))),
+                                           jnp.inf),
+                        scores=jnp.zeros((rows,) + batch), lengths=jnp.ones((rows,) + batch, jnp.int32),
                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
 
 
@@ -409,7 +471,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     def fit(m: BeliefMemory):
         params = jax.tree.map(lambda x: x[active], m.params)
         ll = step_logliks(model, params, traj.obs, traj.action, traj.reset)
-        scores = prefix_scores(ll, traj.reset).reshape(-1)
+        scores = prefix_scores(ll, traj.reset)  # [T, N]
         rows = m.scores.shape[0]
 
         def epoch(carry, _):
@@ -421,7 +483,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
         loss = losses[0]
         record = m.fits > 0
         row = jnp.where(record, m.written % rows, rows)  # rows: out of bounds, dropped
-        lengths = prefix_lengths(traj.reset).reshape(-1)
+        lengths = prefix_lengths(traj.reset)
         return m.replace(params=jax.tree.map(lambda all_, p: all_.at[active].set(p), m.params, params),
                          opt_state=opt_state, scores=m.scores.at[row].set(scores, mode="drop"),
                          lengths=m.lengths.at[row].set(lengths, mode="drop"),
@@ -432,11 +494,12 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
 
 def heldout_score(memory: BeliefMemory) -> jax.Array:
     """f32[]: the mean of the recorded held-out prefix scores of the active model's replays (the
-    units of its threshold; NaN before the first replay since the switch)."""
+    units of its threshold; NaN until the second replay since the switch, the first recorded)."""
     rows = memory.scores.shape[0]
-    recorded = (jnp.arange(rows) < memory.written)[:, None]
+    recorded = (jnp.arange(rows) < memory.written)[:, None, None]
+    per_row = memory.scores[0].size
     total = jnp.sum(jnp.where(recorded, memory.scores, 0.0))
-    return total / jnp.where(memory.written > 0, jnp.minimum(memory.written, rows) * memory.scores.shape[1], jnp.nan)
+    return total / jnp.where(memory.written > 0, jnp.minimum(memory.written, rows) * per_row, jnp.nan)
 
 
 def uniform_score(model: BeliefModel) -> float:
@@ -448,17 +511,19 @@ def uniform_score(model: BeliefModel) -> float:
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3) -> BeliefMemory:
-    """At a buffer switch (``switch`` bool[]) the active model is frozen: its threshold is
-    calibrated on the recorded scores per prefix-length bucket (:func:`calibrate_by_length`;
-    +inf, explaining nothing, if no replay was recorded: the model learnt from at most one
-    replay) and lowered by ``margin`` nats per step, the record emptied and the optimiser
-    restarted for the next model."""
-    rows = memory.scores.shape[0]
-    valid = jnp.broadcast_to((jnp.arange(rows) < memory.written)[:, None], memory.scores.shape)
-    tau = calibrate_by_length(memory.scores, memory.lengths, false_rate, memory.threshold.shape[1], valid,
-                              slack=margin)
-    k = memory.threshold.shape[0]
-    nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], memory.params)
-    switched = memory.replace(threshold=memory.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
-                              written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
-    return jax.tree.map(lambda a, b: jnp.where(switch, a, b), switched, memory)
+    """At a buffer switch (``switch`` bool[]) the active model is frozen: its thresholds are
+    calibrated on the recorded scores per prefix-length bucket for the monotone judgement
+    (:func:`calibrate_monotone`; +inf, explaining nothing, if no replay was recorded: the model
+    learnt from at most one replay) and lowered by ``margin`` nats per step, the record emptied
+    and the optimiser restarted for the next model. Computed only at a switch."""
+
+    def switched(m: BeliefMemory) -> BeliefMemory:
+        rows, k = m.scores.shape[0], m.threshold.shape[0]
+        valid = jnp.broadcast_to((jnp.arange(rows) < m.written)[:, None, None], m.scores.shape)
+        tau = calibrate_monotone(m.scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
+        tau = jnp.where(m.written > 0, tau, jnp.inf)
+        nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], m.params)
+        return m.replace(threshold=m.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
+                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
+
+    return jax.lax.cond(switch, switched, lambda m: m, memory)

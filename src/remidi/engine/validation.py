@@ -337,6 +337,13 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
         require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
                 "(the belief model reads discrete actions)", r.tracker)
+        from remidi.engine import belief as bl
+
+        obs = example_observation(task)[0]
+        problem = bl.coding_problem(bl.coding_for(obs), obs)
+        if problem is not None:
+            raise ConfigError(f"remidi.tracker: belief cannot read this task: {problem}; allowed here: prefix, "
+                              f"per_step")
         require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix or per_step with a learned "
                 "generator (ReMiDi over PAIRED: the belief tracker is not wired into its adversary yet)", r.tracker)
     choice("remidi.policy", r.policy, POLICIES)

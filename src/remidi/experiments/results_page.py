@@ -271,7 +271,7 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
             parts.append(f"margin {r['belief_margin']:g}")
     if r.get("policy") == "combine":
         parts.append("combine")
-    elif "remidi.policy=masked" in (command or []):
+    elif any(str(token).endswith("remidi.policy=masked") for token in command or []):
         parts.append("masked")
     if r.get("rehearsal"):
         parts.append(f"rehearsal {r['rehearsal']:g}")

@@ -104,8 +104,9 @@ for e in blindfold tmaze; do
   run remidi-rehearsal0.3-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.3
 done
 
-# issue #31: the learned belief tracker on the mazes (cpu preset, 5 seeds; GPU jobs), at the
-# commit that stated their claims
-at e113661
+# issue #31: the learned belief tracker on the mazes (cpu preset, 5 seeds; GPU jobs). Their claims
+# were stated at e113661; the runs use b6e5399, the tracker after its review (monotone judgement,
+# per-length thresholds up to the episode limit), whose smoke measurements the README reports
+at b6e5399
 run remidi-belief-s0 blindfold-noisy remidi 0 5 cpu --set remidi.tracker=belief
 run remidi-belief-s0 tmaze remidi 0 5 cpu --set remidi.tracker=belief

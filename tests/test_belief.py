@@ -466,3 +466,12 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     assert out["belief/exact_explained"] == pytest.approx(share)
     assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)
     assert out["belief/agreement"] == pytest.approx(share if threshold < 0 else 1 - share)
+
+
+def test_the_coding_keeps_each_leafs_own_dims():
+    """A leaf whose observation has a unit dim (shape (1, 5)) reads as 5 entries whatever the batch."""
+    obs = {"a": jnp.zeros((1, 5)), "b": jnp.ones((3,))}
+    coding = bl.coding_for(obs)
+    assert coding.num_entries == 8
+    batch = jax.tree.map(lambda x: jnp.stack([x] * 4), obs)
+    np.testing.assert_array_equal(np.asarray(coding.encode(batch)), np.array([[0] * 5 + [1] * 3] * 4))

@@ -50,11 +50,13 @@ class ObsCoding:
     Per leaf of the observation (in ``jax.tree.leaves`` order): ``scales[i]`` (an entry's
     category is ``round(x · scale)``, clipped to ``[0, categories[i])``). ``categories``: K of
     each leaf; the model uses ``max(categories)`` for every entry (an unused category simply
-    gets no mass). ``sizes``: the number of entries of each leaf (its size)."""
+    gets no mass). ``sizes``: the number of entries of each leaf (its size); ``ndims``: the
+    number of dims of one observation's leaf (its trailing dims in a batch)."""
 
     scales: tuple[float, ...]
     categories: tuple[int, ...]
     sizes: tuple[int, ...]
+    ndims: tuple[int, ...] | None = None
 
     @property
     def num_entries(self) -> int:
@@ -69,15 +71,17 @@ class ObsCoding:
         leaves' trailing dims are the ones of one observation, of ``sizes``)."""
         leaves = jax.tree.leaves(obs)
         out = []
-        for leaf, scale, k, size in zip(leaves, self.scales, self.categories, self.sizes):
-            lead = leaf.shape[:leaf.ndim - _event_ndim(leaf, size)]
+        ndims = self.ndims or (None,) * len(leaves)
+        for leaf, scale, k, size, nd in zip(leaves, self.scales, self.categories, self.sizes, ndims):
+            lead = leaf.shape[:leaf.ndim - (_event_ndim(leaf, size) if nd is None else nd)]
             flat = jnp.reshape(leaf, lead + (size,)).astype(jnp.float32)
             out.append(jnp.clip(jnp.round(flat * scale), 0, k - 1).astype(jnp.int32))
         return jnp.concatenate(out, axis=-1)
 
 
 def _event_ndim(leaf, size: int) -> int:
-    """How many trailing dims of ``leaf`` make up one observation of ``size`` entries."""
+    """How many trailing dims of ``leaf`` make up one observation of ``size`` entries (for a
+    coding built without ``ndims``)."""
     n, prod = 0, 1
     while prod < size:
         n += 1
@@ -96,14 +100,15 @@ def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
     bits, as the lever's)."""
     defaults = {"image": (10.0, 11), "agent_dir": (1.0, 4)}
     defaults.update(categories or {})
-    scales, ks, sizes = [], [], []
+    scales, ks, sizes, ndims = [], [], [], []
     for path, leaf in jax.tree_util.tree_leaves_with_path(example_obs):
         name = getattr(path[-1], "name", None) if path else None
         scale, k = defaults.get(name, (1.0, 2))
         scales.append(float(scale))
         ks.append(int(k))
         sizes.append(max(1, math.prod(leaf.shape)))
-    return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes))
+        ndims.append(len(leaf.shape))
+    return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes), ndims=tuple(ndims))
 
 
 def coding_problem(coding: ObsCoding, obs) -> str | None:

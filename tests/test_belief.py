@@ -465,6 +465,13 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     assert 0 < share < 1  # the check below can tell the two judgements apart
     assert out["belief/exact_explained"] == pytest.approx(share)
     assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)
+    # by level kind: the same judgements over the hidden-answer levels and over the others
+    hidden = np.asarray(jax.vmap(TASK.level_tags)(fresh)["hidden"])
+    assert 0 < hidden.sum() < hidden.size
+    per_level = np.asarray(exact).mean(axis=0)  # [N]
+    assert out["belief/exact_explained/hidden"] == pytest.approx(per_level[hidden].mean())
+    assert out["belief/exact_explained/not-hidden"] == pytest.approx(per_level[~hidden].mean())
+    assert out["belief/explained/hidden"] == out["belief/explained/not-hidden"] == (1.0 if threshold < 0 else 0.0)
     assert out["belief/agreement"] == pytest.approx(share if threshold < 0 else 1 - share)
 
 

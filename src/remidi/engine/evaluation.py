@@ -125,8 +125,11 @@ def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     current policy for ``num_steps`` steps (both rollouts take the same key and the trackers do
     not act, so their steps are the same): ``belief/explained`` and ``belief/exact_explained``
     (the share of steps whose prefix each tracker calls indistinguishable from an earlier
-    adversary's) and ``belief/agreement`` (the share of steps they judge alike); NaN while no
-    buffer is frozen. Empty for every other run."""
+    adversary's) and ``belief/agreement`` (the share of steps they judge alike); per level tag
+    of the task the two shares over the levels of that kind and of the others
+    (``belief/explained/<tag>``, ``belief/explained/not-<tag>``, ``belief/exact_explained/...``;
+    NaN where the batch holds no such level); NaN while no buffer is frozen. Empty for every
+    other run."""
     if runner.belief is None:
         return {}
     cfg = setup.cfg
@@ -139,6 +142,13 @@ def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     belief = collect(setup, runner, k_roll, levels, frozen)[0].indist
     reference = collect(setup, runner, k_roll, levels, exact)[0].indist
     nan = jnp.where(runner.active > 0, 0.0, jnp.nan)
-    return {"belief/explained": jnp.mean(belief.astype(jnp.float32)) + nan,
-            "belief/exact_explained": jnp.mean(reference.astype(jnp.float32)) + nan,
-            "belief/agreement": jnp.mean((belief == reference).astype(jnp.float32)) + nan}
+    out = {"belief/explained": jnp.mean(belief.astype(jnp.float32)) + nan,
+           "belief/exact_explained": jnp.mean(reference.astype(jnp.float32)) + nan,
+           "belief/agreement": jnp.mean((belief == reference).astype(jnp.float32)) + nan}
+    for tag, tagged in jax.vmap(setup.task.level_tags)(levels).items():  # bool[N]: the levels of one kind
+        for kind, mask in ((tag, tagged), (f"not-{tag}", ~tagged)):
+            steps = jnp.maximum(jnp.sum(mask) * belief.shape[0], 1)
+            none = jnp.where(jnp.any(mask), 0.0, jnp.nan)
+            out[f"belief/explained/{kind}"] = jnp.sum(belief & mask[None, :]) / steps + nan + none
+            out[f"belief/exact_explained/{kind}"] = jnp.sum(reference & mask[None, :]) / steps + nan + none
+    return out

@@ -419,7 +419,7 @@ def summary_lines(results: list[dict]) -> str:
                 for name, mean in zip(names, t["mean"]):
                     means[f"{name}{where}"] = mean
         numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
-        n = min((min(t["n"]) for t in r["tests"]), default=0)
+        n = min((min(t["n"]) for t in r["tests"] if "mean" in t), default=0)  # of the settings with data
         detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({n} seeds)" if numbers else ""
         lines.append(f"- {claim.title}: {claim.statement}: **{r['verdict']}**{detail}")
     return "\n".join(lines)

@@ -382,10 +382,11 @@ def switches(setup, runner, count) -> jax.Array:
     return (count >= setup.cfg.remidi.steps_per_buffer) & (runner.active + 1 < k)
 
 
-def tracker_budget(setup) -> int:
-    """Slots per env of the candidate tracker, or 0 for the reference tracker (see ReMiDiConfig)."""
+def tracker_budget(setup, mode: str | None = None) -> int:
+    """Slots per env of the candidate tracker, or 0 for the reference tracker (see ReMiDiConfig),
+    for the exact tracker of ``mode`` (default: ``remidi.tracker``)."""
     r = setup.cfg.remidi
-    if r.tracker != "prefix" or not setup.task.deterministic_reset:
+    if (mode or r.tracker) != "prefix" or not setup.task.deterministic_reset:
         return 0
     return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
 

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine import tracker as trk
+from remidi.engine.adversary import tracker_budget
 from remidi.engine.distributions import for_task
 from remidi.engine.rollout import combine, rollout
 from remidi.engine.train import Runner, Setup, collect, combines, frozen_levels, policy_apply
@@ -136,9 +137,8 @@ def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     k_levels, k_roll = jax.random.split(rng)
     levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))
     frozen = frozen_levels(setup, runner).replace(params=None)  # the current policy acts in both
-    r = cfg.remidi  # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
-    budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity) if setup.task.deterministic_reset else 0
-    exact = frozen.replace(belief=None, tracker=trk.make_tracker("prefix", budget))
+    # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
+    exact = frozen.replace(belief=None, tracker=trk.make_tracker("prefix", tracker_budget(setup, "prefix")))
     belief = collect(setup, runner, k_roll, levels, frozen)[0].indist
     reference = collect(setup, runner, k_roll, levels, exact)[0].indist
     nan = jnp.where(runner.active > 0, 0.0, jnp.nan)

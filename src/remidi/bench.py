@@ -243,9 +243,15 @@ def _maze_plr():
 
 @register("maze-remidi", "ReMiDi update in its last buffer, three full frozen buffers of 256 levels")
 def _maze_remidi():
+    return _maze_remidi_last_buffer()
+
+
+def _maze_remidi_last_buffer(**remidi):
+    """ReMiDi's update on the T-maze in its last buffer (``remidi``: ReMiDiConfig fields to change)."""
     from remidi.envs.maze import maze_task
 
     cfg = _maze_config("remidi")
+    cfg = dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, **remidi))
     return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
 
 
@@ -283,21 +289,13 @@ def _maze_remidi_reference():
 @register("maze-remidi-combine", "maze-remidi with remidi.policy=combine: each frozen buffer's policy reads every "
                                 "step, the earliest whose levels explain the prefix acts")
 def _maze_remidi_combine():
-    from remidi.envs.maze import maze_task
-
-    cfg = _maze_config("remidi")
-    cfg = dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, policy="combine"))
-    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
+    return _maze_remidi_last_buffer(policy="combine")
 
 
 @register("maze-remidi-belief", "maze-remidi with the learned belief tracker (remidi.tracker=belief): three frozen "
                                "models judge, the active one learns from each replay")
 def _maze_remidi_belief():
-    from remidi.envs.maze import maze_task
-
-    cfg = _maze_config("remidi")
-    cfg = dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, tracker="belief"))
-    return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
+    return _maze_remidi_last_buffer(tracker="belief")
 
 
 @register("brax-plr", "PLR⊥ update on brax-hopper's paper preset: 256 envs × 100 steps, PPO 4 × 32")

@@ -197,19 +197,27 @@ def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
     return ll
 
 
+def episode_running(op, x, start) -> jax.Array:
+    """[T, N]: ``op`` (a binary function: ``jnp.add``, ``jnp.minimum``) folded over ``x`` [T, N]
+    along each episode's steps so far (step t included), restarting where ``start`` bool[T, N]
+    (and at step 0: a rollout's first step starts what it holds of its episode)."""
+
+    def body(acc, inp):
+        xt, s = inp
+        acc = jnp.where(s, xt, op(acc, xt))
+        return acc, acc
+
+    return jax.lax.scan(body, x[0], (x, start.at[0].set(True)))[1]
+
+
+def prefix_lengths(reset) -> jax.Array:
+    """i32[T, N]: the number of steps of each episode's prefix so far (step t included)."""
+    return episode_running(jnp.add, jnp.ones(reset.shape, jnp.int32), reset)
+
+
 def prefix_scores(ll, reset) -> jax.Array:
     """f32[T, N]: the mean of ``ll`` f32[T, N] over each episode's steps so far (step t included)."""
-
-    def body(carry, inp):
-        total, count = carry
-        step_ll, r = inp
-        total = jnp.where(r, 0.0, total) + step_ll
-        count = jnp.where(r, 0, count) + 1
-        return (total, count), total / count
-
-    zeros = jnp.zeros(ll.shape[1:])
-    _, scores = jax.lax.scan(body, (zeros, zeros.astype(jnp.int32)), (ll, reset))
-    return scores
+    return episode_running(jnp.add, ll, reset) / prefix_lengths(reset)
 
 
 def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
@@ -236,17 +244,6 @@ def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params
 
 
 # ---------------------------------------------------------------------------- calibration
-def prefix_lengths(reset) -> jax.Array:
-    """i32[T, N]: the number of steps of each episode's prefix so far (step t included)."""
-
-    def body(count, r):
-        count = jnp.where(r, 0, count) + 1
-        return count, count
-
-    _, lengths = jax.lax.scan(body, jnp.zeros(reset.shape[1:], jnp.int32), reset)
-    return lengths
-
-
 def num_length_buckets(max_length: int) -> int:
     """How many prefix-length buckets prefixes of at most ``max_length`` steps fill: lengths
     1, 2–3, 4–7, 8–15, ... (powers of two)."""
@@ -306,13 +303,7 @@ def calibrate_by_length(scores, lengths, false_rate: float, num_buckets: int, va
 def episode_minimum(z, lengths) -> jax.Array:
     """f32[T, N]: the running minimum of ``z`` f32[T, N] over each episode's prefix so far
     (``lengths`` i32[T, N], :func:`prefix_lengths`: 1 starts an episode)."""
-
-    def body(low, inp):
-        zt, length = inp
-        low = jnp.where(length == 1, zt, jnp.minimum(low, zt))
-        return low, low
-
-    return jax.lax.scan(body, jnp.full(z.shape[1:], jnp.inf), (z, lengths))[1]
+    return episode_running(jnp.minimum, z, lengths == 1)
 
 
 def calibrate_monotone(scores, lengths, false_rate: float, num_buckets: int, valid=None,

@@ -289,7 +289,7 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
     doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args, "algorithms": {}}
     rows = []
-    cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels: the algorithms of one run share both
+    cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels and their tags: the algorithms of one run share them
     mazes: dict[int, tuple] = {}  # size → (env, perfect mazes, their optimal returns), built once
     if any(isinstance(run.setup.task.env, MazeEnv) for run in loaded):
         optimum = jax.jit(jax.vmap(optimal_return))
@@ -299,8 +299,9 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
     for run in loaded:
         task = run.setup.task
         if task not in cvar_sets:
-            cvar_sets[task] = _solvable_levels(task, cvar_levels, seed)
-        levels = cvar_sets[task]
+            batch = _solvable_levels(task, cvar_levels, seed)
+            cvar_sets[task] = batch, {name: np.asarray(t, bool) for name, t in jax.vmap(task.level_tags)(batch).items()}
+        levels, tags = cvar_sets[task]
         is_maze = isinstance(task.env, MazeEnv)
         perfect = {size: (env, batch) for size, (env, batch, _) in mazes.items()} if is_maze else {}
         optimal = {size: opt for size, (_, _, opt) in mazes.items()} if is_maze else {}
@@ -309,7 +310,6 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
                 f"checkpoint of update {run.update})")
         keys = jax.vmap(jax.random.PRNGKey)(np.asarray(run.seeds, np.uint32) + np.uint32(seed))
         raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
-        tags = {name: np.asarray(t, bool) for name, t in jax.vmap(task.level_tags)(levels).items()}
         metrics = _summarise(raw, run.setup, optimal, tags)
         doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
                                        "metrics": outputs.summarize(metrics)}

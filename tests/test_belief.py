@@ -401,17 +401,11 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
     from remidi.cli import main
     from remidi.experiments import ued
 
+    from test_cli import interrupt_training
+
     base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY]
     assert main([*base, "--out", str(tmp_path / "full")]) == 0
-    real = ued.train_seeds
-
-    def interrupted(*args, on_block=None, **kwargs):
-        def ctrl_c(done, metrics):
-            if done == 10:
-                raise KeyboardInterrupt
-        return real(*args, **kwargs, on_block=ctrl_c)
-
-    monkeypatch.setattr(ued, "train_seeds", interrupted)
+    real = interrupt_training(monkeypatch, 10)
     assert main([*base, "--out", str(tmp_path / "cut")]) == 130
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(tmp_path / "cut"), "--quiet"]) == 0

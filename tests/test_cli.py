@@ -112,21 +112,30 @@ LEVER_TINY = ["--set", "num_updates=40", "--set", "eval_every=10", "--set", "che
               "--set", "remidi.buffer_capacity=8", "--set", "remidi.steps_per_buffer=8"]
 
 
+def interrupt_training(monkeypatch, at: int, algo: str | None = None):
+    """Ctrl-C once training (of ``algo``, or of any algorithm) has done ``at`` updates: patches
+    ``ued.train_seeds``; returns the real one, to put back before a resume."""
+    from remidi.experiments import ued
+
+    real = ued.train_seeds
+
+    def interrupted(task, cfg, name, *args, on_block=None, **kwargs):
+        def ctrl_c(done, metrics):
+            if done == at and algo in (None, name):
+                raise KeyboardInterrupt
+        return real(task, cfg, name, *args, **kwargs, on_block=ctrl_c)
+
+    monkeypatch.setattr(ued, "train_seeds", interrupted)
+    return real
+
+
 def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
     from remidi.experiments import ued
 
     base = ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY]
     assert run_cli(capsys, *base, "--out", str(tmp_path / "full"))[0] == 0
 
-    real = ued.train_seeds
-
-    def interrupted(*args, on_block=None, **kwargs):
-        def ctrl_c(done, metrics):
-            if done == 10:
-                raise KeyboardInterrupt
-        return real(*args, **kwargs, on_block=ctrl_c)
-
-    monkeypatch.setattr(ued, "train_seeds", interrupted)
+    real = interrupt_training(monkeypatch, 10)
     code, _, err = run_cli(capsys, *base, "--out", str(tmp_path / "cut"))
     assert code == 130 and "interrupted" in err
     assert (tmp_path / "cut" / "checkpoint.npz").exists() and not (tmp_path / "cut" / "summary.json").exists()
@@ -169,15 +178,7 @@ def test_lever_bad_config_is_one_line_and_writes_nothing(tmp_path, capsys, argv,
 def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, capsys, monkeypatch):
     from remidi.experiments import ued
 
-    real = ued.train_seeds
-
-    def stop_in_remidi(task, cfg, algo, *args, on_block=None, **kwargs):
-        def ctrl_c(done, metrics):
-            if algo == "remidi" and done == 10:
-                raise KeyboardInterrupt
-        return real(task, cfg, algo, *args, **kwargs, on_block=ctrl_c)
-
-    monkeypatch.setattr(ued, "train_seeds", stop_in_remidi)
+    real = interrupt_training(monkeypatch, 10, algo="remidi")
     out = tmp_path / "both"
     code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY,
                          "--out", str(out))

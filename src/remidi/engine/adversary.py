@@ -101,6 +101,12 @@ class RandomLevels:
     def frozen(self, setup, runner) -> Frozen | None:
         return None
 
+    def own_levels(self, proposal: Proposal) -> jax.Array:
+        """bool[]: this update's rollout shows the active adversary's own levels, what its belief
+        model learns from (``remidi.tracker=belief``): a replay of the active buffer (its fresh
+        levels are the task generator's, not the adversary's)."""
+        return proposal.replay
+
     def best_return(self, proposal: Proposal, best_return):
         """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's."""
         return best_return
@@ -198,9 +204,7 @@ class LevelBuffers(RandomLevels):
         out = super().advance(setup, runner, proposal, params)
         count = out["count"]
         switch = switches(setup, runner, count) if self.buffer_sequence else jnp.asarray(False)
-        if runner.belief is not None:  # remidi.tracker=belief: the active buffer's model is frozen with it
-            out["belief"] = bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
-                                      setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin)
+        out.update(belief_freezes(setup, runner, switch))
         frozen_params = runner.frozen_params
         if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
             frozen_params = jax.tree.map(
@@ -296,10 +300,10 @@ def rehearse_frozen(setup, runner, proposal: Proposal, rng) -> Proposal:
 
 
 def uses_belief(setup) -> bool:
-    """The run judges distinguishability by learned models (``remidi.tracker=belief``): a buffer
-    sequence of at least two buffers."""
+    """The run judges distinguishability by learned models (``remidi.tracker=belief``): a sequence
+    of at least two buffers or generators."""
     r = setup.cfg.remidi
-    return setup.algo.buffer_sequence and setup.algo.replays and r.tracker == "belief" and r.num_buffers >= 2
+    return setup.algo.buffer_sequence and r.tracker == "belief" and r.num_buffers >= 2
 
 
 @functools.lru_cache(maxsize=None)
@@ -332,13 +336,25 @@ def belief_memory(setup, rng):
 
 
 def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
-    """The active buffer's model learns from a replay of its levels (:func:`~remidi.engine.belief.learn`).
-    Returns ``(changed Runner fields, step metrics)``: nothing without a belief tracker."""
+    """The active adversary's model learns from a rollout of its own levels (the adversary's
+    :meth:`~RandomLevels.own_levels`: a replay of the active buffer, every update of a generator;
+    :func:`~remidi.engine.belief.learn`). Returns ``(changed Runner fields, step metrics)``:
+    nothing without a belief tracker."""
     if runner.belief is None:
         return {}, {}
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
-                            proposal.replay, setup.cfg.remidi.belief_epochs)
+                            setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs)
     return {"belief": memory}, {"belief/loss": loss}
+
+
+def belief_freezes(setup, runner, switch) -> dict:
+    """At a switch of a sequence (``switch`` bool[]) the active adversary's model is frozen with
+    it (:func:`~remidi.engine.belief.freeze`): the changed Runner field, nothing without a belief
+    tracker."""
+    if runner.belief is None:
+        return {}
+    return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
+                                setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin)}
 
 
 def belief_contents(setup, runner) -> dict:

@@ -26,7 +26,8 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine import buffer as buf
-from remidi.engine.adversary import Proposal, RandomLevels, buffer_contents, earlier_buffers, switches
+from remidi.engine.adversary import (Proposal, RandomLevels, belief_contents, belief_freezes, buffer_contents,
+                                     earlier_buffers, switches)
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
 
@@ -221,6 +222,12 @@ class GeneratorSequence(LevelGenerator):
     estimate of the update's levels; ``zero``), so later generators learn to leave earlier
     supports.
 
+    With ``remidi.tracker=belief`` a learned model of each generator's trajectories judges
+    instead of its reservoir (the paper's appendix sketch, P(h | Λᵢ) learnt with Λᵢ: the model
+    learns from every update's rollout, all of them the active generator's levels, and is frozen
+    and calibrated with it, :mod:`remidi.engine.belief`); the reservoir is still kept, for the
+    audit against the exact tracker.
+
     Where it approximates Algorithm 1: the support is a finite sample of the generator's
     distribution (a level the generator rarely makes may be missing from it, and a later level
     identical to it is then not recognised); the generator is a policy trained by PPO, not an
@@ -232,9 +239,14 @@ class GeneratorSequence(LevelGenerator):
     def frozen(self, setup, runner) -> Frozen | None:
         return earlier_buffers(setup, runner)
 
+    def own_levels(self, proposal: Proposal) -> jax.Array:
+        """Every update plays the active generator's levels: its belief model learns from each."""
+        return jnp.asarray(True)
+
     def metrics(self, setup, runner) -> dict:
-        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``)."""
-        return buffer_contents(setup, runner)
+        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``), and with
+        ``remidi.tracker=belief`` its model's thresholds (:func:`~remidi.engine.adversary.belief_contents`)."""
+        return {**buffer_contents(setup, runner), **belief_contents(setup, runner)}
 
     def _pay(self, setup, regret, overlap):
         low = jnp.min(regret) if setup.cfg.paired.overlap_regret == "lowest" else 0.0
@@ -261,8 +273,9 @@ class GeneratorSequence(LevelGenerator):
         return out
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
-        """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
-        next and start a fresh generator (new parameters and optimiser state)."""
+        """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir (and its belief
+        model, ``remidi.tracker=belief``), move to the next and start a fresh generator (new
+        parameters and optimiser state)."""
         out = super().advance(setup, runner, proposal, params)
         switch = switches(setup, runner, out["count"])
         fresh = jax.tree.map(lambda x: x[jnp.minimum(runner.active, x.shape[0] - 1)], runner.next_generators)
@@ -270,5 +283,5 @@ class GeneratorSequence(LevelGenerator):
         pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
         generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
                                 step=pick(fresh.step, old.step))
-        return {**out, "active": jnp.where(switch, runner.active + 1, runner.active),
-                "count": jnp.where(switch, 0, out["count"]), "generator": generator}
+        return {**out, **belief_freezes(setup, runner, switch), "generator": generator,
+                "active": jnp.where(switch, runner.active + 1, runner.active), "count": jnp.where(switch, 0, out["count"])}

@@ -344,8 +344,6 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         if problem is not None:
             raise ConfigError(f"remidi.tracker: belief cannot read this task: {problem}; allowed here: prefix, "
                               f"per_step")
-        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix or per_step with a learned "
-                "generator (ReMiDi over PAIRED: the belief tracker is not wired into its adversary yet)", r.tracker)
     choice("remidi.policy", r.policy, POLICIES)
     if r.policy == "combine":
         require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "

@@ -57,7 +57,32 @@ def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
 
 def test_combine_needs_the_prefix_tracker():
     cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="per_step"))
-    with pytest.raises(ConfigError, match="remidi.tracker: must be prefix with remidi.policy=combine"):
+    with pytest.raises(ConfigError, match="remidi.tracker: must be prefix or belief with remidi.policy=combine"):
         validate_ued_config(cfg, "remidi", TASK)
     with pytest.raises(ConfigError, match="remidi.policy: unknown value 'exact'; allowed: masked, combine"):
         validate_ued_config(R(TINY, remidi=R(TINY.remidi, policy="exact")), "remidi", TASK)
+
+
+@pytest.mark.parametrize("threshold", [-np.inf, np.inf])
+def test_with_the_belief_tracker_a_frozen_policy_acts_where_its_buffers_model_explains_the_prefix(threshold):
+    """``remidi.policy=combine`` with ``remidi.tracker=belief``: the first buffer's frozen policy
+    acts where the first buffer's frozen model explains the prefix (threshold −inf: everywhere),
+    the current policy where it does not (+inf: nowhere); here at the first step of the 64 hidden
+    levels, through the evaluation's combined policy."""
+    cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="belief"))
+    validate_ued_config(cfg, "remidi", TASK)
+    setup = tr.make_setup(TASK, cfg, "remidi")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    # a different policy, frozen: another initialisation, scaled so that it is far from uniform
+    other = jax.tree.map(lambda x: 10 * x, tr.init_runner(setup, jax.random.PRNGKey(1)).train_state.params)
+    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))
+    runner = runner.replace(active=jax.numpy.asarray(1), belief=belief,
+                            frozen_params=jax.tree.map(lambda x: x[None], other))
+    levels = TASK.eval_sets["hidden"]
+    acting = np.asarray(evaluation.first_step_policy(setup, runner, TASK.env, levels))
+    single = tr.make_setup(TASK, R(cfg, remidi=R(cfg.remidi, policy="masked")), "remidi")  # one policy acts
+    frozen = np.asarray(evaluation.first_step_policy(
+        single, runner.replace(train_state=runner.train_state.replace(params=other)), TASK.env, levels))
+    current = np.asarray(evaluation.first_step_policy(single, runner, TASK.env, levels))
+    assert np.abs(frozen - current).max() > 1e-3  # the two policies differ on these levels
+    np.testing.assert_allclose(acting, frozen if threshold < 0 else current, rtol=1e-6)

@@ -51,8 +51,11 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
     _, (logits, _) = apply_fn({"params": runner.train_state.params}, carry, obs_in, reset[None])
     logits = logits[0]
     if combines(setup):
-        # every frozen level stepped at the first observation: the reference tracker
-        frozen = frozen_levels(setup, runner).replace(tracker=trk.ExactTracker())
+        # every frozen level stepped at the first observation: the reference tracker (the learned
+        # models judge the first observation themselves under remidi.tracker=belief)
+        frozen = frozen_levels(setup, runner)
+        if frozen.belief is None:
+            frozen = frozen.replace(tracker=trk.ExactTracker())
         tstate = frozen.tracker.start(task.env, task.params, frozen, keys, obs)
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)

@@ -539,3 +539,18 @@ def test_the_coding_keeps_each_leafs_own_dims():
     assert coding.num_entries == 8
     batch = jax.tree.map(lambda x: jnp.stack([x] * 4), obs)
     np.testing.assert_array_equal(np.asarray(coding.encode(batch)), np.array([[0] * 5 + [1] * 3] * 4))
+
+
+def test_a_learned_generator_refuses_counting_replays():
+    """A generator never replays: ``remidi.count=replays`` would never switch ReMiDi over PAIRED's
+    sequence (nor freeze a model), so it is refused in one line; buffers may count replays."""
+    import dataclasses
+
+    from remidi.engine.validation import validate_ued_config
+    from remidi.errors import ConfigError
+    from test_ued_engine import TASK, TINY as CFG
+
+    cfg = dataclasses.replace(CFG, remidi=dataclasses.replace(CFG.remidi, count="replays"))
+    with pytest.raises(ConfigError, match="^remidi.count: must be updates with a learned generator"):
+        validate_ued_config(cfg, "remidi-paired", TASK)
+    validate_ued_config(cfg, "remidi", TASK)

@@ -55,7 +55,7 @@ def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
         assert np.abs(after - before).max() > 1e-6  # masking alone does not freeze the shared weights
 
 
-def test_combine_needs_the_prefix_tracker():
+def test_combine_needs_the_exact_prefix_or_the_belief_tracker():
     cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="per_step"))
     with pytest.raises(ConfigError, match="remidi.tracker: must be prefix or belief with remidi.policy=combine"):
         validate_ued_config(cfg, "remidi", TASK)

@@ -7,6 +7,8 @@ The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
   from, whether the learner trains on them);
 * :meth:`RandomLevels.frozen`: the earlier adversaries' levels, for the distinguishability tracker
   (None: nothing is frozen);
+* :meth:`RandomLevels.own_levels`: whether this update's rollout played the active adversary's
+  own levels, what its learned belief model (``remidi.tracker=belief``) learns from;
 * :meth:`RandomLevels.update`: after scoring: the buffer's new scores or insertions (a level a
   frozen level explains completely is never inserted), and the best-return record of MaxMC;
 * :meth:`RandomLevels.advance`: after the learner: a buffer sequence's switch (freeze the active
@@ -204,7 +206,6 @@ class LevelBuffers(RandomLevels):
         out = super().advance(setup, runner, proposal, params)
         count = out["count"]
         switch = switches(setup, runner, count) if self.buffer_sequence else jnp.asarray(False)
-        out.update(belief_freezes(setup, runner, switch))
         frozen_params = runner.frozen_params
         if frozen_params is not None:  # Combine: the policy trained on the buffer being frozen is kept
             frozen_params = jax.tree.map(
@@ -348,9 +349,10 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
 
 
 def belief_freezes(setup, runner, switch) -> dict:
-    """At a switch of a sequence (``switch`` bool[]) the active adversary's model is frozen with
-    it (:func:`~remidi.engine.belief.freeze`): the changed Runner field, nothing without a belief
-    tracker."""
+    """At a switch of a sequence (``switch`` bool[]: the adversary's ``advance`` moved ``active``
+    on) the active adversary's model is frozen with it (:func:`~remidi.engine.belief.freeze`):
+    the changed Runner field, nothing without a belief tracker. Called once, by the train step,
+    for every adversary."""
     if runner.belief is None:
         return {}
     return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,

@@ -411,15 +411,17 @@ class BeliefTracker:
 @struct.dataclass
 class BeliefMemory:
     """What a ReMiDi run with ``remidi.tracker=belief`` carries (``Runner.belief``): one model per
-    buffer (adversary), trained while its buffer is active and frozen with it.
+    adversary (a buffer of the sequence, or a generator), trained while it is active and frozen
+    with it.
 
-    ``params`` leaves [K, ...] (model k: buffer k's adversary); ``opt_state``: the active model's
+    ``params`` leaves [K, ...] (model k: adversary k's); ``opt_state``: the active model's
     optimiser state (restarted at each switch); ``threshold`` f32[K, L] (per prefix-length
     bucket, :func:`calibrate_by_length`; +inf until calibrated at the model's freeze);
     ``scores`` f32[R, T, N] and ``lengths`` i32[R, T, N]: the prefix scores (and prefix lengths) of
-    the active adversary's last R replays, each under the model as it was before fitting on that replay (held out from it);
-    ``written`` i32[]: replays recorded since the switch (row ``written mod R`` is next);
-    ``fits`` i32[]: replays the active model has learnt from since the switch. The first replay's
+    the active adversary's last R rollouts of its own levels (a buffer's replays, a generator's
+    updates), each under the model as it was before fitting on that rollout (held out from it);
+    ``written`` i32[]: rollouts recorded since the switch (row ``written mod R`` is next);
+    ``fits`` i32[]: rollouts the active model has learnt from since the switch. The first one's
     scores are not recorded: they are those of the untrained model, whose scores sit near the
     uniform model's, and a threshold calibrated on them would let every prefix through."""
 
@@ -458,9 +460,10 @@ def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
 def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, trained,
           epochs: int = 1) -> tuple[BeliefMemory, jax.Array]:
     """The active adversary's model learns from a rollout of its levels (``trained`` bool[]: the
-    rollout replayed the active buffer; otherwise nothing changes): record the rollout's prefix
-    scores under the model before the update (held out; not for the model's first replay since
-    the switch, whose scores are the untrained model's), then ``epochs`` :func:`fit_step` on all
+    rollout played the adversary's own levels, a replay of its buffer or a generator's levels;
+    otherwise nothing changes): record the rollout's prefix scores under the model before the
+    update (held out; not for the model's first rollout since the switch, whose scores are the
+    untrained model's), then ``epochs`` :func:`fit_step` on all
     its steps. ``traj``: a :class:`~remidi.engine.rollout.Trajectory` (leaves [T, N, ...]). Returns
     ``(memory, loss f32[]: the first epoch's, NaN when not trained)``."""
 

@@ -41,9 +41,10 @@ class ReMiDiConfig:
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
     tracker_budget: int = field(default=64, metadata={
         "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
-    # remidi.tracker=belief (engine/belief.py): each buffer's adversary has a learned model of its
-    # trajectories, trained on the replays of its buffer and frozen with it; its threshold is the
-    # belief_false_rate quantile of the prefix scores of its last belief_calibration replays
+    # remidi.tracker=belief (engine/belief.py): each adversary (buffer or generator) has a learned
+    # model of its trajectories, trained on the rollouts of its own levels (a buffer's replays, a
+    # generator's every update) and frozen with it; its threshold is the belief_false_rate quantile
+    # of the prefix scores of its last belief_calibration such rollouts
     belief_false_rate: float = field(default=0.05, metadata={
         "help": "ReMiDi, tracker=belief: share of the adversary's own trajectory prefixes its frozen model may call "
                 "distinguishable (sets the threshold)"})
@@ -53,10 +54,11 @@ class ReMiDiConfig:
     belief_hidden: int = field(default=64, metadata={"help": "ReMiDi, tracker=belief: the model's GRU units"})
     belief_lr: float = field(default=1e-2, metadata={"help": "ReMiDi, tracker=belief: the model's Adam learning rate"})
     belief_epochs: int = field(default=4, metadata={
-        "help": "ReMiDi, tracker=belief: the model's updates on each replay of its buffer"})
+        "help": "ReMiDi, tracker=belief: the model's updates on each rollout of its adversary's levels (a replay "
+                "of its buffer; every update of a generator)"})
     belief_calibration: int = field(default=16, metadata={
-        "help": "ReMiDi, tracker=belief: replays whose prefix scores (held out: scored before the model fits on "
-                "them) calibrate the threshold at the freeze"})
+        "help": "ReMiDi, tracker=belief: rollouts of the adversary's levels whose prefix scores (held out: scored "
+                "before the model fits on them) calibrate the threshold at the freeze"})
     # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
     # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
     # buffer acts on the trajectories realisable under that buffer's levels

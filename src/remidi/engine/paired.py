@@ -26,8 +26,7 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine import buffer as buf
-from remidi.engine.adversary import (Proposal, RandomLevels, belief_contents, belief_freezes, buffer_contents,
-                                     earlier_buffers, switches)
+from remidi.engine.adversary import Proposal, RandomLevels, belief_contents, buffer_contents, earlier_buffers, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
 
@@ -273,9 +272,9 @@ class GeneratorSequence(LevelGenerator):
         return out
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:
-        """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir (and its belief
-        model, ``remidi.tracker=belief``), move to the next and start a fresh generator (new
-        parameters and optimiser state)."""
+        """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
+        next and start a fresh generator (new parameters and optimiser state); with
+        ``remidi.tracker=belief`` the train step freezes its model (:func:`~remidi.engine.adversary.belief_freezes`)."""
         out = super().advance(setup, runner, proposal, params)
         switch = switches(setup, runner, out["count"])
         fresh = jax.tree.map(lambda x: x[jnp.minimum(runner.active, x.shape[0] - 1)], runner.next_generators)
@@ -283,5 +282,5 @@ class GeneratorSequence(LevelGenerator):
         pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
         generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
                                 step=pick(fresh.step, old.step))
-        return {**out, **belief_freezes(setup, runner, switch), "generator": generator,
+        return {**out, "generator": generator,
                 "active": jnp.where(switch, runner.active + 1, runner.active), "count": jnp.where(switch, 0, out["count"])}

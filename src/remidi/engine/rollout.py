@@ -137,7 +137,8 @@ def combine(frozen: Frozen, tstate, apply_fn: Callable, frozen_hidden, obs_in, r
     """ReMiDi's ``Combine`` (Algorithm 1), the one place it is computed: each frozen buffer's
     policy (``frozen.params``, leaves [B, ...], each with its recurrent state ``frozen_hidden``
     [B, ...]) reads the observations ``obs_in`` [1, N, ...]; the earliest buffer one of whose
-    levels produced env n's whole prefix (``frozen.tracker.buffer_match``) acts there, the current
+    levels produced env n's whole prefix, or whose learned model explains it (``remidi.tracker=belief``),
+    (``frozen.tracker.buffer_match``) acts there, the current
     policy (``logits`` f32[N, P]) where none did. Returns ``(frozen_hidden, acting logits
     f32[N, P])``."""
     copies = jax.tree.leaves(frozen.params)[0].shape[0]

@@ -44,7 +44,7 @@ from remidi.engine.config import UEDConfig, buffer_config, num_buffers, score_na
 from remidi.engine.distributions import for_task
 from remidi.engine.networks import flatten_obs, make_network
 from remidi.engine.ppo import Batch, compute_gae, create_train_state, ppo_update
-from remidi.engine.adversary import Proposal, belief_learns, belief_memory, tag_counts
+from remidi.engine.adversary import Proposal, belief_freezes, belief_learns, belief_memory, tag_counts
 from remidi.engine.rollout import Frozen, Trajectory, rollout
 from remidi.envs.interface import UEDTask
 
@@ -221,7 +221,8 @@ def train_step(setup: Setup, runner: Runner):
     #    (PAIRED: the antagonist plays the levels, the generator is paid its regret estimate)
     changed, inserted, adversary_metrics = adversary.update(setup, runner, proposal, scores, overlap, best_ret,
                                                             mean_ret, k_learn)
-    #    (remidi.tracker=belief: the active buffer's model learns from a replay of its levels)
+    #    (remidi.tracker=belief: the active adversary's model learns from a rollout of its own levels,
+    #    adversary.own_levels: a replay of the active buffer, every update of a generator)
     learnt, belief_metrics = belief_learns(setup, runner, proposal, traj)
     changed = {**changed, **learnt}
     # 4. train (masked PPO) if the proposal is trained on
@@ -233,6 +234,8 @@ def train_step(setup: Setup, runner: Runner):
     #    ACCEL's memory of the replay, a fresh generator
     runner = runner.replace(**changed)
     moved = adversary.advance(setup, runner, proposal, train_state.params)
+    #    (remidi.tracker=belief: an adversary frozen now has its model frozen and calibrated with it)
+    moved = {**moved, **belief_freezes(setup, runner, moved["active"] != runner.active)}
     runner = runner.replace(rng=rng, train_state=train_state, update=runner.update + 1, obs_stats=obs_stats, **moved)
     # 6. what the step reports
     return runner, {**step_metrics(setup, runner, proposal, traj, mean_ret, scores, overlap, inserted, frozen),

@@ -326,6 +326,8 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
             "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
     choice("remidi.count", r.count, ("updates", "replays"))
+    require(r.count == "updates" or algo.replays or not algo.buffer_sequence, "remidi.count", "updates with a "
+            "learned generator (a generator never replays, so counting replays would never switch it)", r.count)
     choice("remidi.tracker", r.tracker, MODES + ("belief",))
     if r.tracker == "belief":
         require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)",

@@ -145,3 +145,7 @@ def test_labels_name_what_differs_from_the_exact_single_policy_form():
                     ["remidi", "run", "tmaze", "--set", "remidi.policy=masked"]) == "remidi (masked)"
     assert rp.label("plr", {"remidi": {"policy": "combine"}}) == "plr"  # only a buffer sequence has these forms
     assert rp.label("paired", {"paired": {"estimator": "perfect"}}) == "paired (perfect)"
+    assert rp.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "belief"}}) == \
+        "remidi-paired (perfect, belief)"
+    assert rp.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "prefix"}}) == \
+        "remidi-paired (perfect)"

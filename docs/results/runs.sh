@@ -110,3 +110,10 @@ done
 at b6e5399
 run remidi-belief-s0 blindfold-noisy remidi 0 5 cpu --set remidi.tracker=belief
 run remidi-belief-s0 tmaze remidi 0 5 cpu --set remidi.tracker=belief
+
+# issue #31: ReMiDi over PAIRED on lever-noisy (perfect regret), the exact tracker and the learned
+# belief tracker (a model of each generator's trajectories), the lever's paper preset, 10 seeds,
+# at the commit that stated their claims
+at 3e5a339
+run remidi-paired-perfect-s0 lever-noisy remidi-paired 0 10 paper --set paired.estimator=perfect
+run remidi-paired-perfect-belief-s0 lever-noisy remidi-paired 0 10 paper --set paired.estimator=perfect --set remidi.tracker=belief

@@ -97,3 +97,23 @@ def test_network_flops_match_a_count_by_hand():
     multiply_adds = (lstm_in + hidden) * 4 * hidden + 3 * 3 * 27 * 16 + 4 * 5 + 2 * hidden * 32 + 32 * 3 + 32
     by_hand = (1 + 3 * cfg.ppo.epochs) * 2 * multiply_adds
     assert abs(network_flops_per_step(setup, params) / by_hand - 1) < 0.03
+
+
+@pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs two cores")
+def test_lanes_run_one_pinned_process_per_core_and_add_their_rates():
+    """``--lanes 2``: two processes at once, each on a core of its own, their rates summed."""
+    from remidi.bench import SINGLE_THREAD_XLA, TINY_ENV, run_lanes
+
+    lane = run_lanes("maze-env", 1, 2, {**subprocess_env(__name__), TINY_ENV: "1"})
+    assert lane["lanes"] == 2 and len(lane["lane_cores"]) == 2
+    assert all(len(cores) == 1 for cores in lane["lane_cores"])  # pinned
+    assert lane["lane_cores"][0] != lane["lane_cores"][1]  # to different cores
+    assert lane["env_steps_per_s"] == sum(lane["lane_env_steps_per_s"]) and lane["xla_flags"] == SINGLE_THREAD_XLA
+
+
+def test_lanes_beyond_the_cores_are_a_one_line_error(capsys):
+    from remidi.cli import main
+
+    assert main(["bench", "maze-env", "--lanes", "999"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "--lanes" in err and "999" in err

@@ -74,6 +74,10 @@ BENCHMARKS: dict[str, "Benchmark"] = {}
 DEFAULT = ("maze-plr", "maze-remidi", "maze-env", "lever-plr", "lstm-matmul")
 TINY_ENV = "REMIDI_BENCH_TINY"  # set (by --tiny): every workload at toy sizes, to check the tool in seconds
 SET_ENV = "REMIDI_BENCH_SET"  # JSON {key: value} (by --set): overrides of the train workloads' UED config
+BARRIER_ENV = "REMIDI_BENCH_BARRIER"  # a folder (by --lanes): warmed-up lanes wait there to be timed together
+CORE_ENV = "REMIDI_BENCH_CORE"  # the core a lane pins itself to (before JAX starts its threads)
+# one lane of --lanes: XLA's CPU runtime on one thread (its process is pinned to one core)
+SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
 
 
 def _overrides() -> dict:
@@ -414,6 +418,7 @@ def run_one(name: str, repeats: int) -> dict:
         return out
 
     out = call(args)  # warm-up
+    _wait_for_the_other_lanes()
     times = []
     for _ in range(repeats):
         if work.chain:
@@ -427,7 +432,47 @@ def run_one(name: str, repeats: int) -> dict:
     return {"env_steps_per_s": steps / seconds if steps else None, "seconds_per_call": seconds,
             "env_steps_per_call": steps, "gflops_per_s": flops / seconds / 1e9 if flops else None,
             "compile_s": compile_s, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            "repeats": repeats, "times_s": times, **work.extras(out)}
+            "repeats": repeats, "times_s": times, "cores": sorted(os.sched_getaffinity(0)), **work.extras(out)}
+
+
+def _wait_for_the_other_lanes() -> None:
+    """In a lane of ``--lanes``: say this process is warmed up, then wait until every lane is, so
+    that the lanes' timed calls overlap."""
+    folder = os.environ.get(BARRIER_ENV)
+    if not folder:
+        return
+    open(os.path.join(folder, f"ready-{os.getpid()}"), "w").close()
+    while not os.path.exists(os.path.join(folder, "go")):
+        time.sleep(0.01)
+
+
+def run_lanes(name: str, repeats: int, lanes: int, env: dict) -> dict:
+    """Benchmark ``name`` in ``lanes`` processes at once, each pinned to a core of its own with
+    XLA's CPU runtime on one thread, all timed together: how a CPU runs independent jobs (seeds,
+    algorithms) side by side. ``env_steps_per_s`` is the lanes' total."""
+    import glob
+    import tempfile
+
+    cores = sorted(os.sched_getaffinity(0))
+    with tempfile.TemporaryDirectory() as folder:
+        lane_env = {**env, BARRIER_ENV: folder,
+                    "XLA_FLAGS": f"{env.get('XLA_FLAGS', '')} {SINGLE_THREAD_XLA}".strip()}
+        procs = [subprocess.Popen([sys.executable, "-m", "remidi.bench", name, str(repeats)], stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True, env={**lane_env, CORE_ENV: str(core)})
+                 for core in cores[:lanes]]
+        while len(glob.glob(os.path.join(folder, "ready-*"))) < lanes and all(p.poll() is None for p in procs):
+            time.sleep(0.05)
+        open(os.path.join(folder, "go"), "w").close()  # also when a lane died: the others must not wait forever
+        outs = [p.communicate() for p in procs]
+    for p, (_, err) in zip(procs, outs):
+        if p.returncode != 0:
+            raise RuntimeError(f"benchmark {name} (a lane of {lanes}) failed:\n{err[-3000:]}")
+    each = [json.loads(out.strip().splitlines()[-1]) for out, _ in outs]
+    rates = [r["env_steps_per_s"] for r in each]
+    return {"lanes": lanes, "env_steps_per_s": sum(rates) if None not in rates else None,
+            "lane_env_steps_per_s": rates, "lane_seconds_per_call": [r["seconds_per_call"] for r in each],
+            "lane_cores": [r["cores"] for r in each],
+            "xla_flags": SINGLE_THREAD_XLA}
 
 
 def device_description() -> str:
@@ -468,10 +513,13 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
 
 def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = False,
-                   overrides: dict | None = None) -> dict:
+                   overrides: dict | None = None, lanes: int = 1) -> dict:
     """Run each benchmark in its own process; return the JSON document ``remidi bench --json``
     prints. ``tiny``: toy sizes (checks the tool; the figures mean nothing). ``overrides``: UED
-    config keys set in every train workload (``num_envs`` and ``num_steps`` also in ``maze-env``)."""
+    config keys set in every train workload (``num_envs`` and ``num_steps`` also in ``maze-env``).
+    ``lanes`` > 1: each benchmark also runs in that many pinned single-threaded processes at once
+    (:func:`run_lanes`), reported under ``"lanes"`` with their total against the one process on
+    every core (``over_one_process``)."""
     overrides = overrides or {}
     env = {**os.environ, TINY_ENV: "1" if tiny else "", SET_ENV: json.dumps(overrides)}
     results = {}
@@ -485,8 +533,19 @@ def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = 
         r = results[name]
         print(f"  {_num(r['env_steps_per_s'])} env-steps/s, {_num(r['gflops_per_s'], 1)} GFLOP/s, "
               f"{r['seconds_per_call']:.3f} s per call, compile {r['compile_s']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MB", file=log, flush=True)
-    return {"benchmarks": results, "ratios": ratios(results), "device": device_description(), "tiny": tiny,
-            "set": overrides}
+    doc = {"benchmarks": results, "ratios": ratios(results), "device": device_description(), "tiny": tiny,
+           "set": overrides}
+    if lanes > 1:
+        doc["lanes"] = {}
+        for name in names:
+            print(f"bench {name} in {lanes} lanes (one process per core, XLA on one thread) ...", file=log, flush=True)
+            lane = run_lanes(name, repeats, lanes, env)
+            total, one = lane["env_steps_per_s"], results[name]["env_steps_per_s"]
+            lane["over_one_process"] = total / one if total and one else None
+            doc["lanes"][name] = lane
+            print(f"  {_num(total)} env-steps/s in total ({_num(lane['over_one_process'] or None, 2)}× one process)",
+                  file=log, flush=True)
+    return doc
 
 
 def _num(value, digits: int = 0) -> str:
@@ -504,8 +563,16 @@ def format_table(doc: dict) -> str:
     if doc["ratios"]:
         lines.append("")
         lines += [f"{k}: {v:.3f}" for k, v in doc["ratios"].items()]
+    if doc.get("lanes"):
+        lines += ["", "one process per core (pinned, XLA on one thread), timed together:",
+                  f"{'benchmark':24s} {'lanes':>5s} {'env-steps/s':>12s} {'× one process':>14s}"]
+        for name, lane in doc["lanes"].items():
+            lines.append(f"{name:24s} {lane['lanes']:5d} {_num(lane['env_steps_per_s']):>12s} "
+                         f"{_num(lane['over_one_process'], 2):>14s}")
     return "\n".join(lines)
 
 
 if __name__ == "__main__":  # one benchmark in this process: python -m remidi.bench NAME REPEATS
+    if os.environ.get(CORE_ENV):
+        os.sched_setaffinity(0, {int(os.environ[CORE_ENV])})
     print(json.dumps(run_one(sys.argv[1], int(sys.argv[2]))))

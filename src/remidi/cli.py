@@ -342,12 +342,17 @@ def _cmd_bench(args) -> int:
             raise one_of("remidi bench: NAME", name, list(BENCHMARKS))
     if args.repeats < 1:
         raise RemidiError(f"--repeats: must be an integer ≥ 1, got {args.repeats}")
+    import os
+
+    cores = len(os.sched_getaffinity(0))
+    if not 1 <= args.lanes <= cores:
+        raise RemidiError(f"--lanes: must be an integer in [1, {cores}] (this machine's cores), got {args.lanes}")
     from remidi.bench import check_overrides
     from remidi.experiments.config import parse_set_items
 
     overrides = parse_set_items(args.sets)
     check_overrides(overrides)
-    doc = run_benchmarks(names, args.repeats, log=sys.stderr, tiny=args.tiny, overrides=overrides)
+    doc = run_benchmarks(names, args.repeats, log=sys.stderr, tiny=args.tiny, overrides=overrides, lanes=args.lanes)
     print(json.dumps(doc, indent=2) if args.json else format_table(doc))
     return 0
 
@@ -484,6 +489,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print only the JSON document (progress on stderr)")
     bench.add_argument("--repeats", type=int, default=3, help="timed calls per benchmark (default 3)")
     bench.add_argument("--tiny", action="store_true", help="toy sizes: checks the tool in seconds, figures meaningless")
+    bench.add_argument("--lanes", type=int, default=1, metavar="N",
+                       help="also run each benchmark as N processes at once, each pinned to one core with XLA on "
+                            "one thread, and report their total against one process on every core (default 1: off)")
     bench.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                        help="override a UED config key in every training workload (e.g. num_envs=64, "
                             "remidi.buffer_capacity=64; num_envs and num_steps also apply to maze-env)")

@@ -458,10 +458,13 @@ def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_p
                     ignore=shutil.ignore_patterns("__pycache__"))
     probe = "import json, remidi.files as f; print(json.dumps(f.code_version()))"
     done = subprocess.run([sys.executable, "-c", probe], cwd=repo, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(repo / "frozen"), "JAX_PLATFORMS": "cpu"})
+                          env={**os.environ, "PYTHONPATH": str(repo / "frozen"), "JAX_PLATFORMS": "cpu",
+                               "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false"})
     version = json.loads(done.stdout.strip().splitlines()[-1])
     assert version["commit"] is None and version["dirty"] is None
     assert version["device"] == "cpu: cpu" and version["jax"]
+    assert version["xla_flags"] == "--xla_cpu_multi_thread_eigen=false"  # threading changes rounding: recorded
+    assert version["cpu_cores"] == len(os.sched_getaffinity(0))
 
 
 @pytest.mark.parametrize("argv, needle", [

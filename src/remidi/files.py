@@ -40,8 +40,10 @@ def code_version() -> dict:
     """What code, libraries and device a run used, for its ``config.json``: the git commit of the
     checkout the ``remidi`` package was imported from (``dirty``: uncommitted changes under
     ``src/``), or ``None`` for an installed copy or a copy of the sources that git does not track
-    (a package folder inside some other repository), the JAX versions and the kind of the first
-    device (results depend on XLA's rounding, which differs between CPU and GPU)."""
+    (a package folder inside some other repository), the JAX versions, the kind of the first
+    device (results depend on XLA's rounding, which differs between CPU and GPU), and on a CPU the
+    cores the process may use and ``XLA_FLAGS`` (XLA's threading changes how sums are split, so
+    a run pinned to one core with XLA on one thread need not repeat a two-core run bit for bit)."""
     import subprocess
 
     import jax
@@ -58,6 +60,10 @@ def code_version() -> dict:
 
     commit = git("rev-parse", "HEAD") if git("ls-files", "--error-unmatch", "__init__.py") else None
     dirty = bool(git("status", "--porcelain", "--", str(src.parent))) if commit else None
+    import os
+
     device = jax.devices()[0]
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {"commit": commit, "dirty": dirty, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
-            "device": f"{device.platform}: {device.device_kind}"}
+            "device": f"{device.platform}: {device.device_kind}", "cpu_cores": cores,
+            "xla_flags": os.environ.get("XLA_FLAGS") or None}

@@ -56,6 +56,9 @@ class ReMiDiConfig:
     belief_epochs: int = field(default=4, metadata={
         "help": "ReMiDi, tracker=belief: the model's updates on each rollout of its adversary's levels (a replay "
                 "of its buffer; every update of a generator)"})
+    belief_reference: bool = field(default=False, metadata={
+        "help": "ReMiDi, tracker=belief: judge by the log-likelihood ratio of each frozen model over a model of the "
+                "task generator's trajectories (learnt on the rollouts of fresh levels), not by the likelihood alone"})
     belief_calibration: int = field(default=16, metadata={
         "help": "ReMiDi, tracker=belief: rollouts of the adversary's levels whose prefix scores (held out: scored "
                 "before the model fits on them) calibrate the threshold at the freeze"})

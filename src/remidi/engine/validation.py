@@ -337,6 +337,10 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         positive_int("remidi.belief_epochs", r.belief_epochs)
         require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
         require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
+        require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
+        require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
+                "(the reference learns from the task generator's fresh levels, which a generator never plays)",
+                r.belief_reference)
         require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
                 "(the belief model reads discrete actions)", r.tracker)
         from remidi.engine import belief as bl

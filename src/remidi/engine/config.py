@@ -133,6 +133,10 @@ class UEDConfig:
     # PPO learns from rewards × reward_scale (returns, scores and metrics stay unscaled)
     reward_scale: float = field(default=1.0, metadata={
         "help": "PPO learns from reward × reward_scale (returns and scores stay unscaled)"})
+    reseed: bool = field(default=False, metadata={
+        "help": "every rollout plays its levels with their own randomness drawn afresh (the task's reseed_level, "
+                "e.g. a noisy level's seed): a stochastic environment, where the same level never shows the "
+                "same noise twice"})
     normalize_obs: bool = field(default=False, metadata={
         "help": "normalise observations by their running mean and std (kept in checkpoints)"})
     eval_every: int = field(default=100, metadata={"help": "updates between evaluations (and logged points)"})

@@ -294,6 +294,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     if cfg.eval_every > cfg.num_updates:
         raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
                           f"lower eval_every or raise num_updates")
+    require(isinstance(cfg.reseed, bool), "reseed", "true or false", cfg.reseed)
+    require(not cfg.reseed or task.reseed_level is not None, "reseed", "false for a task without reseed_level (its "
+            "levels carry no randomness of their own to draw afresh)", cfg.reseed)
     choice("score", cfg.score, sc.SCORES)
     score = sc.SCORES[score_name(cfg, algo)]
     for needed, what, has in (

@@ -379,6 +379,8 @@ def test_remidi_over_paired_learns_a_model_of_each_generator_and_freezes_it_at_t
     (["--set", "remidi.belief_epochs=0"], "remidi.belief_epochs"),
     (["--set", "remidi.belief_margin=-1"], "remidi.belief_margin"),
     (["--set", "remidi.tracker=belief-ish"], "remidi.tracker"),
+    (["--algo", "remidi-paired", "--set", "remidi.belief_reference=true"], "remidi.belief_reference: must be false "
+     "with a learned generator"),
 ])
 def test_belief_keys_are_validated(tmp_path, capsys, extra, needle):
     from remidi.cli import main
@@ -456,9 +458,13 @@ def test_remidi_over_paired_with_the_belief_tracker_moves_the_next_generator_off
     assert m["rejected"] > 100
 
 
-def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("extra", [[], ["--set", "remidi.belief_reference=true", "--set", "reseed=true"]],
+                         ids=["likelihood", "ratio"])
+def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch, extra):
     # interrupted after update 10, past the switch at update 8: the frozen model and its
-    # threshold, the active model, its optimiser and its calibration record come back from the checkpoint
+    # threshold, the active model, its optimiser and its calibration record come back from the
+    # checkpoint (with a reference: the live reference, its optimiser and its frozen copies too;
+    # with reseed: the levels' fresh noise is drawn from the run's keys)
     import json
 
     from remidi.cli import main
@@ -466,7 +472,7 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
 
     from test_cli import interrupt_training
 
-    base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY]
+    base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY, *extra]
     assert main([*base, "--out", str(tmp_path / "full")]) == 0
     real = interrupt_training(monkeypatch, 10)
     assert main([*base, "--out", str(tmp_path / "cut")]) == 130
@@ -554,3 +560,58 @@ def test_a_learned_generator_refuses_counting_replays():
     with pytest.raises(ConfigError, match="^remidi.count: must be updates with a learned generator"):
         validate_ued_config(cfg, "remidi-paired", TASK)
     validate_ued_config(cfg, "remidi", TASK)
+
+
+def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and_not_ordinary_mazes():
+    """``remidi.belief_reference`` with ``reseed`` on a constructed blindfold-noisy adversary
+    (90 % blind levels, as PLR⊥'s buffer is at the cpu preset; a random policy). A noisy TV makes
+    every view equally likely under a blind level, an ordinary maze's included, so the likelihood
+    alone explains ordinary mazes (and, with the noise drawn afresh, everything); the ratio over a
+    model of the generator's levels explains fresh blind levels and not fresh ordinary mazes."""
+    from remidi.engine import belief as bl
+    from remidi.envs.noisy import noisy_blindfold_task
+
+    task, t, n, c = noisy_blindfold_task(0.5, 25), 12, 64, 20
+    actions = task.num_actions
+
+    def policy(variables, carry, obs, reset):
+        return carry, (jnp.zeros(reset.shape + (actions,)), jnp.zeros(reset.shape))
+
+    def play(levels, key, frozen=None):
+        return rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels, t, frozen,
+                       deterministic_reset=task.deterministic_reset)[0]
+
+    pool = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), 400))
+    blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(pool))
+    picked = np.concatenate([np.nonzero(blind)[0][:c * 9 // 10], np.nonzero(~blind)[0][:c - c * 9 // 10]])
+    buffer = jax.tree.map(lambda x: x[picked], pool)
+
+    def replays(key):  # the adversary's levels, each with its noise drawn afresh (reseed)
+        k1, k2 = jax.random.split(key)
+        levels = jax.tree.map(lambda x: x[jax.random.randint(k1, (n,), 0, c)], buffer)
+        return jax.vmap(task.reseed_level)(jax.random.split(k2, n), levels)
+
+    example = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)[0]
+    model = bl.BeliefModel(bl.coding_for(example), num_actions=actions, hidden=32)
+    data = play(replays(jax.random.PRNGKey(1)), jax.random.PRNGKey(2))
+    params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=100)
+    gen = play(jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(4), n)), jax.random.PRNGKey(5))
+    ref, _ = fit(model, model.init(jax.random.PRNGKey(6)), gen.obs, gen.action, gen.reset, steps=100)
+    held = play(replays(jax.random.PRNGKey(7)), jax.random.PRNGKey(8))
+    fresh = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(9), n))
+    fresh_blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(fresh))
+    lengths, buckets = bl.prefix_lengths(held.reset), bl.num_length_buckets(t)
+    explained = {}
+    for reference in (None, ref):
+        ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
+        if reference is not None:
+            ll = ll - bl.step_logliks(model, reference, held.obs, held.action, held.reset)
+        tau = bl.calibrate_monotone(bl.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE, buckets)
+        beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
+                                   valid=jnp.ones((1,), bool),
+                                   ref=None if reference is None else jax.tree.map(lambda x: x[None], reference))
+        frozen = Frozen(levels=None, valid=None, tracker=bl.BeliefTracker(model), belief=beliefs)
+        indist = np.asarray(play(fresh, jax.random.PRNGKey(10), frozen).indist)  # [T, N]
+        explained[reference is not None] = (indist[:, fresh_blind].mean(), indist[:, ~fresh_blind].mean())
+    assert explained[False][1] > 0.9  # the likelihood alone: ordinary mazes explained
+    assert explained[True][0] > 0.9 and explained[True][1] < 0.1, explained  # the ratio: blind yes, ordinary no

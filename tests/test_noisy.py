@@ -214,3 +214,35 @@ def test_remidi_on_lever_noisy_takes_hidden_levels_into_its_later_buffer(tmp_pat
     assert m["buffer_fraction/hidden"] > 0.5  # the later buffer accepts hidden levels
     assert m["replay_fraction/hidden"] > 0.5
     assert m["regret/hidden/worst"] >= 20 * (1 - 1 / 64) - 1e-3
+
+
+def test_reseed_plays_each_rollout_with_the_levels_randomness_drawn_afresh():
+    """``reseed``: the same plain level, a new seed per rollout, so the noise code the agent sees
+    is not the stored level's; without it the rollout shows the stored seed's code."""
+    import dataclasses
+
+    from remidi.engine import driver
+    from remidi.engine import train as tr
+    from remidi.engine.config import UEDConfig
+
+    level = lever(3, False, 12345)
+    again = NOISY.reseed_level(jax.random.PRNGKey(0), level)
+    assert again.level == level.level and int(again.seed) != 12345
+    levels = stack(*[level] * 4)
+    stored = NOISY.env.reset_to_level(jax.random.PRNGKey(0), level, NOISY.params)[0]
+    for reseed in (False, True):
+        cfg = dataclasses.replace(UEDConfig(num_envs=4, num_steps=2), reseed=reseed)
+        setup = tr.make_setup(NOISY, cfg, "dr")
+        runner = driver._init(setup, jax.random.PRNGKey(1)[None])
+        runner = jax.tree.map(lambda x: x[0], runner)
+        traj = tr.collect(setup, runner, jax.random.PRNGKey(2), levels, None)[0]
+        same = [bool(jnp.array_equal(traj.obs[0, n], stored)) for n in range(4)]
+        assert same == [not reseed] * 4, (reseed, same)
+
+
+def test_reseed_is_refused_for_a_task_whose_levels_carry_no_randomness(tmp_path, capsys):
+    code = main(["run", "lever", "--algo", "dr", "--preset", "smoke", "--seeds", "1", "--set", "reseed=true",
+                 "--out", str(tmp_path / "run"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "reseed" in err and "reseed_level" in err
+    assert not (tmp_path / "run").exists()

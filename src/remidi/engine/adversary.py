@@ -333,7 +333,7 @@ def belief_memory(setup, rng):
     cfg = setup.cfg
     return bl.init_memory(belief_model(setup), belief_optimizer(setup), cfg.remidi.num_buffers,
                           cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31),
-                          max_length=setup.task.max_episode_steps)
+                          max_length=setup.task.max_episode_steps, reference=cfg.remidi.belief_reference)
 
 
 def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
@@ -343,8 +343,11 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
     nothing without a belief tracker."""
     if runner.belief is None:
         return {}, {}
+    fresh = ~proposal.replay  # the task generator's levels: no replay, no edit, no rehearsal
+    for other in (proposal.edit, proposal.rehearse):
+        fresh = fresh if other is None else fresh & ~other
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
-                            setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs)
+                            setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs, fresh=fresh)
     return {"belief": memory}, {"belief/loss": loss}
 
 

@@ -333,6 +333,7 @@ class FrozenBeliefs:
     params: Any
     threshold: jax.Array
     valid: jax.Array
+    ref: Any = None  # remidi.belief_reference: the generator's reference model frozen with each, leaves [B, ...]
 
 
 @struct.dataclass
@@ -344,6 +345,8 @@ class BeliefState:
     count: jax.Array  # i32[]: the episode's steps so far
     last: jax.Array  # i32[E]: the current observation's categories (the next step's input)
     match: jax.Array  # bool[B]: model b explains the prefix (it and every shorter one reach their thresholds)
+    ref_hidden: Any = None  # f32[B, H]: with a reference, its frozen copies' states ...
+    ref_total: Any = None  # f32[B]: ... and summed log-likelihoods (the score is the difference)
 
 
 @dataclass(frozen=True)
@@ -358,29 +361,38 @@ class BeliefTracker:
 
     model: BeliefModel
 
-    def _judge(self, frozen, total, count) -> jax.Array:
-        """bool[N, B]: each valid frozen model's threshold is reached by the env's prefix score."""
+    def _judge(self, frozen, total, count, ref_total=None) -> jax.Array:
+        """bool[N, B]: each valid frozen model's threshold is reached by the env's prefix score
+        (with a reference: the log-likelihood ratio of the frozen model over its reference)."""
         b = frozen.belief
-        score = total / jnp.maximum(count, 1)[:, None]
+        score = (total if ref_total is None else total - ref_total) / jnp.maximum(count, 1)[:, None]
         if b.threshold.ndim == 1:
             tau = b.threshold[None, :]
         else:  # each env's threshold for its prefix's length: [N, B]
             tau = b.threshold[:, length_bucket(count, b.threshold.shape[1])].T
         return b.valid[None, :] & (score >= tau)
 
-    def _logliks(self, frozen, hidden, cats) -> jax.Array:
-        """f32[N, B]: each frozen model's log-likelihood of ``cats`` [N, E] from ``hidden`` [N, B, H]."""
-        return jax.vmap(lambda p, h: self.model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(
-            frozen.belief.params, hidden)
+    def _logliks(self, params, hidden, cats) -> jax.Array:
+        """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats``
+        [N, E] from ``hidden`` [N, B, H]."""
+        return jax.vmap(lambda p, h: self.model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(params, hidden)
+
+    def _cells(self, params, hidden, last, action) -> jax.Array:
+        """f32[N, B, H]: each frozen model's state after ``last`` and ``action``."""
+        return jax.vmap(lambda p, h: self.model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> BeliefState:
         """The state at the envs' first observations ``obs`` (leaves [N, ...])."""
         n = reset_keys.shape[0]
         cats = self.model.coding.encode(obs)  # [N, E]
         hidden = self.model.initial_hidden((n, frozen.belief.threshold.shape[0]))
-        total, count = self._logliks(frozen, hidden, cats), jnp.ones((n,), jnp.int32)
+        total, count = self._logliks(frozen.belief.params, hidden, cats), jnp.ones((n,), jnp.int32)
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            ref_hidden, ref_total = hidden, self._logliks(frozen.belief.ref, hidden, cats)
         return BeliefState(hidden=hidden, total=total, count=count, last=cats,
-                           match=self._judge(frozen, total, count))
+                           match=self._judge(frozen, total, count, ref_total), ref_hidden=ref_hidden,
+                           ref_total=ref_total)
 
     def explained(self, state: BeliefState) -> jax.Array:
         """bool[N]: some frozen model explains each env's prefix so far."""
@@ -390,14 +402,20 @@ class BeliefTracker:
         """After the envs took ``action`` i32[N] and saw ``next_obs`` (the next episode's first
         observation where ``done`` bool[N])."""
         cats = self.model.coding.encode(next_obs)  # [N, E]
-        stepped = jax.vmap(lambda p, h: self.model.cell(p, h, state.last, action), in_axes=(0, 1), out_axes=1)(
-            frozen.belief.params, state.hidden)  # [N, B, H]
-        hidden = jnp.where(done[:, None, None], 0.0, stepped)
-        total = jnp.where(done[:, None], 0.0, state.total) + self._logliks(frozen, hidden, cats)
+
+        def step(params, hidden, total):
+            hidden = jnp.where(done[:, None, None], 0.0, self._cells(params, hidden, state.last, action))
+            return hidden, jnp.where(done[:, None], 0.0, total) + self._logliks(params, hidden, cats)
+
+        hidden, total = step(frozen.belief.params, state.hidden, state.total)
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            ref_hidden, ref_total = step(frozen.belief.ref, state.ref_hidden, state.ref_total)
         count = jnp.where(done, 0, state.count) + 1
-        fresh = self._judge(frozen, total, count)
+        fresh = self._judge(frozen, total, count, ref_total)
         return BeliefState(hidden=hidden, total=total, count=count, last=cats,
-                           match=jnp.where(done[:, None], fresh, state.match & fresh))
+                           match=jnp.where(done[:, None], fresh, state.match & fresh), ref_hidden=ref_hidden,
+                           ref_total=ref_total)
 
     def overflow(self, state: BeliefState) -> jax.Array:
         return jnp.zeros(state.count.shape, jnp.int32)
@@ -432,10 +450,16 @@ class BeliefMemory:
     lengths: jax.Array
     written: jax.Array
     fits: jax.Array
+    # remidi.belief_reference: a model of the task generator's trajectories (the rollouts of fresh
+    # levels), ``ref`` (learning all run, ``ref_opt`` its optimiser state), copied into
+    # ``ref_frozen`` [K, ...] when adversary k is frozen; scores are then log-likelihood ratios
+    ref: Any = None
+    ref_opt: Any = None
+    ref_frozen: Any = None
 
 
 def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_steps: int, num_envs: int,
-                rng, max_length: int | None = None) -> BeliefMemory:
+                rng, max_length: int | None = None, reference: bool = False) -> BeliefMemory:
     """Fresh models for ``num_buffers`` adversaries (independent initialisations from ``rng``),
     a calibration record of ``rows`` replays of T·N prefix scores each (T = ``num_steps``); the
     prefix lengths, at most ``min(T, max_length)`` (the episode limit), set the length buckets
@@ -443,7 +467,12 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
     params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
     first = jax.tree.map(lambda x: x[0], params)
     batch = (num_steps, num_envs)
-    return BeliefMemory(params=params, opt_state=optimizer.init(first),
+    ref = ref_opt = ref_frozen = None
+    if reference:
+        ref = model.init(jax.random.fold_in(rng, 1))
+        ref_opt = optimizer.init(ref)
+        ref_frozen = jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+    return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, params=params, opt_state=optimizer.init(first),
                         threshold=jnp.full((num_buffers, num_length_buckets(min(num_steps, max_length or num_steps))),
                                            jnp.inf),
                         scores=jnp.zeros((rows,) + batch), lengths=jnp.ones((rows,) + batch, jnp.int32),
@@ -453,23 +482,30 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
 def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
     """The models of the buffers before ``active`` (B = K − 1 entries, the last never frozen)."""
     k = memory.threshold.shape[0]
+    ref = None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
     return FrozenBeliefs(params=jax.tree.map(lambda x: x[:-1], memory.params), threshold=memory.threshold[:-1],
-                         valid=jnp.arange(k - 1) < active)
+                         valid=jnp.arange(k - 1) < active, ref=ref)
 
 
 def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, trained,
-          epochs: int = 1) -> tuple[BeliefMemory, jax.Array]:
+          epochs: int = 1, fresh=None) -> tuple[BeliefMemory, jax.Array]:
     """The active adversary's model learns from a rollout of its levels (``trained`` bool[]: the
     rollout played the adversary's own levels, a replay of its buffer or a generator's levels;
     otherwise nothing changes): record the rollout's prefix scores under the model before the
     update (held out; not for the model's first rollout since the switch, whose scores are the
     untrained model's), then ``epochs`` :func:`fit_step` on all
     its steps. ``traj``: a :class:`~remidi.engine.rollout.Trajectory` (leaves [T, N, ...]). Returns
-    ``(memory, loss f32[]: the first epoch's, NaN when not trained)``."""
+    ``(memory, loss f32[]: the first epoch's, NaN when not trained)``.
+
+    With a reference (``memory.ref``): the recorded scores are log-likelihood ratios over the
+    reference, which itself learns from rollouts of the task generator's fresh levels (``fresh``
+    bool[])."""
 
     def fit(m: BeliefMemory):
         params = jax.tree.map(lambda x: x[active], m.params)
         ll = step_logliks(model, params, traj.obs, traj.action, traj.reset)
+        if m.ref is not None:
+            ll = ll - step_logliks(model, m.ref, traj.obs, traj.action, traj.reset)
         scores = prefix_scores(ll, traj.reset)  # [T, N]
         rows = m.scores.shape[0]
 
@@ -488,7 +524,20 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
                          lengths=m.lengths.at[row].set(lengths, mode="drop"),
                          written=m.written + record.astype(jnp.int32), fits=m.fits + 1), loss
 
-    return jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
+    memory, loss = jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
+    if memory.ref is None:
+        return memory, loss
+
+    def fit_reference(m: BeliefMemory) -> BeliefMemory:
+        def epoch(carry, _):
+            p, o = carry
+            p, o, _ = fit_step(model, optimizer, p, o, traj.obs, traj.action, traj.reset)
+            return (p, o), None
+
+        (ref, ref_opt), _ = jax.lax.scan(epoch, (m.ref, m.ref_opt), None, length=epochs)
+        return m.replace(ref=ref, ref_opt=ref_opt)
+
+    return jax.lax.cond(fresh, fit_reference, lambda m: m, memory), loss
 
 
 def heldout_score(memory: BeliefMemory) -> jax.Array:
@@ -522,7 +571,8 @@ def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, m
         tau = calibrate_monotone(m.scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
         tau = jnp.where(m.written > 0, tau, jnp.inf)
         nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], m.params)
+        ref_frozen = None if m.ref is None else jax.tree.map(lambda all_, r: all_.at[active].set(r), m.ref_frozen, m.ref)
         return m.replace(threshold=m.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
-                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
+                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32), ref_frozen=ref_frozen)
 
     return jax.lax.cond(switch, switched, lambda m: m, memory)

@@ -56,6 +56,9 @@ class ReMiDiConfig:
     belief_epochs: int = field(default=4, metadata={
         "help": "ReMiDi, tracker=belief: the model's updates on each rollout of its adversary's levels (a replay "
                 "of its buffer; every update of a generator)"})
+    belief_reference: bool = field(default=False, metadata={
+        "help": "ReMiDi, tracker=belief: judge by the log-likelihood ratio of each frozen model over a model of the "
+                "task generator's trajectories (learnt on the rollouts of fresh levels), not by the likelihood alone"})
     belief_calibration: int = field(default=16, metadata={
         "help": "ReMiDi, tracker=belief: rollouts of the adversary's levels whose prefix scores (held out: scored "
                 "before the model fits on them) calibrate the threshold at the freeze"})
@@ -130,6 +133,10 @@ class UEDConfig:
     # PPO learns from rewards × reward_scale (returns, scores and metrics stay unscaled)
     reward_scale: float = field(default=1.0, metadata={
         "help": "PPO learns from reward × reward_scale (returns and scores stay unscaled)"})
+    reseed: bool = field(default=False, metadata={
+        "help": "every rollout plays its levels with their own randomness drawn afresh (the task's reseed_level, "
+                "e.g. a noisy level's seed): a stochastic environment, where the same level never shows the "
+                "same noise twice"})
     normalize_obs: bool = field(default=False, metadata={
         "help": "normalise observations by their running mean and std (kept in checkpoints)"})
     eval_every: int = field(default=100, metadata={"help": "updates between evaluations (and logged points)"})

@@ -156,6 +156,8 @@ def collect(setup: Setup, runner: Runner, rng, levels, frozen):
     ``reward × reward_scale``, returns in the environment's.
     """
     cfg, task = setup.cfg, setup.task
+    if cfg.reseed:  # a stochastic environment: each rollout draws the levels' own randomness afresh
+        levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.fold_in(rng, 17), cfg.num_envs), levels)
     carry = setup.net.initialize_carry(cfg.num_envs)
     traj, last_value = rollout(rng, task.env, task.params, policy_apply(setup, runner), runner.train_state.params,
                                carry, levels, cfg.num_steps, frozen, dist=for_task(task.continuous),

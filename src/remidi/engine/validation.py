@@ -294,6 +294,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     if cfg.eval_every > cfg.num_updates:
         raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
                           f"lower eval_every or raise num_updates")
+    require(isinstance(cfg.reseed, bool), "reseed", "true or false", cfg.reseed)
+    require(not cfg.reseed or task.reseed_level is not None, "reseed", "false for a task without reseed_level (its "
+            "levels carry no randomness of their own to draw afresh)", cfg.reseed)
     choice("score", cfg.score, sc.SCORES)
     score = sc.SCORES[score_name(cfg, algo)]
     for needed, what, has in (
@@ -337,6 +340,10 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         positive_int("remidi.belief_epochs", r.belief_epochs)
         require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
         require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
+        require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
+        require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
+                "(the reference learns from the task generator's fresh levels, which a generator never plays)",
+                r.belief_reference)
         require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
                 "(the belief model reads discrete actions)", r.tracker)
         from remidi.engine import belief as bl

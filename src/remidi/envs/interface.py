@@ -134,6 +134,11 @@ class UEDTask:
         level_builder: the task's level-building MDP (:class:`remidi.envs.builder.LevelBuilder`),
             the environment a learned level generator (PAIRED) acts in; None for a task without
             one (the generator algorithms cannot run on it).
+        reseed_level: ``(rng, level) -> level``, the level with its own randomness drawn afresh
+            (a level that carries its environment's random seed, so that the environment is
+            deterministic given the level: :mod:`remidi.envs.noisy`); with the ``reseed`` config
+            key every rollout plays its levels so, as the stochastic environment would. None:
+            the task has no such randomness.
         deterministic_reset: ``env.reset_to_level`` ignores its key (the level fixes the start,
             as in every environment of this package). Lets ReMiDi use the candidate tracker,
             whose cost per step does not grow with the number of frozen levels; leave False for
@@ -157,6 +162,7 @@ class UEDTask:
     level_builder: Any = None
     deterministic_reset: bool = False
     continuous: bool = False
+    reseed_level: Callable[[jax.Array, Any], Any] | None = None
 
 
 def one_step_discounted(optimal_return: Callable[[Any], jax.Array]) -> Callable[[Any, float], jax.Array]:

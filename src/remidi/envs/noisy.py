@@ -195,7 +195,9 @@ def _seeded(sampler: Callable | None):
 def seeded_task(task: UEDTask, wrap: Callable[[UnderspecifiedEnv], SeededEnv]) -> UEDTask:
     """``task`` on :class:`SeededLevel`: its environments wrapped by ``wrap``, each sampled level
     given a fresh seed (independent of the level), every level function reading the plain level.
-    An edited level (ACCEL) is a new level and draws a new seed; evaluation sets get fixed seeds."""
+    An edited level (ACCEL) is a new level and draws a new seed; evaluation sets get fixed seeds.
+    ``reseed_level`` draws a new seed for the same plain level (the ``reseed`` config key: the
+    noise of a stochastic environment, never the same twice)."""
     mutate = None
     if task.mutate_level is not None:
         def mutate(rng, level: SeededLevel, num_edits: int) -> SeededLevel:
@@ -215,6 +217,7 @@ def seeded_task(task: UEDTask, wrap: Callable[[UnderspecifiedEnv], SeededEnv]) -
         mutate_level=mutate,
         easy_level=_seeded(task.easy_level),
         level_builder=None if task.level_builder is None else SeededBuilder(task.level_builder),
+        reseed_level=lambda rng, level: level.replace(seed=draw_seed(rng)),
     )
 
 

@@ -359,7 +359,7 @@ def belief_freezes(setup, runner, switch) -> dict:
     if runner.belief is None:
         return {}
     return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
-                                setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin)}
+                                setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin, belief_model(setup))}
 
 
 def belief_contents(setup, runner) -> dict:

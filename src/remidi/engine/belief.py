@@ -184,7 +184,12 @@ def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
 
     ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
     episode: the state restarts from zeros; an env's first step must be one)."""
-    cats = model.coding.encode(obs)  # [T, N, E]
+    return coded_logliks(model, params, model.coding.encode(obs), action, reset)
+
+
+def coded_logliks(model: BeliefModel, params, cats, action, reset) -> jax.Array:
+    """:func:`step_logliks` of observations already coded, ``cats`` int[T, N, E]."""
+    cats = cats.astype(jnp.int32)
     n = action.shape[1]
 
     def body(hidden, inp):
@@ -456,6 +461,12 @@ class BeliefMemory:
     ref: Any = None
     ref_opt: Any = None
     ref_frozen: Any = None
+    # ... and the recorded rollouts themselves (coded observations i8[R, T, N, E], actions i32[R, T, N],
+    # resets bool[R, T, N]), so that at the freeze the reference's part of each recorded ratio is
+    # computed by the frozen reference, the one that will judge (``scores`` then holds the model's part)
+    codes: Any = None
+    actions: Any = None
+    resets: Any = None
 
 
 def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_steps: int, num_envs: int,
@@ -467,12 +478,15 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
     params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
     first = jax.tree.map(lambda x: x[0], params)
     batch = (num_steps, num_envs)
-    ref = ref_opt = ref_frozen = None
+    ref = ref_opt = ref_frozen = codes = actions = resets = None
     if reference:
         ref = model.init(jax.random.fold_in(rng, 1))
         ref_opt = optimizer.init(ref)
         ref_frozen = jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
-    return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, params=params, opt_state=optimizer.init(first),
+        codes = jnp.zeros((rows,) + batch + (model.coding.num_entries,), jnp.int8)
+        actions, resets = jnp.zeros((rows,) + batch, jnp.int32), jnp.ones((rows,) + batch, bool)
+    return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, codes=codes, actions=actions, resets=resets,
+                        params=params, opt_state=optimizer.init(first),
                         threshold=jnp.full((num_buffers, num_length_buckets(min(num_steps, max_length or num_steps))),
                                            jnp.inf),
                         scores=jnp.zeros((rows,) + batch), lengths=jnp.ones((rows,) + batch, jnp.int32),
@@ -497,15 +511,13 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     its steps. ``traj``: a :class:`~remidi.engine.rollout.Trajectory` (leaves [T, N, ...]). Returns
     ``(memory, loss f32[]: the first epoch's, NaN when not trained)``.
 
-    With a reference (``memory.ref``): the recorded scores are log-likelihood ratios over the
-    reference, which itself learns from rollouts of the task generator's fresh levels (``fresh``
-    bool[])."""
+    With a reference (``memory.ref``, :func:`freeze` judges by the ratio over it): the rollout is
+    recorded too, for the frozen reference's part of the ratio; the reference itself learns from
+    rollouts of the task generator's fresh levels (``fresh`` bool[])."""
 
     def fit(m: BeliefMemory):
         params = jax.tree.map(lambda x: x[active], m.params)
         ll = step_logliks(model, params, traj.obs, traj.action, traj.reset)
-        if m.ref is not None:
-            ll = ll - step_logliks(model, m.ref, traj.obs, traj.action, traj.reset)
         scores = prefix_scores(ll, traj.reset)  # [T, N]
         rows = m.scores.shape[0]
 
@@ -519,6 +531,10 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
         record = m.fits > 0
         row = jnp.where(record, m.written % rows, rows)  # rows: out of bounds, dropped
         lengths = prefix_lengths(traj.reset)
+        if m.ref is not None:
+            m = m.replace(codes=m.codes.at[row].set(model.coding.encode(traj.obs).astype(jnp.int8), mode="drop"),
+                          actions=m.actions.at[row].set(traj.action, mode="drop"),
+                          resets=m.resets.at[row].set(traj.reset, mode="drop"))
         return m.replace(params=jax.tree.map(lambda all_, p: all_.at[active].set(p), m.params, params),
                          opt_state=opt_state, scores=m.scores.at[row].set(scores, mode="drop"),
                          lengths=m.lengths.at[row].set(lengths, mode="drop"),
@@ -541,7 +557,8 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
 
 
 def heldout_score(memory: BeliefMemory) -> jax.Array:
-    """f32[]: the mean of the recorded held-out prefix scores of the active model's replays (the
+    """f32[]: the mean of the recorded held-out prefix scores of the active model's replays (its own
+    log-likelihood, also with a reference, whose part is computed only at the freeze; the
     units of its threshold; NaN until the second replay since the switch, the first recorded)."""
     rows = memory.scores.shape[0]
     recorded = (jnp.arange(rows) < memory.written)[:, None, None]
@@ -558,17 +575,24 @@ def uniform_score(model: BeliefModel) -> float:
     return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories))
 
 
-def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3) -> BeliefMemory:
+def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3,
+           model: BeliefModel | None = None) -> BeliefMemory:
     """At a buffer switch (``switch`` bool[]) the active model is frozen: its thresholds are
     calibrated on the recorded scores per prefix-length bucket for the monotone judgement
     (:func:`calibrate_monotone`; +inf, explaining nothing, if no replay was recorded: the model
     learnt from at most one replay) and lowered by ``margin`` nats per step, the record emptied
-    and the optimiser restarted for the next model. Computed only at a switch."""
+    and the optimiser restarted for the next model. Computed only at a switch. With a reference
+    (``model`` needed) the recorded scores become ratios: minus the frozen reference's prefix
+    scores of the recorded rollouts, computed now by the reference that is frozen with the model."""
 
     def switched(m: BeliefMemory) -> BeliefMemory:
         rows, k = m.scores.shape[0], m.threshold.shape[0]
         valid = jnp.broadcast_to((jnp.arange(rows) < m.written)[:, None, None], m.scores.shape)
-        tau = calibrate_monotone(m.scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
+        scores = m.scores
+        if m.ref is not None:
+            ref_ll = jax.vmap(lambda c, a, r: coded_logliks(model, m.ref, c, a, r))(m.codes, m.actions, m.resets)
+            scores = scores - jax.vmap(prefix_scores)(ref_ll, m.resets)
+        tau = calibrate_monotone(scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
         tau = jnp.where(m.written > 0, tau, jnp.inf)
         nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], m.params)
         ref_frozen = None if m.ref is None else jax.tree.map(lambda all_, r: all_.at[active].set(r), m.ref_frozen, m.ref)

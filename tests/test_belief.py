@@ -118,6 +118,38 @@ def test_the_calibration_record_skips_the_untrained_models_first_replay():
     assert np.isfinite(frozen.threshold[0]).all() and (int(frozen.fits), int(frozen.written)) == (0, 0)
 
 
+def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_frozen_with_the_model():
+    """The recorded rollouts' ratios are computed at the freeze by the reference as it is then (the
+    one frozen with the model, that will judge), not by the reference of each replay's time; the
+    reference learns from fresh rollouts only."""
+    from remidi.engine.rollout import Trajectory
+
+    model = bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bl.make_optimizer()
+    t, n = 2, 3
+    zeros = jnp.zeros((t, n))
+    obs = jax.random.bernoulli(jax.random.PRNGKey(5), 0.3, (t, n, 3)).astype(jnp.float32)
+    traj = Trajectory(obs=obs, reset=jnp.ones((t, n), bool), action=jnp.zeros((t, n), jnp.int32),
+                      log_prob=zeros, value=zeros, reward=zeros, done=jnp.ones((t, n), bool),
+                      indist=jnp.zeros((t, n), bool), overflow=jnp.zeros((t, n), jnp.int32))
+    no, yes = jnp.asarray(False), jnp.asarray(True)
+    memory = bl.init_memory(model, opt, 2, 4, t, n, jax.random.PRNGKey(0), reference=True)
+    ref0 = memory.ref
+    memory, _ = bl.learn(model, opt, memory, 0, traj, yes, fresh=no)  # a replay: the model fits, the reference not
+    assert all(bool(jnp.array_equal(a, b)) for a, b in zip(jax.tree.leaves(ref0), jax.tree.leaves(memory.ref)))
+    memory, _ = bl.learn(model, opt, memory, 0, traj, yes, fresh=no)  # recorded
+    memory, _ = bl.learn(model, opt, memory, 0, traj, no, fresh=yes)  # a fresh update: the reference fits
+    assert not all(bool(jnp.array_equal(a, b)) for a, b in zip(jax.tree.leaves(ref0), jax.tree.leaves(memory.ref)))
+    frozen = bl.freeze(opt, memory, 0, yes, 0.05, model=model)
+    ref_scores = bl.prefix_scores(bl.step_logliks(model, memory.ref, traj.obs, traj.action, traj.reset), traj.reset)
+    valid = jnp.broadcast_to((jnp.arange(4) < 1)[:, None, None], memory.scores.shape)
+    expected = bl.calibrate_monotone(memory.scores - ref_scores[None], memory.lengths, 0.05,
+                                     memory.threshold.shape[1], valid)
+    np.testing.assert_allclose(frozen.threshold[0], expected, rtol=1e-6)
+    assert all(bool(jnp.array_equal(a[0], b)) for a, b in zip(jax.tree.leaves(frozen.ref_frozen),
+                                                               jax.tree.leaves(memory.ref)))
+
+
 def test_calibrate_is_the_lower_quantile():
     scores = jnp.arange(100.0)
     assert float(bl.calibrate(scores, 0.05, slack=0.0)) == 5.0  # 5 of 100 lie strictly below

@@ -76,6 +76,8 @@ def broken(corridor, kind: str):
         return dataclasses.replace(task, env=type("IntDone", (_IntDone, env_class), {})())
     if kind == "eval_sets":  # one level where a batch belongs
         return dataclasses.replace(task, eval_sets={"one": corridor.sample_level(jax.random.PRNGKey(0))})
+    if kind == "reseed_level":  # a batch of two where one level belongs
+        return dataclasses.replace(task, reseed_level=lambda rng, level: jax.tree.map(lambda x: jnp.stack([x, x]), level))
     raise AssertionError(kind)
 
 
@@ -85,6 +87,7 @@ def broken(corridor, kind: str):
     ("reward", "task.env: a step's reward must be a float scalar (f32[]) per environment, got float32[2]"),
     ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
+    ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),
 ])
 def test_a_broken_task_is_one_line_naming_its_field_and_nothing_is_written(corridor, tmp_path, kind, message):
     from remidi import run_ued

@@ -85,7 +85,7 @@ def validate_task(task: UEDTask) -> None:
         if not callable(getattr(task, key)):
             raise ConfigError(f"task.{key}: must be a function, got {getattr(task, key)!r}")
     for key in ("optimal_return", "optimal_discounted_return", "solved", "expected_return", "mutate_level",
-                "easy_level"):
+                "easy_level", "reseed_level"):
         if getattr(task, key) is not None and not callable(getattr(task, key)):
             raise ConfigError(f"task.{key}: must be a function or None, got {getattr(task, key)!r}")
     for key in ("eval_sets", "eval_envs"):
@@ -149,7 +149,8 @@ def validate_task(task: UEDTask) -> None:
         if getattr(value, "shape", None) != (3,) or jnp.dtype(value.dtype) != jnp.bool_:
             raise ConfigError(f"task.solved: must map returns f32[N] to booleans bool[N], got {_shapes(value)} for N = 3")
     for key, fn in (("mutate_level", lambda k, lv: task.mutate_level(k, lv, 1)),
-                    ("easy_level", lambda k, lv: task.easy_level(k))):
+                    ("easy_level", lambda k, lv: task.easy_level(k)),
+                    ("reseed_level", lambda k, lv: task.reseed_level(k, lv))):
         if getattr(task, key) is not None:
             made = _traced(key, "making a level", fn, rng, level)
             if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):

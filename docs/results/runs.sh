@@ -5,9 +5,10 @@
 #
 # Each block trains from a worktree of its commit (so that work on the checkout does not change
 # what the runs execute), then `remidi evaluate --attempts 30` scores each run's final
-# checkpoint. Rerunning the script skips finished runs and resumes an interrupted one from its
-# last checkpoint (`remidi run --resume`). When a run has finished, copy its small outputs into
-# the page's data and regenerate the page:
+# checkpoint. Rerunning the script skips finished runs (and those whose data are already
+# committed under docs/results/data/ or references/, so a fresh machine starts where the page
+# stands) and resumes an interrupted one from its last checkpoint (`remidi run --resume`). When a
+# run has finished, copy its small outputs into the page's data and regenerate the page:
 #
 #   python -m remidi.experiments.results_page --collect RUNS_DIR/<experiment>/<run>
 #
@@ -34,6 +35,9 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
   local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
   N=$((N + 1)); [ $(((N - 1) % LANES)) -eq "$LANE" ] || return 0  # another lane's run
   local out=$R/$exp/$name
+  if grep -qs -- "/$exp/$name\"" "$HERE"/docs/results/data/"$exp"/*/config.json ||
+     { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
+    echo "committed: $exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
   if [ -f "$out/summary.json" ]; then :
   elif [ -f "$out/config.json" ]; then
@@ -52,7 +56,7 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
 # issue #28: the paper's claims, every run at one commit
 at c32046b
 for e in tabular-shared tabular-distinct; do  # both algorithms, the preset's 50 seeds, seconds each
-  [ "$LANE" -ne 0 ] || [ -f "$R/$e/all/remidi/summary.json" ] || $PY -m remidi run "$e" --preset paper --out "$R/$e/all" --quiet
+  [ "$LANE" -ne 0 ] || [ -d "$HERE/docs/results/data/$e" ] || [ -f "$R/$e/all/remidi/summary.json" ] || $PY -m remidi run "$e" --preset paper --out "$R/$e/all" --quiet
 done
 for a in dr plr remidi minimax-return accel remidi-accel; do run "$a-s0" lever "$a" 0 10 paper; done
 for s in 0 5; do run "plr-s$s" tmaze plr $s 5 cpu; run "remidi-s$s" tmaze remidi $s 5 cpu; done

@@ -1,4 +1,4 @@
-# Usage: python docs/belief_probe.py blindfold-noisy|tmaze [FIT_STEPS=300] [reseed]   (a few minutes on a 2-core CPU)
+# Usage: python docs/belief_probe.py blindfold-noisy|tmaze [FIT_STEPS=300] [reseed|same] [FALSE_RATE=0.05]   (minutes on a 2-core CPU)
 """Constructed probe of the belief tracker on mazes, with and without the generator reference.
 
 A frozen buffer concentrated on irreducible levels (90 % blind / T-maze, as PLR⊥'s buffer is at
@@ -35,6 +35,7 @@ irr = np.asarray(jax.vmap(lambda l: task.level_tags(l)[tag])(pool))
 idx = np.concatenate([np.nonzero(irr)[0][:int(0.9 * C)], np.nonzero(~irr)[0][:C - int(0.9 * C)]])
 buffer = jax.tree.map(lambda x: x[idx], pool)
 RESEED = len(sys.argv) > 3 and sys.argv[3] == "reseed"
+ALPHA = float(sys.argv[4]) if len(sys.argv) > 4 else 0.05  # the false-distinguishable rate
 def from_buffer(key, n):
     k1, k2 = jax.random.split(key)
     levels = jax.tree.map(lambda x: x[jax.random.randint(k1, (n,), 0, C)], buffer)
@@ -86,7 +87,7 @@ for use_ref in (False, True):
     if use_ref:
         ll = ll - bl.step_logliks(model, ref, held.obs, held.action, held.reset)
     scores = bl.prefix_scores(ll, held.reset)
-    tau = bl.calibrate_monotone(scores[None], lengths[None], 0.05, L)
+    tau = bl.calibrate_monotone(scores[None], lengths[None], ALPHA, L)
     fb = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                           valid=jnp.ones((1,), bool), ref=jax.tree.map(lambda x: x[None], ref) if use_ref else None)
     tr = roll(fresh, jax.random.PRNGKey(8), Frozen(levels=None, valid=None, tracker=bl.BeliefTracker(model), belief=fb))

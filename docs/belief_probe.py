@@ -51,11 +51,7 @@ opt = bl.make_optimizer(1e-2)
 
 @jax.jit
 def fit(params, obs, action, reset):
-    def body(carry, _):
-        p, s = carry
-        p, s, loss = bl.fit_step(model, opt, p, s, obs, action, reset)
-        return (p, s), loss
-    (params, _), losses = jax.lax.scan(body, (params, opt.init(params)), None, length=STEPS)
+    params, _, losses = bl.fit_steps(model, opt, params, opt.init(params), obs, action, reset, STEPS)
     return params, losses
 
 data = roll(from_buffer(jax.random.PRNGKey(1), N), jax.random.PRNGKey(2))

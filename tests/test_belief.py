@@ -23,18 +23,8 @@ FALSE_RATE = 0.05
 def fit(model, params, obs, action, reset, steps, lr=1e-2):
     """``steps`` full-batch updates (one jitted scan); returns ``(params, losses f32[steps])``."""
     opt = bl.make_optimizer(lr)
-
-    @jax.jit
-    def run(params):
-        def body(carry, _):
-            p, s = carry
-            p, s, loss = bl.fit_step(model, opt, p, s, obs, action, reset)
-            return (p, s), loss
-
-        (params, _), losses = jax.lax.scan(body, (params, opt.init(params)), None, length=steps)
-        return params, losses
-
-    return run(params)
+    params, _, losses = jax.jit(lambda p: bl.fit_steps(model, opt, p, opt.init(p), obs, action, reset, steps))(params)
+    return params, losses
 
 
 # ------------------------------------------------------------------------------ the model

@@ -248,6 +248,20 @@ def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params
     return optax.apply_updates(params, updates), opt_state, loss
 
 
+def fit_steps(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
+              steps: int):
+    """``steps`` :func:`fit_step` updates on the same batch (one ``lax.scan``). Returns ``(params,
+    opt_state, losses f32[steps])`` (each the loss before its update)."""
+
+    def body(carry, _):
+        p, o = carry
+        p, o, loss = fit_step(model, optimizer, p, o, obs, action, reset)
+        return (p, o), loss
+
+    (params, opt_state), losses = jax.lax.scan(body, (params, opt_state), None, length=steps)
+    return params, opt_state, losses
+
+
 # ---------------------------------------------------------------------------- calibration
 def num_length_buckets(max_length: int) -> int:
     """How many prefix-length buckets prefixes of at most ``max_length`` steps fill: lengths
@@ -521,12 +535,8 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
         scores = prefix_scores(ll, traj.reset)  # [T, N]
         rows = m.scores.shape[0]
 
-        def epoch(carry, _):
-            p, o = carry
-            p, o, loss = fit_step(model, optimizer, p, o, traj.obs, traj.action, traj.reset)
-            return (p, o), loss
-
-        (params, opt_state), losses = jax.lax.scan(epoch, (params, m.opt_state), None, length=epochs)
+        params, opt_state, losses = fit_steps(model, optimizer, params, m.opt_state, traj.obs, traj.action,
+                                              traj.reset, epochs)
         loss = losses[0]
         record = m.fits > 0
         row = jnp.where(record, m.written % rows, rows)  # rows: out of bounds, dropped
@@ -545,12 +555,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
         return memory, loss
 
     def fit_reference(m: BeliefMemory) -> BeliefMemory:
-        def epoch(carry, _):
-            p, o = carry
-            p, o, _ = fit_step(model, optimizer, p, o, traj.obs, traj.action, traj.reset)
-            return (p, o), None
-
-        (ref, ref_opt), _ = jax.lax.scan(epoch, (m.ref, m.ref_opt), None, length=epochs)
+        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
         return m.replace(ref=ref, ref_opt=ref_opt)
 
     return jax.lax.cond(fresh, fit_reference, lambda m: m, memory), loss

@@ -28,6 +28,7 @@ probability of improvement's interval, not on overlapping intervals of means.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Callable, NamedTuple, Sequence
 
@@ -180,11 +181,39 @@ def permutation_pvalue(x, y, paired: bool = False, alternative: str = "greater",
     if x.size == 0 or y.size == 0 or np.isnan(x).any() or np.isnan(y).any():
         return math.nan
     exact = permutation_count(x.size, y.size, paired) <= max_exact
+    if exact and not paired:
+        return _exact_independent_pvalue(x, y, alternative)
     res = scipy.stats.permutation_test((x, y), _mean_difference, vectorized=True, alternative=alternative,
                                        permutation_type="samples" if paired else "independent",
                                        n_resamples=np.inf if exact else n_resamples,
                                        rng=np.random.default_rng(seed))
     return float(res.pvalue)
+
+
+def _exact_independent_pvalue(x: np.ndarray, y: np.ndarray, alternative: str) -> float:
+    """``scipy.stats.permutation_test``'s exact independent-samples p-value, computed at once.
+
+    SciPy builds its C(n+m, n) relabellings one by one in Python (2.5 s for 10 seeds against 10,
+    and the results page makes two dozen such tests); here the same relabellings (x's indices
+    in increasing order, the rest in increasing order, as SciPy's) are one index array, their
+    statistics one vectorised mean difference, and the p-value counts them as SciPy does
+    (values within 100 ulps of the observed one count as equal to it). Checked against SciPy in
+    tests/test_stats.py.
+    """
+    pooled, n = np.concatenate([x, y]), x.size
+    total, count = pooled.size, math.comb(pooled.size, x.size)
+    first = np.fromiter(itertools.chain.from_iterable(itertools.combinations(range(total), n)),
+                        dtype=np.intp, count=count * n).reshape(count, n)  # [count, n]
+    chosen = np.zeros((count, total), dtype=bool)
+    np.put_along_axis(chosen, first, True, axis=1)
+    rest = np.nonzero(~chosen)[1].reshape(count, total - n)  # [count, m], increasing in each row
+    null = _mean_difference(pooled[first], pooled[rest])  # f[count]
+    observed = _mean_difference(x, y)
+    gamma = abs(np.finfo(observed.dtype).eps * 100 * observed)
+    greater = np.count_nonzero(null >= observed - gamma) / count
+    less = np.count_nonzero(null <= observed + gamma) / count
+    p = {"greater": greater, "less": less, "two-sided": 2 * min(greater, less)}[alternative]
+    return float(min(p, 1.0))
 
 
 def holm(pvalues: Sequence[float]) -> np.ndarray:

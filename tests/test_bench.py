@@ -29,7 +29,7 @@ def test_bench_json_has_only_the_document_on_stdout():
     assert matmul["env_steps_per_s"] is None and matmul["gflops_per_s"] > 0
     assert abs(matmul["gflops_per_s"] * 1e9 * matmul["seconds_per_call"] - 2 * 4 * 406 * 1024 * 64) < 1e3
     solve = doc["benchmarks"]["solve-onestep"]  # plain Python: nothing compiled, no steps
-    assert solve["compile_s"] < 0.01 and solve["env_steps_per_s"] is None and solve["rounds"] > 100
+    assert solve["compile_s"] < 0.01 and solve["env_steps_per_s"] is None and solve["rounds"] > 10
     assert "cpu" in doc["device"]
     assert "bench maze-env" in proc.stderr and "bench lstm-matmul" in proc.stderr  # progress goes to stderr
 

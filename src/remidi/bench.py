@@ -396,7 +396,7 @@ def random_onestep_game(n_levels: int, n_obs: int, n_actions: int, seed: int = 0
 def _solve_onestep():
     from remidi.solvers.onestep import solve_blp
 
-    game = random_onestep_game(300 if _tiny() else 10_000, 100, 3)
+    game = random_onestep_game(*((100, 20) if _tiny() else (10_000, 100)), 3)
     return Workload(solve_blp, (game,), None, extras=lambda out: {"rounds": len(out.rounds)}, jit=False)
 
 

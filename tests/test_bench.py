@@ -14,8 +14,7 @@ FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_p
 
 
 def test_bench_json_has_only_the_document_on_stdout():
-    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-env", "lstm-matmul", "solve-onestep", "--tiny", "--repeats", "2",
-                           "--json"],
+    proc = subprocess.run([sys.executable, "-m", "remidi", "bench", "maze-env", "--tiny", "--repeats", "2", "--json"],
                           capture_output=True, text=True, timeout=300, env=subprocess_env(__name__))
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)  # nothing but the document
@@ -25,13 +24,20 @@ def test_bench_json_has_only_the_document_on_stdout():
     assert result["env_steps_per_s"] > 0 and result["compile_s"] > 0 and result["peak_rss_mb"] > 100
     assert result["env_steps_per_s"] == result["env_steps_per_call"] / result["seconds_per_call"]
     assert result["gflops_per_s"] is None  # the environment alone: no network
-    matmul = doc["benchmarks"]["lstm-matmul"]  # a FLOP rate, no environment steps
+    assert "cpu" in doc["device"]
+    assert "bench maze-env" in proc.stderr  # progress goes to stderr
+
+
+def test_a_flop_rate_without_env_steps_and_plain_python_without_compiling(monkeypatch):
+    # what each benchmark's own process measures (`run_one`, here in the test's process, at --tiny sizes)
+    from remidi.bench import TINY_ENV, run_one
+
+    monkeypatch.setenv(TINY_ENV, "1")
+    matmul = run_one("lstm-matmul", 1)  # a FLOP rate, no environment steps
     assert matmul["env_steps_per_s"] is None and matmul["gflops_per_s"] > 0
     assert abs(matmul["gflops_per_s"] * 1e9 * matmul["seconds_per_call"] - 2 * 4 * 406 * 1024 * 64) < 1e3
-    solve = doc["benchmarks"]["solve-onestep"]  # plain Python: nothing compiled, no steps
+    solve = run_one("solve-onestep", 1)  # plain Python: nothing compiled, no steps
     assert solve["compile_s"] < 0.01 and solve["env_steps_per_s"] is None and solve["rounds"] > 10
-    assert "cpu" in doc["device"]
-    assert "bench maze-env" in proc.stderr and "bench lstm-matmul" in proc.stderr  # progress goes to stderr
 
 
 def test_ratios_compare_time_per_env_step():

@@ -157,7 +157,7 @@ def _filled_runner(setup, active: int):
     bufs = runner.buffers  # leaves [1, K, C, ...]
     k, c = bufs.valid.shape[1:]
     keys = jax.random.split(jax.random.PRNGKey(1), k * c)
-    levels = jax.vmap(setup.task.sample_level)(keys)
+    levels = jax.jit(jax.vmap(setup.task.sample_level))(keys)
     levels = jax.tree.map(lambda x: x.reshape((1, k, c) + x.shape[1:]), levels)
     scores = jax.random.uniform(jax.random.PRNGKey(2), (1, k, c))
     bufs = bufs.replace(levels=levels, valid=jnp.ones_like(bufs.valid), scores=scores)
@@ -324,7 +324,7 @@ def _maze_env():
     num_envs, num_steps = (4, 16) if _tiny() else (32, 256)
     num_envs = int(_overrides().get("num_envs", num_envs))
     num_steps = int(_overrides().get("num_steps", num_steps))
-    levels = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), num_envs))
+    levels = jax.jit(jax.vmap(task.sample_level))(jax.random.split(jax.random.PRNGKey(0), num_envs))
 
     @jax.jit
     def block(rng):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -111,8 +112,15 @@ def policy_apply(setup: Setup, runner: Runner):
 
 def example_observation(task: UEDTask, key=None):
     """One observation (unbatched leaves): the first of a level the task samples with ``key``
-    (``PRNGKey(0)`` if None), reset with the same key. Returns ``(obs, level)``."""
-    key = jax.random.PRNGKey(0) if key is None else key
+    (``PRNGKey(0)`` if None), reset with the same key. Returns ``(obs, level)``.
+
+    One compiled program: called outside a trace, the generator's and the reset's operations
+    would each compile a program of their own (about a hundred for the maze, seconds per process)."""
+    return _first_observation(task, jax.random.PRNGKey(0) if key is None else key)
+
+
+@partial(jax.jit, static_argnums=0)
+def _first_observation(task: UEDTask, key):
     level = task.sample_level(key)
     return task.env.reset_to_level(key, level, task.params)[0], level
 

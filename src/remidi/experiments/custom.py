@@ -59,7 +59,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
         raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")
     validate_task(task)  # one line naming the field, before anything reads the task
     base = config if config is not None else UEDConfig()
-    tags = sorted(task.level_tags(task.sample_level(jax.random.PRNGKey(0))))
+    tags = sorted(jax.eval_shape(lambda k: task.level_tags(task.sample_level(k)), jax.random.PRNGKey(0)))  # names only
     sets = sorted(task.eval_sets)
     rates = tuple(f"solve_rate/{s}" for s in sets) if task.solved is not None else ()
     regrets = tuple(f"regret/{s}/mean" for s in sets) if task.optimal_return is not None else ()

@@ -582,7 +582,8 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
         return rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels, t, frozen,
                        deterministic_reset=task.deterministic_reset)[0]
 
-    pool = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), 400))
+    sample = jax.jit(jax.vmap(task.sample_level))  # one program, not the generator's operations one by one
+    pool = sample(jax.random.split(jax.random.PRNGKey(0), 400))
     blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(pool))
     picked = np.concatenate([np.nonzero(blind)[0][:c * 9 // 10], np.nonzero(~blind)[0][:c - c * 9 // 10]])
     buffer = jax.tree.map(lambda x: x[picked], pool)
@@ -596,10 +597,10 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
     model = bl.BeliefModel(bl.coding_for(example), num_actions=actions, hidden=32)
     data = play(replays(jax.random.PRNGKey(1)), jax.random.PRNGKey(2))
     params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=100)
-    gen = play(jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(4), n)), jax.random.PRNGKey(5))
+    gen = play(sample(jax.random.split(jax.random.PRNGKey(4), n)), jax.random.PRNGKey(5))
     ref, _ = fit(model, model.init(jax.random.PRNGKey(6)), gen.obs, gen.action, gen.reset, steps=100)
     held = play(replays(jax.random.PRNGKey(7)), jax.random.PRNGKey(8))
-    fresh = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(9), n))
+    fresh = sample(jax.random.split(jax.random.PRNGKey(9), n))
     fresh_blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(fresh))
     lengths, buckets = bl.prefix_lengths(held.reset), bl.num_length_buckets(t)
     explained = {}

@@ -27,7 +27,7 @@ def maze_edits():
     """60 generated T-maze task levels and their edits (3 edits each)."""
     task = maze_task("tmaze")
     keys = jax.random.split(jax.random.PRNGKey(0), 60)
-    levels = jax.vmap(task.sample_level)(keys)
+    levels = jax.jit(jax.vmap(task.sample_level))(keys)
     edited = jax.jit(jax.vmap(lambda k, lv: mutate_maze(k, lv, EDITS)))(jax.random.split(jax.random.PRNGKey(1), 60),
                                                                          levels)
     return jax.device_get(levels), jax.device_get(edited)
@@ -71,7 +71,7 @@ def test_an_edited_tmaze_stays_a_tmaze_that_plays_like_the_original(maze_edits):
 
 
 def test_lever_edits_move_the_lever_and_keep_visibility():
-    levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(0), 200))
+    levels = jax.jit(jax.vmap(TASK.sample_level))(jax.random.split(jax.random.PRNGKey(0), 200))
     edited = jax.vmap(lambda k, lv: TASK.mutate_level(k, lv, EDITS))(jax.random.split(jax.random.PRNGKey(1), 200),
                                                                      levels)
     np.testing.assert_array_equal(edited.visible, levels.visible)

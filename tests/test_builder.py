@@ -34,7 +34,7 @@ def test_every_level_the_sampler_produces_can_be_built(kind):
     task = M.maze_task(kind)
     builder = task.level_builder
     keys = jax.random.split(jax.random.PRNGKey(1), 24)
-    levels = jax.vmap(task.sample_level)(keys)
+    levels = jax.jit(jax.vmap(task.sample_level))(keys)
     build = jax.jit(builder.build)
     kinds = set()
     for i in range(24):

@@ -76,7 +76,7 @@ def indistinguishable(task, agents, frozen_levels, steps, action=0):
 
 # ------------------------------------------------------------------------------------ lever-noisy
 def test_lever_noise_code_varies_with_the_seed_only_and_is_deterministic():
-    levels = jax.vmap(NOISY.sample_level)(jax.random.split(jax.random.PRNGKey(0), 256))
+    levels = jax.jit(jax.vmap(NOISY.sample_level))(jax.random.split(jax.random.PRNGKey(0), 256))
     (obs, rewards), (obs2, rewards2) = play(NOISY, 2)(levels, jnp.zeros(2, jnp.int32))
     obs, obs2 = np.asarray(obs), np.asarray(obs2)
     assert obs.shape == (256, 3, LEVERS + 1 + NOISE_BITS)
@@ -148,7 +148,7 @@ MAZE_NOISY, MAZE_PLAIN = noisy_blindfold_task(), maze_task("blindfold")
 
 
 def maze_levels(count, blind, key=7):
-    levels = jax.vmap(MAZE_NOISY.sample_level)(jax.random.split(jax.random.PRNGKey(key), count))
+    levels = jax.jit(jax.vmap(MAZE_NOISY.sample_level))(jax.random.split(jax.random.PRNGKey(key), count))
     return levels.replace(level=levels.level.replace(blind=jnp.full((count,), blind)))
 
 

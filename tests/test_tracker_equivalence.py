@@ -128,8 +128,8 @@ def test_too_small_a_budget_is_reported_and_only_misses_matches():
 def test_candidate_tracker_equals_reference_on_the_lever_game(combine):
     task = lever_task(num_levers=8)
     keys = jax.random.split(jax.random.PRNGKey(3), 2)
-    agents = jax.vmap(task.sample_level)(jax.random.split(keys[0], 32))
-    frozen = jax.vmap(task.sample_level)(jax.random.split(keys[1], 30))
+    agents = jax.jit(jax.vmap(task.sample_level))(jax.random.split(keys[0], 32))
+    frozen = jax.jit(jax.vmap(task.sample_level))(jax.random.split(keys[1], 30))
     frozen = frozen.replace(correct=frozen.correct % 4)  # visible levers 4..7 match no frozen level
     valid = jnp.arange(30) % 7 != 3
     ref = run(task.env, task.params, agents, frozen, valid, 0, 8, combine)

@@ -172,7 +172,8 @@ def permutation_pvalue(x, y, paired: bool = False, alternative: str = "greater",
     relabels the pooled values (``"independent"``). ``scipy.stats.permutation_test`` enumerates
     every arrangement (``n_resamples=np.inf``: exact) when there are at most ``max_exact``
     (:func:`permutation_count`; always for ≤ 10 seeds per group), else draws ``n_resamples``
-    of them with ``seed``. The p-value counts the observed arrangement: full separation of 3
+    of them with ``seed``; the exact independent case is SciPy's count computed at once
+    (:func:`_exact_independent_pvalue`). The p-value counts the observed arrangement: full separation of 3
     against 3 gives 1/20, four pairs all in favour 1/16. NaN anywhere gives NaN.
     """
     x, y = _sample(x), _sample(y)

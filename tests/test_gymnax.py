@@ -214,3 +214,9 @@ def test_all_algorithms_of_a_gymnax_experiment_are_those_its_task_supports():
     every = parse_algos(get_experiment("cartpole"), "all")
     assert "accel" in every and "paired" not in every and "remidi-paired" not in every
     assert "paired" in parse_algos(get_experiment("lever"), "all")
+    # naming one says why it is left out, not that the name is unknown
+    with pytest.raises(ConfigError, match=r"^--algo: remidi-paired cannot run on cartpole: cartpole's task has no "
+                                          r"level-building MDP \(UEDTask.level_builder\).*; allowed: dr, plr"):
+        parse_algos(get_experiment("cartpole"), "dr,remidi-paired")
+    with pytest.raises(ConfigError, match="^--algo: unknown value 'pared'"):
+        parse_algos(get_experiment("cartpole"), "pared")

@@ -96,7 +96,12 @@ def test_a_complete_overlap_pays_the_configured_regret():
     np.testing.assert_allclose(seq._pay(Setup, regret, overlap), [0.0, -1.0, 5.0])
 
 
-def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist():
+@pytest.fixture(scope="module")
+def generator_sequence():
+    """Five runners of ReMiDi over PAIRED on the lever game (3 generators, a switch every 2
+    updates: after updates 2 and 4) and, per update, what its compiled step computed: the regret
+    estimate of each level, what the generator was paid for it, and the loss mask of each PPO
+    update of an agent (the antagonist's, then the protagonist's)."""
     import dataclasses
 
     import jax
@@ -104,23 +109,77 @@ def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist():
     from remidi.engine import train as tr
     from test_ued_engine import TASK, TINY
 
-    cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=3, steps_per_buffer=2))
-    setup = tr.make_setup(TASK, cfg, "remidi-paired")
-    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    step = jax.jit(lambda r: tr.train_step(setup, r)[0])
-    first_fresh = jax.tree.map(lambda x: x[0], runner.next_generators.params)
-    r1 = step(runner)  # count 1 on buffer 0: the generator learns, no switch
-    assert int(r1.active) == 0
-    assert not all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(r1.generator.params),
-                                                        jax.tree.leaves(runner.generator.params)))
-    r2 = step(r1)  # count 2: switch to buffer 1 with the first fresh generator, optimiser restarted
-    assert int(r2.active) == 1 and int(r2.count) == 0 and int(r2.generator.step) == 0
-    for a, b in zip(jax.tree.leaves(r2.generator.params), jax.tree.leaves(first_fresh)):
-        np.testing.assert_array_equal(a, b)
-    # the antagonist is one for all generators: it kept learning across the switch
-    assert not all(np.array_equal(a, b) for a, b in zip(jax.tree.leaves(r2.antagonist.params),
-                                                        jax.tree.leaves(r1.antagonist.params)))
-    assert int(r2.antagonist.step) > int(r1.antagonist.step)
+    records = {"regret": [], "paid": [], "mask": []}
+
+    def record(name, x):
+        jax.debug.callback(lambda v: records[name].append(np.asarray(v)), x, ordered=True)
+
+    real_estimate, real_rewards, real_ppo = paired.regret_estimate, paired.generator_rewards, tr.ppo_update
+
+    def estimate(*args, **kwargs):
+        regret = real_estimate(*args, **kwargs)
+        record("regret", regret)
+        return regret
+
+    def rewards(paid, num_steps):
+        record("paid", paid)
+        return real_rewards(paid, num_steps)
+
+    def ppo_update(state, carry, batch, *args):
+        record("mask", batch.mask)
+        return real_ppo(state, carry, batch, *args)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(paired, "regret_estimate", estimate)
+        mp.setattr(paired, "generator_rewards", rewards)
+        mp.setattr(tr, "ppo_update", ppo_update)
+        cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=3, steps_per_buffer=2))
+        setup = tr.make_setup(TASK, cfg, "remidi-paired")
+        runners = [tr.init_runner(setup, jax.random.PRNGKey(0))]
+        step = jax.jit(lambda r: tr.train_step(setup, r)[0])
+        for _ in range(4):
+            runners.append(step(runners[-1]))
+        jax.effects_barrier()
+    return setup, runners, records
+
+
+def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist(generator_sequence):
+    import jax
+
+    _, (r0, r1, r2, r3, r4), _ = generator_sequence
+    fresh = [jax.tree.map(lambda x: x[k], r0.next_generators.params) for k in (0, 1)]
+    same = lambda a, b: all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))  # noqa: E731
+    assert int(r1.active) == 0 and not same(r1.generator.params, r0.generator.params)  # it learns, no switch
+    # update 2 switches to buffer 1 with the first fresh generator, optimiser restarted; update 4
+    # to buffer 2 with the second
+    for runner, k in ((r2, 0), (r4, 1)):
+        assert int(runner.active) == k + 1 and int(runner.count) == 0 and int(runner.generator.step) == 0
+        assert same(runner.generator.params, fresh[k])
+    assert int(r3.active) == 1 and not same(r3.generator.params, fresh[0])  # the first fresh one learnt
+    # the antagonist is one for all generators: it kept learning across both switches
+    for before, after in ((r1, r2), (r3, r4)):
+        assert not same(after.antagonist.params, before.antagonist.params)
+        assert int(after.antagonist.step) > int(before.antagonist.step)
+
+
+def test_a_complete_overlap_trains_the_protagonist_nothing_and_pays_the_lowest_regret(generator_sequence):
+    """Update 3, the second generator's first: a level whose every step a level of the first
+    generator's reservoir explains (the lever game: a hidden level, whichever lever) gives the
+    protagonist's PPO update no unmasked step and pays the generator the update's lowest regret
+    estimate; the other levels train and are paid their own estimate."""
+    _, _, records = generator_sequence
+    assert len(records["regret"]) == 4 and len(records["mask"]) == 8  # per update: antagonist, protagonist
+    regret, paid = records["regret"][2], records["paid"][2]
+    antagonist_mask, protagonist_mask = records["mask"][4], records["mask"][5]  # [T, N]
+    assert antagonist_mask.all()  # the antagonist plays with nothing frozen
+    overlap = ~protagonist_mask.any(axis=0)
+    assert overlap.any() and not overlap.all()  # the test needs both kinds of level
+    np.testing.assert_allclose(paid[overlap], np.min(regret))
+    np.testing.assert_allclose(paid[~overlap], regret[~overlap])
+    assert np.min(regret) < np.max(regret[overlap])  # the lowest estimate is a real cut for an overlapping level
+    for k in range(2):  # before the first switch nothing is frozen: every step of every level trains
+        assert records["mask"][2 * k + 1].all()
+        np.testing.assert_allclose(records["paid"][k], records["regret"][k])
 
 
 def test_the_generator_learns_in_the_agents_reward_units(monkeypatch):

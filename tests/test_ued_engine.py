@@ -271,6 +271,14 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
                      "remidi-paired": ("GeneratorSequence", False, True, False, True)}
     with pytest.raises(ConfigError, match="would never train the agent"):
         RandomLevels(trains_on_fresh=False)
+    from remidi.engine.paired import GeneratorSequence, LevelGenerator
+
+    with pytest.raises(ConfigError, match="^adversary: LevelGenerator trains the protagonist on every generated level"):
+        LevelGenerator(trains_on_fresh=False)
+    with pytest.raises(ConfigError, match="^adversary: GeneratorSequence trains the protagonist"):
+        GeneratorSequence(trains_on_fresh=False)
+    with pytest.raises(ConfigError, match="^adversary: GeneratorSequence is a sequence of generators"):
+        GeneratorSequence(buffer_sequence=False)
     with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversary adversary"):
         Algorithm("bad", "plr")
     # non-robust PLR (trains on fresh levels too) is a valid adversary

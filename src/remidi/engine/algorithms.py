@@ -25,7 +25,9 @@ class Algorithm:
         :class:`~remidi.engine.adversary.RandomLevels` (DR), :class:`~remidi.engine.adversary.LevelBuffers`
         (the PLR family; ``buffer_sequence=True``: ReMiDi's refinement, a sequence of
         ``remidi.num_buffers`` buffers, levels a frozen one explains rejected and PPO's loss masked on
-        the steps a frozen level explains), :class:`~remidi.engine.adversary.EditingBuffers` (ACCEL).
+        the steps a frozen level explains), :class:`~remidi.engine.adversary.EditingBuffers` (ACCEL),
+        :class:`~remidi.engine.paired.LevelGenerator` (PAIRED) and
+        :class:`~remidi.engine.paired.GeneratorSequence` (ReMiDi over PAIRED).
         Its ``trains_on_fresh``: PPO learns from rollouts on fresh levels too (robust PLR⊥ and its
         relatives learn only from replays).
     score: the level score it always uses (``minimax-return``: ``neg_return``); None: the config's
@@ -41,7 +43,7 @@ class Algorithm:
     def __post_init__(self):
         if not isinstance(self.adversary, RandomLevels):
             raise ConfigError(f"algorithm {self.name}: adversary must be a remidi.engine.adversary adversary "
-                              f"(RandomLevels, LevelBuffers or EditingBuffers), got {type(self.adversary).__name__}")
+                              f"(RandomLevels, LevelBuffers, EditingBuffers, LevelGenerator or GeneratorSequence), got {type(self.adversary).__name__}")
 
     def score_name(self, configured: str) -> str:
         """The score this algorithm ranks levels by, given the config's ``score``."""
@@ -98,10 +100,18 @@ class RegisteredNames(Sequence):
     """The names in :data:`ALGORITHMS` now, in order: what an experiment's ``algorithms`` holds,
     so algorithms registered after the experiment was built (:func:`register_algorithm`) are
     allowed by ``--algo`` and listed by ``remidi list``. ``where(Algorithm) -> bool`` keeps the
-    ones the experiment's task supports (a task with no level-building MDP: no learned generator)."""
+    ones the experiment's task supports (a task with no level-building MDP: no learned generator);
+    ``why``: the sentence that says why an algorithm ``where`` leaves out is not among them."""
 
-    def __init__(self, where=None):
-        self.where = where
+    def __init__(self, where=None, why: str | None = None):
+        self.where, self.why = where, why
+
+    def refusal(self, name: str) -> str | None:
+        """Why the registered algorithm ``name`` is left out here (None: it is not left out, or
+        no algorithm of that name is registered)."""
+        if name in ALGORITHMS and self.where is not None and not self.where(ALGORITHMS[name]):
+            return self.why or "this experiment's task does not support it"
+        return None
 
     def _names(self) -> tuple[str, ...]:
         return tuple(name for name, algo in ALGORITHMS.items() if self.where is None or self.where(algo))

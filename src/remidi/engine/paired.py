@@ -29,6 +29,7 @@ from remidi.engine import buffer as buf
 from remidi.engine.adversary import Proposal, RandomLevels, belief_contents, buffer_contents, earlier_buffers, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
+from remidi.errors import ConfigError
 
 ESTIMATORS = ("paired", "flexible", "perfect")
 
@@ -124,6 +125,11 @@ class LevelGenerator(RandomLevels):
     :func:`generator_net`, :func:`generator_ppo`). All three learn in the same jitted step."""
 
     trains_on_fresh: bool = True
+
+    def __post_init__(self):
+        if not self.trains_on_fresh:
+            raise ConfigError(f"adversary: {type(self).__name__} trains the protagonist on every generated level (it "
+                              "has no replay to train on instead); allowed: trains_on_fresh=True")
 
     def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
         """A fresh generator (and antagonist) from ``rng`` (folded, never split)."""
@@ -234,6 +240,12 @@ class GeneratorSequence(LevelGenerator):
     exact one); one masked protagonist stands for the per-adversary policies and Combine."""
 
     buffer_sequence: bool = True
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.buffer_sequence:
+            raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
+                              "LevelGenerator); allowed: buffer_sequence=True")
 
     def frozen(self, setup, runner) -> Frozen | None:
         return earlier_buffers(setup, runner)

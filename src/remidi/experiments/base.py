@@ -137,6 +137,10 @@ def parse_algos(exp: Experiment, text: str | None) -> list[str]:
                           f"(allowed: {', '.join(exp.algorithms + ('all',))})")
     for algo in algos:
         if algo not in exp.algorithms:
+            why = exp.algorithms.refusal(algo) if hasattr(exp.algorithms, "refusal") else None
+            if why is not None:
+                raise ConfigError(f"--algo: {algo} cannot run on {exp.name}: {why}; "
+                                  f"allowed: {', '.join(exp.algorithms + ('all',))}")
             raise one_of("--algo", algo, exp.algorithms + ("all",))
     if len(set(algos)) != len(algos):
         raise ConfigError(f"--algo: {text!r} names an algorithm twice")

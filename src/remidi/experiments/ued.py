@@ -125,8 +125,9 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
 
     return Experiment(
         name=name, description=description, default_algorithms=PAPER_ALGORITHMS,
-        algorithms=RegisteredNames(None if builds_levels else lambda algo: not isinstance(algo.adversary,
-                                                                                          LevelGenerator)),
+        algorithms=RegisteredNames(None if builds_levels else lambda algo: not isinstance(algo.adversary, LevelGenerator),
+                                   why=f"{name}'s task has no level-building MDP (UEDTask.level_builder), which a "
+                                       f"learned level generator needs"),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),

@@ -78,6 +78,10 @@ def broken(corridor, kind: str):
         return dataclasses.replace(task, eval_sets={"one": corridor.sample_level(jax.random.PRNGKey(0))})
     if kind == "reseed_level":  # a batch of two where one level belongs
         return dataclasses.replace(task, reseed_level=lambda rng, level: jax.tree.map(lambda x: jnp.stack([x, x]), level))
+    if kind == "level_builder":  # builds another task's levels (the lever game's)
+        from remidi.envs.lever import LeverBuilder
+
+        return dataclasses.replace(task, level_builder=LeverBuilder(8))
     raise AssertionError(kind)
 
 
@@ -88,6 +92,7 @@ def broken(corridor, kind: str):
     ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
     ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),
+    ("level_builder", "task.level_builder: must build a level with the sampled level's shapes"),
 ])
 def test_a_broken_task_is_one_line_naming_its_field_and_nothing_is_written(corridor, tmp_path, kind, message):
     from remidi import run_ued

@@ -156,6 +156,17 @@ def validate_task(task: UEDTask) -> None:
             if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):
                 raise ConfigError(f"task.{key}: must return a level with the sampled level's shapes ({_shapes(level)}), "
                                   f"got {_shapes(made)}")
+    builder = task.level_builder
+    if builder is not None:
+        for key in ("num_steps", "num_actions"):
+            value = getattr(builder, key, None)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ConfigError(f"task.level_builder: {key} must be an integer ≥ 1, got {value!r}")
+        made = _traced("level_builder", "building a level from a whole design",
+                       lambda k: builder.build(k, jnp.zeros((builder.num_steps,), jnp.int32)), rng)
+        if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):
+            raise ConfigError(f"task.level_builder: must build a level with the sampled level's shapes "
+                              f"({_shapes(level)}), got {_shapes(made)}")
 
     level_leaves = jax.tree.leaves(level)
     for name, levels in task.eval_sets.items():

@@ -290,3 +290,45 @@ def test_paired_normalises_both_agents_observations_with_the_protagonists_statis
     assert float(r2.obs_stats.count) == 2 * per_update  # the antagonist's rollouts add nothing
     assert sorted(seen) == [0, 0, per_update, per_update]  # both agents of an update read the same statistics
     assert int(r2.antagonist.step) > int(runner.antagonist.step) and np.isfinite(float(m1["paired/regret"]))
+
+
+def test_a_generators_support_is_a_reservoir_of_the_levels_it_generated():
+    """GeneratorSequence keeps a reservoir of its generator's levels: every generated level draws
+    an i.i.d. uniform key and the active buffer keeps the remidi.buffer_capacity levels of highest
+    key seen so far (a uniform sample of all generated). Ten updates of 8 distinct lever levels
+    into a reservoir of 8: it holds exactly the 8 of the 80 with the highest keys. (With
+    buffer.duplicate_check, on here as in every preset, a level generated again would update its
+    entry's key instead of taking a second slot.)"""
+    import jax
+
+    from remidi.engine import buffer as buf
+    from remidi.engine import train as tr
+    from remidi.engine.adversary import Proposal
+    from remidi.envs.lever import LeverLevel
+    from test_ued_engine import TASK, TINY
+
+    setup = tr.make_setup(TASK, TINY, "remidi-paired")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    seq = setup.algo.adversary
+    assert setup.cfg.remidi.buffer_capacity == 8 == setup.cfg.num_envs
+
+    def keep(runner, levels, rng):
+        proposal = Proposal(replay=jnp.asarray(False), levels=levels, buffer=None, slots=None, train=jnp.asarray(True))
+        changed, inserted = seq._keep(setup, runner, proposal, rng)
+        return runner.replace(**changed), inserted
+
+    keep = jax.jit(keep)
+    ids, keys = [], []
+    for u in range(10):
+        level_ids = jnp.arange(8 * u, 8 * u + 8)  # (correct lever, visible) distinct across the 80
+        levels = LeverLevel(correct=(level_ids % 64).astype(jnp.int32), visible=level_ids < 64)
+        rng = jax.random.PRNGKey(100 + u)
+        runner, _ = keep(runner, levels, rng)
+        ids.append(np.asarray(level_ids))
+        keys.append(np.asarray(jax.random.uniform(rng, (8,))))  # the keys _keep draws from that rng
+    ids, keys = np.concatenate(ids), np.concatenate(keys)
+    held = buf.select_buffer(runner.buffers, runner.active)
+    assert np.asarray(held.valid).all()
+    held_ids = np.asarray(held.levels.correct) + 64 * ~np.asarray(held.levels.visible)
+    assert sorted(held_ids.tolist()) == sorted(ids[np.argsort(keys)[-8:]].tolist())
+    np.testing.assert_allclose(np.sort(np.asarray(held.scores)), np.sort(keys)[-8:])

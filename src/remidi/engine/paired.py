@@ -220,7 +220,9 @@ class GeneratorSequence(LevelGenerator):
     A generator's empirical support is a reservoir of the levels it generated: the active
     buffer of ``runner.buffers`` (``remidi.buffer_capacity`` levels), filled by reservoir
     sampling (every generated level gets an i.i.d. uniform key and the reservoir keeps the levels
-    with the highest keys: a uniform sample of all it generated). The frozen generators'
+    with the highest keys: a uniform sample of all it generated; with ``buffer.duplicate_check``,
+    on in every preset, a level generated again takes its new key in its entry instead of a
+    second slot, so the reservoir holds distinct levels). The frozen generators'
     reservoirs are the tracker's frozen levels. A generated level whose rollout a frozen level
     explains at every step (a complete overlap) gives the protagonist no gradient (every step is
     masked) and pays the generator ``paired.overlap_regret`` (``lowest``: the lowest regret

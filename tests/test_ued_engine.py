@@ -297,18 +297,23 @@ def test_paired_needs_a_level_builder_and_resumes_exactly(tmp_path):
         validate_ued_config(R(TINY, score="neg_return", paired=R(TINY.paired, estimator="perfect")), "paired",
                             dataclasses.replace(TASK, optimal_return=None, optimal_discounted_return=None))
     cfg = R(TINY, num_updates=20)
-    full = driver.train_seeds(TASK, cfg, "paired", [0, 1], progress=False)
 
     def crash(done, metrics):
         if done == 10:
             raise Crash
 
-    with pytest.raises(Crash):
-        driver.train_seeds(TASK, cfg, "paired", [0, 1], out=tmp_path, progress=False, on_block=crash)
-    resumed = driver.train_seeds(TASK, cfg, "paired", [0, 1], out=tmp_path, resume=True, progress=False)
-    for name in full.history:
-        np.testing.assert_array_equal(full.history[name], resumed.history[name], err_msg=name)
-    for a, b in zip(jax.tree.leaves(full.runner), jax.tree.leaves(resumed.runner)):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    assert {"paired/regret", "paired/antagonist_return", "paired/generator_entropy", "generated/hidden"} <= set(full.history)
-    assert full.runner.generator is not None and full.runner.antagonist is not None
+    # ReMiDi over PAIRED interrupted after update 10, past its switch at update 8: the frozen
+    # reservoir, the second generator and the fresh ones to come come back from the checkpoint
+    for algo in ("paired", "remidi-paired"):
+        full = driver.train_seeds(TASK, cfg, algo, [0, 1], progress=False)
+        with pytest.raises(Crash):
+            driver.train_seeds(TASK, cfg, algo, [0, 1], out=tmp_path / algo, progress=False, on_block=crash)
+        resumed = driver.train_seeds(TASK, cfg, algo, [0, 1], out=tmp_path / algo, resume=True, progress=False)
+        for name in full.history:
+            np.testing.assert_array_equal(full.history[name], resumed.history[name], err_msg=f"{algo}: {name}")
+        for a, b in zip(jax.tree.leaves(full.runner), jax.tree.leaves(resumed.runner)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert {"paired/regret", "paired/antagonist_return", "paired/generator_entropy",
+                "generated/hidden"} <= set(full.history)
+        assert full.runner.generator is not None and full.runner.antagonist is not None
+    assert (np.asarray(full.runner.active) == 1).all()  # remidi-paired switched before the crash

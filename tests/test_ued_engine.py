@@ -102,7 +102,10 @@ def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
     (dict(buffer=R(BASE.buffer, replay_prob=1.5)), "buffer.replay_prob"),
     (dict(ppo=R(BASE.ppo, minibatches=5)), "ppo.minibatches"),
     (dict(remidi=R(BASE.remidi, num_buffers=5)), "remidi.num_buffers: must be small enough"),
-    (dict(remidi=R(BASE.remidi, tracker="loose")), "remidi.tracker: unknown value 'loose'; allowed: prefix, per_step"),
+    (dict(remidi=R(BASE.remidi, tracker="loose")), "remidi.tracker: unknown value 'loose'; allowed: prefix (the exact "
+                                                   "tracker, the default), per_step"),
+    # the belief model's keys are checked under the exact tracker too (a value there is a mistake either way)
+    (dict(remidi=R(BASE.remidi, belief_false_rate=1.5)), "remidi.belief_false_rate: must be a number in [0, 1), got 1.5"),
 ])
 def test_invalid_configs_name_the_key(change, needle):
     with pytest.raises(ConfigError) as err:

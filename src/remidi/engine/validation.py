@@ -343,16 +343,18 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     choice("remidi.count", r.count, ("updates", "replays"))
     require(r.count == "updates" or algo.replays or not algo.buffer_sequence, "remidi.count", "updates with a "
             "learned generator (a generator never replays, so counting replays would never switch it)", r.count)
-    choice("remidi.tracker", r.tracker, MODES + ("belief",))
+    if r.tracker not in MODES + ("belief",):  # the exact tracker is "prefix" (the definition); name it so
+        raise ConfigError(f"remidi.tracker: unknown value {r.tracker!r}; allowed: prefix (the exact tracker, the "
+                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model)")
+    # the belief model's keys are checked whichever tracker runs: a bad value is a mistake either way
+    require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)", r.belief_false_rate)
+    positive_int("remidi.belief_hidden", r.belief_hidden)
+    positive_int("remidi.belief_calibration", r.belief_calibration)
+    positive_int("remidi.belief_epochs", r.belief_epochs)
+    require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
+    require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
+    require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
     if r.tracker == "belief":
-        require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)",
-                r.belief_false_rate)
-        positive_int("remidi.belief_hidden", r.belief_hidden)
-        positive_int("remidi.belief_calibration", r.belief_calibration)
-        positive_int("remidi.belief_epochs", r.belief_epochs)
-        require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
-        require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
-        require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
         require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
                 "(the reference learns from the task generator's fresh levels, which a generator never plays)",
                 r.belief_reference)

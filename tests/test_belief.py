@@ -230,6 +230,19 @@ def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
     assert abs(rate - FALSE_RATE) < 0.025, rate
     other = bits(jax.random.PRNGKey(9), n, t, 1.0 - probs)  # another adversary's trajectories
     assert float(jnp.mean(scores(other) < tau)) > 0.9
+    # the rule training uses (freeze): thresholds per prefix length, lowered for the episode-long
+    # judgement (a prefix is distinguishable once it or a shorter one fell below its threshold)
+    lengths = bl.prefix_lengths(reset)
+    buckets = bl.num_length_buckets(3)
+    tau_m = bl.calibrate_monotone(scores(held)[None], lengths[None], FALSE_RATE, buckets)
+    assert tau_m.shape == (buckets,)
+
+    def flagged(obs):
+        return bl.episode_minimum(scores(obs) - tau_m[bl.length_bucket(lengths, buckets)], lengths) < 0
+
+    rate = float(jnp.mean(flagged(test)))
+    assert abs(rate - FALSE_RATE) < 0.025, rate
+    assert float(jnp.mean(flagged(other))) > 0.9
 
 
 # ------------------------------------------------------------------------------ the tracker
@@ -251,14 +264,18 @@ def from_buffer(buffer, key, n):
 
 def learn_adversary(task, buffer, hidden=16, steps=200, n=256, t=4):
     """A belief model of the adversary ``buffer`` (levels drawn uniformly from it), fit on one
-    rollout sample and calibrated on another: ``(tracker, FrozenBeliefs with one model)``."""
+    rollout sample and calibrated on another as training does (thresholds per prefix length for the
+    episode-long judgement): ``(tracker, FrozenBeliefs with one model)``."""
     example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)
     model = bl.BeliefModel(bl.coding_for(example), num_actions=task.num_actions, hidden=hidden)
     data = roll(task, from_buffer(buffer, jax.random.PRNGKey(1), n), t, jax.random.PRNGKey(2))
     params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=steps)
     held = roll(task, from_buffer(buffer, jax.random.PRNGKey(4), n), t, jax.random.PRNGKey(5))
     ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
-    tau = bl.calibrate(bl.prefix_scores(ll, held.reset), FALSE_RATE)
+    # as training calibrates (freeze): per prefix length, for the episode-long judgement
+    lengths = bl.prefix_lengths(held.reset)
+    tau = bl.calibrate_monotone(bl.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE,
+                                bl.num_length_buckets(task.max_episode_steps))
     frozen = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                               valid=jnp.ones((1,), bool))
     return bl.BeliefTracker(model), frozen

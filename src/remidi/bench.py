@@ -21,8 +21,10 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
 * ``maze-remidi-combine``: ``maze-remidi`` with ``remidi.policy=combine`` (Algorithm 1's
   multi-policy form: the three frozen buffers' policies each read every step's observation and
   the earliest buffer whose levels explain the prefix acts); ``remidi_combine_step_over_remidi_step``
-  (not run by default). Rehearsal (``remidi.rehearsal``) needs no workload of its own: a
-  rehearsal update costs what a replay update costs (one rollout and one PPO update).
+  (not run by default).
+* ``maze-remidi-rehearsal``: ``maze-remidi`` with ``remidi.rehearsal=1``: every update trains on
+  a batch of a frozen buffer's levels instead of a replay of the active one (one rollout and one
+  PPO update either way); ``remidi_rehearsal_step_over_remidi_step`` (not run by default).
 * ``maze-remidi-belief``: ``maze-remidi`` with the learned belief tracker
   (``remidi.tracker=belief``, engine/belief.py): each step every env's prefix is scored by the
   three frozen buffers' GRU models instead of stepping frozen levels, and the active buffer's
@@ -296,6 +298,12 @@ def _maze_remidi_combine():
     return _maze_remidi_last_buffer(policy="combine")
 
 
+@register("maze-remidi-rehearsal", "maze-remidi with remidi.rehearsal=1: every update trains on a frozen buffer's "
+                                  "levels instead of replaying the active one")
+def _maze_remidi_rehearsal():
+    return _maze_remidi_last_buffer(rehearsal=1.0)
+
+
 @register("maze-remidi-belief", "maze-remidi with the learned belief tracker (remidi.tracker=belief): three frozen "
                                "models judge, the active one learns from each replay")
 def _maze_remidi_belief():
@@ -495,6 +503,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
         out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
     if "maze-remidi-combine" in results and "maze-remidi" in results:
         out["remidi_combine_step_over_remidi_step"] = per_call("maze-remidi-combine") / per_call("maze-remidi")
+    if "maze-remidi-rehearsal" in results and "maze-remidi" in results:
+        out["remidi_rehearsal_step_over_remidi_step"] = per_call("maze-remidi-rehearsal") / per_call("maze-remidi")
     if "maze-remidi-belief" in results and "maze-remidi" in results:
         out["remidi_belief_step_over_remidi_step"] = per_call("maze-remidi-belief") / per_call("maze-remidi")
     if "maze-paired" in results and "maze-plr" in results:

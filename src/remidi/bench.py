@@ -185,7 +185,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     def extras(out):
         _, metrics = out
-        return {name: float(metrics[name].mean()) for name in ("replay", "edit", "tracker_overflow", "rejected")
+        return {name: float(metrics[name].mean()) for name in ("replay", "edit", "rehearsal", "tracker_overflow", "rejected")
                 if name in metrics}
 
     steps = updates_per_call * cfg.num_envs * cfg.num_steps

@@ -127,6 +127,7 @@ class LevelGenerator(RandomLevels):
     trains_on_fresh: bool = True
 
     def __post_init__(self):
+        super().__post_init__()
         if not self.trains_on_fresh:
             raise ConfigError(f"adversary: {type(self).__name__} trains the protagonist on every generated level (it "
                               "has no replay to train on instead); allowed: trains_on_fresh=True")
@@ -220,9 +221,10 @@ class GeneratorSequence(LevelGenerator):
     A generator's empirical support is a reservoir of the levels it generated: the active
     buffer of ``runner.buffers`` (``remidi.buffer_capacity`` levels), filled by reservoir
     sampling (every generated level gets an i.i.d. uniform key and the reservoir keeps the levels
-    with the highest keys: a uniform sample of all it generated; with ``buffer.duplicate_check``,
-    on in every preset, a level generated again takes its new key in its entry instead of a
-    second slot, so the reservoir holds distinct levels). The frozen generators'
+    with the highest keys: without ``buffer.duplicate_check`` a uniform sample of all it
+    generated; with it, on in every preset, a level generated again takes its newest key in its
+    entry instead of a second slot, so the reservoir holds distinct levels, a level generated
+    often weighted between once and as often as it was generated). The frozen generators'
     reservoirs are the tracker's frozen levels. A generated level whose rollout a frozen level
     explains at every step (a complete overlap) gives the protagonist no gradient (every step is
     masked) and pays the generator ``paired.overlap_regret`` (``lowest``: the lowest regret

@@ -62,7 +62,8 @@ def validate_task(task: UEDTask) -> None:
     callable), then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
     level, a reset to it and one step: the step's observation has the reset's shapes, its reward is
     a float scalar and its done a boolean scalar; the level tags are boolean scalars, the optimal
-    returns float scalars, edited and easy levels have the sampled level's shapes; every evaluation
+    returns float scalars, edited, easy and reseeded levels and a level the ``level_builder``
+    builds from a whole design have the sampled level's shapes; every evaluation
     set is a batch of such levels (a leading level axis, the same on every leaf) that its
     environment resets to an observation of the training observation's shapes. Checked once per
     task object."""
@@ -160,7 +161,7 @@ def validate_task(task: UEDTask) -> None:
     if builder is not None:
         for key in ("num_steps", "num_actions"):
             value = getattr(builder, key, None)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
                 raise ConfigError(f"task.level_builder: {key} must be an integer ≥ 1, got {value!r}")
         made = _traced("level_builder", "building a level from a whole design",
                        lambda k: builder.build(k, jnp.zeros((builder.num_steps,), jnp.int32)), rng)

@@ -82,6 +82,12 @@ def broken(corridor, kind: str):
         from remidi.envs.lever import LeverBuilder
 
         return dataclasses.replace(task, level_builder=LeverBuilder(8))
+    if kind == "level_builder_size":  # a builder of no design steps
+        from remidi.envs.lever import LeverBuilder
+
+        empty = LeverBuilder(8)
+        empty.num_steps = 0
+        return dataclasses.replace(task, level_builder=empty)
     raise AssertionError(kind)
 
 
@@ -93,6 +99,7 @@ def broken(corridor, kind: str):
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
     ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),
     ("level_builder", "task.level_builder: must build a level with the sampled level's shapes"),
+    ("level_builder_size", "task.level_builder.num_steps: must be an integer ≥ 1, got 0"),
 ])
 def test_a_broken_task_is_one_line_naming_its_field_and_nothing_is_written(corridor, tmp_path, kind, message):
     from remidi import run_ued

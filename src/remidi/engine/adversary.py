@@ -86,9 +86,10 @@ class RandomLevels:
     trains_on_fresh: bool = True
 
     def __post_init__(self):
-        if type(self) is RandomLevels and not self.trains_on_fresh:
-            raise ConfigError("adversary: RandomLevels without trains_on_fresh would never train the agent (it has "
-                              "no replay); allowed: trains_on_fresh=True")
+        # an adversary that never replays (DR, a learned generator) trains the agent on fresh levels or never
+        if not self.trains_on_fresh and not isinstance(self, LevelBuffers):
+            raise ConfigError(f"adversary: {type(self).__name__} without trains_on_fresh would never train the agent "
+                              "(it has no replay); allowed: trains_on_fresh=True")
 
     def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
         new = self._fresh(setup, k_levels)

@@ -126,12 +126,6 @@ class LevelGenerator(RandomLevels):
 
     trains_on_fresh: bool = True
 
-    def __post_init__(self):
-        super().__post_init__()
-        if not self.trains_on_fresh:
-            raise ConfigError(f"adversary: {type(self).__name__} trains the protagonist on every generated level (it "
-                              "has no replay to train on instead); allowed: trains_on_fresh=True")
-
     def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
         """A fresh generator (and antagonist) from ``rng`` (folded, never split)."""
         from remidi.engine.ppo import create_train_state

@@ -56,6 +56,14 @@ def _is_scalar(x, kind: str) -> bool:
     return dtype == jnp.bool_ if kind == "bool" else jnp.issubdtype(dtype, jnp.floating)
 
 
+def _task_size(field: str, value) -> None:
+    """ConfigError unless ``value`` is an integer ≥ 1 (a Python or NumPy integer, not a bool)."""
+    from remidi.errors import ConfigError
+
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ConfigError(f"{field}: must be an integer ≥ 1, got {value!r}")
+
+
 def validate_task(task: UEDTask) -> None:
     """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
     train: field types and ranges (``num_actions`` ≥ 1, ``max_episode_steps`` ≥ 1, the functions
@@ -74,9 +82,7 @@ def validate_task(task: UEDTask) -> None:
     if task in _VALIDATED:
         return
     for key in ("num_actions", "max_episode_steps"):
-        value = getattr(task, key)
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ConfigError(f"task.{key}: must be an integer ≥ 1, got {value!r}")
+        _task_size(f"task.{key}", getattr(task, key))
     for key in ("deterministic_reset", "continuous"):
         if not isinstance(getattr(task, key), bool):
             raise ConfigError(f"task.{key}: must be true or false, got {getattr(task, key)!r}")
@@ -160,9 +166,7 @@ def validate_task(task: UEDTask) -> None:
     builder = task.level_builder
     if builder is not None:
         for key in ("num_steps", "num_actions"):
-            value = getattr(builder, key, None)
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-                raise ConfigError(f"task.level_builder: {key} must be an integer ≥ 1, got {value!r}")
+            _task_size(f"task.level_builder.{key}", getattr(builder, key, None))
         made = _traced("level_builder", "building a level from a whole design",
                        lambda k: builder.build(k, jnp.zeros((builder.num_steps,), jnp.int32)), rng)
         if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):

@@ -13,15 +13,16 @@
 #   python -m remidi.experiments.results_page --collect RUNS_DIR/<experiment>/<run>
 #
 # On a CPU, two lanes (one process per core, XLA on one thread) train 1.36× faster in total than
-# one process on both cores (`remidi bench maze-plr --lanes 2`, docs/performance.md): lane L of N
-# takes every N-th run, counted from L.
+# one process on both cores (`remidi bench maze-plr --lanes 2`, docs/performance.md). Each lane
+# takes the next run that no other lane holds (a `flock` on RUNS_DIR/EXPERIMENT/NAME.lock, released
+# when its process ends), so lanes stay busy until the list is done.
 #
 #   for l in 0 1; do LANES=2 LANE=$l nohup bash docs/results/runs.sh RUNS_DIR > lane$l.log 2>&1 & done
 set -u
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 R=${1:-/work/runs}
 PY=${PYTHON:-python}
-LANES=${LANES:-1}; LANE=${LANE:-0}; N=0
+LANES=${LANES:-1}; LANE=${LANE:-0}
 if [ "$LANES" -gt 1 ]; then  # pin this lane to its core, XLA on one thread
   export XLA_FLAGS="${XLA_FLAGS:-} --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
   PY="taskset -c $LANE $PY"
@@ -33,17 +34,18 @@ at() {  # at COMMIT: the runs that follow train with that commit's code
 }
 run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into RUNS_DIR/EXPERIMENT/NAME
   local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
-  N=$((N + 1)); [ $(((N - 1) % LANES)) -eq "$LANE" ] || return 0  # another lane's run
   local out=$R/$exp/$name
   if grep -qs -- "/$exp/$name\"" "$HERE"/docs/results/data/"$exp"/*/config.json ||
      { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
     echo "committed: $exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
+  mkdir -p "$R/$exp"; local lock; exec {lock}>"$out.lock"
+  if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi  # another lane is on it
   if [ -f "$out/summary.json" ]; then :
   elif [ -f "$out/config.json" ]; then
     echo "$(date +%T) resume $out"; $PY -m remidi run --resume "$out" --quiet >> "$out.log" 2>&1
   else
-    mkdir -p "$R/$exp"; echo "$(date +%T) start $out"
+    echo "$(date +%T) start $out"
     $PY -m remidi run "$exp" --algo "$algo" --preset "$preset" --seed "$s" --seeds "$n" --out "$out" --quiet "$@" \
       > "$out.log" 2>&1
   fi
@@ -51,6 +53,7 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
   if [ -f "$out/summary.json" ] && [ ! -f "$out/evaluate.json" ] && [ "$preset" != reference ]; then
     $PY -m remidi evaluate "$out" --attempts 30 >> "$out.log" 2>&1; echo "$(date +%T) evaluated $? $out"
   fi
+  exec {lock}>&-
 }
 
 # issue #28: the paper's claims, every run at one commit

@@ -110,6 +110,36 @@ def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, ca
     _same_results(cut, tmp_path / "full")
 
 
+def test_sigterm_while_the_first_block_runs_keeps_that_block(tmp_path, capsys, monkeypatch):
+    """Python runs the SIGTERM handler only when XLA's call returns, so a signal that comes while
+    the first block of a run (or of a resumed run) computes is handled as the driver's wait for
+    that block returns. The handler must then only record it (request() True: no exit at once)
+    and the block is checkpointed: before, the run exited there and lost the block (a resumed
+    maze run lost ten minutes of training)."""
+    from remidi import preemption
+    from remidi.cli import main
+    from remidi.engine import driver
+
+    real, answers = driver._to_host, []
+
+    def waited(tree):  # the first call waits for the first block: the handler runs as it returns
+        out = real(tree)
+        if not answers:
+            answers.append(preemption.request())
+        return out
+
+    monkeypatch.setattr(driver, "_to_host", waited)
+    cut = tmp_path / "cut"
+    assert main(_tiny(cut, "--set", "checkpoint_every=40")) == 143
+    assert answers == [True]
+    assert capsys.readouterr().err.startswith("remidi: terminated (SIGTERM), checkpoint of update 10 written")
+    assert _checkpoint_done(cut) == 10
+    monkeypatch.setattr(driver, "_to_host", real)
+    assert main(["run", "--resume", str(cut), "--quiet"]) == 0
+    assert main(_tiny(tmp_path / "full", "--set", "checkpoint_every=40")) == 0
+    _same_results(cut, tmp_path / "full")
+
+
 def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys, monkeypatch):
     """SIGTERM during the last block of the first of two algorithms: that one finishes and writes
     its results, the second does not start (no block, no checkpoint); status 143, and the resume

@@ -2,8 +2,8 @@
 pre-empts or time-limits a job: ``remidi run`` checkpoints and exits with :data:`EXIT_STATUS`.
 
 The command line's SIGTERM handler (``remidi.cli``) asks :func:`request`. While a UED run is
-training (:func:`checkpointing`, entered by the driver once its first block has run, so its
-programs are compiled), the request is only recorded: the driver finishes the block under way,
+training (:func:`checkpointing`, entered by the driver once its first block is compiled and
+dispatched), the request is only recorded: the driver finishes the block under way,
 writes a checkpoint of it (whatever ``checkpoint_every`` says) and raises :class:`Preempted`, which
 the command line reports as one line with the resume hint and exit status 143. Anywhere else
 (start-up, compiling, writing the results of a finished algorithm) nothing newer than the last

@@ -286,10 +286,19 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
         raise preemption.Preempted(None)
     bar = _progress(num_updates, done, desc, progress and writer)
     with ExitStack() as stack:
-        armed = False  # once a block has run (compiled): a SIGTERM checkpoints, then stops
+        armed = False  # once the first block is compiled and dispatched: a SIGTERM checkpoints, then stops
         while done < num_updates:
             length = min(eval_every, num_updates - done)
             runner, step_metrics = programs.run_block(runner, length)
+            if ckpt is not None and not armed:
+                # Python runs a signal handler only between bytecodes, so a SIGTERM that comes
+                # while XLA compiles or runs a block is handled when that call returns. The call
+                # above returns once the block is compiled and dispatched (asynchronously: it runs
+                # while _to_host waits for it), so from here on a SIGTERM keeps the block under
+                # way; before (tracing, compiling) nothing newer than the last checkpoint exists
+                # and the handler exits at once.
+                stack.enter_context(preemption.checkpointing())
+                armed = True
             step_metrics = _to_host(step_metrics)
             eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
             evals = _to_host(programs.evaluate(runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
@@ -311,9 +320,6 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
                 if bar is not None:
                     bar.close()
                 raise preemption.Preempted(done)
-            if ckpt is not None and not armed:
-                stack.enter_context(preemption.checkpointing())
-                armed = True
     if bar is not None:
         bar.close()
     names = history[0].keys()

@@ -1,0 +1,154 @@
+"""The simulated belief model's parts (remidi.engine.simulated, issue #31): replaying a level
+reproduces a rollout of it, the noise table learns the identity where the environment is
+deterministic and the noise's distribution where it is not, and the mixture over a buffer's
+candidates is a mean of likelihoods."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from remidi.engine import belief as bl
+from remidi.engine import simulated as sm
+from remidi.engine.rollout import rollout
+
+T, N = 24, 32
+
+
+def _random_rollout(task, key, params=None):
+    a, params = task.num_actions, task.params if params is None else params
+
+    def policy(variables, carry, obs, reset):
+        return carry, (jnp.zeros(reset.shape + (a,)), jnp.zeros(reset.shape))
+
+    levels = jax.vmap(task.sample_level)(jax.random.split(key, N))
+    traj, _ = rollout(jax.random.fold_in(key, 1), task.env, params, policy, {}, jnp.zeros(1), levels, T,
+                      deterministic_reset=task.deterministic_reset)
+    return levels, traj
+
+
+def _coding(task, levels):
+    example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], levels), task.params)
+    return bl.coding_for(example)
+
+
+@pytest.fixture(scope="module")
+def lever():
+    from remidi.envs.lever import lever_task
+
+    task = lever_task(8)
+    levels, traj = _random_rollout(task, jax.random.PRNGKey(3))
+    return task, levels, traj, _coding(task, levels)
+
+
+@pytest.fixture(scope="module")
+def noisy_maze():
+    from remidi.envs.noisy import noisy_blindfold_task
+
+    import dataclasses
+
+    task = noisy_blindfold_task(0.5, 25)
+    # episodes of 7 steps: the 24-step rollout restarts each level three times
+    task = dataclasses.replace(task, params=task.params.replace(max_steps_in_episode=7))
+    levels, traj = _random_rollout(task, jax.random.PRNGKey(4))
+    return task, levels, traj, _coding(task, levels)
+
+
+def _replayed(task, coding, levels, traj, reseed=None):
+    @jax.jit
+    def go(levels, actions, resets, key):
+        def one(level, acts, rs, k):
+            k1, k2 = jax.random.split(k)
+            level = level if reseed is None else reseed(k1, level)
+            return sm.replay_level(task.env, task.params, coding, level, acts, rs, k2)
+        return jax.vmap(one, in_axes=(0, 1, 1, 0), out_axes=1)(levels, actions, resets, jax.random.split(key, N))
+    return go(levels, traj.action, traj.reset, jax.random.PRNGKey(9))
+
+
+def test_replaying_a_level_with_the_rollouts_actions_gives_its_observations_and_ends(lever):
+    """The lever game ends every episode after one step: each step's replay restarts, and the
+    end entry records every end. Replayed codes equal the rollout's, end entries included."""
+    task, levels, traj, coding = lever
+    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    assert bool(jnp.all(agent[1:, :, -1] == 1)) and bool(jnp.all(agent[0, :, -1] == 0))
+    np.testing.assert_array_equal(np.asarray(_replayed(task, coding, levels, traj)), np.asarray(agent))
+
+
+def test_replaying_a_noisy_level_with_its_own_seed_gives_its_observations_through_restarts(noisy_maze):
+    """blindfold-noisy with 7-step episodes: the replay restarts where the rollout did (the
+    noise, a function of the seed and the episode's step, restarts with it)."""
+    task, levels, traj, coding = noisy_maze
+    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    assert int(agent[:, :, -1].sum()) >= 3 * N  # ends at steps 7, 14, 21 (and at the goal)
+    np.testing.assert_array_equal(np.asarray(_replayed(task, coding, levels, traj)), np.asarray(agent))
+
+
+def test_the_table_learns_the_identity_where_the_game_is_deterministic(lever):
+    task, levels, traj, coding = lever
+    counts = sm.count_rollout(sm.init_counts(coding), task.env, task.params, coding, None, levels, traj.obs,
+                              traj.action, traj.reset, jax.random.PRNGKey(5))
+    assert float(counts.sum()) == T * N * (coding.num_entries + 1)
+    assert float(counts[:, 0].sum()) == 0.0  # the copies always agree: d = 1
+    logq = sm.log_q(counts)
+    seen = np.asarray(counts[:, 1].sum(-1) > 0)  # [E+1, K, K] rows that were seen
+    k = counts.shape[-1]
+    diag = np.asarray(logq[:, 1][..., np.arange(k), np.arange(k), np.arange(k)])  # log q(o = a | a, a)
+    rows = np.nonzero(seen[:, np.arange(k), np.arange(k)])
+    assert np.all(diag[rows] > np.log(0.99))
+    # the agent's own observation is likely, any other one is not
+    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    own = sm.step_logq(logq, agent, agent, agent)
+    other = sm.step_logq(logq, agent, jnp.roll(agent, 1, axis=1), jnp.roll(agent, 1, axis=1))
+    differs = np.asarray(jnp.any(agent != jnp.roll(agent, 1, axis=1), axis=-1))
+    assert np.all(np.asarray(own) > -0.1)
+    assert np.all(np.asarray(other)[differs] < -5.0)
+
+
+def test_on_a_noisy_tv_the_table_learns_uniform_noise_and_keeps_the_walls(noisy_maze):
+    """blindfold-noisy: a blind level's copies under fresh seeds disagree (d = 0) and show the
+    noise, drawn uniformly in each channel's range; an ordinary maze's copies agree (d = 1)."""
+    task, levels, traj, coding = noisy_maze
+    counts = sm.count_rollout(sm.init_counts(coding), task.env, task.params, coding, task.reseed_level, levels,
+                              traj.obs, traj.action, traj.reset, jax.random.PRNGKey(5))
+    blind = np.asarray(jax.vmap(lambda l: task.level_tags(l)["blind"])(levels))
+    assert 0 < blind.sum() < N
+    noisy_share = float(counts[:, 0].sum() / counts.sum())
+    assert abs(noisy_share - blind.mean()) < 0.05  # the steps of blind levels, and only those
+    k = counts.shape[-1]
+    off = 1 - np.asarray(counts[:-1, 0].sum(-1))[:, np.arange(k), np.arange(k)].sum() / float(counts[:-1, 0].sum())
+    # the copies' noisy entries differ: 10/11, 5/6 and 2/3 of the time for the cells' three channels,
+    # 3/4 for the direction: 0.80 of the 76 entries
+    assert abs(off - (25 * (10 / 11 + 5 / 6 + 2 / 3) + 3 / 4) / 76) < 0.02
+    # the object channel (first of each cell's three, 11 values): rows d = 0 are uniform over 0..10
+    obj = np.asarray(counts[0:75:3, 0]).sum((0, 2))  # [ô¹, o], pooled over the cells and ô²
+    freq = obj / obj.sum(-1, keepdims=True)  # ≈ 870 draws per row
+    assert np.abs(freq - 1 / 11).max() < 0.05
+    # ordinary mazes: the agent's view is one of the copies' (identity)
+    logq = sm.log_q(counts)
+    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    plain = _replayed(task, coding, levels, traj)
+    own = np.asarray(sm.step_logq(logq, agent, plain, plain))
+    assert np.all(own[:, ~blind] > -2.0)  # what the smoothing of rarely seen rows costs
+    shifted = jnp.roll(plain, 1, axis=1)  # another env's level
+    other = np.asarray(sm.step_logq(logq, agent, shifted, shifted))
+    both = ~blind & np.roll(~blind, 1)
+    differs = np.asarray(jnp.any(agent != shifted, axis=-1))[:, both]
+    assert np.all(other[:, both][differs] < own[:, both][differs] - 5.0)
+
+
+def test_the_mixture_is_the_log_mean_likelihood_over_each_buffers_valid_levels():
+    valid = jnp.array([True, True, True, False, True, True, False, False])  # 2 buffers of 4
+    index = jnp.array([0, 2, 4, -1])
+    totals = jnp.array([-1.0, -2.0, -3.0, 0.0])
+    mix = sm.mixture(totals, index, valid, 2, 4)
+    np.testing.assert_allclose(np.asarray(mix), [np.log((np.exp(-1) + np.exp(-2)) / 3), np.log(np.exp(-3) / 2)],
+                               rtol=1e-6)
+    assert float(sm.mixture(totals, index, jnp.zeros(8, bool), 2, 4)[0]) == -np.inf
+
+
+def test_candidates_are_the_most_likely_first_observations():
+    logq = jnp.log(jnp.full((2, 2, 2, 2, 2), 0.5)).at[0, 1, 1, 1, 1].set(np.log(0.9)).at[0, 1, 1, 1, 0].set(np.log(0.1))
+    first = jnp.array([[1, 0], [0, 0], [1, 0], [1, 0]])  # entry 0 (category), end entry
+    index, lq = sm.candidates(logq, jnp.array([1, 0]), first, first, jnp.array([True, True, False, True]), 3)
+    assert list(np.asarray(index)) == [0, 3, 1]
+    assert np.asarray(lq)[0] > np.asarray(lq)[2]

@@ -29,10 +29,14 @@ levels, S candidate slots per env (each with two simulated copies).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, Callable
+
 import jax
 import jax.numpy as jnp
+from flax import struct
 
-from remidi.engine.belief import ObsCoding
+from remidi.engine.belief import BeliefModel, ObsCoding, length_bucket
 
 
 # ---------------------------------------------------------------------------- the noise table
@@ -151,3 +155,177 @@ def candidates(logq, first_agent, first1, first2, valid, budget: int):
     top, index = jax.lax.top_k(lq, budget)
     index = jnp.where(jnp.isfinite(top), index, -1)
     return index.astype(jnp.int32), top
+
+
+# ---------------------------------------------------------------------------- the tracker
+@struct.dataclass
+class FrozenSims:
+    """What the simulated tracker reads from the rollout's ``Frozen.belief``: ``logq`` (:func:`log_q`
+    of the run's table), ``threshold`` f32[B, L] (per prefix-length bucket), ``valid`` bool[B]
+    (buffer b has been frozen), ``ref`` (leaves [B, ...]: the generator's GRU model frozen with
+    each buffer, the ratio's denominator; None: judge by the mixture alone) and ``key`` (the
+    randomness of the frozen levels' copies in this rollout)."""
+
+    logq: jax.Array
+    threshold: jax.Array
+    valid: jax.Array
+    key: jax.Array
+    ref: Any = None
+
+
+@struct.dataclass
+class SimState:
+    """The tracker state of one env (leaves [N, ...] in the component): ``index`` i32[S] (the
+    frozen level each slot follows, −1 empty), the slots' two copies' environment states (leaves
+    [S, 2, ...]) and their first states, ``total`` f32[S] (log P(prefix | the slot's level)) and
+    ``start_total`` (its first observation's), ``count`` i32[] (the prefix's steps), the
+    reference's GRU state f32[B, H], summed log-likelihood f32[B] and the last coded observation
+    i32[E + 1] (its input), and ``match`` bool[B] (buffer b explains the prefix)."""
+
+    index: jax.Array
+    copies: Any
+    start_copies: Any
+    total: jax.Array
+    start_total: jax.Array
+    count: jax.Array
+    match: jax.Array
+    last: jax.Array
+    ref_hidden: Any = None
+    ref_total: Any = None
+
+
+@dataclass(frozen=True)
+class SimulatedTracker:
+    """The simulated belief model as a tracker component over N rollout envs (the rollout's
+    ``frozen``: levels [F, ...] buffer-major with ``valid`` bool[F], and ``belief`` a
+    :class:`FrozenSims`). ``budget`` candidate slots per env, each following one frozen level in
+    two copies; ``reseed`` (static: ``UEDTask.reseed_level``, or None) draws a copy's randomness;
+    ``ref_model`` the GRU of the ratio's reference. The environment's reset must ignore its key
+    (the candidate tracker's condition): the copies' first states are computed once per rollout."""
+
+    coding: ObsCoding
+    ref_model: BeliefModel
+    num_buffers: int
+    budget: int = 64
+    reseed: Callable | None = None
+
+    def __hash__(self):
+        return hash((self.coding, self.ref_model, self.num_buffers, self.budget, id(self.reseed)))
+
+    def __eq__(self, other):
+        return (isinstance(other, SimulatedTracker) and (self.coding, self.ref_model, self.num_buffers, self.budget)
+                == (other.coding, other.ref_model, other.num_buffers, other.budget) and self.reseed is other.reseed)
+
+    # -- scoring
+    def scores(self, frozen, state: SimState) -> jax.Array:
+        """f32[N, B]: each frozen buffer's score of each env's prefix, per step: the mixture's
+        log-likelihood, minus the reference's with a reference, over the prefix's length."""
+        capacity = frozen.valid.shape[0] // self.num_buffers
+        mix = jax.vmap(mixture, in_axes=(0, 0, None, None, None))(state.total, state.index, frozen.valid,
+                                                                   self.num_buffers, capacity)  # [N, B]
+        score = mix if state.ref_total is None else mix - state.ref_total
+        return score / jnp.maximum(state.count, 1)[:, None]
+
+    def _judge(self, frozen, state: SimState) -> jax.Array:
+        """bool[N, B]: each frozen buffer's score reaches its threshold for the prefix's length."""
+        sims = frozen.belief
+        tau = sims.threshold[:, length_bucket(state.count, sims.threshold.shape[1])].T  # [N, B]
+        return sims.valid[None, :] & (self.scores(frozen, state) >= tau)
+
+    def _ref_logliks(self, refs, hidden, cats) -> jax.Array:
+        return jax.vmap(lambda p, h: self.ref_model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(refs, hidden)
+
+    def _copies(self, frozen):
+        """The frozen levels' two copies (leaves [F, ...] each), their randomness drawn afresh."""
+        if self.reseed is None:
+            return frozen.levels, frozen.levels
+        f = frozen.valid.shape[0]
+        k1, k2 = jax.random.split(frozen.belief.key)
+        return (jax.vmap(self.reseed)(jax.random.split(k1, f), frozen.levels),
+                jax.vmap(self.reseed)(jax.random.split(k2, f), frozen.levels))
+
+    # -- the component's methods
+    def start_coded(self, env, params, frozen, agent) -> SimState:
+        """The state at the envs' first coded observations ``agent`` i32[N, E + 1]."""
+        n = agent.shape[0]
+        key0 = jax.random.PRNGKey(0)  # the reset ignores it
+        firsts = [jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(key0, lv, params) for lv in self._copies(frozen)]
+        c1, c2 = (with_end(self.coding, obs, jnp.zeros(frozen.valid.shape, bool)) for obs, _ in firsts)
+        index, total = jax.vmap(candidates, in_axes=(None, 0, None, None, None, None))(
+            frozen.belief.logq, agent, c1, c2, frozen.valid, self.budget)  # [N, S]
+        gather = lambda states: jax.tree.map(lambda x: x[jnp.maximum(index, 0)], states)  # noqa: E731
+        copies = jax.tree.map(lambda a, b: jnp.stack([a, b], axis=2), gather(firsts[0][1]), gather(firsts[1][1]))
+        count = jnp.ones((n,), jnp.int32)
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            ref_hidden = self.ref_model.initial_hidden((n, self.num_buffers))
+            ref_total = self._ref_logliks(frozen.belief.ref, ref_hidden, agent[:, :-1])
+        state = SimState(index=index, copies=copies, start_copies=copies, total=total, start_total=total,
+                         count=count, match=jnp.zeros((n, self.num_buffers), bool), last=agent,
+                         ref_hidden=ref_hidden, ref_total=ref_total)
+        return state.replace(match=self._judge(frozen, state))
+
+    def start(self, env, params, frozen, reset_keys, obs, starts=None) -> SimState:
+        return self.start_coded(env, params, frozen, with_end(self.coding, obs, jnp.zeros(reset_keys.shape[:1], bool)))
+
+    def explained(self, state: SimState) -> jax.Array:
+        return jnp.any(state.match, axis=-1)
+
+    def advance_coded(self, env, params, frozen, env_keys, state: SimState, action, agent, done) -> SimState:
+        """After the envs took ``action`` [N] with ``env_keys`` [N] and saw the coded observation
+        ``agent`` i32[N, E + 1] (the next episode's first where ``done`` bool[N]: the slots restart)."""
+        step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
+        step = jax.vmap(jax.vmap(jax.vmap(env.step, in_axes=(None, 0, None, None)),  # the two copies
+                                 in_axes=(None, 0, None, None)),  # the slots
+                        in_axes=(0, 0, 0, None))  # the envs
+        obs, copies, _, ended, _ = step(step_keys, state.copies, action, params)
+        codes = with_end(self.coding, obs, ended)  # [N, S, 2, E + 1]
+        lq = step_logq(frozen.belief.logq, agent[:, None], codes[:, :, 0], codes[:, :, 1])  # [N, S]
+        total = jnp.where(state.index >= 0, state.total + lq, -jnp.inf)
+        restart = done[:, None]
+        total = jnp.where(restart, state.start_total, total)
+        copies = jax.tree.map(lambda s, c: jnp.where(restart.reshape(restart.shape + (1,) * (c.ndim - 2)), s, c),
+                              state.start_copies, copies)
+        count = jnp.where(done, 0, state.count) + 1
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            hidden = jax.vmap(lambda p, h: self.ref_model.cell(p, h, state.last[:, :-1], action), in_axes=(0, 1),
+                              out_axes=1)(frozen.belief.ref, state.ref_hidden)
+            ref_hidden = jnp.where(done[:, None, None], 0.0, hidden)
+            ref_total = (jnp.where(done[:, None], 0.0, state.ref_total)
+                         + self._ref_logliks(frozen.belief.ref, ref_hidden, agent[:, :-1]))
+        state = state.replace(copies=copies, total=total, count=count, last=agent, ref_hidden=ref_hidden,
+                              ref_total=ref_total)
+        fresh = self._judge(frozen, state)
+        return state.replace(match=jnp.where(done[:, None], fresh, state.match & fresh))
+
+    def advance(self, env, params, frozen, env_keys, state: SimState, action, next_obs, done) -> SimState:
+        # the agent's own end entry is 0: an ended episode restarts (as the exact tracker does)
+        agent = with_end(self.coding, next_obs, jnp.zeros(done.shape, bool))
+        return self.advance_coded(env, params, frozen, env_keys, state, action, agent, done)
+
+    def overflow(self, state: SimState) -> jax.Array:
+        return jnp.zeros(state.count.shape, jnp.int32)
+
+    def buffer_match(self, state: SimState, num_buffers: int, capacity: int) -> jax.Array:
+        return state.match[:, :num_buffers]
+
+
+
+def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, actions, resets, key) -> jax.Array:
+    """f32[T, N, B]: the tracker's per-step scores (:meth:`SimulatedTracker.scores`) of a recorded
+    rollout (``codes`` i32[T, N, E + 1] of :func:`recorded_codes`, ``actions`` [T, N], ``resets``
+    bool[T, N]) against ``frozen``: what calibration needs, the same computation as in a rollout."""
+    agent = codes.at[:, :, -1].set(0)  # an ended episode restarts: the agent's own end entry is 0
+    state = tracker.start_coded(env, params, frozen, agent[0])
+    first = tracker.scores(frozen, state)
+    n = actions.shape[1]
+
+    def body(state, inp):
+        act, obs, restart, k = inp
+        state = tracker.advance_coded(env, params, frozen, jax.random.split(k, n), state, act, obs, restart)
+        return state, tracker.scores(frozen, state)
+
+    keys = jax.random.split(key, actions.shape[0] - 1)
+    _, later = jax.lax.scan(body, state, (actions[:-1], agent[1:], resets[1:], keys))
+    return jnp.concatenate([first[None], later])

@@ -41,6 +41,7 @@ from flax import struct
 
 from remidi.engine import belief as bl
 from remidi.engine import buffer as buf
+from remidi.engine import simulated as sm
 from remidi.engine.config import buffer_config
 from remidi.engine.rollout import Frozen
 from remidi.engine.tracker import make_tracker
@@ -265,6 +266,11 @@ def earlier_buffers(setup, runner) -> Frozen | None:
     k = earlier.valid.shape[0]
     valid = earlier.valid & (jnp.arange(k) < runner.active)[:, None]
     flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+    if uses_simulated(setup):  # remidi.tracker=simulated: the earlier buffers' levels, simulated with learnt noise
+        return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
+                      tracker=simulated_tracker(setup, k),
+                      belief=sm.frozen_sims(runner.belief, runner.active, sm.SMOOTHING,
+                                            jax.random.fold_in(jax.random.PRNGKey(19), runner.update)))
     if runner.belief is not None:  # remidi.tracker=belief: the earlier buffers' learned models judge
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                       tracker=bl.BeliefTracker(belief_model(setup)),
@@ -302,10 +308,24 @@ def rehearse_frozen(setup, runner, proposal: Proposal, rng) -> Proposal:
 
 
 def uses_belief(setup) -> bool:
-    """The run judges distinguishability by learned models (``remidi.tracker=belief``): a sequence
-    of at least two buffers or generators."""
+    """The run judges distinguishability by learned models (``remidi.tracker=belief`` or
+    ``simulated``): a sequence of at least two buffers or generators."""
     r = setup.cfg.remidi
-    return setup.algo.buffer_sequence and r.tracker == "belief" and r.num_buffers >= 2
+    return setup.algo.buffer_sequence and r.tracker in ("belief", "simulated") and r.num_buffers >= 2
+
+
+def uses_simulated(setup) -> bool:
+    """The run judges by the simulated belief model (``remidi.tracker=simulated``, engine/simulated.py)."""
+    return uses_belief(setup) and setup.cfg.remidi.tracker == "simulated"
+
+
+def simulated_tracker(setup, num_buffers: int) -> sm.SimulatedTracker:
+    """The simulated tracker over ``num_buffers`` frozen buffers (the earlier buffers; one to calibrate)."""
+    r = setup.cfg.remidi
+    model = belief_model(setup)
+    return sm.SimulatedTracker(model.coding, model, num_buffers,
+                               budget=min(r.tracker_budget, num_buffers * r.buffer_capacity),
+                               reseed=setup.task.reseed_level)
 
 
 @functools.lru_cache(maxsize=None)
@@ -332,6 +352,12 @@ def belief_memory(setup, rng):
     if not uses_belief(setup):
         return None
     cfg = setup.cfg
+    if uses_simulated(setup):
+        model = belief_model(setup)
+        level = jax.eval_shape(setup.task.sample_level, jax.random.PRNGKey(0))
+        return sm.init_memory(model.coding, model, belief_optimizer(setup), cfg.remidi.num_buffers,
+                              cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31),
+                              level, max_length=setup.task.max_episode_steps, reference=cfg.remidi.belief_reference)
     return bl.init_memory(belief_model(setup), belief_optimizer(setup), cfg.remidi.num_buffers,
                           cfg.remidi.belief_calibration, cfg.num_steps, cfg.num_envs, jax.random.fold_in(rng, 31),
                           max_length=setup.task.max_episode_steps, reference=cfg.remidi.belief_reference)
@@ -347,6 +373,12 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
     fresh = ~proposal.replay  # the task generator's levels: no replay, no edit, no rehearsal
     for other in (proposal.edit, proposal.rehearse):
         fresh = fresh if other is None else fresh & ~other
+    if uses_simulated(setup):
+        model = belief_model(setup)
+        memory = sm.learn(runner.belief, setup.task.env, setup.task.params, model.coding, setup.task.reseed_level, model,
+                          belief_optimizer(setup), proposal.levels, traj, setup.algo.adversary.own_levels(proposal),
+                          fresh, setup.cfg.remidi.belief_epochs, jax.random.fold_in(jax.random.PRNGKey(23), runner.update))
+        return {"belief": memory}, {}
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
                             setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs, fresh=fresh)
     return {"belief": memory}, {"belief/loss": loss}
@@ -359,6 +391,12 @@ def belief_freezes(setup, runner, switch) -> dict:
     for every adversary."""
     if runner.belief is None:
         return {}
+    if uses_simulated(setup):
+        active = buf.select_buffer(runner.buffers, runner.active)
+        r = setup.cfg.remidi
+        return {"belief": sm.freeze(simulated_tracker(setup, 1), runner.belief, setup.task.env, setup.task.params,
+                                    active.levels, active.valid, runner.active, switch, r.belief_false_rate,
+                                    r.belief_margin, sm.SMOOTHING, jax.random.fold_in(jax.random.PRNGKey(29), runner.update))}
     return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
                                 setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin, belief_model(setup))}
 
@@ -375,6 +413,9 @@ def belief_contents(setup, runner) -> dict:
     memory = runner.belief
     last = memory.threshold[jnp.maximum(runner.active - 1, 0)]  # f32[L]
     frozen = runner.active > 0
+    if uses_simulated(setup):
+        return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
+                "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan)}
     return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
             "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan),
             "belief/heldout_score": bl.heldout_score(memory),

@@ -33,9 +33,10 @@ class ReMiDiConfig:
         "help": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' "
                 "unit) or replays"})
     tracker: str = field(default="prefix", metadata={
-        "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule) or belief "
+        "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule), belief "
                 "(a learned model per buffer judges the prefix: for environments whose observations are random "
-                "given the level; engine/belief.py)"})
+                "given the level; engine/belief.py) or simulated (the frozen levels simulated under fresh randomness "
+                "with a learnt noise model, the belief_* keys as for belief; engine/simulated.py)"})
     # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
     # env's first observation are stepped, at most this many; 0 steps every frozen level (the
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)

@@ -37,6 +37,9 @@ import jax.numpy as jnp
 from flax import struct
 
 from remidi.engine.belief import BeliefModel, ObsCoding, length_bucket
+from remidi.envs.interface import tree_equal
+
+SMOOTHING = 0.1  # the noise table's Dirichlet prior per cell (log_q)
 
 
 # ---------------------------------------------------------------------------- the noise table
@@ -329,3 +332,126 @@ def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, action
     keys = jax.random.split(key, actions.shape[0] - 1)
     _, later = jax.lax.scan(body, state, (actions[:-1], agent[1:], resets[1:], keys))
     return jnp.concatenate([first[None], later])
+
+
+# ---------------------------------------------------------------------------- in a run
+@struct.dataclass
+class SimMemory:
+    """What a ReMiDi run with ``remidi.tracker=simulated`` carries (``Runner.belief``).
+
+    ``counts`` (:func:`init_counts`): the noise table, learnt from every rollout (the noise is the
+    environment's, not an adversary's); ``ref`` / ``ref_opt``: the generator's GRU model (the
+    ratio's denominator, learning from rollouts of fresh levels; None without
+    ``remidi.belief_reference``), copied into ``ref_frozen`` [K, ...] when buffer k is frozen;
+    ``threshold`` f32[K, L] (+inf until calibrated); the active buffer's last R replays
+    (``codes`` i8[R, T, N, E + 1], ``actions``, ``resets``, and the replayed ``levels`` leaves
+    [R, N, ...]; ``written`` i32[] since the switch), scored against the buffer at its freeze to
+    calibrate its threshold (the envs whose level the buffer has since dropped left out)."""
+
+    counts: jax.Array
+    threshold: jax.Array
+    codes: jax.Array
+    actions: jax.Array
+    resets: jax.Array
+    levels: Any
+    written: jax.Array
+    ref: Any = None
+    ref_opt: Any = None
+    ref_frozen: Any = None
+
+
+def init_memory(coding: ObsCoding, model: BeliefModel, optimizer, num_buffers: int, rows: int, num_steps: int,
+                num_envs: int, rng, example_level, max_length: int | None = None, reference: bool = True) -> SimMemory:
+    """A fresh memory: an empty table, ``rows`` replays of T = ``num_steps`` steps of ``num_envs``
+    envs recorded (levels like ``example_level``), thresholds per length bucket (prefixes of at
+    most ``min(T, max_length)`` steps), and with ``reference`` a fresh GRU reference."""
+    from remidi.engine.belief import num_length_buckets
+
+    batch = (rows, num_steps, num_envs)
+    ref = ref_opt = ref_frozen = None
+    if reference:
+        ref = model.init(jax.random.fold_in(rng, 1))
+        ref_opt = optimizer.init(ref)
+        ref_frozen = jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+    buckets = num_length_buckets(min(num_steps, max_length or num_steps))
+    return SimMemory(counts=init_counts(coding), threshold=jnp.full((num_buffers, buckets), jnp.inf),
+                     codes=jnp.zeros(batch + (coding.num_entries + 1,), jnp.int8),
+                     actions=jnp.zeros(batch, jnp.int32), resets=jnp.ones(batch, bool),
+                     levels=jax.tree.map(lambda x: jnp.zeros((rows, num_envs) + x.shape, x.dtype), example_level),
+                     written=jnp.zeros((), jnp.int32), ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen)
+
+
+def learn(memory: SimMemory, env, params, coding: ObsCoding, reseed, model: BeliefModel, optimizer, levels, traj,
+          own, fresh, epochs: int, key) -> SimMemory:
+    """After a rollout (``traj`` leaves [T, N, ...]) of ``levels`` (leaves [N, ...]): the noise
+    table counts its triples (every rollout); a replay of the active buffer (``own`` bool[]) is
+    recorded for its calibration; the reference learns from rollouts of fresh levels (``fresh``)."""
+    from remidi.engine.belief import fit_steps
+
+    counts = count_rollout(memory.counts, env, params, coding, reseed, levels, traj.obs, traj.action, traj.reset, key)
+    rows = memory.codes.shape[0]
+    row = jnp.where(own, memory.written % rows, rows)  # rows: out of bounds, dropped
+    memory = memory.replace(
+        counts=counts,
+        codes=memory.codes.at[row].set(recorded_codes(coding, traj.obs, traj.reset).astype(jnp.int8), mode="drop"),
+        actions=memory.actions.at[row].set(traj.action, mode="drop"),
+        resets=memory.resets.at[row].set(traj.reset, mode="drop"),
+        levels=jax.tree.map(lambda all_, x: all_.at[row].set(x, mode="drop"), memory.levels, levels),
+        written=memory.written + own.astype(jnp.int32))
+    if memory.ref is None:
+        return memory
+
+    def fit_reference(m: SimMemory) -> SimMemory:
+        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
+        return m.replace(ref=ref, ref_opt=ref_opt)
+
+    return jax.lax.cond(fresh, fit_reference, lambda m: m, memory)
+
+
+def freeze(tracker: SimulatedTracker, memory: SimMemory, env, params, buffer_levels, buffer_valid, active, switch,
+           false_rate: float, margin: float, smoothing: float, key) -> SimMemory:
+    """At a buffer switch (``switch`` bool[]): the active buffer's threshold is calibrated on its
+    recorded replays, each scored against the buffer's levels (``buffer_levels`` leaves [C, ...],
+    ``buffer_valid`` bool[C]) as the tracker will score fresh prefixes against it (with the
+    reference frozen now; :func:`~remidi.engine.belief.calibrate_monotone`; +inf, explaining
+    nothing, without a recorded replay); the reference is frozen with it and the record emptied.
+    ``tracker``: the run's, for one buffer. Computed only at a switch."""
+    from remidi.engine.belief import calibrate_monotone, prefix_lengths
+
+    def switched(m: SimMemory) -> SimMemory:
+        rows, k = m.codes.shape[0], m.threshold.shape[0]
+        frozen = _one_buffer(buffer_levels, buffer_valid, m, smoothing, key,
+                             None if m.ref is None else jax.tree.map(lambda x: x[None], m.ref))
+        scores = jax.lax.map(lambda x: score_recorded(tracker, env, params, frozen, x[0].astype(jnp.int32), x[1], x[2],
+                                                      jax.random.fold_in(key, 1))[..., 0],
+                             (m.codes, m.actions, m.resets))  # [R, T, N]
+        lengths = jax.vmap(prefix_lengths)(m.resets)
+        # an env's replayed level counts only if the buffer still holds it (PLR replaces levels)
+        held = jax.vmap(jax.vmap(lambda lv: jnp.any(buffer_valid & jax.vmap(tree_equal, in_axes=(0, None))(
+            buffer_levels, lv))))(m.levels)  # [R, N]
+        valid = (jnp.arange(rows) < m.written)[:, None, None] & held[:, None, :]
+        valid = jnp.broadcast_to(valid, scores.shape)
+        tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, false_rate,
+                                 m.threshold.shape[1], valid, margin=margin)
+        tau = jnp.where(jnp.any(valid), tau, jnp.inf)
+        ref_frozen = None if m.ref is None else jax.tree.map(lambda all_, r: all_.at[active].set(r), m.ref_frozen, m.ref)
+        return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
+                         ref_frozen=ref_frozen)
+
+    return jax.lax.cond(switch, switched, lambda m: m, memory)
+
+
+def _one_buffer(levels, valid, memory: SimMemory, smoothing: float, key, ref):
+    from remidi.engine.rollout import Frozen
+
+    return Frozen(levels=levels, valid=valid,
+                  belief=FrozenSims(logq=log_q(memory.counts, smoothing), threshold=jnp.zeros((1, memory.threshold.shape[1])),
+                                    valid=jnp.ones((1,), bool), key=key, ref=ref))
+
+
+def frozen_sims(memory: SimMemory, active, smoothing: float, key) -> FrozenSims:
+    """What the rollout's tracker reads: the buffers before ``active`` (B = K − 1 entries)."""
+    k = memory.threshold.shape[0]
+    ref = None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
+    return FrozenSims(logq=log_q(memory.counts, smoothing), threshold=memory.threshold[:-1],
+                      valid=jnp.arange(k - 1) < active, key=key, ref=ref)

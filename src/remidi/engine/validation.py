@@ -348,9 +348,10 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     choice("remidi.count", r.count, ("updates", "replays"))
     require(r.count == "updates" or algo.replays or not algo.buffer_sequence, "remidi.count", "updates with a "
             "learned generator (a generator never replays, so counting replays would never switch it)", r.count)
-    if r.tracker not in MODES + ("belief",):  # the exact tracker is "prefix" (the definition); name it so
+    if r.tracker not in MODES + ("belief", "simulated"):  # the exact tracker is "prefix" (the definition); name it so
         raise ConfigError(f"remidi.tracker: unknown value {r.tracker!r}; allowed: prefix (the exact tracker, the "
-                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model)")
+                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model), "
+                          f"simulated (the frozen levels simulated under fresh randomness, with a learnt noise model)")
     # the belief model's keys are checked whichever tracker runs: a bad value is a mistake either way
     require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)", r.belief_false_rate)
     positive_int("remidi.belief_hidden", r.belief_hidden)
@@ -359,7 +360,12 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
     require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
     require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
-    if r.tracker == "belief":
+    if r.tracker == "simulated":
+        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step or belief with a "
+                "learned generator (the simulated model needs the adversary's levels: a buffer's)", r.tracker)
+        require(task.deterministic_reset, "remidi.tracker", "prefix, per_step or belief for a task whose reset draws "
+                "randomness (the simulated model follows the frozen levels from their fixed starts)", r.tracker)
+    if r.tracker in ("belief", "simulated"):
         require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
                 "(the reference learns from the task generator's fresh levels, which a generator never plays)",
                 r.belief_reference)
@@ -370,13 +376,14 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         obs = example_observation(task)[0]
         problem = bl.coding_problem(bl.coding_for(obs), obs)
         if problem is not None:
-            raise ConfigError(f"remidi.tracker: belief cannot read this task: {problem}; allowed here: prefix, "
+            raise ConfigError(f"remidi.tracker: {r.tracker} cannot read this task: {problem}; allowed here: prefix, "
                               f"per_step")
     choice("remidi.policy", r.policy, POLICIES)
     if r.policy == "combine":
         require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
                 "observations normalised by statistics gathered after they were frozen)", r.policy)
-        require(r.tracker in ("prefix", "belief"), "remidi.tracker", "prefix or belief with remidi.policy=combine (a "
+        require(r.tracker in ("prefix", "belief", "simulated"), "remidi.tracker", "prefix, belief or simulated with "
+                "remidi.policy=combine (a "
                 "policy per buffer acts where that buffer's levels produced, or its model explains, the whole prefix)",
                 r.tracker)
     require(isinstance(r.rehearsal, (int, float)) and not isinstance(r.rehearsal, bool) and 0 <= r.rehearsal <= 1,

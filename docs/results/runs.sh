@@ -112,6 +112,12 @@ run remidi-belief-s0 lever remidi 0 10 paper --set remidi.tracker=belief
 run remidi-belief-margin2-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief --set remidi.belief_margin=2
 run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief
 
+at f199ddc  # the simulated belief model (remidi.tracker=simulated), ahead of the keep block
+for e in blindfold-noisy tmaze; do
+  run remidi-simulated-s0 $e remidi 0 5 cpu --set remidi.tracker=simulated --set remidi.belief_reference=true \
+    --set remidi.belief_false_rate=0
+done
+
 # issue #31: keeping earlier skills (the masked policy, combine, rehearsal 0.1 and 0.3), blindfold
 # and T-maze, cpu preset, 5 seeds each, all at the commit that stated their claims (a GPU job:
 # the preset notes ≈ 20 minutes per seed and algorithm on a 2-core CPU, so 40 seed-runs here)

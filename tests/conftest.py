@@ -121,7 +121,7 @@ def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[s
 
 # the files that take longest on a cold cache (worker-seconds, 2-core CPU, measured with the
 # compile report below), heaviest first; the others follow in their usual order
-HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_brax_smoke", "test_examples", "test_belief",
+HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_brax_smoke", "test_examples", "test_belief", "test_simulated",
                "test_cli", "test_engine_reference_maze", "test_engine_reference", "test_bench", "test_continuous", "test_sharding",
                "test_maze_env", "test_accel", "test_gymnax", "test_tracker_equivalence", "test_evaluate", "test_tabular_ued",
                "test_interrupt", "test_ued_engine", "test_render", "test_ppo", "test_buffer", "test_networks",

@@ -154,12 +154,13 @@ def test_candidates_are_the_most_likely_first_observations():
     assert np.asarray(lq)[0] > np.asarray(lq)[2]
 
 
-def _judge_fresh_levels(task, tag, reference: bool):
+def _judge_fresh_levels(task, tag, variants):
     """The probe of docs/belief_probe_simulated.py through the tracker component in a rollout,
     smaller: a frozen buffer of 32 levels, 90 % irreducible (as PLR⊥'s at the cpu preset), a
     random policy; the table from fresh levels' rollouts, the reference fit on one, thresholds
-    calibrated (false rate 0.05) on a rollout of the buffer's levels with fresh randomness, then
-    fresh generator levels judged beside the exact tracker. Returns (explained, exact, irreducible)."""
+    calibrated on a rollout of the buffer's levels with fresh randomness, then fresh generator
+    levels judged beside the exact tracker, for each of ``variants`` ((judge by the ratio over
+    the reference, false rate), ...). Returns ([explained per variant], exact, irreducible)."""
     from remidi.engine.rollout import Frozen
     from remidi.engine.tracker import ExactTracker
 
@@ -188,7 +189,7 @@ def _judge_fresh_levels(task, tag, reference: bool):
                                   traj.action, traj.reset, jax.random.PRNGKey(30 + i))
     model = bl.BeliefModel(coding, num_actions=a, hidden=32)
     ref = None
-    if reference:
+    if any(reference for reference, _ in variants):
         opt = bl.make_optimizer(1e-2)
         gen = roll(sample(jax.random.PRNGKey(40), n), jax.random.PRNGKey(41))
         params = model.init(jax.random.PRNGKey(42))
@@ -197,42 +198,42 @@ def _judge_fresh_levels(task, tag, reference: bool):
     tracker = sm.SimulatedTracker(coding, model, num_buffers=1, budget=c, reseed=task.reseed_level)
     buckets = bl.num_length_buckets(t)
 
-    def frozen(threshold):
+    def frozen(threshold, reference):
         return Frozen(levels=buffer, valid=jnp.ones((c,), bool), tracker=tracker,
                       belief=sm.FrozenSims(logq=sm.log_q(counts), threshold=threshold, valid=jnp.ones((1,), bool),
-                                           key=jax.random.PRNGKey(50), ref=ref))
+                                           key=jax.random.PRNGKey(50), ref=ref if reference else None))
 
     pick = jax.random.randint(jax.random.PRNGKey(60), (n,), 0, c)
     held_levels = jax.tree.map(lambda x: x[pick], buffer)
     if task.reseed_level is not None:
         held_levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.PRNGKey(61), n), held_levels)
     held = roll(held_levels, jax.random.PRNGKey(62))
-    cal = frozen(jnp.zeros((1, buckets)))
-    scores = jax.jit(lambda f, codes, act, rs: sm.score_recorded(tracker, task.env, task.params, f, codes, act, rs,
-                                                                 jax.random.PRNGKey(63)))(
-        cal, sm.recorded_codes(coding, held.obs, held.reset), held.action, held.reset)[..., 0]
-    tau = bl.calibrate_monotone(scores[None], bl.prefix_lengths(held.reset)[None], 0.05, buckets)
     fresh = sample(jax.random.PRNGKey(70), n)
-    judged = roll(fresh, jax.random.PRNGKey(71), frozen(tau[None]))
+    judged = []
+    for reference, false_rate in variants:
+        scores = jax.jit(lambda f, codes, act, rs: sm.score_recorded(tracker, task.env, task.params, f, codes, act, rs,
+                                                                     jax.random.PRNGKey(63)))(
+            frozen(jnp.zeros((1, buckets)), reference), sm.recorded_codes(coding, held.obs, held.reset), held.action,
+            held.reset)[..., 0]
+        tau = bl.calibrate_monotone(scores[None], bl.prefix_lengths(held.reset)[None], false_rate, buckets)
+        judged.append(np.asarray(roll(fresh, jax.random.PRNGKey(71), frozen(tau[None], reference)).indist))
     exact = roll(fresh, jax.random.PRNGKey(71), Frozen(levels=buffer, valid=jnp.ones((c,), bool), tracker=ExactTracker()))
-    return np.asarray(judged.indist), np.asarray(exact.indist), tags(fresh)
+    return judged, np.asarray(exact.indist), tags(fresh)
 
 
-@pytest.mark.parametrize("reference", [False, True])
-def test_on_the_t_maze_the_simulated_model_judges_as_the_exact_tracker_does(reference):
+def test_on_the_t_maze_the_simulated_model_judges_as_the_exact_tracker_does():
     """Deterministic: the table learns the identity and the mixture over the buffer is the exact
-    tracker; with the ratio over the generator's GRU the calibration costs a few T-maze prefixes
-    (the stated false rate). Measured: agreement 1.00 alone, ≥ 0.95 with the reference."""
+    tracker (judged alone, at the default false rate); judged by the ratio over the generator's
+    GRU at false rate 0 (the results page's configuration) it agrees too. Both measured 1.00;
+    the ratio at 0.05 leaves ≈ 0.1 of T-maze steps unexplained (the false rate, measured 0.89)."""
     from remidi.envs.maze import maze_task
 
-    judged, exact, tmaze = _judge_fresh_levels(maze_task("tmaze", 0.5, 25), "tmaze", reference)
-    print(judged[:, tmaze].mean(), judged[:, ~tmaze].mean(), exact[:, tmaze].mean(), exact[:, ~tmaze].mean())
+    (alone, ratio), exact, tmaze = _judge_fresh_levels(maze_task("tmaze", 0.5, 25), "tmaze",
+                                                       [(False, 0.05), (True, 0.0)])
     assert exact[:, tmaze].mean() > 0.9 and exact[:, ~tmaze].mean() < 0.05
-    if not reference:
-        assert np.mean(judged == exact) >= 0.99
-    else:  # the calibrated ratio leaves some of the buffer's kind of prefixes unexplained (the false rate)
-        assert judged[:, tmaze].mean() >= 0.85
-    assert np.all(judged <= exact)  # never explains what no frozen level produced
+    assert np.mean(alone == exact) >= 0.99
+    assert np.mean(ratio == exact) >= 0.97
+    assert np.all(alone <= exact) and np.all(ratio <= exact)  # never explains what no frozen level produced
 
 
 def test_on_a_noisy_tv_the_ratio_explains_fresh_blind_levels_and_no_ordinary_maze():
@@ -242,7 +243,7 @@ def test_on_a_noisy_tv_the_ratio_explains_fresh_blind_levels_and_no_ordinary_maz
     TV makes any view as likely as any other)."""
     from remidi.envs.noisy import noisy_blindfold_task
 
-    judged, exact, blind = _judge_fresh_levels(noisy_blindfold_task(0.5, 25), "blind", True)
+    (judged,), exact, blind = _judge_fresh_levels(noisy_blindfold_task(0.5, 25), "blind", [(True, 0.0)])
     assert exact.mean() == 0.0
     assert judged[:, blind].mean() > 0.8
     assert judged[:, ~blind].mean() < 0.1

@@ -382,8 +382,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     if r.policy == "combine":
         require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
                 "observations normalised by statistics gathered after they were frozen)", r.policy)
-        require(r.tracker in ("prefix", "belief", "simulated"), "remidi.tracker", "prefix, belief or simulated with "
-                "remidi.policy=combine (a "
+        require(r.tracker in ("prefix", "belief"), "remidi.tracker", "prefix or belief with remidi.policy=combine (a "
                 "policy per buffer acts where that buffer's levels produced, or its model explains, the whole prefix)",
                 r.tracker)
     require(isinstance(r.rehearsal, (int, float)) and not isinstance(r.rehearsal, bool) and 0 <= r.rehearsal <= 1,

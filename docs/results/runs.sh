@@ -115,7 +115,7 @@ run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief
 at f199ddc  # the simulated belief model (remidi.tracker=simulated), ahead of the keep block
 for e in blindfold-noisy tmaze; do
   run remidi-simulated-s0 $e remidi 0 5 cpu --set remidi.tracker=simulated --set remidi.belief_reference=true \
-    --set remidi.belief_false_rate=0
+    --set remidi.belief_false_rate=0 --set remidi.belief_margin=5
 done
 
 # issue #31: keeping earlier skills (the masked policy, combine, rehearsal 0.1 and 0.3), blindfold

@@ -169,21 +169,21 @@ CLAIMS = (
           "(defaults) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (belief)", "plr"),), min_seeds=5),
     Claim("blindfold-noisy-simulated", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the simulated "
-          "belief model (remidi.tracker=simulated judged by the ratio over the generator, belief_false_rate 0: chosen "
-          "on constructed adversaries and one smoke seed, docs/belief-tracker-plan.md) keeps fewer blind levels in its "
-          "last buffer than with the exact tracker (smoke preset, 1 seed, before this claim: 0.00 against the exact "
-          "tracker's 0.53–0.59)", "summary:buffer_fraction/blind", ("blindfold-noisy",),
-          greater=(("remidi", "remidi (simulated, ratio, false rate 0)"),), min_seeds=5),
+          "belief model (remidi.tracker=simulated judged by the ratio over the generator, belief_false_rate 0, "
+          "belief_margin 5 nats per step: chosen on constructed adversaries and one smoke seed per domain, "
+          "docs/belief-tracker-plan.md) keeps fewer blind levels in its last buffer than with the exact tracker "
+          "(smoke preset, 1 seed, before this claim: 0.00 against the exact tracker's 0.53–0.59)", "summary:buffer_fraction/blind", ("blindfold-noisy",),
+          greater=(("remidi", "remidi (simulated, ratio, false rate 0, margin 5)"),), min_seeds=5),
     Claim("blindfold-noisy-simulated-heldout", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the "
           "simulated belief model solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean",
-          ("blindfold-noisy",), greater=(("remidi (simulated, ratio, false rate 0)", "plr"),), min_seeds=5),
+          ("blindfold-noisy",), greater=(("remidi (simulated, ratio, false rate 0, margin 5)", "plr"),), min_seeds=5),
     Claim("tmaze-simulated-agreement", "beyond the paper (T-maze, #31)", "on the deterministic T-maze task the "
           "simulated belief model judges steps as the exact tracker does (bound: the share of steps of the last audit "
           "rollout both judge alike in [0.95, 1]; before this claim: 1.00 on the constructed adversary of "
-          "docs/belief_probe_simulated.py, and 1.0 at every audit of one smoke seed judged by the mixture alone)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (simulated, ratio, false rate 0)", 0.95, 1.0),), min_seeds=5),
+          "docs/belief_probe_simulated.py, and 1.0 at every audit of one smoke seed)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (simulated, ratio, false rate 0, margin 5)", 0.95, 1.0),), min_seeds=5),
     Claim("tmaze-simulated-heldout", "beyond the paper (T-maze, #31)", "ReMiDi with the simulated belief model "
           "solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
-          greater=(("remidi (simulated, ratio, false rate 0)", "plr"),), min_seeds=5),
+          greater=(("remidi (simulated, ratio, false rate 0, margin 5)", "plr"),), min_seeds=5),
     Claim("blindfold-keep-combine", "beyond the paper (blindfold, #31)", "ReMiDi's exact multi-policy form "
           "(remidi.policy=combine) solves more of the generator's blind levels than the masked single policy (both "
           "trained at one commit)",
@@ -287,7 +287,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
 def label(algo: str, config: dict, command: list | None = None) -> str:
     """How the page names an algorithm's runs: a learned generator's with its regret estimator
     (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief tracker); a buffer sequence's with what differs from its exact single-policy
-    form (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
+    form (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
     ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
     baseline run beside its variants, kept apart from the plain runs of earlier claims); the
     others by name."""
@@ -305,6 +305,8 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
         parts.append("simulated, ratio" if r.get("belief_reference") else "simulated")
         if r.get("belief_false_rate", 0.05) != 0.05:
             parts.append(f"false rate {r['belief_false_rate']:g}")
+        if r.get("belief_margin", 1e-3) != 1e-3:
+            parts.append(f"margin {r['belief_margin']:g}")
     if r.get("policy") == "combine":
         parts.append("combine")
     elif any(str(token).endswith("remidi.policy=masked") for token in command or []):
@@ -485,7 +487,7 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
     "tabular-shared": (["mmr", "remidi"], ["summary:regret/h1", "summary:regret/h3", "summary:regret/h5",
                                            "summary:adversary_prob/theta5"],
                        ["regret/h1", "regret/h3", "regret/h5", "adversary_prob/theta5", "adversary_prob/theta6"]),
-    "tmaze": (["dr", "plr", "minimax-return", "remidi", "remidi (belief)", "remidi (simulated, ratio, false rate 0)", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
+    "tmaze": (["dr", "plr", "minimax-return", "remidi", "remidi (belief)", "remidi (simulated, ratio, false rate 0, margin 5)", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
                "remidi (rehearsal 0.3)", "paired (perfect)", "remidi-paired (perfect)"],
               ["evaluate:solve_rate/mean", "summary:replay_fraction/tmaze", "evaluate:cvar/solve_rate/100%",
                "evaluate:cvar/solve_rate/10%", "evaluate:generator/solve_rate/tmaze",
@@ -509,7 +511,7 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                      "summary:buffer_fraction/hidden", "summary:generated/hidden", "summary:belief/explained",
                      "summary:belief/exact_explained"],
                     ["solve_rate/visible", "replay_fraction/hidden", "buffer_fraction/hidden", "generated/hidden"]),
-    "blindfold-noisy": (["plr", "remidi", "remidi (belief)", "remidi (simulated, ratio, false rate 0)"],
+    "blindfold-noisy": (["plr", "remidi", "remidi (belief)", "remidi (simulated, ratio, false rate 0, margin 5)"],
                         ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "summary:buffer_fraction/blind",
                          "evaluate:generator/solve_rate/blind", "summary:belief/explained",
                          "summary:belief/exact_explained"],

@@ -481,24 +481,11 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
     # checkpoint, and so do the reference's (the live reference, its optimiser, its frozen
     # copies); with reseed, the levels' fresh noise is drawn from the run's keys. One run with
     # every piece of belief state: the plain likelihood's state is a subset of it.
-    import json
+    from test_cli import assert_resumes_to_the_uninterrupted_result
 
-    from remidi.cli import main
-    from remidi.experiments import ued
-
-    from test_cli import interrupt_training
-
-    base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY,
-            "--set", "remidi.belief_reference=true", "--set", "reseed=true"]
-    assert main([*base, "--out", str(tmp_path / "full")]) == 0
-    real = interrupt_training(monkeypatch, 10)
-    assert main([*base, "--out", str(tmp_path / "cut")]) == 130
-    monkeypatch.setattr(ued, "train_seeds", real)
-    assert main(["run", "--resume", str(tmp_path / "cut"), "--quiet"]) == 0
-    assert (tmp_path / "cut" / "metrics.csv").read_text() == (tmp_path / "full" / "metrics.csv").read_text()
-    full = json.loads((tmp_path / "full" / "summary.json").read_text())
-    cut = json.loads((tmp_path / "cut" / "summary.json").read_text())
-    assert full["metrics"] == cut["metrics"]
+    assert_resumes_to_the_uninterrupted_result(monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1",
+                                                             "--quiet", *TINY, "--set", "remidi.belief_reference=true",
+                                                             "--set", "reseed=true"], tmp_path)
 
 
 # ------------------------------------------------------------------------------ the audit

@@ -129,6 +129,26 @@ def interrupt_training(monkeypatch, at: int, algo: str | None = None):
     return real
 
 
+def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, at: int = 10) -> dict:
+    """``remidi`` with ``base`` (its argv without ``--out``) into ``folder/full``, and again into
+    ``folder/cut`` interrupted (Ctrl-C) after update ``at`` and resumed: both end with the same
+    metrics.csv and summary metrics. Returns the summary's metrics."""
+    import json
+
+    from remidi.cli import main
+    from remidi.experiments import ued
+
+    assert main([*base, "--out", str(folder / "full")]) == 0
+    real = interrupt_training(monkeypatch, at)
+    assert main([*base, "--out", str(folder / "cut")]) == 130
+    monkeypatch.setattr(ued, "train_seeds", real)
+    assert main(["run", "--resume", str(folder / "cut"), "--quiet"]) == 0
+    assert (folder / "cut" / "metrics.csv").read_text() == (folder / "full" / "metrics.csv").read_text()
+    full = json.loads((folder / "full" / "summary.json").read_text())["metrics"]
+    assert full == json.loads((folder / "cut" / "summary.json").read_text())["metrics"]
+    return full
+
+
 def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
     from remidi.experiments import ued
 

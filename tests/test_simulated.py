@@ -262,22 +262,10 @@ def test_a_simulated_run_calibrates_at_each_switch_and_resumes_to_the_uninterrup
     first switch): the noise table, the thresholds, the reference and its frozen copies and the
     calibration record come back from the checkpoint. Every frozen buffer got a finite threshold
     at its switch, the last none; the audit compares the judgement with the exact tracker's."""
-    import json
+    from test_cli import assert_resumes_to_the_uninterrupted_result
 
-    from remidi.cli import main
-    from remidi.experiments import ued
-
-    from test_cli import interrupt_training
-
-    base = ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY]
-    assert main([*base, "--out", str(tmp_path / "full")]) == 0
-    real = interrupt_training(monkeypatch, 10)
-    assert main([*base, "--out", str(tmp_path / "cut")]) == 130
-    monkeypatch.setattr(ued, "train_seeds", real)
-    assert main(["run", "--resume", str(tmp_path / "cut"), "--quiet"]) == 0
-    assert (tmp_path / "cut" / "metrics.csv").read_text() == (tmp_path / "full" / "metrics.csv").read_text()
-    full = json.loads((tmp_path / "full" / "summary.json").read_text())["metrics"]
-    assert full == json.loads((tmp_path / "cut" / "summary.json").read_text())["metrics"]
+    full = assert_resumes_to_the_uninterrupted_result(
+        monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path)
     with np.load(next((tmp_path / "full").rglob("checkpoint.npz"))) as data:
         threshold = data[next(n for n in data.files if n.endswith(".belief.threshold"))]  # [seed, buffer, bucket]
         counts = data[next(n for n in data.files if n.endswith(".belief.counts"))]

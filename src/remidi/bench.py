@@ -31,6 +31,11 @@ Workloads (one seed, the shapes of the paper's maze preset; the train steps are 
   model fits on every replay (``remidi.belief_epochs`` updates);
   ``remidi_belief_step_over_remidi_step`` is its cost per environment step against the exact
   candidate tracker's (not run by default).
+* ``maze-remidi-simulated``: ``maze-remidi`` with the simulated belief model
+  (``remidi.tracker=simulated`` judged by the ratio, engine/simulated.py): each step every env's
+  ``tracker_budget`` candidates are stepped in two copies, and every update replays its levels
+  twice for the noise table (and a fresh update fits the GRU reference);
+  ``remidi_simulated_step_over_remidi_step`` (not run by default).
 * ``maze-accel``: ACCEL (``accel``) on the same set-up as ``maze-plr``: with every update
   replaying, the updates alternate between a replay (rollout + PPO) and an edit of that replay's
   levels (rollout + scoring + insertion, no PPO); reports the share of edit updates (``edit``)
@@ -195,7 +200,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
     from remidi.engine.paired import LevelGenerator
 
     flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
-        setup.algo.buffer_sequence and (cfg.remidi.tracker == "belief" or cfg.remidi.policy == "combine") else \
+        setup.algo.buffer_sequence and (cfg.remidi.tracker in ("belief", "simulated") or cfg.remidi.policy == "combine") else \
         steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
@@ -308,6 +313,12 @@ def _maze_remidi_rehearsal():
                                "models judge, the active one learns from each replay")
 def _maze_remidi_belief():
     return _maze_remidi_last_buffer(tracker="belief")
+
+
+@register("maze-remidi-simulated", "maze-remidi with the simulated belief model (remidi.tracker=simulated, the ratio): "
+                                  "two copies of each candidate, the noise table counted on every update")
+def _maze_remidi_simulated():
+    return _maze_remidi_last_buffer(tracker="simulated", belief_reference=True)
 
 
 @register("brax-plr", "PLR⊥ update on brax-hopper's paper preset: 256 envs × 100 steps, PPO 4 × 32")
@@ -507,6 +518,8 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
         out["remidi_rehearsal_step_over_remidi_step"] = per_call("maze-remidi-rehearsal") / per_call("maze-remidi")
     if "maze-remidi-belief" in results and "maze-remidi" in results:
         out["remidi_belief_step_over_remidi_step"] = per_call("maze-remidi-belief") / per_call("maze-remidi")
+    if "maze-remidi-simulated" in results and "maze-remidi" in results:
+        out["remidi_simulated_step_over_remidi_step"] = per_call("maze-remidi-simulated") / per_call("maze-remidi")
     if "maze-paired" in results and "maze-plr" in results:
         out["paired_step_over_plr_step"] = per_call("maze-paired") / per_call("maze-plr")
     if "maze-paired-reference" in results and "maze-plr" in results:

@@ -164,7 +164,7 @@ def _judge_fresh_levels(task, tag, variants):
     from remidi.engine.rollout import Frozen
     from remidi.engine.tracker import ExactTracker
 
-    t, n, c = 16, 64, 32
+    t, n, c = 16, 32, 32
     a = task.num_actions
 
     def policy(variables, carry, obs, reset):
@@ -250,7 +250,7 @@ def test_on_a_noisy_tv_the_ratio_explains_fresh_blind_levels_and_no_ordinary_maz
 
 
 # ------------------------------------------------------------------------------ in a run
-TINY = ["--set", "num_updates=40", "--set", "eval_every=10", "--set", "checkpoint_every=10",
+TINY = ["--set", "num_updates=24", "--set", "eval_every=6", "--set", "checkpoint_every=6", "--set", "remidi.num_buffers=3",
         "--set", "num_envs=8", "--set", "num_steps=4", "--set", "eval_attempts=2", "--set", "ppo.epochs=1",
         "--set", "remidi.buffer_capacity=8", "--set", "remidi.steps_per_buffer=8", "--set", "buffer.topk_k=8",
         "--set", "buffer.min_fill=0.25", "--set", "remidi.tracker=simulated", "--set", "remidi.belief_hidden=8",
@@ -258,19 +258,19 @@ TINY = ["--set", "num_updates=40", "--set", "eval_every=10", "--set", "checkpoin
 
 
 def test_a_simulated_run_calibrates_at_each_switch_and_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch):
-    """lever-noisy, 4 buffers switching every 8 updates, interrupted after update 10 (past the
+    """lever-noisy, 3 buffers switching every 8 updates, interrupted after update 12 (past the
     first switch): the noise table, the thresholds, the reference and its frozen copies and the
     calibration record come back from the checkpoint. Every frozen buffer got a finite threshold
     at its switch, the last none; the audit compares the judgement with the exact tracker's."""
     from test_cli import assert_resumes_to_the_uninterrupted_result
 
     full = assert_resumes_to_the_uninterrupted_result(
-        monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path)
+        monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path, at=12)
     with np.load(next((tmp_path / "full").rglob("checkpoint.npz"))) as data:
         threshold = data[next(n for n in data.files if n.endswith(".belief.threshold"))]  # [seed, buffer, bucket]
         counts = data[next(n for n in data.files if n.endswith(".belief.counts"))]
     assert np.isfinite(threshold[:, :-1]).all() and np.isinf(threshold[:, -1]).all()
-    assert counts.sum() == 40 * 8 * 4 * counts.shape[1]  # every update's triples: T·N·(E + 1) each
+    assert counts.sum() == 24 * 8 * 4 * counts.shape[1]  # every update's triples: T·N·(E + 1) each
     for name in ("belief/explained", "belief/exact_explained", "belief/agreement"):
         assert 0.0 <= full[name]["mean"] <= 1.0, name
 

@@ -342,6 +342,33 @@ def calibrate_monotone(scores, lengths, false_rate: float, num_buckets: int, val
     return tau + shift - margin
 
 
+# ---------------------------------------------------------------------------- frozen models
+def frozen_logliks(model: BeliefModel, params, hidden, cats) -> jax.Array:
+    """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats``
+    [N, E] from ``hidden`` [N, B, H]."""
+    return jax.vmap(lambda p, h: model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(params, hidden)
+
+
+def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, done):
+    """Each frozen model (``params`` leaves [B, ...]) one step on: its state [N, B, H] after the
+    last observation ``last`` [N, E] and ``action`` [N] (zeros where ``done`` bool[N]: an episode
+    starts), and the summed log-likelihood ``total`` [N, B] of the episode with ``cats`` [N, E]."""
+    cells = jax.vmap(lambda p, h: model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
+    hidden = jnp.where(done[:, None, None], 0.0, cells)
+    return hidden, jnp.where(done[:, None], 0.0, total) + frozen_logliks(model, params, hidden, cats)
+
+
+def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fresh):
+    """``memory`` (any with ``ref`` and ``ref_opt``) with the generator's reference model fit
+    ``epochs`` steps on ``traj``, a rollout of fresh levels (``fresh`` bool[]; else unchanged)."""
+
+    def fit(m):
+        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
+        return m.replace(ref=ref, ref_opt=ref_opt)
+
+    return jax.lax.cond(fresh, fit, lambda m: m, memory)
+
+
 # ---------------------------------------------------------------------------- the tracker
 @struct.dataclass
 class FrozenBeliefs:
@@ -391,24 +418,15 @@ class BeliefTracker:
             tau = b.threshold[:, length_bucket(count, b.threshold.shape[1])].T
         return b.valid[None, :] & (score >= tau)
 
-    def _logliks(self, params, hidden, cats) -> jax.Array:
-        """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats``
-        [N, E] from ``hidden`` [N, B, H]."""
-        return jax.vmap(lambda p, h: self.model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(params, hidden)
-
-    def _cells(self, params, hidden, last, action) -> jax.Array:
-        """f32[N, B, H]: each frozen model's state after ``last`` and ``action``."""
-        return jax.vmap(lambda p, h: self.model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
-
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> BeliefState:
         """The state at the envs' first observations ``obs`` (leaves [N, ...])."""
         n = reset_keys.shape[0]
         cats = self.model.coding.encode(obs)  # [N, E]
         hidden = self.model.initial_hidden((n, frozen.belief.threshold.shape[0]))
-        total, count = self._logliks(frozen.belief.params, hidden, cats), jnp.ones((n,), jnp.int32)
+        total, count = frozen_logliks(self.model, frozen.belief.params, hidden, cats), jnp.ones((n,), jnp.int32)
         ref_hidden = ref_total = None
         if frozen.belief.ref is not None:
-            ref_hidden, ref_total = hidden, self._logliks(frozen.belief.ref, hidden, cats)
+            ref_hidden, ref_total = hidden, frozen_logliks(self.model, frozen.belief.ref, hidden, cats)
         return BeliefState(hidden=hidden, total=total, count=count, last=cats,
                            match=self._judge(frozen, total, count, ref_total), ref_hidden=ref_hidden,
                            ref_total=ref_total)
@@ -421,15 +439,12 @@ class BeliefTracker:
         """After the envs took ``action`` i32[N] and saw ``next_obs`` (the next episode's first
         observation where ``done`` bool[N])."""
         cats = self.model.coding.encode(next_obs)  # [N, E]
-
-        def step(params, hidden, total):
-            hidden = jnp.where(done[:, None, None], 0.0, self._cells(params, hidden, state.last, action))
-            return hidden, jnp.where(done[:, None], 0.0, total) + self._logliks(params, hidden, cats)
-
-        hidden, total = step(frozen.belief.params, state.hidden, state.total)
+        hidden, total = frozen_step(self.model, frozen.belief.params, state.hidden, state.total, state.last, action,
+                                    cats, done)
         ref_hidden = ref_total = None
         if frozen.belief.ref is not None:
-            ref_hidden, ref_total = step(frozen.belief.ref, state.ref_hidden, state.ref_total)
+            ref_hidden, ref_total = frozen_step(self.model, frozen.belief.ref, state.ref_hidden, state.ref_total,
+                                                state.last, action, cats, done)
         count = jnp.where(done, 0, state.count) + 1
         fresh = self._judge(frozen, total, count, ref_total)
         return BeliefState(hidden=hidden, total=total, count=count, last=cats,
@@ -554,11 +569,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     if memory.ref is None:
         return memory, loss
 
-    def fit_reference(m: BeliefMemory) -> BeliefMemory:
-        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
-        return m.replace(ref=ref, ref_opt=ref_opt)
-
-    return jax.lax.cond(fresh, fit_reference, lambda m: m, memory), loss
+    return fit_reference(model, optimizer, memory, traj, epochs, fresh), loss
 
 
 def heldout_score(memory: BeliefMemory) -> jax.Array:

@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.engine.belief import BeliefModel, ObsCoding, length_bucket
+from remidi.engine.belief import BeliefModel, ObsCoding, fit_reference, frozen_logliks, frozen_step, length_bucket
 from remidi.envs.interface import tree_equal
 
 SMOOTHING = 0.1  # the noise table's Dirichlet prior per cell (log_q)
@@ -235,9 +235,6 @@ class SimulatedTracker:
         tau = sims.threshold[:, length_bucket(state.count, sims.threshold.shape[1])].T  # [N, B]
         return sims.valid[None, :] & (self.scores(frozen, state) >= tau)
 
-    def _ref_logliks(self, refs, hidden, cats) -> jax.Array:
-        return jax.vmap(lambda p, h: self.ref_model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(refs, hidden)
-
     def _copies(self, frozen):
         """The frozen levels' two copies (leaves [F, ...] each), their randomness drawn afresh."""
         if self.reseed is None:
@@ -262,7 +259,7 @@ class SimulatedTracker:
         ref_hidden = ref_total = None
         if frozen.belief.ref is not None:
             ref_hidden = self.ref_model.initial_hidden((n, self.num_buffers))
-            ref_total = self._ref_logliks(frozen.belief.ref, ref_hidden, agent[:, :-1])
+            ref_total = frozen_logliks(self.ref_model, frozen.belief.ref, ref_hidden, agent[:, :-1])
         state = SimState(index=index, copies=copies, start_copies=copies, total=total, start_total=total,
                          count=count, match=jnp.zeros((n, self.num_buffers), bool), last=agent,
                          ref_hidden=ref_hidden, ref_total=ref_total)
@@ -292,11 +289,8 @@ class SimulatedTracker:
         count = jnp.where(done, 0, state.count) + 1
         ref_hidden = ref_total = None
         if frozen.belief.ref is not None:
-            hidden = jax.vmap(lambda p, h: self.ref_model.cell(p, h, state.last[:, :-1], action), in_axes=(0, 1),
-                              out_axes=1)(frozen.belief.ref, state.ref_hidden)
-            ref_hidden = jnp.where(done[:, None, None], 0.0, hidden)
-            ref_total = (jnp.where(done[:, None], 0.0, state.ref_total)
-                         + self._ref_logliks(frozen.belief.ref, ref_hidden, agent[:, :-1]))
+            ref_hidden, ref_total = frozen_step(self.ref_model, frozen.belief.ref, state.ref_hidden, state.ref_total,
+                                                state.last[:, :-1], action, agent[:, :-1], done)
         state = state.replace(copies=copies, total=total, count=count, last=agent, ref_hidden=ref_hidden,
                               ref_total=ref_total)
         fresh = self._judge(frozen, state)
@@ -386,8 +380,6 @@ def learn(memory: SimMemory, env, params, coding: ObsCoding, reseed, model: Beli
     """After a rollout (``traj`` leaves [T, N, ...]) of ``levels`` (leaves [N, ...]): the noise
     table counts its triples (every rollout); a replay of the active buffer (``own`` bool[]) is
     recorded for its calibration; the reference learns from rollouts of fresh levels (``fresh``)."""
-    from remidi.engine.belief import fit_steps
-
     counts = count_rollout(memory.counts, env, params, coding, reseed, levels, traj.obs, traj.action, traj.reset, key)
     rows = memory.codes.shape[0]
     row = jnp.where(own, memory.written % rows, rows)  # rows: out of bounds, dropped
@@ -398,14 +390,7 @@ def learn(memory: SimMemory, env, params, coding: ObsCoding, reseed, model: Beli
         resets=memory.resets.at[row].set(traj.reset, mode="drop"),
         levels=jax.tree.map(lambda all_, x: all_.at[row].set(x, mode="drop"), memory.levels, levels),
         written=memory.written + own.astype(jnp.int32))
-    if memory.ref is None:
-        return memory
-
-    def fit_reference(m: SimMemory) -> SimMemory:
-        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
-        return m.replace(ref=ref, ref_opt=ref_opt)
-
-    return jax.lax.cond(fresh, fit_reference, lambda m: m, memory)
+    return memory if memory.ref is None else fit_reference(model, optimizer, memory, traj, epochs, fresh)
 
 
 def freeze(tracker: SimulatedTracker, memory: SimMemory, env, params, buffer_levels, buffer_valid, active, switch,

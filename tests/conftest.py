@@ -37,6 +37,7 @@ it, and tests/test_maze_env.py, which compares our maze with jaxued's bit for bi
 programs with XLA's own fusion emitters.
 """
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -105,6 +106,20 @@ def _xla_optimization(request):
         jax.clear_caches()
         jax.config.update("jax_disable_most_optimizations", disable)
     yield
+
+
+@contextlib.contextmanager
+def optimizing():
+    """Compile the programs first traced inside the block with XLA's optimisations, whatever the
+    file's setting: for a test of an unoptimised file that runs one program long enough (a model
+    fit of hundreds of full-batch steps) to pay for its optimised compile. Jit it inside the
+    block (a fresh function), since jit's in-memory cache does not key on the setting."""
+    before = jax.config.read("jax_disable_most_optimizations")
+    jax.config.update("jax_disable_most_optimizations", _OPTIMIZE == "none")
+    try:
+        yield
+    finally:
+        jax.config.update("jax_disable_most_optimizations", before)
 
 
 def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[str, str]:

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import optimizing
 from remidi.engine import belief as bl
 from remidi.engine.rollout import Frozen, rollout
 from remidi.engine.tracker import ExactTracker
@@ -21,9 +22,11 @@ FALSE_RATE = 0.05
 
 
 def fit(model, params, obs, action, reset, steps, lr=1e-2):
-    """``steps`` full-batch updates (one jitted scan); returns ``(params, losses f32[steps])``."""
+    """``steps`` full-batch updates (one jitted scan, compiled with XLA's optimisations: it runs
+    long enough to pay for them); returns ``(params, losses f32[steps])``."""
     opt = bl.make_optimizer(lr)
-    params, _, losses = jax.jit(lambda p: bl.fit_steps(model, opt, p, opt.init(p), obs, action, reset, steps))(params)
+    with optimizing():
+        params, _, losses = jax.jit(lambda p: bl.fit_steps(model, opt, p, opt.init(p), obs, action, reset, steps))(params)
     return params, losses
 
 
@@ -467,8 +470,9 @@ def test_remidi_with_the_belief_tracker_keeps_noisy_hidden_levels_out_of_its_lat
     from remidi.cli import main
 
     out = tmp_path / "remidi"
-    assert main(["run", "lever-noisy", "--algo", "remidi", "--preset", "smoke", "--seeds", "1", "--out", str(out),
-                 "--quiet", "--set", "remidi.tracker=belief", "--set", "remidi.belief_margin=2", "--set", "num_updates=150"]) == 0
+    with optimizing():  # 150 updates of the smoke preset run long enough to pay for XLA's optimisations
+        assert main(["run", "lever-noisy", "--algo", "remidi", "--preset", "smoke", "--seeds", "1", "--out", str(out), "--quiet",
+                     "--set", "remidi.tracker=belief", "--set", "remidi.belief_margin=2", "--set", "num_updates=150"]) == 0
     m = {k: v["mean"] for k, v in json.loads((out / "summary.json").read_text())["metrics"].items()}
     assert m["active_buffer"] == 1
     assert m["buffer_fraction/hidden/b0"] > 0.9
@@ -588,10 +592,11 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
 
     sample = jax.jit(jax.vmap(task.sample_level))  # one program, not the generator's operations one by one
     pool = sample(jax.random.split(jax.random.PRNGKey(0), 400))
-    blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(pool))
+    blind = np.asarray(jax.jit(jax.vmap(lambda level: task.level_tags(level)["blind"]))(pool))
     picked = np.concatenate([np.nonzero(blind)[0][:c * 9 // 10], np.nonzero(~blind)[0][:c - c * 9 // 10]])
     buffer = jax.tree.map(lambda x: x[picked], pool)
 
+    @jax.jit  # one program (eager, each of its gathers costs ~0.3 s here)
     def replays(key):  # the adversary's levels, each with its noise drawn afresh (reseed)
         k1, k2 = jax.random.split(key)
         levels = jax.tree.map(lambda x: x[jax.random.randint(k1, (n,), 0, c)], buffer)
@@ -600,8 +605,8 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
     example = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)[0]
     model = bl.BeliefModel(bl.coding_for(example), num_actions=actions, hidden=32)
     data = play(replays(jax.random.PRNGKey(1)), jax.random.PRNGKey(2))
-    params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=100)
     gen = play(sample(jax.random.split(jax.random.PRNGKey(4), n)), jax.random.PRNGKey(5))
+    params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=100)
     ref, _ = fit(model, model.init(jax.random.PRNGKey(6)), gen.obs, gen.action, gen.reset, steps=100)
     held = play(replays(jax.random.PRNGKey(7)), jax.random.PRNGKey(8))
     fresh = sample(jax.random.split(jax.random.PRNGKey(9), n))

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import optimizing
+
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "bring_your_own_env.py"
 
 
@@ -26,7 +28,8 @@ def test_bring_your_own_env_example(tmp_path, capsys):
     out = tmp_path / "byo"
     # in-process, so the suite's compilation cache (tests/conftest.py) applies; 150 updates, not
     # the default 200, to save the suite time (PLR⊥'s hidden replay share at 150: 0.86 and 0.89)
-    assert example.main([str(out), "--updates", "150"]) == 0
+    with optimizing():  # 2 × 150 updates: long enough to pay for XLA's optimisations
+        assert example.main([str(out), "--updates", "150"]) == 0
     printed = capsys.readouterr().out
     assert "next:" in printed and str(out / "training.png") in printed
     assert (out / "training.png").stat().st_size > 10_000

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import optimizing
 from remidi.cli import main
 from remidi.engine.rollout import Frozen, rollout
 from remidi.engine.tracker import ExactTracker
@@ -207,8 +208,9 @@ def test_remidi_on_lever_noisy_takes_hidden_levels_into_its_later_buffer(tmp_pat
     fractions of hidden levels 1.0, visible solve rate 0.02 against 0.19 on the plain game; after
     150 updates, 2 seeds: 1.0 and 1.0). The results page has the 10-seed paper-preset runs."""
     out = tmp_path / "remidi"
-    assert main(["run", "lever-noisy", "--algo", "remidi", "--preset", "smoke", "--seeds", "1", "--out", str(out),
-                 "--quiet", "--set", "num_updates=150"]) == 0
+    with optimizing():  # 150 updates of the smoke preset run long enough to pay for XLA's optimisations
+        assert main(["run", "lever-noisy", "--algo", "remidi", "--preset", "smoke", "--seeds", "1", "--out", str(out),
+                     "--quiet", "--set", "num_updates=150"]) == 0
     m = {k: v["mean"] for k, v in json.loads((out / "summary.json").read_text())["metrics"].items()}
     assert m["active_buffer"] == 1
     assert m["buffer_fraction/hidden/b0"] > 0.9

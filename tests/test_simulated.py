@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import optimizing
 from remidi.engine import belief as bl
 from remidi.engine import simulated as sm
 from remidi.engine.rollout import rollout
@@ -170,31 +171,31 @@ def _judge_fresh_levels(task, tag, variants):
     def policy(variables, carry, obs, reset):
         return carry, (jnp.zeros(reset.shape + (a,)), jnp.zeros(reset.shape))
 
-    def roll(levels, key, frozen=None):
-        return rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels, t, frozen,
-                       deterministic_reset=task.deterministic_reset)[0]
-
-    sample = lambda key, k: jax.vmap(task.sample_level)(jax.random.split(key, k))  # noqa: E731
-    tags = lambda levels: np.asarray(jax.vmap(lambda l: task.level_tags(l)[tag])(levels))  # noqa: E731
+    # each piece one jitted program (eager operations cost ~3 ms each here), indexing on the host
+    roll = jax.jit(lambda levels, key, frozen=None: rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels,
+                                                            t, frozen, deterministic_reset=task.deterministic_reset)[0])
+    sample = jax.jit(lambda key, k: jax.vmap(task.sample_level)(jax.random.split(key, k)), static_argnums=1)
+    tags = lambda levels: np.asarray(jax.jit(jax.vmap(lambda l: task.level_tags(l)[tag]))(levels))  # noqa: E731
+    take = lambda tree, i: jax.tree.map(lambda x: jnp.asarray(np.asarray(x)[i]), tree)  # noqa: E731
+    count = jax.jit(lambda counts, levels, traj, key: sm.count_rollout(
+        counts, task.env, task.params, coding, task.reseed_level, levels, traj.obs, traj.action, traj.reset, key))
     pool = sample(jax.random.PRNGKey(0), 1000)
     irr = tags(pool)
     idx = np.concatenate([np.nonzero(irr)[0][:29], np.nonzero(~irr)[0][:3]])
-    buffer = jax.tree.map(lambda x: x[idx], pool)
+    buffer = take(pool, idx)
     coding = _coding(task, buffer)
     counts = sm.init_counts(coding)
     for i in range(2):
         levels = sample(jax.random.PRNGKey(10 + i), n)
-        traj = roll(levels, jax.random.PRNGKey(20 + i))
-        counts = sm.count_rollout(counts, task.env, task.params, coding, task.reseed_level, levels, traj.obs,
-                                  traj.action, traj.reset, jax.random.PRNGKey(30 + i))
+        counts = count(counts, levels, roll(levels, jax.random.PRNGKey(20 + i)), jax.random.PRNGKey(30 + i))
     model = bl.BeliefModel(coding, num_actions=a, hidden=32)
     ref = None
     if any(reference for reference, _ in variants):
         opt = bl.make_optimizer(1e-2)
         gen = roll(sample(jax.random.PRNGKey(40), n), jax.random.PRNGKey(41))
         params = model.init(jax.random.PRNGKey(42))
-        ref = jax.jit(lambda p: bl.fit_steps(model, opt, p, opt.init(p), gen.obs, gen.action, gen.reset, 150)[0])(params)
-        ref = jax.tree.map(lambda x: x[None], ref)
+        ref = jax.jit(lambda p: jax.tree.map(lambda x: x[None], bl.fit_steps(model, opt, p, opt.init(p), gen.obs,
+                                                                               gen.action, gen.reset, 150)[0]))(params)
     tracker = sm.SimulatedTracker(coding, model, num_buffers=1, budget=c, reseed=task.reseed_level)
     buckets = bl.num_length_buckets(t)
 
@@ -203,10 +204,9 @@ def _judge_fresh_levels(task, tag, variants):
                       belief=sm.FrozenSims(logq=sm.log_q(counts), threshold=threshold, valid=jnp.ones((1,), bool),
                                            key=jax.random.PRNGKey(50), ref=ref if reference else None))
 
-    pick = jax.random.randint(jax.random.PRNGKey(60), (n,), 0, c)
-    held_levels = jax.tree.map(lambda x: x[pick], buffer)
+    held_levels = take(buffer, np.asarray(jax.random.randint(jax.random.PRNGKey(60), (n,), 0, c)))
     if task.reseed_level is not None:
-        held_levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.PRNGKey(61), n), held_levels)
+        held_levels = jax.jit(jax.vmap(task.reseed_level))(jax.random.split(jax.random.PRNGKey(61), n), held_levels)
     held = roll(held_levels, jax.random.PRNGKey(62))
     fresh = sample(jax.random.PRNGKey(70), n)
     judged = []
@@ -228,8 +228,9 @@ def test_on_the_t_maze_the_simulated_model_judges_as_the_exact_tracker_does():
     the ratio at 0.05 leaves ≈ 0.1 of T-maze steps unexplained (the false rate, measured 0.89)."""
     from remidi.envs.maze import maze_task
 
-    (alone, ratio), exact, tmaze = _judge_fresh_levels(maze_task("tmaze", 0.5, 25), "tmaze",
-                                                       [(False, 0.05), (True, 0.0)])
+    with optimizing():  # rollouts that step 32 candidate levels twice per env: long enough to pay
+        (alone, ratio), exact, tmaze = _judge_fresh_levels(maze_task("tmaze", 0.5, 25), "tmaze",
+                                                           [(False, 0.05), (True, 0.0)])
     assert exact[:, tmaze].mean() > 0.9 and exact[:, ~tmaze].mean() < 0.05
     assert np.mean(alone == exact) >= 0.99
     assert np.mean(ratio == exact) >= 0.97
@@ -243,7 +244,8 @@ def test_on_a_noisy_tv_the_ratio_explains_fresh_blind_levels_and_no_ordinary_maz
     TV makes any view as likely as any other)."""
     from remidi.envs.noisy import noisy_blindfold_task
 
-    (judged,), exact, blind = _judge_fresh_levels(noisy_blindfold_task(0.5, 25), "blind", [(True, 0.0)])
+    with optimizing():
+        (judged,), exact, blind = _judge_fresh_levels(noisy_blindfold_task(0.5, 25), "blind", [(True, 0.0)])
     assert exact.mean() == 0.0
     assert judged[:, blind].mean() > 0.8
     assert judged[:, ~blind].mean() < 0.1

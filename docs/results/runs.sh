@@ -114,8 +114,9 @@ run remidi-belief-s0 lever-noisy remidi 0 10 paper --set remidi.tracker=belief
 
 # issue #31: keeping earlier skills (the masked policy, combine, rehearsal 0.1 and 0.3), blindfold
 # and T-maze, cpu preset, 5 seeds each, all at the commit that stated their claims. A lent H200 trained
-# the eight runs side by side for nine minutes (blindfold combine from its update 600; each config.json
-# notes its updates per device); the CPU finishes them, the nearly finished ones first
+# the eight runs side by side for nine minutes (blindfold combine from its update 600), then seven of
+# them one block more (each config.json notes its updates per device); the CPU finishes them, the
+# nearly finished ones first
 at ab55b8c
 run remidi-combine-s0 blindfold remidi 0 5 cpu --set remidi.policy=combine
 for e in blindfold tmaze; do run remidi-masked-s0 $e remidi 0 5 cpu --set remidi.policy=masked; done

@@ -67,6 +67,32 @@ def test_the_model_learns_a_deterministic_sequence():
     assert float(bl.step_logliks(model, params, odd, action, reset)[1, 0]) < -5.0
 
 
+def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
+    """The exact tracker requires a frozen level's episode to end where the agent's did. The
+    model's continues output does the same: every observation the same, the adversary's episodes
+    3 steps long; an episode that goes on to a 4th step is unlikely at that step (and the tracker
+    stops explaining it there), its first 3 steps as likely as the adversary's."""
+    coding = bl.coding_for(jnp.array([1.0, 0.0]))
+    model = bl.BeliefModel(coding, num_actions=2, hidden=16)
+    t, n = 12, 8
+    obs = jnp.broadcast_to(jnp.array([1.0, 0.0]), (t, n, 2))
+    action = jnp.zeros((t, n), jnp.int32)
+    reset = jnp.broadcast_to((jnp.arange(t) % 3 == 0)[:, None], (t, n))
+    params, _ = fit(model, model.init(jax.random.PRNGKey(0)), obs, action, reset, steps=300, lr=3e-2)
+    longer = jnp.zeros((6, 1), bool).at[0].set(True)  # one episode of 6 steps
+    ll = np.asarray(bl.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer)[:, 0])
+    assert ll[:3].min() > -0.1 and ll[3] < -4.0
+    beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=jnp.asarray([-1.0]),
+                               valid=jnp.ones((1,), bool))
+    frozen, tracker = Frozen(levels=None, valid=jnp.ones((1,), bool), belief=beliefs), bl.BeliefTracker(model)
+    state = tracker.start(None, None, frozen, jnp.zeros((1, 2), jnp.uint32), obs[0, :1])
+    explained = [bool(tracker.explained(state)[0])]
+    for step in range(1, 6):
+        state = tracker.advance(None, None, frozen, None, state, action[step - 1, :1], obs[step, :1], longer[step])
+        explained.append(bool(tracker.explained(state)[0]))
+    assert explained == [True, True, True, False, False, False]
+
+
 def test_an_all_masked_batch_gives_no_update():
     obs = jnp.ones((3, 2, 4))
     action = jnp.zeros((3, 2), jnp.int32)

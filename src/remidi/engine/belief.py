@@ -14,6 +14,11 @@ below a threshold. This module is that model, for discrete observations:
   an episode's start) predicts the next observation as E independent categoricals (a
   *factorised* categorical); the first observation of an episode is predicted from the zero
   state, i.e. it is the adversary's distribution of first observations;
+* the same state predicts whether the episode *continues* (a Bernoulli): at every later step of
+  an episode the step's likelihood includes "it did not end here", and training also sees the
+  steps where episodes did end, so a prefix that goes on where the adversary's episodes end is
+  unlikely under its model, as the exact tracker requires a frozen level's episode to end where
+  the agent's did;
 * :func:`step_logliks` gives ``log P(o_t | o_<t, a_<t)`` per step of a batch of trajectories
   (episodes delimited by ``reset``), :func:`prefix_scores` the mean log-likelihood per step of
   each episode's prefix so far (the score a threshold is compared with), :func:`fit_step` one
@@ -146,13 +151,15 @@ class BeliefModel:
 
     def init(self, rng) -> dict:
         """The parameters: GRU kernels ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], biases ``b`` f32[3H],
-        ``bh`` f32[H] (the candidate's recurrent bias), head ``wo`` f32[H, E·K], ``bo`` f32[E·K]."""
+        ``bh`` f32[H] (the candidate's recurrent bias), head ``wo`` f32[H, E·K], ``bo`` f32[E·K],
+        and the episode-continues logit's ``wc`` f32[H], ``bc`` f32[]."""
         d, h, ek = self.input_size, self.hidden, self.coding.num_entries * self.coding.num_categories
-        k1, k2, k3 = jax.random.split(rng, 3)
+        k1, k2, k3, k4 = jax.random.split(rng, 4)
         return {"wx": jax.random.normal(k1, (d, 3 * h)) / jnp.sqrt(d),
                 "wh": jax.random.normal(k2, (h, 3 * h)) / jnp.sqrt(h),
                 "b": jnp.zeros((3 * h,)), "bh": jnp.zeros((h,)),
-                "wo": jax.random.normal(k3, (h, ek)) * 0.1 / jnp.sqrt(h), "bo": jnp.zeros((ek,))}
+                "wo": jax.random.normal(k3, (h, ek)) * 0.1 / jnp.sqrt(h), "bo": jnp.zeros((ek,)),
+                "wc": jax.random.normal(k4, (h,)) * 0.1 / jnp.sqrt(h), "bc": jnp.zeros(())}
 
     def initial_hidden(self, batch_shape=()) -> jax.Array:
         """f32[..., H]: the state at an episode's start (zeros)."""
@@ -164,6 +171,12 @@ class BeliefModel:
         logits = (hidden @ params["wo"] + params["bo"]).reshape(hidden.shape[:-1] + (e, k))
         logp = jax.nn.log_softmax(logits, axis=-1)
         return jnp.sum(jnp.take_along_axis(logp, cats[..., None], axis=-1)[..., 0], axis=-1)
+
+    def continues(self, params, hidden, go_on) -> jax.Array:
+        """f32[...]: log P(the episode continues, where ``go_on`` bool[...]; else ends | ``hidden``
+        f32[..., H], the state after a step's observation and action)."""
+        logit = hidden @ params["wc"] + params["bc"]
+        return jnp.where(go_on, jax.nn.log_sigmoid(logit), jax.nn.log_sigmoid(-logit))
 
     def cell(self, params, hidden, cats, action) -> jax.Array:
         """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` i32[...]."""
@@ -180,7 +193,8 @@ class BeliefModel:
 
 
 def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
-    """f32[T, N]: ``log P(obs[t] | the episode's observations and actions before t)``.
+    """f32[T, N]: ``log P(obs[t], and at a later step of an episode that it continued | the
+    episode's observations and actions before t)``.
 
     ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
     episode: the state restarts from zeros; an env's first step must be one)."""
@@ -189,17 +203,27 @@ def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
 
 def coded_logliks(model: BeliefModel, params, cats, action, reset) -> jax.Array:
     """:func:`step_logliks` of observations already coded, ``cats`` int[T, N, E]."""
+    return _scan_logliks(model, params, cats, action, reset)[0]
+
+
+def _scan_logliks(model: BeliefModel, params, cats, action, reset):
+    """(f32[T, N] :func:`coded_logliks`, f32[T, N] ``log P(the episode ended after step t − 1)``
+    where step t > 0 starts an episode, else 0: the ends a prefix's score never sees, since the
+    agent's next episode starts afresh, but the model learns from)."""
     cats = cats.astype(jnp.int32)
     n = action.shape[1]
 
-    def body(hidden, inp):
+    def body(carry, inp):
+        hidden, seen = carry  # seen: a step of this rollout came before (its state is in hidden)
         c, a, r = inp
+        ends = jnp.where(r & seen, model.continues(params, hidden, False), 0.0)
+        goes_on = jnp.where(r, 0.0, model.continues(params, hidden, True))
         hidden = jnp.where(r[:, None], 0.0, hidden)
-        ll = model.loglik(params, hidden, c)
-        return model.cell(params, hidden, c, a), ll
+        ll = model.loglik(params, hidden, c) + goes_on
+        return (model.cell(params, hidden, c, a), jnp.ones_like(seen)), (ll, ends)
 
-    _, ll = jax.lax.scan(body, model.initial_hidden((n,)), (cats, action, reset))
-    return ll
+    _, (ll, ends) = jax.lax.scan(body, (model.initial_hidden((n,)), jnp.zeros((n,), bool)), (cats, action, reset))
+    return ll, ends
 
 
 def episode_running(op, x, start) -> jax.Array:
@@ -227,10 +251,11 @@ def prefix_scores(ll, reset) -> jax.Array:
 
 def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
     """f32[]: the mean negative log-likelihood per step over the steps of ``mask`` bool[T, N]
-    (all if None); 0 when no step is masked in."""
-    ll = step_logliks(model, params, obs, action, reset)
+    (all if None), an episode's end counted with its last step; 0 when no step is masked in."""
+    ll, ends = _scan_logliks(model, params, model.coding.encode(obs), action, reset)
     mask = jnp.ones(ll.shape, bool) if mask is None else mask
-    return -jnp.sum(jnp.where(mask, ll, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
+    last_masked = jnp.concatenate([jnp.zeros_like(mask[:1]), mask[:-1]])  # an end belongs to the step before
+    return -(jnp.sum(jnp.where(mask, ll, 0.0)) + jnp.sum(jnp.where(last_masked, ends, 0.0))) / jnp.maximum(jnp.sum(mask), 1)
 
 
 def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
@@ -352,10 +377,12 @@ def frozen_logliks(model: BeliefModel, params, hidden, cats) -> jax.Array:
 def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, done):
     """Each frozen model (``params`` leaves [B, ...]) one step on: its state [N, B, H] after the
     last observation ``last`` [N, E] and ``action`` [N] (zeros where ``done`` bool[N]: an episode
-    starts), and the summed log-likelihood ``total`` [N, B] of the episode with ``cats`` [N, E]."""
+    starts), and the summed log-likelihood ``total`` [N, B] of the episode with ``cats`` [N, E]
+    (and, where it goes on, with its continuing: :func:`step_logliks` step by step)."""
     cells = jax.vmap(lambda p, h: model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
+    goes_on = jax.vmap(lambda p, h: model.continues(p, h, True), in_axes=(0, 1), out_axes=1)(params, cells)
     hidden = jnp.where(done[:, None, None], 0.0, cells)
-    return hidden, jnp.where(done[:, None], 0.0, total) + frozen_logliks(model, params, hidden, cats)
+    return hidden, jnp.where(done[:, None], 0.0, total + goes_on) + frozen_logliks(model, params, hidden, cats)
 
 
 def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fresh):
@@ -585,10 +612,11 @@ def heldout_score(memory: BeliefMemory) -> jax.Array:
 
 def uniform_score(model: BeliefModel) -> float:
     """The per-step log-likelihood of a model that knows nothing (every entry uniform over its
-    leaf's categories): a frozen model whose held-out scores are near this one explains anything
-    its adversary could show, and its threshold lets nearly every prefix through."""
+    leaf's categories, an episode as likely to end as to go on at every later step): a frozen
+    model whose held-out scores are near this one explains anything its adversary could show,
+    and its threshold lets nearly every prefix through."""
     c = model.coding
-    return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories))
+    return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories)) - math.log(2)
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3,

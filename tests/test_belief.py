@@ -82,6 +82,9 @@ def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
     longer = jnp.zeros((6, 1), bool).at[0].set(True)  # one episode of 6 steps
     ll = np.asarray(bl.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer)[:, 0])
     assert ll[:3].min() > -0.1 and ll[3] < -4.0
+    # a rollout's first step starts what it holds of an episode, marked as a start or not
+    carried = bl.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer.at[0].set(False))[:, 0]
+    np.testing.assert_allclose(np.asarray(carried), ll, rtol=1e-6)
     beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=jnp.asarray([-1.0]),
                                valid=jnp.ones((1,), bool))
     frozen, tracker = Frozen(levels=None, valid=jnp.ones((1,), bool), belief=beliefs), bl.BeliefTracker(model)

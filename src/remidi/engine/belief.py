@@ -217,7 +217,7 @@ def _scan_logliks(model: BeliefModel, params, cats, action, reset):
         hidden, seen = carry  # seen: a step of this rollout came before (its state is in hidden)
         c, a, r = inp
         ends = jnp.where(r & seen, model.continues(params, hidden, False), 0.0)
-        goes_on = jnp.where(r, 0.0, model.continues(params, hidden, True))
+        goes_on = jnp.where(r | ~seen, 0.0, model.continues(params, hidden, True))  # a rollout's first step starts
         hidden = jnp.where(r[:, None], 0.0, hidden)
         ll = model.loglik(params, hidden, c) + goes_on
         return (model.cell(params, hidden, c, a), jnp.ones_like(seen)), (ll, ends)

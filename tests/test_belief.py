@@ -68,8 +68,8 @@ def test_the_model_learns_a_deterministic_sequence():
 
 
 def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
-    """The exact tracker requires a frozen level's episode to end where the agent's did. The
-    model's continues output does the same: every observation the same, the adversary's episodes
+    """The exact tracker requires that a frozen level's episode not end where the agent's goes
+    on. The model's continues output does the same: every observation the same, the adversary's episodes
     3 steps long; an episode that goes on to a 4th step is unlikely at that step (and the tracker
     stops explaining it there), its first 3 steps as likely as the adversary's."""
     coding = bl.coding_for(jnp.array([1.0, 0.0]))

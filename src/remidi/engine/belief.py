@@ -15,11 +15,12 @@ below a threshold. This module is that model, for discrete observations:
   *factorised* categorical); the first observation of an episode is predicted from the zero
   state, i.e. it is the adversary's distribution of first observations;
 * the same state predicts whether the episode *continues* (a Bernoulli): at every later step of
-  an episode the step's likelihood includes "it did not end here", and training also sees the
-  steps where episodes did end, so a prefix that goes on where the adversary's episodes end is
-  unlikely under its model, as the exact tracker requires a frozen level's episode to end where
-  the agent's did;
-* :func:`step_logliks` gives ``log P(o_t | o_<t, a_<t)`` per step of a batch of trajectories
+  an episode the step's likelihood includes "it did not end before this step", and training also
+  sees the steps where episodes did end, so a prefix that goes on where the adversary's episodes
+  end is unlikely under its model, as the exact tracker requires that a frozen level's episode
+  not end where the agent's goes on (where the agent's ends, both restart);
+* :func:`step_logliks` gives ``log P(o_t, and that the episode went on to t | o_<t, a_<t)`` per
+  step of a batch of trajectories
   (episodes delimited by ``reset``), :func:`prefix_scores` the mean log-likelihood per step of
   each episode's prefix so far (the score a threshold is compared with), :func:`fit_step` one
   Optax update on a batch, masked to the chosen steps;
@@ -197,33 +198,35 @@ def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
     episode's observations and actions before t)``.
 
     ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
-    episode: the state restarts from zeros; an env's first step must be one)."""
+    episode: the state restarts from zeros; a rollout's first step starts what it holds of its
+    episode, marked or not)."""
     return coded_logliks(model, params, model.coding.encode(obs), action, reset)
 
 
 def coded_logliks(model: BeliefModel, params, cats, action, reset) -> jax.Array:
     """:func:`step_logliks` of observations already coded, ``cats`` int[T, N, E]."""
-    return _scan_logliks(model, params, cats, action, reset)[0]
+    obs_ll, went_on = _scan_logliks(model, params, cats, action, reset)
+    return obs_ll + jnp.where(reset, 0.0, went_on)
 
 
 def _scan_logliks(model: BeliefModel, params, cats, action, reset):
-    """(f32[T, N] :func:`coded_logliks`, f32[T, N] ``log P(the episode ended after step t − 1)``
-    where step t > 0 starts an episode, else 0: the ends a prefix's score never sees, since the
-    agent's next episode starts afresh, but the model learns from)."""
+    """(f32[T, N] ``log P(obs[t] | the episode before t)``, f32[T, N] ``log P(the episode went on
+    to step t, where it did; else that it ended after step t − 1)``, 0 at the rollout's first
+    step). The second is the outcome of step t − 1: a prefix's score includes it where the
+    episode went on; where it ended the model learns from it, and the agent's next episode
+    starts afresh."""
     cats = cats.astype(jnp.int32)
     n = action.shape[1]
 
     def body(carry, inp):
         hidden, seen = carry  # seen: a step of this rollout came before (its state is in hidden)
         c, a, r = inp
-        ends = jnp.where(r & seen, model.continues(params, hidden, False), 0.0)
-        goes_on = jnp.where(r | ~seen, 0.0, model.continues(params, hidden, True))  # a rollout's first step starts
+        went_on = jnp.where(seen, model.continues(params, hidden, ~r), 0.0)  # a rollout's first step starts
         hidden = jnp.where(r[:, None], 0.0, hidden)
-        ll = model.loglik(params, hidden, c) + goes_on
-        return (model.cell(params, hidden, c, a), jnp.ones_like(seen)), (ll, ends)
+        return (model.cell(params, hidden, c, a), jnp.ones_like(seen)), (model.loglik(params, hidden, c), went_on)
 
-    _, (ll, ends) = jax.lax.scan(body, (model.initial_hidden((n,)), jnp.zeros((n,), bool)), (cats, action, reset))
-    return ll, ends
+    _, out = jax.lax.scan(body, (model.initial_hidden((n,)), jnp.zeros((n,), bool)), (cats, action, reset))
+    return out
 
 
 def episode_running(op, x, start) -> jax.Array:
@@ -251,11 +254,12 @@ def prefix_scores(ll, reset) -> jax.Array:
 
 def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
     """f32[]: the mean negative log-likelihood per step over the steps of ``mask`` bool[T, N]
-    (all if None), an episode's end counted with its last step; 0 when no step is masked in."""
-    ll, ends = _scan_logliks(model, params, model.coding.encode(obs), action, reset)
-    mask = jnp.ones(ll.shape, bool) if mask is None else mask
-    last_masked = jnp.concatenate([jnp.zeros_like(mask[:1]), mask[:-1]])  # an end belongs to the step before
-    return -(jnp.sum(jnp.where(mask, ll, 0.0)) + jnp.sum(jnp.where(last_masked, ends, 0.0))) / jnp.maximum(jnp.sum(mask), 1)
+    (all if None), each step's observation and its outcome (the episode went on or ended after
+    it); 0 when no step is masked in."""
+    obs_ll, outcome = _scan_logliks(model, params, model.coding.encode(obs), action, reset)
+    mask = jnp.ones(obs_ll.shape, bool) if mask is None else mask
+    outcome = jnp.concatenate([outcome[1:], jnp.zeros_like(outcome[:1])])  # step t's outcome, seen at t + 1
+    return -jnp.sum(jnp.where(mask, obs_ll + outcome, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
 
 
 def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
@@ -612,11 +616,11 @@ def heldout_score(memory: BeliefMemory) -> jax.Array:
 
 def uniform_score(model: BeliefModel) -> float:
     """The per-step log-likelihood of a model that knows nothing (every entry uniform over its
-    leaf's categories, an episode as likely to end as to go on at every later step): a frozen
-    model whose held-out scores are near this one explains anything its adversary could show,
-    and its threshold lets nearly every prefix through."""
+    leaf's categories; the first step's, which has no continues factor, as ``belief/threshold``
+    is the one-step prefixes'): a frozen model whose held-out scores are near this one explains
+    anything its adversary could show, and its threshold lets nearly every prefix through."""
     c = model.coding
-    return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories)) - math.log(2)
+    return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories))
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3,

@@ -389,6 +389,28 @@ def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, d
     return hidden, jnp.where(done[:, None], 0.0, total + goes_on) + frozen_logliks(model, params, hidden, cats)
 
 
+def init_reference(model: BeliefModel, optimizer, num_buffers: int, rng):
+    """A fresh reference model of the task generator's trajectories: ``(ref, ref_opt, ref_frozen)``,
+    its parameters, its optimiser state and its copies for the ``num_buffers`` buffers (leaves
+    [K, ...], each set by :func:`freeze_reference` when its buffer is frozen)."""
+    ref = model.init(jax.random.fold_in(rng, 1))
+    return ref, optimizer.init(ref), jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+
+
+def freeze_reference(memory, active):
+    """``memory.ref_frozen`` (any memory with ``ref`` and ``ref_frozen``; None without a reference)
+    with the reference as it is now frozen for buffer ``active``."""
+    if memory.ref is None:
+        return None
+    return jax.tree.map(lambda all_, r: all_.at[active].set(r), memory.ref_frozen, memory.ref)
+
+
+def earlier_references(memory):
+    """The references frozen with the buffers before the last (leaves [K − 1, ...]; None without
+    a reference): what the rollout's tracker reads, as its frozen models."""
+    return None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
+
+
 def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fresh):
     """``memory`` (any with ``ref`` and ``ref_opt``) with the generator's reference model fit
     ``epochs`` steps on ``traj``, a rollout of fresh levels (``fresh`` bool[]; else unchanged)."""
@@ -540,9 +562,7 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
     batch = (num_steps, num_envs)
     ref = ref_opt = ref_frozen = codes = actions = resets = None
     if reference:
-        ref = model.init(jax.random.fold_in(rng, 1))
-        ref_opt = optimizer.init(ref)
-        ref_frozen = jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+        ref, ref_opt, ref_frozen = init_reference(model, optimizer, num_buffers, rng)
         codes = jnp.zeros((rows,) + batch + (model.coding.num_entries,), jnp.int8)
         actions, resets = jnp.zeros((rows,) + batch, jnp.int32), jnp.ones((rows,) + batch, bool)
     return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, codes=codes, actions=actions, resets=resets,
@@ -556,9 +576,8 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
 def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
     """The models of the buffers before ``active`` (B = K − 1 entries, the last never frozen)."""
     k = memory.threshold.shape[0]
-    ref = None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
     return FrozenBeliefs(params=jax.tree.map(lambda x: x[:-1], memory.params), threshold=memory.threshold[:-1],
-                         valid=jnp.arange(k - 1) < active, ref=ref)
+                         valid=jnp.arange(k - 1) < active, ref=earlier_references(memory))
 
 
 def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, trained,
@@ -643,8 +662,8 @@ def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, m
         tau = calibrate_monotone(scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
         tau = jnp.where(m.written > 0, tau, jnp.inf)
         nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], m.params)
-        ref_frozen = None if m.ref is None else jax.tree.map(lambda all_, r: all_.at[active].set(r), m.ref_frozen, m.ref)
         return m.replace(threshold=m.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),
-                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32), ref_frozen=ref_frozen)
+                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32),
+                         ref_frozen=freeze_reference(m, active))
 
     return jax.lax.cond(switch, switched, lambda m: m, memory)

@@ -1,5 +1,5 @@
-"""The simulated belief model (issue #31, ``remidi.tracker=simulated``; work in progress: the
-pure functions below are built and tested, the tracker is not yet wired into a run).
+"""The simulated belief model (issue #31, ``remidi.tracker=simulated``; wired into a run by
+:mod:`remidi.engine.adversary`).
 
 The exact tracker asks whether one frozen level produced exactly the agent's observations; with
 randomness in what the agent sees (a noisy TV, a noise code) no level ever does. The learned
@@ -36,7 +36,9 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.engine.belief import BeliefModel, ObsCoding, fit_reference, frozen_logliks, frozen_step, length_bucket
+from remidi.engine.belief import (BeliefModel, ObsCoding, calibrate_monotone, earlier_references, fit_reference,
+                                  freeze_reference, frozen_logliks, frozen_step, init_reference, length_bucket,
+                                  num_length_buckets, prefix_lengths)
 from remidi.envs.interface import tree_equal
 
 SMOOTHING = 0.1  # the noise table's Dirichlet prior per cell (log_q)
@@ -359,14 +361,8 @@ def init_memory(coding: ObsCoding, model: BeliefModel, optimizer, num_buffers: i
     """A fresh memory: an empty table, ``rows`` replays of T = ``num_steps`` steps of ``num_envs``
     envs recorded (levels like ``example_level``), thresholds per length bucket (prefixes of at
     most ``min(T, max_length)`` steps), and with ``reference`` a fresh GRU reference."""
-    from remidi.engine.belief import num_length_buckets
-
     batch = (rows, num_steps, num_envs)
-    ref = ref_opt = ref_frozen = None
-    if reference:
-        ref = model.init(jax.random.fold_in(rng, 1))
-        ref_opt = optimizer.init(ref)
-        ref_frozen = jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+    ref, ref_opt, ref_frozen = init_reference(model, optimizer, num_buffers, rng) if reference else (None,) * 3
     buckets = num_length_buckets(min(num_steps, max_length or num_steps))
     return SimMemory(counts=init_counts(coding), threshold=jnp.full((num_buffers, buckets), jnp.inf),
                      codes=jnp.zeros(batch + (coding.num_entries + 1,), jnp.int8),
@@ -401,10 +397,9 @@ def freeze(tracker: SimulatedTracker, memory: SimMemory, env, params, buffer_lev
     reference frozen now; :func:`~remidi.engine.belief.calibrate_monotone`; +inf, explaining
     nothing, without a recorded replay); the reference is frozen with it and the record emptied.
     ``tracker``: the run's, for one buffer. Computed only at a switch."""
-    from remidi.engine.belief import calibrate_monotone, prefix_lengths
 
     def switched(m: SimMemory) -> SimMemory:
-        rows, k = m.codes.shape[0], m.threshold.shape[0]
+        rows = m.codes.shape[0]
         frozen = _one_buffer(buffer_levels, buffer_valid, m, smoothing, key,
                              None if m.ref is None else jax.tree.map(lambda x: x[None], m.ref))
         scores = jax.lax.map(lambda x: score_recorded(tracker, env, params, frozen, x[0].astype(jnp.int32), x[1], x[2],
@@ -419,9 +414,8 @@ def freeze(tracker: SimulatedTracker, memory: SimMemory, env, params, buffer_lev
         tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, false_rate,
                                  m.threshold.shape[1], valid, margin=margin)
         tau = jnp.where(jnp.any(valid), tau, jnp.inf)
-        ref_frozen = None if m.ref is None else jax.tree.map(lambda all_, r: all_.at[active].set(r), m.ref_frozen, m.ref)
         return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
-                         ref_frozen=ref_frozen)
+                         ref_frozen=freeze_reference(m, active))
 
     return jax.lax.cond(switch, switched, lambda m: m, memory)
 
@@ -437,6 +431,5 @@ def _one_buffer(levels, valid, memory: SimMemory, smoothing: float, key, ref):
 def frozen_sims(memory: SimMemory, active, smoothing: float, key) -> FrozenSims:
     """What the rollout's tracker reads: the buffers before ``active`` (B = K − 1 entries)."""
     k = memory.threshold.shape[0]
-    ref = None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
     return FrozenSims(logq=log_q(memory.counts, smoothing), threshold=memory.threshold[:-1],
-                      valid=jnp.arange(k - 1) < active, key=key, ref=ref)
+                      valid=jnp.arange(k - 1) < active, key=key, ref=earlier_references(memory))

@@ -402,23 +402,23 @@ def belief_freezes(setup, runner, switch) -> dict:
 
 
 def belief_contents(setup, runner) -> dict:
-    """``remidi.tracker=belief``: ``belief/threshold`` and ``belief/threshold/long`` (the last
+    """``remidi.tracker=belief`` or ``simulated``: ``belief/threshold`` and ``belief/threshold/long`` (the last
     frozen model's thresholds for one-step prefixes and for the longest prefix-length bucket, which
     holds the longest bucket's with enough held-out prefixes, :func:`~remidi.engine.belief.calibrate_by_length`; NaN
     before the first switch), ``belief/heldout_score`` (the active model's mean held-out prefix
     score since the switch) and ``belief/uniform_score`` (a model that knows nothing: a frozen
-    model whose scores sit near it explains almost anything), all in nats per step."""
+    model whose scores sit near it explains almost anything; these two for ``belief`` only), all
+    in nats per step."""
     if runner.belief is None:
         return {}
     memory = runner.belief
     last = memory.threshold[jnp.maximum(runner.active - 1, 0)]  # f32[L]
     frozen = runner.active > 0
-    if uses_simulated(setup):
-        return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
-                "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan)}
-    return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
-            "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan),
-            "belief/heldout_score": bl.heldout_score(memory),
+    out = {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
+           "belief/threshold/long": jnp.where(frozen, last[-1], jnp.nan)}
+    if uses_simulated(setup):  # no model of the buffer's own: its scores are the mixture's
+        return out
+    return {**out, "belief/heldout_score": bl.heldout_score(memory),
             "belief/uniform_score": jnp.float32(bl.uniform_score(belief_model(setup)))}
 
 

@@ -18,6 +18,9 @@
 # when its process ends), so lanes stay busy until the list is done.
 #
 #   for l in 0 1; do LANES=2 LANE=$l nohup bash docs/results/runs.sh RUNS_DIR > lane$l.log 2>&1 & done
+#
+# ONLY="EXPERIMENT/NAME ..." limits the queue to those runs; RUNS_PYTHONPATH is appended to each
+# commit's PYTHONPATH (device/runs_on_device.sh uses both on a lent GPU).
 set -u
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 R=${1:-/work/runs}
@@ -27,20 +30,23 @@ if [ "$LANES" -gt 1 ]; then  # pin this lane to its core, XLA on one thread
   export XLA_FLAGS="${XLA_FLAGS:-} --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
   PY="taskset -c $LANE $PY"
 fi
-at() {  # at COMMIT: the runs that follow train with that commit's code
-  local frozen=$(dirname "$R")/frozen-$1
-  if [ ! -d "$frozen" ]; then git -C "$HERE" worktree add --detach "$frozen" "$1" || [ -d "$frozen" ] || exit 1; fi
-  export PYTHONPATH="$frozen/src"
+at() { AT=$1; }  # at COMMIT: the runs that follow train with that commit's code
+checkout() {  # the code of commit $AT on PYTHONPATH (a worktree beside RUNS_DIR, made when a run first needs it)
+  local frozen=$(dirname "$R")/frozen-$AT
+  if [ ! -d "$frozen" ]; then git -C "$HERE" worktree add --detach "$frozen" "$AT" || [ -d "$frozen" ] || exit 1; fi
+  export PYTHONPATH="$frozen/src${RUNS_PYTHONPATH:+:$RUNS_PYTHONPATH}"  # RUNS_PYTHONPATH: e.g. a device's wheels
 }
 run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into RUNS_DIR/EXPERIMENT/NAME
   local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
   local out=$R/$exp/$name
+  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $exp/$name "* ]]; then return; fi  # ONLY="EXP/NAME ...": just those
   if grep -qs -- "/$exp/$name\"" "$HERE"/docs/results/data/"$exp"/*/config.json ||
      { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
     echo "committed: $exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
   mkdir -p "$R/$exp"; local lock; exec {lock}>"$out.lock"
   if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi  # another lane is on it
+  checkout
   if [ -f "$out/summary.json" ]; then :
   elif [ -f "$out/config.json" ]; then
     echo "$(date +%T) resume $out"; $PY -m remidi run --resume "$out" --quiet >> "$out.log" 2>&1
@@ -59,7 +65,8 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
 # issue #28: the paper's claims, every run at one commit
 at c32046b
 for e in tabular-shared tabular-distinct; do  # both algorithms, the preset's 50 seeds, seconds each
-  [ "$LANE" -ne 0 ] || [ -d "$HERE/docs/results/data/$e" ] || [ -f "$R/$e/all/remidi/summary.json" ] || $PY -m remidi run "$e" --preset paper --out "$R/$e/all" --quiet
+  [ "$LANE" -ne 0 ] || [ -d "$HERE/docs/results/data/$e" ] || [ -f "$R/$e/all/remidi/summary.json" ] ||
+    { checkout; $PY -m remidi run "$e" --preset paper --out "$R/$e/all" --quiet; }
 done
 for a in dr plr remidi minimax-return accel remidi-accel; do run "$a-s0" lever "$a" 0 10 paper; done
 for s in 0 5; do run "plr-s$s" tmaze plr $s 5 cpu; run "remidi-s$s" tmaze remidi $s 5 cpu; done

@@ -18,7 +18,8 @@ def test_bench_json_has_only_the_document_on_stdout():
                           capture_output=True, text=True, timeout=300, env=subprocess_env(__name__))
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)  # nothing but the document
-    assert set(doc) == {"benchmarks", "ratios", "device", "tiny", "set"} and doc["tiny"] is True
+    assert set(doc) == {"benchmarks", "ratios", "device", "tiny", "set", "seeds"} and doc["tiny"] is True
+    assert doc["seeds"] == 1
     result = doc["benchmarks"]["maze-env"]
     assert FIELDS <= set(result) and result["repeats"] == 2 and len(result["times_s"]) == 2
     assert result["env_steps_per_s"] > 0 and result["compile_s"] > 0 and result["peak_rss_mb"] > 100
@@ -38,6 +39,19 @@ def test_a_flop_rate_without_env_steps_and_plain_python_without_compiling(monkey
     assert abs(matmul["gflops_per_s"] * 1e9 * matmul["seconds_per_call"] - 2 * 4 * 406 * 1024 * 64) < 1e3
     solve = run_one("solve-onestep", 1)  # plain Python: nothing compiled, no steps
     assert solve["compile_s"] < 0.01 and solve["env_steps_per_s"] is None and solve["rounds"] > 10
+
+
+def test_seeds_train_together_and_count_every_seeds_steps(monkeypatch):
+    """``--seeds 2``: the train workload's runner carries two seeds (as a run of two seeds does)
+    and a call's environment steps are both seeds'."""
+    from remidi.bench import SEEDS_ENV, TINY_ENV
+
+    monkeypatch.setenv(TINY_ENV, "1")
+    one = BENCHMARKS["lever-plr"].build()
+    monkeypatch.setenv(SEEDS_ENV, "2")
+    two = BENCHMARKS["lever-plr"].build()
+    assert two.env_steps_per_call == 2 * one.env_steps_per_call
+    assert two.args[0].update.shape == (2,) and one.args[0].update.shape == (1,)
 
 
 def test_ratios_compare_time_per_env_step():
@@ -123,3 +137,6 @@ def test_lanes_beyond_the_cores_are_a_one_line_error(capsys):
     assert main(["bench", "maze-env", "--lanes", "999"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "--lanes" in err and "999" in err
+    assert main(["bench", "maze-env", "--seeds", "0"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "--seeds" in err

@@ -7,8 +7,9 @@ then times ``repeats`` calls (``block_until_ready``) and reports the median
 time are its own; ratios are taken between benchmarks of one ``remidi bench`` invocation (same
 machine, same moment).
 
-Workloads (one seed, the shapes of the paper's maze preset; the train steps are the engine's own
-``train_step`` inside the driver's compiled block, with a seed axis of size 1, ``driver.run_steps``):
+Workloads (one seed, or ``--seeds N`` trained together as a run of N seeds does; the shapes of the
+paper's maze preset; the train steps are the engine's own ``train_step`` inside the driver's
+compiled block, ``driver.run_steps``):
 
 * ``maze-plr``: PLR⊥ on the T-maze task, 32 envs × 256 steps, the paper's maze agent (conv +
   LSTM), PPO 5 epochs × 1 minibatch; the buffer (4000) is full and every update replays, so
@@ -81,6 +82,7 @@ BENCHMARKS: dict[str, "Benchmark"] = {}
 DEFAULT = ("maze-plr", "maze-remidi", "maze-env", "lever-plr", "lstm-matmul")
 TINY_ENV = "REMIDI_BENCH_TINY"  # set (by --tiny): every workload at toy sizes, to check the tool in seconds
 SET_ENV = "REMIDI_BENCH_SET"  # JSON {key: value} (by --set): overrides of the train workloads' UED config
+SEEDS_ENV = "REMIDI_BENCH_SEEDS"  # seeds trained together by the train workloads (by --seeds; default 1)
 BARRIER_ENV = "REMIDI_BENCH_BARRIER"  # a folder (by --lanes): warmed-up lanes wait there to be timed together
 CORE_ENV = "REMIDI_BENCH_CORE"  # the core a lane pins itself to (before JAX starts its threads)
 # one lane of --lanes: XLA's CPU runtime on one thread (its process is pinned to one core)
@@ -110,6 +112,10 @@ def check_overrides(overrides: dict) -> None:
         validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
     if any(key.startswith("buffer.") for key in overrides):
         validate_section("buffer.", lambda: validate_buffer_config(cfg.buffer))
+
+
+def _seeds() -> int:
+    return int(os.environ.get(SEEDS_ENV) or 1)
 
 
 def _tiny() -> bool:
@@ -152,21 +158,23 @@ def register(name: str, description: str):
 
 
 # ----------------------------------------------------------------------------- workloads
-def _filled_runner(setup, active: int):
-    """A one-seed runner (leaves [1, ...]) whose every buffer is full of the task's random levels
-    (random scores), on buffer ``active``."""
+def _filled_runner(setup, active: int, seeds: int = 1):
+    """A runner of ``seeds`` seeds (leaves [S, ...], as ``driver.run_steps`` takes them) whose
+    every buffer is full of the task's random levels (random scores; the same for every seed),
+    on buffer ``active``."""
     import jax
     import jax.numpy as jnp
 
     from remidi.engine import driver
 
-    runner = driver._init(setup, jax.random.PRNGKey(0)[None])
-    bufs = runner.buffers  # leaves [1, K, C, ...]
+    runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.arange(seeds, dtype=jnp.uint32)))
+    bufs = runner.buffers  # leaves [S, K, C, ...]
     k, c = bufs.valid.shape[1:]
     keys = jax.random.split(jax.random.PRNGKey(1), k * c)
     levels = jax.jit(jax.vmap(setup.task.sample_level))(keys)
-    levels = jax.tree.map(lambda x: x.reshape((1, k, c) + x.shape[1:]), levels)
-    scores = jax.random.uniform(jax.random.PRNGKey(2), (1, k, c))
+    levels = jax.tree.map(lambda x: jnp.broadcast_to(x.reshape((1, k, c) + x.shape[1:]), (seeds, k, c) + x.shape[1:]),
+                          levels)
+    scores = jnp.broadcast_to(jax.random.uniform(jax.random.PRNGKey(2), (1, k, c)), (seeds, k, c))
     bufs = bufs.replace(levels=levels, valid=jnp.ones_like(bufs.valid), scores=scores)
     return runner.replace(buffers=bufs, active=jnp.full_like(runner.active, active))
 
@@ -182,7 +190,8 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     cfg = apply_overrides(_shrink(cfg), _overrides())
     setup = tr.make_setup(task, cfg, algo)
-    runner = _filled_runner(setup, active)
+    seeds = _seeds()
+    runner = _filled_runner(setup, active, seeds)
 
     @partial(jax.jit, donate_argnums=0)
     def block(runner):
@@ -193,7 +202,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
         return {name: float(metrics[name].mean()) for name in ("replay", "edit", "rehearsal", "tracker_overflow", "rejected")
                 if name in metrics}
 
-    steps = updates_per_call * cfg.num_envs * cfg.num_steps
+    steps = updates_per_call * cfg.num_envs * cfg.num_steps * seeds
     # the network's operation count assumes every update trains one network; an editing algorithm's
     # edit updates do not, a learned generator's updates train three, a belief tracker adds its models'
     # work and Combine the frozen policies' (no figure rather than a wrong one)
@@ -536,15 +545,16 @@ def ratios(results: dict[str, dict]) -> dict[str, float]:
 
 
 def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = False,
-                   overrides: dict | None = None, lanes: int = 1) -> dict:
+                   overrides: dict | None = None, lanes: int = 1, seeds: int = 1) -> dict:
     """Run each benchmark in its own process; return the JSON document ``remidi bench --json``
     prints. ``tiny``: toy sizes (checks the tool; the figures mean nothing). ``overrides``: UED
     config keys set in every train workload (``num_envs`` and ``num_steps`` also in ``maze-env``).
     ``lanes`` > 1: each benchmark also runs in that many pinned single-threaded processes at once
     (:func:`run_lanes`), reported under ``"lanes"`` with their total against the one process on
-    every core (``over_one_process``)."""
+    every core (``over_one_process``). ``seeds``: the train workloads train that many seeds
+    together (vmapped, as a run of that many seeds does; their env-steps count every seed's)."""
     overrides = overrides or {}
-    env = {**os.environ, TINY_ENV: "1" if tiny else "", SET_ENV: json.dumps(overrides)}
+    env = {**os.environ, TINY_ENV: "1" if tiny else "", SET_ENV: json.dumps(overrides), SEEDS_ENV: str(seeds)}
     results = {}
     for name in names:
         print(f"bench {name}: {BENCHMARKS[name].description} ...", file=log, flush=True)
@@ -557,7 +567,7 @@ def run_benchmarks(names: list[str], repeats: int, log=sys.stderr, tiny: bool = 
         print(f"  {_num(r['env_steps_per_s'])} env-steps/s, {_num(r['gflops_per_s'], 1)} GFLOP/s, "
               f"{r['seconds_per_call']:.3f} s per call, compile {r['compile_s']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MB", file=log, flush=True)
     doc = {"benchmarks": results, "ratios": ratios(results), "device": device_description(), "tiny": tiny,
-           "set": overrides}
+           "set": overrides, "seeds": seeds}
     if lanes > 1:
         doc["lanes"] = {}
         for name in names:

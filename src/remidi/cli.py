@@ -347,12 +347,15 @@ def _cmd_bench(args) -> int:
     cores = len(os.sched_getaffinity(0))
     if not 1 <= args.lanes <= cores:
         raise RemidiError(f"--lanes: must be an integer in [1, {cores}] (this machine's cores), got {args.lanes}")
+    if args.seeds < 1:
+        raise RemidiError(f"--seeds: must be an integer ≥ 1, got {args.seeds}")
     from remidi.bench import check_overrides
     from remidi.experiments.config import parse_set_items
 
     overrides = parse_set_items(args.sets)
     check_overrides(overrides)
-    doc = run_benchmarks(names, args.repeats, log=sys.stderr, tiny=args.tiny, overrides=overrides, lanes=args.lanes)
+    doc = run_benchmarks(names, args.repeats, log=sys.stderr, tiny=args.tiny, overrides=overrides, lanes=args.lanes,
+                         seeds=args.seeds)
     print(json.dumps(doc, indent=2) if args.json else format_table(doc))
     return 0
 
@@ -495,6 +498,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                        help="override a UED config key in every training workload (e.g. num_envs=64, "
                             "remidi.buffer_capacity=64; num_envs and num_steps also apply to maze-env)")
+    bench.add_argument("--seeds", type=int, default=1, metavar="N",
+                       help="train N seeds together in every training workload (vmapped, as a run of N seeds "
+                            "does; default 1: the one-seed program)")
     bench.set_defaults(func=_cmd_bench)
     return parser
 

@@ -47,6 +47,8 @@ import jax.numpy as jnp
 import optax
 from flax import struct
 
+from remidi.engine.seeds import cond_per_seed
+
 
 # ---------------------------------------------------------------------------- observations
 @dataclass(frozen=True)
@@ -419,7 +421,7 @@ def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fres
         ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
         return m.replace(ref=ref, ref_opt=ref_opt)
 
-    return jax.lax.cond(fresh, fit, lambda m: m, memory)
+    return cond_per_seed(fresh, fit, lambda m: m, memory)
 
 
 # ---------------------------------------------------------------------------- the tracker
@@ -615,7 +617,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
                          lengths=m.lengths.at[row].set(lengths, mode="drop"),
                          written=m.written + record.astype(jnp.int32), fits=m.fits + 1), loss
 
-    memory, loss = jax.lax.cond(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
+    memory, loss = cond_per_seed(trained, fit, lambda m: (m, jnp.float32(jnp.nan)), memory)
     if memory.ref is None:
         return memory, loss
 
@@ -666,4 +668,4 @@ def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, m
                          written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32),
                          ref_frozen=freeze_reference(m, active))
 
-    return jax.lax.cond(switch, switched, lambda m: m, memory)
+    return cond_per_seed(switch, switched, lambda m: m, memory)

@@ -43,6 +43,7 @@ from remidi import preemption
 from remidi.engine import evaluation
 from remidi.engine import train as tr
 from remidi.engine.config import UEDConfig
+from remidi.engine.seeds import SEED_BATCH
 from remidi.engine.validation import validate_ued_config
 from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history, remove_stale_temporaries,
                                       save_run)
@@ -102,12 +103,13 @@ def over_seeds(fn):
 
     A vmapped axis of size 1 is not free: XLA keeps it in the network's matrix products and
     turns the train step's ``lax.cond`` into selects (the measurements are in
-    ``docs/performance.md``, "A seed axis of size 1"). ``S`` is the
+    ``docs/performance.md``, "A seed axis of size 1"; rare branches use
+    :func:`~remidi.engine.seeds.cond_per_seed`, which reads the axis name). ``S`` is the
     axis's size where ``fn`` runs: under ``shard_map`` a device's share of the seeds."""
 
     def mapped(*args):
         if jax.tree.leaves(args)[0].shape[0] != 1:
-            return jax.vmap(fn)(*args)
+            return jax.vmap(fn, axis_name=SEED_BATCH)(*args)  # seeds.cond_per_seed reads the axis
         out = fn(*jax.tree.map(lambda x: x[0], args))
         return jax.tree.map(lambda x: x[None], out)
 

@@ -39,6 +39,7 @@ from flax import struct
 from remidi.engine.belief import (BeliefModel, ObsCoding, calibrate_monotone, earlier_references, fit_reference,
                                   freeze_reference, frozen_logliks, frozen_step, init_reference, length_bucket,
                                   num_length_buckets, prefix_lengths)
+from remidi.engine.seeds import cond_per_seed
 from remidi.envs.interface import tree_equal
 
 SMOOTHING = 0.1  # the noise table's Dirichlet prior per cell (log_q)
@@ -417,7 +418,7 @@ def freeze(tracker: SimulatedTracker, memory: SimMemory, env, params, buffer_lev
         return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
                          ref_frozen=freeze_reference(m, active))
 
-    return jax.lax.cond(switch, switched, lambda m: m, memory)
+    return cond_per_seed(switch, switched, lambda m: m, memory)
 
 
 def _one_buffer(levels, valid, memory: SimMemory, smoothing: float, key, ref):

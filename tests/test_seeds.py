@@ -1,0 +1,47 @@
+"""cond_per_seed: a rarely taken branch stays a branch under the driver's seed vmap."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from remidi.engine.driver import over_seeds
+from remidi.engine.seeds import any_seed, cond_per_seed
+
+
+def _counting_branch(calls):
+    def true_fn(x):
+        jax.debug.callback(lambda: calls.append(1))
+        return x * 2.0 + 1.0
+    return true_fn
+
+
+def _run(cond, preds, xs):
+    calls = []
+    out = jax.jit(over_seeds(lambda p, x: cond(p, _counting_branch(calls), lambda y: y - 1.0, x)))(preds, xs)
+    jax.effects_barrier()
+    return np.asarray(out), len(calls)
+
+
+def test_each_seed_keeps_its_own_branch():
+    xs = jnp.arange(6.0).reshape(3, 2)
+    preds = jnp.array([True, False, True])
+    out, calls = _run(cond_per_seed, preds, xs)
+    np.testing.assert_array_equal(out, np.where(np.asarray(preds)[:, None], xs * 2 + 1, xs - 1))
+    assert calls > 0
+    out1, _ = _run(cond_per_seed, preds[:1], xs[:1])  # a one-seed program: no seed axis, an ordinary cond
+    np.testing.assert_array_equal(out1, xs[:1] * 2 + 1)
+
+
+def test_the_branch_does_not_run_when_no_seed_takes_it():
+    xs, preds = jnp.ones((3, 2)), jnp.zeros((3,), bool)
+    out, calls = _run(cond_per_seed, preds, xs)
+    np.testing.assert_array_equal(out, xs - 1)
+    assert calls == 0
+    _, plain_calls = _run(jax.lax.cond, preds, xs)  # vmap turns a plain cond into both branches and a select
+    assert plain_calls > 0
+
+
+def test_any_seed_is_one_value_for_the_batch():
+    got = jax.jit(over_seeds(lambda p: any_seed(p)))(jnp.array([False, True, False]))
+    np.testing.assert_array_equal(got, [True, True, True])
+    assert not jax.jit(over_seeds(lambda p: any_seed(p)))(jnp.array([False]))[0]

@@ -133,8 +133,11 @@ for e in blindfold tmaze; do
   run remidi-rehearsal0.3-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.3
 done
 
-# issue #31: the simulated belief model (remidi.tracker=simulated), at the commit that stated its claims
-at f199ddc
+# issue #31: the simulated belief model (remidi.tracker=simulated). Its claims were stated at f199ddc;
+# the runs use aeff7a8 (branch runs-f199ddc-seeds): f199ddc with the seed-batch branch of main's
+# 7369c07, the same computation (a 2-seed smoke run: identical metrics and checkpoint) 8.2x faster
+# per update at 5 seeds (f199ddc recalibrated at every update of a multi-seed run)
+at aeff7a8
 for e in blindfold-noisy tmaze; do
   run remidi-simulated-s0 $e remidi 0 5 cpu --set remidi.tracker=simulated --set remidi.belief_reference=true \
     --set remidi.belief_false_rate=0 --set remidi.belief_margin=5

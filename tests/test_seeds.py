@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from remidi.engine.driver import over_seeds
 from remidi.engine.seeds import any_seed, cond_per_seed
@@ -45,3 +46,36 @@ def test_any_seed_is_one_value_for_the_batch():
     got = jax.jit(over_seeds(lambda p: any_seed(p)))(jnp.array([False, True, False]))
     np.testing.assert_array_equal(got, [True, True, True])
     assert not jax.jit(over_seeds(lambda p: any_seed(p)))(jnp.array([False]))[0]
+
+
+def _conds(jaxpr) -> int:
+    """The ``cond`` equations of a jaxpr and of every jaxpr inside it."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += eqn.primitive.name == "cond"
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (tuple, list)) else (value,):
+                inner = getattr(sub, "jaxpr", None)
+                if inner is not None:
+                    n += _conds(getattr(inner, "jaxpr", inner))
+    return n
+
+
+@pytest.mark.parametrize("tracker", ["simulated", "belief"])
+def test_a_multi_seed_run_keeps_the_belief_trackers_rare_work_in_branches(tracker):
+    """Two seeds of lever-noisy with a belief tracker and its reference: the traced train step
+    keeps the calibration at a switch and the reference's fit on fresh levels as branches (a
+    vmapped ``lax.cond`` would leave none, running them at every update)."""
+    from remidi.engine import driver
+    from remidi.engine import train as tr
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import resolve_config
+
+    exp = get_experiment("lever-noisy")
+    cfg = resolve_config(exp, "smoke", {"num_envs": "8", "remidi.tracker": tracker, "remidi.belief_reference": "true",
+                                        "remidi.belief_hidden": "8"})
+    setup = tr.make_setup(exp.make_task(cfg), cfg, "remidi")
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(2, dtype=jnp.uint32))
+    runner = jax.eval_shape(lambda k: driver._init(setup, k), keys)
+    closed = jax.make_jaxpr(lambda r: driver.run_steps(setup, r, 1))(runner)
+    assert _conds(closed.jaxpr) >= 2

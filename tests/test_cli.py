@@ -132,7 +132,9 @@ def interrupt_training(monkeypatch, at: int, algo: str | None = None):
 def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, at: int = 10) -> dict:
     """``remidi`` with ``base`` (its argv without ``--out``) into ``folder/full``, and again into
     ``folder/cut`` interrupted (Ctrl-C) after update ``at`` and resumed: both end with the same
-    metrics.csv and summary metrics. Returns the summary's metrics."""
+    metrics.csv and summary metrics, and the resumed run's summary records its two parts (the
+    updates each trained, back to back, each with its code and device). Returns the summary's
+    metrics."""
     import json
 
     from remidi.cli import main
@@ -144,9 +146,14 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(folder / "cut"), "--quiet"]) == 0
     assert (folder / "cut" / "metrics.csv").read_text() == (folder / "full" / "metrics.csv").read_text()
-    full = json.loads((folder / "full" / "summary.json").read_text())["metrics"]
-    assert full == json.loads((folder / "cut" / "summary.json").read_text())["metrics"]
-    return full
+    full = json.loads((folder / "full" / "summary.json").read_text())
+    cut = json.loads((folder / "cut" / "summary.json").read_text())
+    assert full["metrics"] == cut["metrics"]
+    (whole,), (first, second) = full["parts"], cut["parts"]
+    assert whole["updates"][0] == first["updates"][0] == 0 and second["updates"][1] == whole["updates"][1]
+    assert 0 < first["updates"][1] == second["updates"][0] < whole["updates"][1]
+    assert all(p["code"]["device"] and p["wall_s"] >= 0 for p in (whole, first, second))
+    return full["metrics"]
 
 
 def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):

@@ -102,6 +102,28 @@ def test_parts_of_one_algorithm_are_merged_by_seed_and_a_seed_twice_is_an_error(
         rp.load_runs(tmp_path)
 
 
+def test_provenance_names_every_part_of_a_resumed_run(tmp_path):
+    """A run started on a GPU and resumed on the CPU (its summary's ``parts``): the provenance row
+    names both devices and commits and sums their wall times; a run resumed before parts were
+    recorded keeps its start's device and is marked †."""
+    gpu = {"commit": "aaaaaaa1", "device": "gpu: NVIDIA H200"}
+    cpu = {"commit": "bbbbbbb2", "device": "cpu: cpu"}
+    folder = write_run(tmp_path, "tmaze", "remidi", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["parts"] = [{"updates": [0, 900], "wall_s": 600.0, "code": gpu},
+                        {"updates": [900, 1500], "wall_s": 1200.0, "code": cpu}]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    old = write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
+    summary = json.loads((old / "summary.json").read_text())
+    (old / "summary.json").write_text(json.dumps({**summary, "resumed": True}))
+    (old / "config.json").write_text(json.dumps({"code": {"commit": "ccccccc3", "device": "cpu: cpu"}}))
+    table = rp.provenance_table(rp.load_runs(tmp_path))
+    row = next(line for line in table.splitlines() if "| remidi |" in line)
+    assert "aaaaaaa, bbbbbbb" in row and "cpu: cpu, gpu: NVIDIA H200" in row and "30.0 min |" in row
+    row = next(line for line in table.splitlines() if "| plr |" in line)
+    assert "ccccccc" in row and "| cpu: cpu |" in row and "1.0 min †" in row
+
+
 def test_collect_keeps_the_files_and_the_curves_the_page_draws(tmp_path):
     run = write_run(tmp_path / "runs", "tmaze", "plr", [3, 4], summary={"solve_rate/mean": [0.1, 0.2]},
                     evaluate={"solve_rate/mean": [0.1, 0.2]})

@@ -116,9 +116,10 @@ def load_history(path: Path, meta: dict):
         raise _unreadable(path, err) from None
 
 
-def save_run(ckpt: Path, runner, done, steps, history, per_step) -> None:
+def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None) -> None:
     """Write a run's state at ``done`` updates: the metrics logged so far (``steps``, ``history``
-    and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``."""
+    and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``
+    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.driver.drive`)."""
     arrays = {}
     for i, h in enumerate(history):
         arrays.update({f"h{i}|{k}": v for k, v in h.items()})
@@ -126,7 +127,10 @@ def save_run(ckpt: Path, runner, done, steps, history, per_step) -> None:
         arrays.update({f"p{i}|{k}": v for k, v in p.items()})
     atomic_write(ckpt.with_name(HISTORY), lambda fh: np.savez(fh, **arrays), binary=True)
     # the runner checkpoint is written last: it is what marks the history as complete
-    save_checkpoint(ckpt, runner, {"done": done, "steps": steps, "num_blocks": len(per_step)})
+    meta = {"done": done, "steps": steps, "num_blocks": len(per_step)}
+    if parts is not None:
+        meta["parts"] = parts
+    save_checkpoint(ckpt, runner, meta)
 
 
 def _unstack(saved, prefix: str, count: int) -> list[dict[str, np.ndarray]]:

@@ -226,13 +226,15 @@ def ued_programs(setup: tr.Setup, devices: int = 1) -> Programs:
 class TrainResult:
     """A finished run: ``steps`` i[T] (the update count at the end of each block), ``history``
     {name: f[S, T]} (each block's reduced step metrics and the evaluation at its end),
-    ``per_step`` {name: f[S, num_updates]} (the raw replay counters of every update) and the
-    final ``runner`` (leaves ``[S, ...]``; sharded along the seed axis for a sharded run)."""
+    ``per_step`` {name: f[S, num_updates]} (the raw replay counters of every update), the
+    final ``runner`` (leaves ``[S, ...]``; sharded along the seed axis for a sharded run) and
+    ``parts``: the invocations that trained it (:func:`drive`; empty without a run folder)."""
 
     steps: np.ndarray
     history: dict[str, np.ndarray]
     per_step: dict[str, np.ndarray]
     runner: object
+    parts: list = ()
 
 
 def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | tr.Algorithm, seeds: list[int],
@@ -277,12 +279,15 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
         ckpt.parent.mkdir(parents=True, exist_ok=True)
         if writer:
             remove_stale_temporaries(ckpt)
+    earlier: list[dict] = []  # the parts before this invocation's
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
         if sharding is not None:
             runner = _put(runner, sharding)
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
+        earlier = list(meta.get("parts") or [{"updates": [0, done], "code": None}])  # older checkpoints: unrecorded
+    part = new_part(done) if ckpt is not None else None
 
     if ckpt is not None and preemption.requested():  # SIGTERM came as the previous algorithm finished
         raise preemption.Preempted(None)
@@ -315,7 +320,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
             if ckpt is not None and (done % checkpoint_every < length or done == num_updates or preempted):
                 host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
                 if writer:  # process 0 writes
-                    save_run(ckpt, host_runner, done, steps, history, per_step)
+                    save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part(done)])
             if on_block is not None:
                 on_block(done, history[-1])
             if preempted:
@@ -327,7 +332,21 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
     names = history[0].keys()
     hist = {name: np.stack([h[name] for h in history], axis=1) for name in names}
     raw = {name: np.concatenate([p[name] for p in per_step], axis=1) for name in per_step[0]}
-    return TrainResult(np.asarray(steps), hist, raw, runner)
+    return TrainResult(np.asarray(steps), hist, raw, runner, earlier + [part(done)] if part is not None else [])
+
+
+def new_part(start: int):
+    """This invocation's part of a run, from update ``start``: a function of the updates done so
+    far giving ``{"updates": [start, done], "wall_s": seconds since now, "code":
+    remidi.files.code_version()}`` (commit, device, JAX). A run resumed elsewhere (another
+    machine, device or commit) records each part, so its provenance needs no hand-written note;
+    ``code`` None: a part trained before parts were recorded."""
+    import time
+
+    from remidi.files import code_version
+
+    started, code = time.perf_counter(), code_version()
+    return lambda done: {"updates": [start, done], "wall_s": round(time.perf_counter() - started, 1), "code": code}
 
 
 def _progress(total: int, initial: int, desc: str, enabled: bool):

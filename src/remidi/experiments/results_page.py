@@ -269,10 +269,16 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
         run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
                            else str(folder))
-        run.commits.add((config.get("code") or {}).get("commit"))
-        run.wall_s += float(summary.get("wall_s", 0.0))
-        run.resumed |= bool(summary.get("resumed"))
-        run.devices.add((config.get("code") or {}).get("device") or "not recorded")
+        started = config.get("code") or {}  # what the run recorded when it started
+        # each invocation that trained it (summary "parts"; older runs: the start's record and the last part's time)
+        parts = summary.get("parts") or [{"code": None, "wall_s": summary.get("wall_s", 0.0),
+                                          "last": bool(summary.get("resumed"))}]
+        for part in parts:
+            code = part.get("code") or started  # a part before parts were recorded: the start's record
+            run.commits.add(code.get("commit") or started.get("commit"))
+            run.devices.add(code.get("device") or "not recorded")
+            run.wall_s += float(part.get("wall_s") or 0.0)
+            run.resumed |= part.get("last", part.get("code") is None and len(parts) > 1)  # a part's time unknown
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
             if values.shape[0] != len(run.seeds):  # logged by some parts only: no per-seed alignment
@@ -464,9 +470,10 @@ def summary_lines(results: list[dict]) -> str:
 
 
 def provenance_table(runs: dict) -> str:
-    """One row per experiment and algorithm: preset, seeds, commits, devices, the training wall time
-    summed over its parts (marked † where a part was resumed: its summary holds the time of its
-    last part alone) and its data folders."""
+    """One row per experiment and algorithm: preset, seeds, commits and devices (of every part
+    that trained it, where its summary records ``parts``), the training wall time summed over its
+    parts (marked † where some part's time is unknown: a run resumed before parts were recorded
+    holds the time of its last part alone) and its data folders."""
     lines = ["| experiment | algorithm | preset | seeds | commit | device | training wall time (all parts) | data |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for (exp, algo), run in sorted(runs.items()):
@@ -476,8 +483,8 @@ def provenance_table(runs: dict) -> str:
         lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {devices} | {wall} | "
                      + ", ".join(f"`{f}`" for f in run.folders) + " |")
     if any(run.resumed for run in runs.values()):
-        lines.append("\n† a part of these runs was resumed from a checkpoint; its wall time counts the last "
-                     "part alone.")
+        lines.append("\n† a part of these runs was resumed from a checkpoint before runs recorded their parts; its "
+                     "wall time counts the last part alone.")
     return "\n".join(lines)
 
 

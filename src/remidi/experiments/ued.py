@@ -61,7 +61,8 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         final.update(final_replay_fractions(result.per_step, cfg.num_envs))
         ordered = {name: final[name] for name in summary_metrics if name in final}
         ordered.update({k: v for k, v in final.items() if k not in ordered})
-        return RunResult(steps=result.steps, history=history, final=ordered)
+        return RunResult(steps=result.steps, history=history, final=ordered,
+                         extra={"parts": list(result.parts)} if result.parts else {})
 
     return train
 

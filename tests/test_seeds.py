@@ -61,21 +61,37 @@ def _conds(jaxpr) -> int:
     return n
 
 
-@pytest.mark.parametrize("tracker", ["simulated", "belief"])
-def test_a_multi_seed_run_keeps_the_belief_trackers_rare_work_in_branches(tracker):
-    """Two seeds of lever-noisy with a belief tracker and its reference: the traced train step
-    keeps the calibration at a switch and the reference's fit on fresh levels as branches (a
-    vmapped ``lax.cond`` would leave none, running them at every update)."""
+def test_a_multi_seed_run_keeps_the_simulated_models_rare_work_in_branches():
+    """Two seeds of lever-noisy with the simulated tracker and its reference: the traced train
+    step keeps the calibration at a switch and the reference's fit on fresh levels as branches (a
+    vmapped ``lax.cond`` leaves none, running them at every update: 8× the cost per update at the
+    cpu preset's 5 seeds, docs/performance.md)."""
     from remidi.engine import driver
     from remidi.engine import train as tr
     from remidi.experiments import get_experiment
     from remidi.experiments.base import resolve_config
 
     exp = get_experiment("lever-noisy")
-    cfg = resolve_config(exp, "smoke", {"num_envs": "8", "remidi.tracker": tracker, "remidi.belief_reference": "true",
-                                        "remidi.belief_hidden": "8"})
+    cfg = resolve_config(exp, "smoke", {"num_envs": "8", "remidi.tracker": "simulated",
+                                        "remidi.belief_reference": "true", "remidi.belief_hidden": "8"})
     setup = tr.make_setup(exp.make_task(cfg), cfg, "remidi")
     keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(2, dtype=jnp.uint32))
     runner = jax.eval_shape(lambda k: driver._init(setup, k), keys)
     closed = jax.make_jaxpr(lambda r: driver.run_steps(setup, r, 1))(runner)
     assert _conds(closed.jaxpr) >= 2
+
+
+def test_the_belief_models_calibration_is_a_branch_over_several_seeds():
+    """The learned belief tracker's freeze (its calibration at a switch) over two seeds stays a
+    branch, and calibrates only the seed that switches."""
+    from remidi.engine import belief
+
+    model = belief.BeliefModel(belief.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = belief.make_optimizer()
+    one = belief.init_memory(model, opt, 2, 2, 4, 3, jax.random.PRNGKey(0)).replace(written=jnp.ones((), jnp.int32))
+    memory = jax.tree.map(lambda x: jnp.stack([x, x]), one)  # two seeds, each with one recorded rollout
+    freeze = over_seeds(lambda m, s: belief.freeze(opt, m, 0, s, 0.05).threshold)
+    switch = jnp.array([True, False])
+    assert _conds(jax.make_jaxpr(freeze)(memory, switch).jaxpr) >= 1
+    threshold = np.asarray(jax.jit(freeze)(memory, switch))
+    assert np.isfinite(threshold[0, 0]).all() and np.isinf(threshold[1]).all()

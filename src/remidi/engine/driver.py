@@ -27,6 +27,7 @@ runs on different hardware do. A sharded run is itself deterministic and resumes
 
 from __future__ import annotations
 
+import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from functools import partial
@@ -49,6 +50,7 @@ from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load
                                       save_run)
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
+from remidi.files import code_version
 
 SEED_AXIS = "seed"
 
@@ -341,10 +343,6 @@ def new_part(start: int):
     remidi.files.code_version()}`` (commit, device, JAX). A run resumed elsewhere (another
     machine, device or commit) records each part, so its provenance needs no hand-written note;
     ``code`` None: a part trained before parts were recorded."""
-    import time
-
-    from remidi.files import code_version
-
     started, code = time.perf_counter(), code_version()
     return lambda done: {"updates": [start, done], "wall_s": round(time.perf_counter() - started, 1), "code": code}
 

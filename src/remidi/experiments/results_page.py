@@ -270,15 +270,16 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
                            else str(folder))
         started = config.get("code") or {}  # what the run recorded when it started
-        # each invocation that trained it (summary "parts"; older runs: the start's record and the last part's time)
-        parts = summary.get("parts") or [{"code": None, "wall_s": summary.get("wall_s", 0.0),
-                                          "last": bool(summary.get("resumed"))}]
+        parts = summary.get("parts")  # each invocation that trained it
+        if parts is None:  # a run before parts were recorded: the start's record, the last part's time
+            parts = [{"code": started, "wall_s": summary.get("wall_s", 0.0)}]
+            run.resumed |= bool(summary.get("resumed"))
         for part in parts:
-            code = part.get("code") or started  # a part before parts were recorded: the start's record
+            code = part.get("code") or started  # None: a part before parts were recorded
             run.commits.add(code.get("commit") or started.get("commit"))
             run.devices.add(code.get("device") or "not recorded")
             run.wall_s += float(part.get("wall_s") or 0.0)
-            run.resumed |= part.get("last", part.get("code") is None and len(parts) > 1)  # a part's time unknown
+            run.resumed |= part.get("code") is None  # that part's time is unknown
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
             if values.shape[0] != len(run.seeds):  # logged by some parts only: no per-seed alignment

@@ -171,3 +171,27 @@ def test_labels_name_what_differs_from_the_exact_single_policy_form():
         "remidi-paired (perfect, belief)"
     assert rp.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "prefix"}}) == \
         "remidi-paired (perfect)"
+
+
+def test_a_claim_figure_shows_its_whole_title_and_the_verdict(tmp_path, monkeypatch):
+    """The longest claim title on the page, wrapped: every line of it lies inside the figure and
+    the last one names the verdict (one long line once cut the verdict off at the right edge)."""
+    from remidi.experiments import plots
+
+    claim = max(rp.CLAIMS, key=lambda c: len(c.title) + len(c.metric))
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig))
+    result = {"claim": claim, "verdict": "not reproduced"}
+    rp._interval_figure(tmp_path / "claim.png", result, {})
+    (fig,) = figures
+    fig.tight_layout()
+    fig.canvas.draw()
+    import matplotlib.text
+
+    texts = [t for t in fig.findobj(matplotlib.text.Text) if t.get_visible() and t.get_text()]
+    for t in texts:  # the title, the algorithms' names, the ticks
+        box = t.get_window_extent()
+        assert 0 <= box.x0 and box.x1 <= fig.bbox.width and 0 <= box.y0 and box.y1 <= fig.bbox.height, t
+    title = max(texts, key=lambda t: len(t.get_text())).get_text()
+    assert title.splitlines()[-1] == "verdict: not reproduced"
+    assert claim.title in title.replace("\n", " ")

@@ -30,6 +30,7 @@ import math
 import re
 import shutil
 import sys
+import textwrap
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -582,7 +583,10 @@ def _interval_figure(path: Path, result: dict, runs: dict) -> None:
     claim = result["claim"]
     algos = list(dict.fromkeys([a for pair in claim.greater for a in pair] + [b[0] for b in claim.bounds]))
     rows = [(exp, a) for exp in claim.experiments for a in algos]
-    fig, ax = plt.subplots(figsize=(6, 0.6 + 0.4 * len(rows)))
+    # wrapped, so that a long claim title never cuts off the verdict (its own last line)
+    title = textwrap.wrap(f"{claim.title}: {claim.metric.split(':', 1)[1]} (mean, 95% CI, seeds)", 95)
+    title.append(f"verdict: {result['verdict']}")
+    fig, ax = plt.subplots(figsize=(6, 0.5 + 0.4 * len(rows) + 0.15 * len(title)))
     for y, (exp, a) in enumerate(rows):
         x = list(metric_values(runs, exp, a, claim.metric).values())
         if x:
@@ -590,8 +594,7 @@ def _interval_figure(path: Path, result: dict, runs: dict) -> None:
             ax.plot(x, [y] * len(x), "k.", markersize=3, alpha=0.5)
     ax.set_yticks(range(len(rows)), [f"{e} / {a}" if len(claim.experiments) > 1 else a for e, a in rows], fontsize=8)
     ax.invert_yaxis()
-    ax.set_title(f"{claim.title}: {claim.metric.split(':', 1)[1]} (mean, 95% CI, seeds) — {result['verdict']}",
-                 fontsize=8)
+    fig.suptitle("\n".join(title), fontsize=8)  # centred on the figure, not on the narrower axes
     ax.grid(alpha=0.3, axis="x")
     _save(fig, path)
 

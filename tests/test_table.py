@@ -129,3 +129,20 @@ def test_default_columns_are_the_claims_metrics_the_headline_and_the_level_share
     assert shown == ["experiment", "algorithm", "solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze",
                      "replay_fraction/blind", "buffer_fraction/blind", "regret/h1", "regret/h3", "regret/h5",
                      "seeds", "preset", "wall time"], head
+
+
+def test_two_runs_of_one_algorithm_in_different_forms_get_two_names(tmp_path, capsys):
+    """ReMiDi's masked and combine runs (and a run without config.json) are told apart by what
+    their config changes, as the results page names them."""
+    for name, config in (("masked", {"remidi": {"policy": "masked"}}), ("combine", {"remidi": {"policy": "combine"}}),
+                         ("bare", None)):
+        write_run(tmp_path / name, "lever", "remidi", {"solve_rate/visible": [1.0, 1.0]})
+        if config is None:
+            (tmp_path / name / "config.json").unlink()
+        else:
+            command = ["remidi", "run", "lever", "--set", f"remidi.policy={config['remidi']['policy']}"]
+            (tmp_path / name / "config.json").write_text(json.dumps({"algo": "remidi", "config": config,
+                                                                     "command": command}))
+    assert main(["table", *(str(tmp_path / n) for n in ("masked", "combine", "bare"))]) == 0
+    rows = capsys.readouterr().out.strip().splitlines()[2:5]
+    assert [row.split(" | ")[1] for row in rows] == ["remidi (masked)", "remidi (combine)", "remidi"]

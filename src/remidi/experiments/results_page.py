@@ -43,6 +43,7 @@ from remidi.experiments import outputs
 from remidi.experiments.compare import compare
 from remidi.experiments.table import _cells as table_cells
 from remidi.experiments.table import _digits as table_digits
+from remidi.experiments.table import label  # how the page names an algorithm's runs
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "docs" / "results" / "data"
@@ -290,38 +291,6 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
                 means = np.nanmean(values, axis=1)
             run.values.setdefault("run", {})[name] = dict(zip(run.seeds, map(float, means)))
     return runs
-
-
-def label(algo: str, config: dict, command: list | None = None) -> str:
-    """How the page names an algorithm's runs: a learned generator's with its regret estimator
-    (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief tracker); a buffer sequence's with what differs from its exact single-policy
-    form (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
-    ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
-    baseline run beside its variants, kept apart from the plain runs of earlier claims); the
-    others by name."""
-    estimator = config.get("paired", {}).get("estimator")
-    if algo in ("paired", "remidi-paired") and estimator:
-        belief = algo == "remidi-paired" and config.get("remidi", {}).get("tracker") == "belief"
-        return f"{algo} ({estimator}, belief)" if belief else f"{algo} ({estimator})"
-    r = config.get("remidi", {})
-    parts = []
-    if r.get("tracker") == "belief":
-        parts.append("belief")
-        if r.get("belief_margin", 1e-3) != 1e-3:
-            parts.append(f"margin {r['belief_margin']:g}")
-    if r.get("tracker") == "simulated":
-        parts.append("simulated, ratio" if r.get("belief_reference") else "simulated")
-        if r.get("belief_false_rate", 0.05) != 0.05:
-            parts.append(f"false rate {r['belief_false_rate']:g}")
-        if r.get("belief_margin", 1e-3) != 1e-3:
-            parts.append(f"margin {r['belief_margin']:g}")
-    if r.get("policy") == "combine":
-        parts.append("combine")
-    elif any(str(token).endswith("remidi.policy=masked") for token in command or []):
-        parts.append("masked")
-    if r.get("rehearsal"):
-        parts.append(f"rehearsal {r['rehearsal']:g}")
-    return f"{algo} ({', '.join(parts)})" if algo.startswith("remidi") and parts else algo
 
 
 def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:

@@ -71,6 +71,38 @@ def summaries(folders: list[Path]) -> list[dict]:
     return found
 
 
+def label(algo: str, config: dict, command: list | None = None) -> str:
+    """How a table and the results page name an algorithm's runs: a learned generator's with its regret estimator
+    (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief tracker); a buffer sequence's with what differs from its exact single-policy
+    form (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
+    ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
+    baseline run beside its variants, kept apart from the plain runs of earlier claims); the
+    others by name."""
+    estimator = config.get("paired", {}).get("estimator")
+    if algo in ("paired", "remidi-paired") and estimator:
+        belief = algo == "remidi-paired" and config.get("remidi", {}).get("tracker") == "belief"
+        return f"{algo} ({estimator}, belief)" if belief else f"{algo} ({estimator})"
+    r = config.get("remidi", {})
+    parts = []
+    if r.get("tracker") == "belief":
+        parts.append("belief")
+        if r.get("belief_margin", 1e-3) != 1e-3:
+            parts.append(f"margin {r['belief_margin']:g}")
+    if r.get("tracker") == "simulated":
+        parts.append("simulated, ratio" if r.get("belief_reference") else "simulated")
+        if r.get("belief_false_rate", 0.05) != 0.05:
+            parts.append(f"false rate {r['belief_false_rate']:g}")
+        if r.get("belief_margin", 1e-3) != 1e-3:
+            parts.append(f"margin {r['belief_margin']:g}")
+    if r.get("policy") == "combine":
+        parts.append("combine")
+    elif any(str(token).endswith("remidi.policy=masked") for token in command or []):
+        parts.append("masked")
+    if r.get("rehearsal"):
+        parts.append(f"rehearsal {r['rehearsal']:g}")
+    return f"{algo} ({', '.join(parts)})" if algo.startswith("remidi") and parts else algo
+
+
 def per_seed(entry: dict | None) -> list[float]:
     """A metric entry's per-seed values f[S] (``None``, JSON's NaN, → NaN); ``[mean]`` for an
     entry without them; ``[]`` for no entry."""
@@ -122,6 +154,16 @@ def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
     return outputs.summarize(per_seed)  # a seed without a defined point makes the mean NaN: n/a
 
 
+def _name(doc: dict) -> str:
+    """The row's algorithm, named by :func:`label` from the run's ``config.json`` (so that two
+    ReMiDi runs that differ in policy or tracker get two names), by its summary alone without one."""
+    config = Path(doc["folder"]) / "config.json"
+    if not config.is_file():
+        return doc["algo"]
+    run = outputs.read_json(config)
+    return label(doc["algo"], run.get("config", {}), run.get("command"))
+
+
 SHARES = ("replay_fraction", "buffer_fraction")  # the level shares that carry the UED experiments' claims
 
 
@@ -163,7 +205,7 @@ def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int
         if d.get("resumed"):
             wall += " (last part)"
         values = windowed(d, metrics, last) if last is not None else d["metrics"]
-        cells = [d["experiment"], d["algo"], *(c for m in metrics for c in _cells(values.get(m), _digits(m))),
+        cells = [d["experiment"], _name(d), *(c for m in metrics for c in _cells(values.get(m), _digits(m))),
                  str(len(d["seeds"])), d["preset"], wall]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n\n" + NOTE

@@ -60,8 +60,8 @@ compiled block, ``driver.run_steps``):
   100 observations and 3 actions (rewards uniform in [0, 1], seed 0); plain Python and HiGHS, no
   compilation (not run by default).
 * ``brax-plr``: PLR⊥ on ``brax-hopper``'s paper preset (256 envs × 100 steps, PPO 4 epochs × 32
-  minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 8 s
-  per update on a 2-core CPU).
+  minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 4 s
+  per update on a 2-core CPU, docs/performance.md).
 """
 
 from __future__ import annotations

@@ -13,12 +13,44 @@ sets, and boolean level tags to report (e.g. which levels hide the answer).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
 from flax import struct
-from jaxued.environments.underspecified_env import EnvParams, UnderspecifiedEnv
+
+
+def _jaxued_interface():
+    """``jaxued.environments.underspecified_env``, the module of the interface we share with
+    jaxued, without running ``jaxued.environments``' ``__init__`` until something else needs it:
+    that imports jaxued's maze, which imports gymnax's every environment and seaborn, seconds of
+    start-up for every process (the CLI's included) that never touches a maze. The module is
+    registered under its own name, so a later import of the package finds it there and jaxued's
+    classes stay the same objects (``tests/test_interface_import.py``)."""
+    import importlib.util
+    import sys
+
+    name = "jaxued.environments.underspecified_env"
+    if name in sys.modules:
+        return sys.modules[name]
+    package = importlib.util.find_spec("jaxued")
+    if package is None or not package.submodule_search_locations:
+        raise ImportError("remidi needs the jaxued package (pip install jaxued)")
+    path = Path(next(iter(package.submodule_search_locations))) / "environments" / "underspecified_env.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+    return module
+
+
+EnvParams = _jaxued_interface().EnvParams
+UnderspecifiedEnv = _jaxued_interface().UnderspecifiedEnv
 
 __all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal",
            "one_step_discounted"]

@@ -45,6 +45,7 @@ from jaxued.environments.maze.env import DIR_TO_VEC, EnvParams, Observation, mak
 
 from remidi.envs.builder import BuilderState, LevelBuilder
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.envs.maze_names import CORRIDORS, HELD_OUT_NAMES, PREFAB_NAMES, TRAIN_SIZE
 
 __all__ = [
     "MazeLevel", "MazeState", "MazeEnv", "MAX_STEPS", "TRAIN_SIZE", "NUM_WALLS", "PREFAB_NAMES", "HELD_OUT_NAMES",
@@ -53,14 +54,9 @@ __all__ = [
 ]
 
 MAX_STEPS = 250
-TRAIN_SIZE = 13
 NUM_WALLS = 25
 VIEW = 5
 RIGHT, UP = 0, 3
-PREFAB_NAMES = ("SixteenRooms", "SixteenRooms2", "Labyrinth", "LabyrinthFlipped", "Labyrinth2",
-                "StandardMaze", "StandardMaze2", "StandardMaze3")
-CORRIDORS = {"SmallCorridor": 13, "LargeCorridor": 19}
-HELD_OUT_NAMES = PREFAB_NAMES + tuple(CORRIDORS)
 
 
 @struct.dataclass

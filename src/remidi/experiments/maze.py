@@ -16,8 +16,7 @@ import numpy as np
 from remidi.engine.buffer import BufferConfig
 from remidi.engine.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
-from remidi.envs.maze import HELD_OUT_NAMES, TRAIN_SIZE, maze_task
-from remidi.envs.noisy import noisy_blindfold_task
+from remidi.envs.maze_names import HELD_OUT_NAMES, TRAIN_SIZE  # not remidi.envs.maze: see maze_names
 from remidi.errors import probability, require
 from remidi.experiments.ued import make_ued_experiment
 
@@ -92,7 +91,11 @@ def task_factory(kind: str):
         require(isinstance(cfg.maze.num_walls, int) and 0 <= cfg.maze.num_walls <= cells - 2, "maze.num_walls",
                 f"an integer in [0, {cells - 2}]", cfg.maze.num_walls)
         if kind == "blindfold-noisy":
+            from remidi.envs.noisy import noisy_blindfold_task
+
             return noisy_blindfold_task(cfg.maze.prob, cfg.maze.num_walls)
+        from remidi.envs.maze import maze_task
+
         return maze_task(kind, cfg.maze.prob, cfg.maze.num_walls)
 
     return factory

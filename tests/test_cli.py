@@ -133,18 +133,22 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     """``remidi`` with ``base`` (its argv without ``--out``) into ``folder/full``, and again into
     ``folder/cut`` interrupted (Ctrl-C) after update ``at`` and resumed: both end with the same
     metrics.csv and summary metrics, and the resumed run's summary records its two parts (the
-    updates each trained, back to back, each with its code and device). Returns the summary's
-    metrics."""
+    updates each trained, back to back, each with its code and device); the interrupted and the
+    resumed run compile nothing the full run did not (a runner restored from a checkpoint has
+    the fresh one's types). Returns the summary's metrics."""
     import json
 
     from remidi.cli import main
+    from remidi.engine import driver
     from remidi.experiments import ued
 
     assert main([*base, "--out", str(folder / "full")]) == 0
+    programs = driver._run_block._cache_size(), driver._evaluate._cache_size()
     real = interrupt_training(monkeypatch, at)
     assert main([*base, "--out", str(folder / "cut")]) == 130
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(folder / "cut"), "--quiet"]) == 0
+    assert (driver._run_block._cache_size(), driver._evaluate._cache_size()) == programs
     assert (folder / "cut" / "metrics.csv").read_text() == (folder / "full" / "metrics.csv").read_text()
     full = json.loads((folder / "full" / "summary.json").read_text())
     cut = json.loads((folder / "cut" / "summary.json").read_text())

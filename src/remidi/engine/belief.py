@@ -570,7 +570,7 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, num_
     return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, codes=codes, actions=actions, resets=resets,
                         params=params, opt_state=optimizer.init(first),
                         threshold=jnp.full((num_buffers, num_length_buckets(min(num_steps, max_length or num_steps))),
-                                           jnp.inf),
+                                           jnp.inf, jnp.float32),  # strongly typed, as a checkpoint restores it
                         scores=jnp.zeros((rows,) + batch), lengths=jnp.ones((rows,) + batch, jnp.int32),
                         written=jnp.zeros((), jnp.int32), fits=jnp.zeros((), jnp.int32))
 

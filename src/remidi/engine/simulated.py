@@ -365,7 +365,8 @@ def init_memory(coding: ObsCoding, model: BeliefModel, optimizer, num_buffers: i
     batch = (rows, num_steps, num_envs)
     ref, ref_opt, ref_frozen = init_reference(model, optimizer, num_buffers, rng) if reference else (None,) * 3
     buckets = num_length_buckets(min(num_steps, max_length or num_steps))
-    return SimMemory(counts=init_counts(coding), threshold=jnp.full((num_buffers, buckets), jnp.inf, jnp.float32),  # as a checkpoint restores it
+    threshold = jnp.full((num_buffers, buckets), jnp.inf, jnp.float32)  # strongly typed, as a checkpoint restores it
+    return SimMemory(counts=init_counts(coding), threshold=threshold,
                      codes=jnp.zeros(batch + (coding.num_entries + 1,), jnp.int8),
                      actions=jnp.zeros(batch, jnp.int32), resets=jnp.ones(batch, bool),
                      levels=jax.tree.map(lambda x: jnp.zeros((rows, num_envs) + x.shape, x.dtype), example_level),

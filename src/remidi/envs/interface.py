@@ -49,8 +49,8 @@ def _jaxued_interface():
     return module
 
 
-EnvParams = _jaxued_interface().EnvParams
-UnderspecifiedEnv = _jaxued_interface().UnderspecifiedEnv
+_JAXUED = _jaxued_interface()
+EnvParams, UnderspecifiedEnv = _JAXUED.EnvParams, _JAXUED.UnderspecifiedEnv
 
 __all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal",
            "one_step_discounted"]

@@ -72,10 +72,11 @@ def summaries(folders: list[Path]) -> list[dict]:
 
 
 def label(algo: str, config: dict, command: list | None = None) -> str:
-    """How a table and the results page name an algorithm's runs: a learned generator's with its regret estimator
-    (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief tracker); a buffer sequence's with what differs from its exact single-policy
-    form (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and
-    ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
+    """How a table and the results page name an algorithm's runs: a learned generator's with its
+    regret estimator (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief
+    tracker); a buffer sequence's with what differs from its exact single-policy form
+    (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``,
+    ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
     baseline run beside its variants, kept apart from the plain runs of earlier claims); the
     others by name."""
     estimator = config.get("paired", {}).get("estimator")

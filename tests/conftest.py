@@ -23,7 +23,8 @@ program, 2-core CPU; tests/compile_report.py shows any program's):
   while the code runs nearly as fast (block: 3.8 s to compile and 1.4 s to run, instead of 8.5 s
   and 1.0 s). They go into ``XLA_FLAGS`` before any backend starts, so the xdist workers and the
   tests' subprocesses inherit them; a jaxlib that no longer knows one of them (XLA would abort)
-  is found by a probe, and the suite then runs without them (the report header says which).
+  is found by a probe (run once per jaxlib version and flag string while the cache is on), and
+  the suite then runs without them (the report header says which).
   ``REMIDI_TEST_XLA_FLAGS=0`` leaves ``XLA_FLAGS`` alone.
 * Most test files run their programs for milliseconds, so they compile without LLVM optimisation
   (JAX's ``jax_disable_most_optimizations``: 2.0 s instead of 3.8 s to compile the block, which
@@ -38,6 +39,8 @@ programs with XLA's own fusion emitters.
 """
 
 import contextlib
+import hashlib
+import importlib.metadata
 import os
 import subprocess
 import sys
@@ -47,6 +50,7 @@ import jax
 import pytest
 
 FAST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false --xla_backend_optimization_level=1"
+_CACHE = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
 _FLAGS_CHECKED = "REMIDI_TEST_XLA_FLAGS_CHECKED"  # set once the controlling process has decided
 
 
@@ -55,6 +59,15 @@ def _add_fast_xla_flags() -> None:
         return  # a worker or subprocess: the controlling process decided, and XLA_FLAGS says what
     os.environ[_FLAGS_CHECKED] = "1"
     flags = f"{os.environ.get('XLA_FLAGS', '')} {FAST_XLA_FLAGS}".strip()
+    # a jaxlib that accepted these flags once accepts them again: remembered beside the cache
+    # (a new jaxlib or new flags give a new marker and a new probe; no cache, always a probe)
+    marker = None
+    if _CACHE:
+        tag = hashlib.sha1(f"{importlib.metadata.version('jaxlib')} {flags}".encode()).hexdigest()[:16]
+        marker = Path(_CACHE).parent / f"xla-flags-ok-{tag}"
+        if marker.exists():
+            os.environ["XLA_FLAGS"] = flags
+            return
     try:
         probe = subprocess.run([sys.executable, "-c", "import jax.numpy as j; j.ones(2).sum().block_until_ready()"],
                                env=dict(os.environ, XLA_FLAGS=flags), capture_output=True, timeout=300).returncode
@@ -62,6 +75,9 @@ def _add_fast_xla_flags() -> None:
         probe = None
     if probe == 0:
         os.environ["XLA_FLAGS"] = flags
+        if marker is not None:
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            marker.touch()
     else:
         os.environ[_FLAGS_CHECKED] = "refused"  # for the report header
 
@@ -74,7 +90,6 @@ def pytest_report_header(config):
 
 _add_fast_xla_flags()
 
-_CACHE = os.environ.get("REMIDI_TEST_JAX_CACHE", str(Path.home() / ".cache" / "remidi" / "jax-test-cache"))
 if _CACHE:
     jax.config.update("jax_compilation_cache_dir", _CACHE)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
@@ -134,13 +149,25 @@ def subprocess_env(module_name: str, cache: bool = True, **extra: str) -> dict[s
                    JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
     return env
 
+@pytest.fixture
+def no_png(monkeypatch):
+    """For tests whose checks read no plot: a run's figures are built (their data and panel code
+    runs) but not rendered (``tight_layout`` and ``savefig``, most of a figure's cost). The PNGs
+    themselves are checked by tests/test_plots.py, the smoke tests and test_cli's output tests."""
+    import matplotlib.pyplot as plt
+
+    from remidi.experiments import plots
+
+    monkeypatch.setattr(plots, "_save", lambda fig, path: plt.close(fig))
+
+
 # the files that take longest on a cold cache (worker-seconds, 2-core CPU, measured with the
 # compile report below), heaviest first; the others follow in their usual order
 HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_brax_smoke", "test_examples", "test_belief", "test_simulated",
                "test_cli", "test_engine_reference_maze", "test_engine_reference", "test_bench", "test_continuous", "test_sharding",
                "test_maze_env", "test_accel", "test_gymnax", "test_tracker_equivalence", "test_evaluate", "test_tabular_ued",
                "test_interrupt", "test_ued_engine", "test_render", "test_ppo", "test_buffer", "test_networks",
-               "test_tracking", "test_scores", "test_resume_damaged", "test_seed_init")
+               "test_tracking", "test_scores", "test_resume_damaged")
 
 
 def pytest_collection_modifyitems(session, config, items):

@@ -17,6 +17,8 @@ from remidi.engine.tracker import ExactTracker
 from remidi.envs.lever import LeverLevel, lever_task
 from remidi.envs.noisy import SeededLevel, draw_seed, noisy_lever_task
 
+pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
+
 LEVERS = 8
 FALSE_RATE = 0.05
 

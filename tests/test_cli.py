@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -76,20 +77,33 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv,
     assert not out.exists()
 
 
-def test_existing_run_is_never_overwritten(tmp_path, capsys):
-    out = tmp_path / "run"
-    assert run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+@pytest.fixture(scope="module")
+def finished_tabular(tmp_path_factory):
+    """A finished several-algorithm tabular run (mmr/ and its other algorithms' sub-folders),
+    trained once for the tests that only need one to be refused or told it is finished: each test
+    copies it (``shutil.copytree`` keeps the files' times) and checks its own copy."""
+    out = tmp_path_factory.mktemp("tabular") / "both"
+    assert main(["run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST]) == 0
+    return out
+
+
+def copy_of(run: Path, to: Path) -> Path:
+    shutil.copytree(run, to)
+    return to
+
+
+def test_existing_run_is_never_overwritten(tmp_path, capsys, finished_tabular):
+    out = copy_of(finished_tabular, tmp_path / "both") / "mmr"  # a folder holding one algorithm's run
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     code, _, err = run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--out", str(out), *FAST)
     assert code == 2 and "already holds a run" in err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
-def test_one_algorithm_into_a_finished_several_algorithm_run_writes_nothing(tmp_path, capsys):
+def test_one_algorithm_into_a_finished_several_algorithm_run_writes_nothing(tmp_path, capsys, finished_tabular):
     """A several-algorithm run keeps config.json in each algorithm's sub-folder, none at the top:
     a later single-algorithm run into the same folder must be refused, not added beside them."""
-    out = tmp_path / "both"
-    assert run_cli(capsys, "run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+    out = copy_of(finished_tabular, tmp_path / "both")
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     code, _, err = run_cli(capsys, "run", "tabular-shared", "--algo", "mmr", "--seeds", "1", "--out", str(out), *FAST)
     assert code == 2 and "already holds a run" in err and err.count("\n") == 1
@@ -146,6 +160,7 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     programs = driver._run_block._cache_size(), driver._evaluate._cache_size()
     real = interrupt_training(monkeypatch, at)
     assert main([*base, "--out", str(folder / "cut")]) == 130
+    assert (folder / "cut" / "checkpoint.npz").exists() and not (folder / "cut" / "summary.json").exists()
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(folder / "cut"), "--quiet"]) == 0
     assert (driver._run_block._cache_size(), driver._evaluate._cache_size()) == programs
@@ -160,24 +175,10 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     return full["metrics"]
 
 
-def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, capsys, monkeypatch):
-    from remidi.experiments import ued
-
-    base = ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY]
-    assert run_cli(capsys, *base, "--out", str(tmp_path / "full"))[0] == 0
-
-    real = interrupt_training(monkeypatch, 10)
-    code, _, err = run_cli(capsys, *base, "--out", str(tmp_path / "cut"))
-    assert code == 130 and "interrupted" in err
-    assert (tmp_path / "cut" / "checkpoint.npz").exists() and not (tmp_path / "cut" / "summary.json").exists()
-    monkeypatch.setattr(ued, "train_seeds", real)
-
-    code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path / "cut"), "--quiet")
-    assert code == 0, err
-    assert (tmp_path / "cut" / "metrics.csv").read_text() == (tmp_path / "full" / "metrics.csv").read_text()
-    full = json.loads((tmp_path / "full" / "summary.json").read_text())
-    cut = json.loads((tmp_path / "cut" / "summary.json").read_text())
-    assert full["metrics"] == cut["metrics"]
+@pytest.mark.usefixtures("no_png")
+def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch):
+    assert_resumes_to_the_uninterrupted_result(
+        monkeypatch, ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY], tmp_path)
 
 
 def test_resume_errors_are_one_line(tmp_path, capsys):
@@ -510,6 +511,7 @@ def test_an_empty_out_or_resume_folder_is_refused(tmp_path, capsys, monkeypatch,
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.usefixtures("no_png")
 def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_path, capsys, monkeypatch):
     """XLA's RESOURCE_EXHAUSTED at allocation or compile: one line naming num_envs and the size,
     exit 2; the files and folders this run made are removed (a resume would fail the same way),
@@ -576,9 +578,8 @@ def test_run_help_names_each_experiments_default_algorithms_from_the_registry(ca
         assert not extra or f"(all adds {', '.join(extra)})" in group
 
 
-def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys):
-    out = tmp_path / "both"
-    assert run_cli(capsys, "run", "tabular-shared", "--seeds", "1", "--out", str(out), "--quiet", *FAST)[0] == 0
+def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, finished_tabular):
+    out = copy_of(finished_tabular, tmp_path / "both")
     for folder in (out, out / "mmr"):  # a several-algorithm run, one algorithm's run
         before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
         code, stdout, err = run_cli(capsys, "run", "--resume", str(folder), "--quiet")

@@ -102,6 +102,7 @@ def test_an_import_path_that_is_no_task_is_one_line(tmp_path, capsys, monkeypatc
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.usefixtures("no_png")
 def test_my_score_example_registers_a_score_and_trains_with_it(tmp_path, capsys, restore_registries):
     """examples/my_score.py: abs_gae is registered at import and a tiny PLR⊥ run ranks its buffer by it."""
     from remidi.engine.scores import SCORES
@@ -115,9 +116,13 @@ def test_my_score_example_registers_a_score_and_trains_with_it(tmp_path, capsys,
     assert "score=abs_gae" in capsys.readouterr().err
 
 
-def test_my_algorithm_example_registers_two_algorithms_and_trains_them(tmp_path, capsys, restore_registries):
+@pytest.mark.usefixtures("no_png")
+def test_my_algorithm_example_registers_two_algorithms_trains_them_and_resumes_with_the_plugin(
+        tmp_path, capsys, monkeypatch, restore_registries):
     """examples/my_algorithm.py: plr-classic and remidi-maxmc are registered at import, listed by
-    the lever experiment and trained by a tiny run; a resume finds them by name."""
+    the lever experiment and trained by a tiny run; a resume finds them by name. A process that has
+    not registered the run's algorithm says so in one line; REMIDI_PLUGINS naming the example's
+    module makes `remidi run --resume` find it (one run serves both checks)."""
     from remidi.cli import main
     from remidi.engine.algorithms import ALGORITHMS
 
@@ -134,16 +139,6 @@ def test_my_algorithm_example_registers_two_algorithms_and_trains_them(tmp_path,
     capsys.readouterr()
     assert main(["run", "--resume", str(out), "--quiet"]) == 0  # finished: nothing left, found by name
 
-
-def test_resuming_a_plugins_run_needs_the_plugin(tmp_path, capsys, monkeypatch, restore_registries):
-    """A process that has not registered the run's algorithm says so in one line; REMIDI_PLUGINS
-    naming the example's module makes `remidi run --resume` find it."""
-    from remidi.cli import main
-    from remidi.engine.algorithms import ALGORITHMS
-
-    example = load_example(EXAMPLE.parent / "my_algorithm.py")
-    out = tmp_path / "algo"
-    assert example.main([str(out), "--updates", "10"]) == 0
     del ALGORITHMS["plr-classic"], ALGORITHMS["remidi-maxmc"], sys.modules["my_algorithm"]  # a fresh process
     (out / "remidi-maxmc" / "summary.json").unlink()  # left unfinished
     capsys.readouterr()

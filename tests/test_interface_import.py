@@ -1,8 +1,18 @@
-"""The lever game and the command line start without jaxued's maze, gymnax and seaborn
-(seconds of start-up), and jaxued's interface stays one class when its package is imported later."""
+"""Two checks on a fresh single-device process (one subprocess serves both: each start costs
+seconds):
+
+* the lever game and the command line start without jaxued's maze, gymnax and seaborn (seconds of
+  start-up), and jaxued's interface stays one class when its package is imported later;
+* regression, initialising many seeds must not hang. With jaxlib 0.10.2 on CPU, several *batched*
+  QR decompositions in one program (orthogonal initialisers under ``vmap`` over seeds) sometimes
+  never finish; the driver initialises seeds one after another with ``lax.map``. In a subprocess,
+  a hang fails the test (its timeout) instead of stalling the suite.
+"""
 
 import subprocess
 import sys
+
+import pytest
 
 from conftest import subprocess_env
 
@@ -22,12 +32,30 @@ from remidi.envs.interface import UnderspecifiedEnv
 from remidi.envs.maze import MazeEnv
 print("RESULT", heavy, jaxued.environments.UnderspecifiedEnv is UnderspecifiedEnv, issubclass(Maze, UnderspecifiedEnv),
       issubclass(MazeEnv, UnderspecifiedEnv))
+
+import jax, jax.numpy as jnp
+from remidi.engine import train as tr
+from remidi.envs.lever import lever_task
+from remidi.experiments.lever import paper_config
+setup = tr.make_setup(lever_task(64), paper_config(), "dr")
+runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.arange(8, dtype=jnp.uint32)))
+jax.block_until_ready(runner)
+print("initialised", runner.train_state.step.shape)
 """
 
 
-def test_the_lever_game_starts_without_the_maze_stack_and_the_interface_stays_one_class():
+@pytest.fixture(scope="module")
+def fresh_process():
     done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=300,
                           env=subprocess_env(__name__))
     assert done.returncode == 0, done.stderr[-2000:]
-    line = next(x for x in done.stdout.splitlines() if x.startswith("RESULT"))
+    return done.stdout
+
+
+def test_the_lever_game_starts_without_the_maze_stack_and_the_interface_stays_one_class(fresh_process):
+    line = next(x for x in fresh_process.splitlines() if x.startswith("RESULT"))
     assert line == "RESULT [] True True True"
+
+
+def test_initialising_eight_seeds_finishes(fresh_process):
+    assert "initialised (8,)" in fresh_process

@@ -13,6 +13,8 @@ import pytest
 from conftest import subprocess_env
 from test_cli import LEVER_TINY
 
+pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
+
 # the `remidi` program with Python's default Ctrl-C handling (a test runner may start its
 # children with SIGINT ignored, and then remidi leaves it ignored)
 LAUNCH = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "

@@ -19,6 +19,8 @@ from remidi.envs.lever import LeverLevel, lever_task
 from remidi.envs.maze import maze_task
 from remidi.envs.noisy import NOISE_BITS, SeededLevel, noisy_blindfold_task, noisy_lever_task
 
+pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
+
 LEVERS = 8  # a small lever game: the same code paths as the experiment's 64
 NOISY, PLAIN = noisy_lever_task(LEVERS), lever_task(LEVERS)
 

@@ -13,6 +13,8 @@ from remidi.engine import belief as bl
 from remidi.engine import simulated as sm
 from remidi.engine.rollout import rollout
 
+pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
+
 T, N = 24, 32
 
 

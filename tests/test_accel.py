@@ -86,9 +86,9 @@ def test_brax_edits_keep_theta_in_range_and_type_b_canonical():
     theta = jnp.array([[0.5, 1.0, 1.5], [1.0, 1.0, 1.0]], jnp.float32)
     levels = BraxLevel(theta=theta, type_b=jnp.array([False, True]), sign=jnp.array([False, True]),
                        seed=jnp.stack([seed_data(0), seed_data(1)]))
+    mutate = jax.jit(jax.vmap(lambda key, lv: env.mutate_level(key, lv, 4)))  # one program for the 20 draws
     for k in range(20):
-        edited = jax.vmap(lambda key, lv: env.mutate_level(key, lv, 4))(jax.random.split(jax.random.PRNGKey(k), 2),
-                                                                        levels)
+        edited = mutate(jax.random.split(jax.random.PRNGKey(k), 2), levels)
         assert float(edited.theta[0].min()) >= 0.5 and float(edited.theta[0].max()) <= 1.5
         assert int((edited.theta[0] != theta[0]).sum()) <= 3
         np.testing.assert_array_equal(edited.theta[1], np.ones(3))  # type B: θ stays canonical

@@ -255,6 +255,7 @@ def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
     model = bl.BeliefModel(bl.coding_for(train[0, 0]), num_actions=2, hidden=16)
     params, _ = fit(model, model.init(jax.random.PRNGKey(0)), train, action, reset, steps=150)
 
+    @jax.jit  # one program (eager, its scan is traced again on every call)
     def scores(obs):
         return bl.prefix_scores(bl.step_logliks(model, params, obs, action, reset), reset)
 
@@ -271,6 +272,7 @@ def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
     tau_m = bl.calibrate_monotone(scores(held)[None], lengths[None], FALSE_RATE, buckets)
     assert tau_m.shape == (buckets,)
 
+    @jax.jit
     def flagged(obs):
         return bl.episode_minimum(scores(obs) - tau_m[bl.length_bucket(lengths, buckets)], lengths) < 0
 
@@ -284,10 +286,17 @@ def uniform_policy(variables, carry, obs, reset):
     return carry, (jnp.zeros(reset.shape + (LEVERS,)), jnp.zeros(reset.shape))
 
 
+@functools.lru_cache(maxsize=None)
+def _rollout_program(task, steps):
+    """One jitted rollout per (task, steps): called eagerly, its scan would be traced, lowered and
+    loaded again on every call."""
+    return jax.jit(lambda levels, key, frozen: rollout(key, task.env, task.params, uniform_policy, {}, jnp.zeros(1),
+                                                       levels, steps, frozen,
+                                                       deterministic_reset=task.deterministic_reset)[0])
+
+
 def roll(task, levels, steps, key, frozen=None):
-    traj, _ = rollout(key, task.env, task.params, uniform_policy, {}, jnp.zeros(1), levels, steps, frozen,
-                      deterministic_reset=task.deterministic_reset)
-    return traj
+    return _rollout_program(task, steps)(levels, key, frozen)
 
 
 def from_buffer(buffer, key, n):
@@ -524,12 +533,12 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
 
 
 # ------------------------------------------------------------------------------ the audit
-@pytest.mark.parametrize("threshold", [-jnp.inf, jnp.inf])
-def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_same_rollout(threshold):
+def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_same_rollout():
     """``belief/*`` evaluation metrics (engine/evaluation.py ``tracker_audit``): a frozen model
     with threshold −inf explains every step (agreement = the exact tracker's explained share),
     one with +inf none (agreement = 1 − that share); NaN while nothing is frozen; the exact
-    tracker's share is the one a plain ReMiDi run's tracker gives on the same levels and key."""
+    tracker's share is the one a plain ReMiDi run's tracker gives on the same levels and key.
+    (Both thresholds in one test: the second runs the first's jitted programs.)"""
     import dataclasses
 
     from remidi.engine import evaluation
@@ -541,40 +550,44 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     r = dataclasses.replace
     cfg = r(TINY, remidi=r(TINY.remidi, tracker="belief"))
     setup = tr.make_setup(TASK, cfg, "remidi")
-    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    assert all(np.isnan(float(v)) for v in evaluation.tracker_audit(setup, runner, jax.random.PRNGKey(1)).values())
+    plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")
+    audit = jax.jit(evaluation.tracker_audit, static_argnums=0)
+    collect = jax.jit(lambda setup_, runner, key, levels, frozen: tr.collect(setup_, runner, key, levels, frozen)[0],
+                      static_argnums=0)
+    runner0 = tr.init_runner(setup, jax.random.PRNGKey(0))
+    assert all(np.isnan(float(v)) for v in audit(setup, runner0, jax.random.PRNGKey(1)).values())
     # buffer 0 frozen full of the task's levels (the lever game: many fresh levels repeat one of them)
-    bufs = runner.buffers
+    bufs = runner0.buffers
     c = bufs.valid.shape[1]
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(2), c))
     bufs = bufs.replace(levels=jax.tree.map(lambda all_, x: all_.at[0].set(x), bufs.levels, levels),
                         valid=bufs.valid.at[0].set(True))
-    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))  # every length
-    runner = runner.replace(buffers=bufs, active=jnp.asarray(1), belief=belief)
-    out = {k: float(v) for k, v in evaluation.tracker_audit(setup, runner, jax.random.PRNGKey(1)).items()}
-    plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")
     k_levels, k_roll = jax.random.split(jax.random.PRNGKey(1))
     fresh = jax.vmap(TASK.sample_level)(jax.random.split(k_levels, cfg.num_envs))
-    exact = tr.collect(plain, runner.replace(belief=None), k_roll, fresh,
-                       earlier_buffers(plain, runner.replace(belief=None)))[0].indist
-    share = float(np.mean(np.asarray(exact)))
-    # the audit's two rollouts (belief-judged and exact-judged) are the same steps
-    frozen = earlier_buffers(setup, runner).replace(params=None)
-    one = tr.collect(setup, runner, k_roll, fresh, frozen)[0]
-    two = tr.collect(setup, runner, k_roll, fresh, frozen.replace(belief=None, tracker=ExactTracker()))[0]
-    for a, b in ((one.action, two.action), (one.done, two.done), (one.obs, two.obs)):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    assert 0 < share < 1  # the check below can tell the two judgements apart
-    assert out["belief/exact_explained"] == pytest.approx(share)
-    assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)
-    # by level kind: the same judgements over the hidden-answer levels and over the others
     hidden = np.asarray(jax.vmap(TASK.level_tags)(fresh)["hidden"])
     assert 0 < hidden.sum() < hidden.size
-    per_level = np.asarray(exact).mean(axis=0)  # [N]
-    assert out["belief/exact_explained/hidden"] == pytest.approx(per_level[hidden].mean())
-    assert out["belief/exact_explained/not-hidden"] == pytest.approx(per_level[~hidden].mean())
-    assert out["belief/explained/hidden"] == out["belief/explained/not-hidden"] == (1.0 if threshold < 0 else 0.0)
-    assert out["belief/agreement"] == pytest.approx(share if threshold < 0 else 1 - share)
+    for threshold in (-jnp.inf, jnp.inf):
+        belief = runner0.belief.replace(threshold=runner0.belief.threshold.at[0].set(threshold))  # every length
+        runner = runner0.replace(buffers=bufs, active=jnp.asarray(1, runner0.active.dtype), belief=belief)
+        out = {k: float(v) for k, v in audit(setup, runner, jax.random.PRNGKey(1)).items()}
+        exact = collect(plain, runner.replace(belief=None), k_roll, fresh,
+                        earlier_buffers(plain, runner.replace(belief=None))).indist
+        share = float(np.mean(np.asarray(exact)))
+        # the audit's two rollouts (belief-judged and exact-judged) are the same steps
+        frozen = earlier_buffers(setup, runner).replace(params=None)
+        one = collect(setup, runner, k_roll, fresh, frozen)
+        two = collect(setup, runner, k_roll, fresh, frozen.replace(belief=None, tracker=ExactTracker()))
+        for a, b in ((one.action, two.action), (one.done, two.done), (one.obs, two.obs)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert 0 < share < 1  # the check below can tell the two judgements apart
+        assert out["belief/exact_explained"] == pytest.approx(share)
+        assert out["belief/explained"] == (1.0 if threshold < 0 else 0.0)
+        # by level kind: the same judgements over the hidden-answer levels and over the others
+        per_level = np.asarray(exact).mean(axis=0)  # [N]
+        assert out["belief/exact_explained/hidden"] == pytest.approx(per_level[hidden].mean())
+        assert out["belief/exact_explained/not-hidden"] == pytest.approx(per_level[~hidden].mean())
+        assert out["belief/explained/hidden"] == out["belief/explained/not-hidden"] == (1.0 if threshold < 0 else 0.0)
+        assert out["belief/agreement"] == pytest.approx(share if threshold < 0 else 1 - share)
 
 
 def test_the_coding_keeps_each_leafs_own_dims():
@@ -643,11 +656,11 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
     fresh = sample(jax.random.split(jax.random.PRNGKey(9), n))
     fresh_blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(fresh))
     lengths, buckets = bl.prefix_lengths(held.reset), bl.num_length_buckets(t)
+    logliks = jax.jit(functools.partial(bl.step_logliks, model))  # one program for both models
+    ll_model = logliks(params, held.obs, held.action, held.reset)
     explained = {}
     for reference in (None, ref):
-        ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
-        if reference is not None:
-            ll = ll - bl.step_logliks(model, reference, held.obs, held.action, held.reset)
+        ll = ll_model if reference is None else ll_model - logliks(reference, held.obs, held.action, held.reset)
         tau = bl.calibrate_monotone(bl.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE, buckets)
         beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                                    valid=jnp.ones((1,), bool),

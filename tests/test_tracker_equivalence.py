@@ -95,11 +95,19 @@ def maze_case():
     return M._stack(agents), M._stack(frozen), jnp.asarray(valid)
 
 
+@functools.lru_cache(maxsize=None)  # the masked one serves two tests
+def maze_reference(combine):
+    """The reference tracker's rollout on :func:`maze_case`."""
+    env = M.MazeEnv(M.TRAIN_SIZE)
+    agents, frozen, valid = maze_case()
+    return run(env, env.default_params, agents, frozen, valid, 0, 7, combine)
+
+
 @pytest.mark.parametrize("combine", [False, True], ids=["masked", "combine"])
 def test_candidate_tracker_equals_reference_on_mazes(combine):
     env = M.MazeEnv(M.TRAIN_SIZE)
     agents, frozen, valid = maze_case()
-    ref = run(env, env.default_params, agents, frozen, valid, 0, 7, combine)
+    ref = maze_reference(combine)
     cand = run(env, env.default_params, agents, frozen, valid, 24, 7, combine)
     assert int(cand.overflow.max()) == 0  # 24 slots hold every frozen level sharing a first observation
     np.testing.assert_array_equal(cand.indist, ref.indist)
@@ -116,7 +124,7 @@ def test_candidate_tracker_equals_reference_on_mazes(combine):
 def test_too_small_a_budget_is_reported_and_only_misses_matches():
     env = M.MazeEnv(M.TRAIN_SIZE)
     agents, frozen, valid = maze_case()
-    ref = run(env, env.default_params, agents, frozen, valid, 0, 7, False)
+    ref = maze_reference(False)
     cand = run(env, env.default_params, agents, frozen, valid, 2, 7, False)
     overflow = cand.overflow[0]
     assert (overflow[8:12] > 0).all()  # 6 frozen T-mazes share the agent T-maze's first observation

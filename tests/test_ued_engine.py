@@ -56,6 +56,22 @@ def test_same_seed_same_result_and_resume_matches_uninterrupted(tmp_path):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+def test_a_fresh_runner_is_typed_as_a_restored_one(monkeypatch):
+    """A checkpoint restores every leaf strongly typed; ``driver._init`` gives the fresh runner
+    the same types even where a state's constructor made a weak-typed leaf (``jnp.full(shape,
+    jnp.inf)``), so a resumed run reuses the fresh run's compiled programs."""
+    from remidi.engine import train as tr
+
+    real = tr.init_runner
+    monkeypatch.setattr(tr, "init_runner", lambda setup, key: real(setup, key).replace(
+        frozen_params=jnp.full((3,), jnp.inf)))  # a weak-typed leaf
+    setup = tr.make_setup(TASK, TINY, "dr")
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(2, dtype=jnp.uint32))
+    shapes = jax.eval_shape(lambda k: driver._init.__wrapped__(setup, k), keys)  # traced afresh (jit's cache holds the real one)
+    assert shapes.frozen_params.shape == (2, 3)
+    assert not any(leaf.weak_type for leaf in jax.tree.leaves(shapes))
+
+
 def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, monkeypatch):
     path = tmp_path / "checkpoint.npz"
     runner = {"a": jnp.arange(3), "b": jnp.ones(2)}

@@ -96,7 +96,11 @@ def _init(setup: tr.Setup, keys):
     # lax.map, not vmap: several *batched* QR decompositions (orthogonal initialisers) in one
     # program hang the CPU runtime of jaxlib 0.10.2 (reproduced with 2+ seeds); initialising
     # one seed after another avoids them, and runs once per run.
-    return jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
+    # Every leaf strongly typed, as a checkpoint restores it: a weak-typed leaf (``jnp.full(shape,
+    # jnp.inf)``) would give a resumed run's runner other types, so its programs would be traced
+    # and compiled again, under other persistent-cache keys (a no-op on strongly typed leaves)
+    runner = jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
+    return jax.tree.map(lambda x: jax.lax.convert_element_type(x, x.dtype), runner)
 
 
 def over_seeds(fn):

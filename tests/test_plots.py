@@ -47,6 +47,14 @@ def test_fixed_style_per_algorithm():
     assert len({(s["linestyle"], s["marker"]) for s in styles}) == 4  # identical curves stay visible
     assert plots.algorithm_style("plr") == plots.algorithm_style("plr")
     assert plots.algorithm_style("my-algo") == plots.algorithm_style("my-algo")
+    # the results page's labels: an estimator keeps its algorithm's style, the masked policy too;
+    # ReMiDi's variants each get a colour and line style of their own, and keep ReMiDi's marker
+    assert plots.algorithm_style("paired (perfect)") == plots.algorithm_style("paired")
+    assert plots.algorithm_style("remidi (masked)") == plots.algorithm_style("remidi")
+    variants = [plots.algorithm_style(f"remidi ({v})") for v in ("combine", "rehearsal 0.3", "belief, margin 2",
+                                                                 "simulated, ratio, false rate 0, margin 5")]
+    assert len({s["color"] for s in variants + styles}) == 8
+    assert {s["marker"] for s in variants} == {plots.algorithm_style("remidi")["marker"]}
 
 
 def test_lever_plot(figures, tmp_path):

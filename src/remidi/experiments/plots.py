@@ -32,15 +32,28 @@ ALGORITHM_STYLES = {
     "remidi-paired": ("#e377c2", "-", "*"),
 }
 _SPARE = [("#e377c2", "--", "*"), ("#17becf", ":", "h")]
+# a variant of a buffer sequence (the results page's "remidi (combine)", "remidi (belief, margin 2)"):
+# the algorithm's marker, the variant's colour and line style, by the variant's first word
+VARIANT_STYLES = {
+    "combine": ("#8b0000", "--"),
+    "rehearsal": ("#ff9896", "-."),
+    "belief": ("#17becf", "--"),
+    "simulated": ("#393b79", ":"),
+}
 
 
 def algorithm_style(name: str) -> dict:
-    """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``: fixed per name."""
-    name = name.split(" (", 1)[0]  # the results page's "paired (perfect)": the algorithm's style
+    """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``: fixed per name. A
+    results-page label (``paired (perfect)``, ``remidi (combine)``) takes its algorithm's style,
+    with the colour and line style of :data:`VARIANT_STYLES` where its first word names one."""
+    name, _, variant = name.partition(" (")
     if name in ALGORITHM_STYLES:
         color, linestyle, marker = ALGORITHM_STYLES[name]
     else:  # an algorithm this module does not know: a spare style chosen by the name alone
         color, linestyle, marker = _SPARE[sum(map(ord, name)) % len(_SPARE)]
+    first = variant.rstrip(")").replace(",", " ").split()
+    if first and first[0] in VARIANT_STYLES:
+        color, linestyle = VARIANT_STYLES[first[0]]
     return {"color": color, "linestyle": linestyle, "marker": marker}
 
 

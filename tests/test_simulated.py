@@ -291,3 +291,27 @@ def test_the_simulated_model_is_refused_where_it_cannot_run(tmp_path, capsys, ex
     err = capsys.readouterr().err
     assert needle in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_each_seed_draws_its_own_simulation_noise():
+    """The simulated tracker's random draws (the frozen copies' noise in the rollout, the counted
+    replays, the calibration) come from the runner's key: two seeds at the same update draw
+    different noise (they shared one fixed key per update), the same key the same noise."""
+    import dataclasses
+
+    from remidi.engine import train as tr
+    from remidi.engine.adversary import earlier_buffers
+    from remidi.envs.noisy import noisy_lever_task
+    from test_ued_engine import TINY as CFG
+
+    r = dataclasses.replace
+    cfg = r(CFG, remidi=r(CFG.remidi, num_buffers=3, tracker="simulated", belief_hidden=8))
+    setup = tr.make_setup(noisy_lever_task(8), cfg, "remidi")
+    shapes = jax.eval_shape(lambda k: tr.init_runner(setup, k), jax.random.PRNGKey(0))
+    runner = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes).replace(active=jnp.asarray(1, jnp.int32))
+
+    def key(seed):
+        return np.asarray(jax.random.key_data(earlier_buffers(setup, runner.replace(rng=jax.random.PRNGKey(seed))).belief.key))
+
+    assert not np.array_equal(key(0), key(1))
+    np.testing.assert_array_equal(key(0), key(0))

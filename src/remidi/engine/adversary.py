@@ -270,7 +270,7 @@ def earlier_buffers(setup, runner) -> Frozen | None:
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                       tracker=simulated_tracker(setup, k),
                       belief=sm.frozen_sims(runner.belief, runner.active, sm.SMOOTHING,
-                                            jax.random.fold_in(jax.random.PRNGKey(19), runner.update)))
+                                            jax.random.fold_in(runner.rng, 19)))
     if runner.belief is not None:  # remidi.tracker=belief: the earlier buffers' learned models judge
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                       tracker=bl.BeliefTracker(belief_model(setup)),
@@ -377,7 +377,7 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
         model = belief_model(setup)
         memory = sm.learn(runner.belief, setup.task.env, setup.task.params, model.coding, setup.task.reseed_level, model,
                           belief_optimizer(setup), proposal.levels, traj, setup.algo.adversary.own_levels(proposal),
-                          fresh, setup.cfg.remidi.belief_epochs, jax.random.fold_in(jax.random.PRNGKey(23), runner.update))
+                          fresh, setup.cfg.remidi.belief_epochs, jax.random.fold_in(runner.rng, 23))
         return {"belief": memory}, {}
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
                             setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs, fresh=fresh)
@@ -396,7 +396,7 @@ def belief_freezes(setup, runner, switch) -> dict:
         r = setup.cfg.remidi
         return {"belief": sm.freeze(simulated_tracker(setup, 1), runner.belief, setup.task.env, setup.task.params,
                                     active.levels, active.valid, runner.active, switch, r.belief_false_rate,
-                                    r.belief_margin, sm.SMOOTHING, jax.random.fold_in(jax.random.PRNGKey(29), runner.update))}
+                                    r.belief_margin, sm.SMOOTHING, jax.random.fold_in(runner.rng, 29))}
     return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
                                 setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin, belief_model(setup))}
 

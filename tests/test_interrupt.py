@@ -74,6 +74,17 @@ def _same_results(a, b):
     assert json.loads((a / "summary.json").read_text())["metrics"] == json.loads((b / "summary.json").read_text())["metrics"]
 
 
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The uninterrupted run the resumed ones must equal, trained once for this file's tests
+    (``checkpoint_every`` only decides when the driver saves: the same programs, the same metrics)."""
+    from remidi.cli import main
+
+    out = tmp_path_factory.mktemp("uninterrupted") / "full"
+    assert main(_tiny(out)) == 0
+    return out
+
+
 def _checkpoint_done(folder):
     import numpy as np
 
@@ -81,7 +92,7 @@ def _checkpoint_done(folder):
         return json.loads(str(saved["meta"]))["done"]
 
 
-def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, capsys, monkeypatch):
+def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, capsys, monkeypatch, uninterrupted):
     """SIGTERM's request (remidi.preemption, what the command line's handler records) during a
     block: that block is checkpointed although checkpoint_every has not come (update 20 of
     checkpoint_every=40), one line names the update and the resume command, status 143; the
@@ -91,7 +102,6 @@ def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, ca
     from remidi.experiments import ued
 
     every = ("--set", "checkpoint_every=40")
-    assert main(_tiny(tmp_path / "full", *every)) == 0
     real = ued.train_seeds
 
     def notified(*args, on_block=None, **kwargs):
@@ -109,10 +119,10 @@ def test_sigterm_while_training_checkpoints_the_block_and_exits_143(tmp_path, ca
     assert _checkpoint_done(cut) == 20 and not (cut / "summary.json").exists()
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(cut), "--quiet"]) == 0
-    _same_results(cut, tmp_path / "full")
+    _same_results(cut, uninterrupted)
 
 
-def test_sigterm_while_the_first_block_runs_keeps_that_block(tmp_path, capsys, monkeypatch):
+def test_sigterm_while_the_first_block_runs_keeps_that_block(tmp_path, capsys, monkeypatch, uninterrupted):
     """Python runs the SIGTERM handler only when XLA's call returns, so a signal that comes while
     the first block of a run (or of a resumed run) computes is handled as the driver's wait for
     that block returns. The handler must then only record it (request() True: no exit at once)
@@ -138,8 +148,7 @@ def test_sigterm_while_the_first_block_runs_keeps_that_block(tmp_path, capsys, m
     assert _checkpoint_done(cut) == 10
     monkeypatch.setattr(driver, "_to_host", real)
     assert main(["run", "--resume", str(cut), "--quiet"]) == 0
-    assert main(_tiny(tmp_path / "full", "--set", "checkpoint_every=40")) == 0
-    _same_results(cut, tmp_path / "full")
+    _same_results(cut, uninterrupted)
 
 
 def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys, monkeypatch):
@@ -170,7 +179,7 @@ def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys
 
 
 @pytest.mark.slow
-def test_sigterm_to_the_program_then_resume_gives_the_uninterrupted_result(tmp_path):
+def test_sigterm_to_the_program_then_resume_gives_the_uninterrupted_result(tmp_path, uninterrupted):
     """The real signal: `remidi run` in a subprocess gets SIGTERM once its first checkpoint is
     written; it exits 143 with one line and the resume hint (having checkpointed the block under
     way, or at once if training had ended), and `--resume` finishes it to the uninterrupted result."""
@@ -195,8 +204,7 @@ def test_sigterm_to_the_program_then_resume_gives_the_uninterrupted_result(tmp_p
     if "checkpoint of update" in err:  # the usual case: the block under way was checkpointed
         assert f"checkpoint of update {_checkpoint_done(out)} written" in err
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
-    assert main(_tiny(tmp_path / "full")) == 0
-    _same_results(out, tmp_path / "full")
+    _same_results(out, uninterrupted)
 
 
 def test_sigterm_before_training_exits_143_at_once(tmp_path):

@@ -59,13 +59,16 @@ def _add_fast_xla_flags() -> None:
         return  # a worker or subprocess: the controlling process decided, and XLA_FLAGS says what
     os.environ[_FLAGS_CHECKED] = "1"
     flags = f"{os.environ.get('XLA_FLAGS', '')} {FAST_XLA_FLAGS}".strip()
-    # a jaxlib that accepted these flags once accepts them again: remembered beside the cache
+    # a jaxlib that accepted these flags once accepts them again: remembered in the cache's folder
     # (a new jaxlib or new flags give a new marker and a new probe; no cache, always a probe)
     marker = None
     if _CACHE:
-        tag = hashlib.sha1(f"{importlib.metadata.version('jaxlib')} {flags}".encode()).hexdigest()[:16]
-        marker = Path(_CACHE).parent / f"xla-flags-ok-{tag}"
-        if marker.exists():
+        try:
+            tag = hashlib.sha1(f"{importlib.metadata.version('jaxlib')} {flags}".encode()).hexdigest()[:16]
+        except importlib.metadata.PackageNotFoundError:  # a jaxlib without metadata: probe every time
+            tag = None
+        marker = None if tag is None else Path(_CACHE) / f"xla-flags-ok-{tag}"  # gone with the cache
+        if marker is not None and marker.exists():
             os.environ["XLA_FLAGS"] = flags
             return
     try:
@@ -76,8 +79,9 @@ def _add_fast_xla_flags() -> None:
     if probe == 0:
         os.environ["XLA_FLAGS"] = flags
         if marker is not None:
-            marker.parent.mkdir(parents=True, exist_ok=True)
-            marker.touch()
+            with contextlib.suppress(OSError):  # an unwritable place: the next run probes again
+                marker.parent.mkdir(parents=True, exist_ok=True)
+                marker.touch()
     else:
         os.environ[_FLAGS_CHECKED] = "refused"  # for the report header
 

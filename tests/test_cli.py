@@ -143,13 +143,14 @@ def interrupt_training(monkeypatch, at: int, algo: str | None = None):
     return real
 
 
-def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, at: int = 10) -> dict:
+def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, at: int = 10, capsys=None) -> dict:
     """``remidi`` with ``base`` (its argv without ``--out``) into ``folder/full``, and again into
     ``folder/cut`` interrupted (Ctrl-C) after update ``at`` and resumed: both end with the same
     metrics.csv and summary metrics, and the resumed run's summary records its two parts (the
     updates each trained, back to back, each with its code and device); the interrupted and the
     resumed run compile nothing the full run did not (a runner restored from a checkpoint has
-    the fresh one's types). Returns the summary's metrics."""
+    the fresh one's types). With ``capsys``, the interrupted run said so in one line. Returns the
+    summary's metrics."""
     import json
 
     from remidi.cli import main
@@ -159,7 +160,12 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     assert main([*base, "--out", str(folder / "full")]) == 0
     programs = driver._run_block._cache_size(), driver._evaluate._cache_size()
     real = interrupt_training(monkeypatch, at)
+    if capsys is not None:
+        capsys.readouterr()
     assert main([*base, "--out", str(folder / "cut")]) == 130
+    if capsys is not None:
+        err = capsys.readouterr().err
+        assert err.startswith("remidi: interrupted") and err.count("\n") == 1, err
     assert (folder / "cut" / "checkpoint.npz").exists() and not (folder / "cut" / "summary.json").exists()
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(folder / "cut"), "--quiet"]) == 0
@@ -176,9 +182,10 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
 
 
 @pytest.mark.usefixtures("no_png")
-def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch):
+def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch, capsys):
     assert_resumes_to_the_uninterrupted_result(
-        monkeypatch, ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY], tmp_path)
+        monkeypatch, ["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY], tmp_path,
+        capsys=capsys)
 
 
 def test_resume_errors_are_one_line(tmp_path, capsys):

@@ -55,6 +55,12 @@ def test_fixed_style_per_algorithm():
                                                                  "simulated, ratio, false rate 0, margin 5")]
     assert len({s["color"] for s in variants + styles}) == 8
     assert {s["marker"] for s in variants} == {plots.algorithm_style("remidi")["marker"]}
+    # in one figure no two names are drawn alike, however their labels differ
+    names = ["plr", "remidi", "remidi (masked)", "remidi (rehearsal 0.1)", "remidi (rehearsal 0.3)", "remidi (belief)",
+             "remidi (belief, margin 2)", "remidi (combine)"]
+    figure = plots.distinct_styles(names)
+    assert len({(s["color"], s["linestyle"], s["marker"]) for s in figure.values()}) == len(names)
+    assert figure["plr"] == plots.algorithm_style("plr") and figure["remidi"] == plots.algorithm_style("remidi")
 
 
 def test_lever_plot(figures, tmp_path):

@@ -257,6 +257,14 @@ class EditingBuffers(LevelBuffers):
                 "last_replayed": jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level)}
 
 
+def simulation_key(runner, purpose: int) -> jax.Array:
+    """The simulated tracker's key for one of its uses in this update (19: the rollout's frozen
+    copies, 23: the counted replays, 29: the calibration): from the seed's own key, so each seed
+    draws its own noise. ``runner.rng``'s children in the train step are ``fold_in(rng, 0..5)``
+    (``split`` with JAX's partitionable threefry), so ``purpose`` must not be below 6."""
+    return jax.random.fold_in(runner.rng, purpose)
+
+
 def earlier_buffers(setup, runner) -> Frozen | None:
     """The levels of every buffer of a sequence before the active one, as one batch of
     F = (K−1)·capacity with the tracker of the config (None with fewer than two buffers)."""
@@ -270,7 +278,7 @@ def earlier_buffers(setup, runner) -> Frozen | None:
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                       tracker=simulated_tracker(setup, k),
                       belief=sm.frozen_sims(runner.belief, runner.active, sm.SMOOTHING,
-                                            jax.random.fold_in(runner.rng, 19)))
+                                            simulation_key(runner, 19)))
     if runner.belief is not None:  # remidi.tracker=belief: the earlier buffers' learned models judge
         return Frozen(levels=flat, valid=valid.reshape(-1), params=runner.frozen_params,
                       tracker=bl.BeliefTracker(belief_model(setup)),
@@ -377,7 +385,7 @@ def belief_learns(setup, runner, proposal: Proposal, traj) -> tuple[dict, dict]:
         model = belief_model(setup)
         memory = sm.learn(runner.belief, setup.task.env, setup.task.params, model.coding, setup.task.reseed_level, model,
                           belief_optimizer(setup), proposal.levels, traj, setup.algo.adversary.own_levels(proposal),
-                          fresh, setup.cfg.remidi.belief_epochs, jax.random.fold_in(runner.rng, 23))
+                          fresh, setup.cfg.remidi.belief_epochs, simulation_key(runner, 23))
         return {"belief": memory}, {}
     memory, loss = bl.learn(belief_model(setup), belief_optimizer(setup), runner.belief, runner.active, traj,
                             setup.algo.adversary.own_levels(proposal), setup.cfg.remidi.belief_epochs, fresh=fresh)
@@ -396,7 +404,7 @@ def belief_freezes(setup, runner, switch) -> dict:
         r = setup.cfg.remidi
         return {"belief": sm.freeze(simulated_tracker(setup, 1), runner.belief, setup.task.env, setup.task.params,
                                     active.levels, active.valid, runner.active, switch, r.belief_false_rate,
-                                    r.belief_margin, sm.SMOOTHING, jax.random.fold_in(runner.rng, 29))}
+                                    r.belief_margin, sm.SMOOTHING, simulation_key(runner, 29))}
     return {"belief": bl.freeze(belief_optimizer(setup), runner.belief, runner.active, switch,
                                 setup.cfg.remidi.belief_false_rate, setup.cfg.remidi.belief_margin, belief_model(setup))}
 

@@ -9,6 +9,7 @@ dashes, markers at different positions).
 from __future__ import annotations
 
 import math
+import textwrap
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +38,7 @@ _SPARE = [("#e377c2", "--", "*"), ("#17becf", ":", "h")]
 VARIANT_STYLES = {
     "combine": ("#8b0000", "--"),
     "rehearsal": ("#ff9896", "-."),
-    "belief": ("#17becf", "--"),
+    "belief": ("#008b8b", "--"),
     "simulated": ("#393b79", ":"),
 }
 
@@ -59,6 +60,24 @@ def algorithm_style(name: str) -> dict:
 
 SERIES_LINES = ("-", "--", ":", "-.")
 SERIES_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
+def distinct_styles(names: list[str], style=None) -> dict[str, dict]:
+    """The plot style of each of ``names`` in one figure (``style(name)``, default
+    :func:`algorithm_style`), with no two alike: a name whose style an earlier one already has
+    (``remidi (rehearsal 0.1)`` and ``(rehearsal 0.3)``, ``remidi`` and ``remidi (masked)``) takes
+    the next line style, then the next marker, that no earlier name has with its colour."""
+    style = style or algorithm_style
+    out, used = {}, set()
+    for name in names:
+        s = dict(style(name))
+        lines = [s["linestyle"]] + [x for x in SERIES_LINES if x != s["linestyle"]]
+        markers = [s["marker"]] + [m for m in SERIES_MARKERS if m != s["marker"]]
+        s["linestyle"], s["marker"] = next(
+            ((ls, m) for m in markers for ls in lines if (s["color"], ls, m) not in used), (lines[0], markers[0]))
+        used.add((s["color"], s["linestyle"], s["marker"]))
+        out[name] = s
+    return out
 
 
 def series_style(i: int) -> dict:
@@ -169,8 +188,10 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
         want_lo, want_hi = panel.ylim if panel.ylim is not None else (None, None)
         ax.set_ylim(lo - 0.05 * span if want_lo is None else want_lo, hi + 0.25 * span if want_hi is None else want_hi)
         if panel.missing:
-            ax.text(0.98, 0.12, f"n/a: {', '.join(panel.missing)}", transform=ax.transAxes, fontsize=8,
-                    color="dimgray", ha="right", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
+            # under the panel, below its x label (inside it covered curves), wrapped to the panel's width
+            note = "\n".join(textwrap.wrap(f"n/a: {', '.join(panel.missing)}", 70))
+            ax.annotate(note, xy=(1, 0), xycoords="axes fraction", xytext=(0, -30), textcoords="offset points",
+                        fontsize=8, color="dimgray", ha="right", va="top")
         ax.set_title(panel.title)
         ax.set_xlabel(panel.xlabel)
         ax.set_ylabel(panel.ylabel)

@@ -509,16 +509,16 @@ EXTRA_TABLES = {
 
 def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> list[Path]:
     """Per experiment its training curves (mean ± std over seeds) and per claim an interval plot."""
-    from remidi.experiments.plots import Curve, Panel, plot_panels
+    from remidi.experiments.plots import Curve, Panel, distinct_styles, plot_panels
 
     written = []
     for exp, (algos, _, curves) in SECTIONS.items():
         present = [a for a in algos if (exp, a) in runs]
         if not curves or not present:
             continue
-        panels = []
+        panels, styles = [], distinct_styles(present, _style)  # one style per algorithm in every panel
         for name in curves:
-            lines = [Curve(a, *runs[exp, a].curves[name], _style(a)) for a in present
+            lines = [Curve(a, *runs[exp, a].curves[name], styles[a]) for a in present
                      if name in runs[exp, a].curves and np.isfinite(runs[exp, a].curves[name][1]).any()]
             panels.append(Panel(name, lines, ylabel=name, xlabel="update",
                                 missing=[a for a in present if a not in {c.label for c in lines}]))

@@ -165,3 +165,51 @@ def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion
     levels = jax.tree.map(lambda x: x[:2], task.eval_sets["visible"])
     got = score_rollout(make_setup(task, cfg, "plr"), levels, traj, jnp.zeros((4, 2)), jnp.zeros(2), jnp.zeros(2))
     np.testing.assert_allclose(got, [0.75 * 0.25, 0.25 * 0.75])
+
+
+def test_a_replay_that_ends_no_episode_leaves_the_maxmc_record_as_it_was():
+    """MaxMC's record is the best return of an episode that ended. A replay whose rollout is
+    shorter than the episode (−0.5 per step, 3-step episodes, 1-step rollouts) ends none: its
+    partial return −0.5 would beat the record −5 of the level's whole episodes and stay in it."""
+    import dataclasses
+
+    from flax import struct
+
+    from remidi.engine import train as tr
+    from remidi.engine.config import UEDConfig
+    from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+
+    @struct.dataclass
+    class Level:
+        x: jax.Array  # f32[]: nothing the game reads
+
+    class Cost(UnderspecifiedEnv):
+        @property
+        def default_params(self):
+            return None
+
+        def action_space(self, params):
+            from gymnax.environments import spaces
+
+            return spaces.Discrete(2)
+
+        def reset_env_to_level(self, rng, level, params):
+            return jnp.zeros(2), jnp.zeros((), jnp.int32)
+
+        def step_env(self, rng, t, action, params):
+            return jnp.zeros(2), t + 1, jnp.asarray(-0.5), t + 1 >= 3, {}
+
+    task = UEDTask(env=Cost(), params=None, sample_level=lambda rng: Level(x=jax.random.uniform(rng)), num_actions=2,
+                   max_episode_steps=3, optimal_return=lambda level: jnp.asarray(-1.5),
+                   eval_sets={"one": Level(x=jnp.zeros(1))}, deterministic_reset=True)
+    base = UEDConfig()
+    cfg = UEDConfig(num_updates=1, num_envs=4, num_steps=1, network="mlp", hidden_size=8, score="maxmc",
+                    buffer=dataclasses.replace(base.buffer, capacity=4, min_fill=0.25, replay_prob=1.0))
+    setup = tr.make_setup(task, cfg, "plr")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    bufs = runner.buffers  # [K=1, C=4]: four levels whose record is a whole episode's −5
+    runner = runner.replace(buffers=bufs.replace(valid=jnp.ones_like(bufs.valid), scores=jnp.ones_like(bufs.scores),
+                                                 extras={"max_return": jnp.full_like(bufs.extras["max_return"], -5.0)}))
+    after, metrics = jax.jit(lambda r: tr.train_step(setup, r))(runner)
+    assert float(metrics["replay"]) == 1.0  # a replay of the four levels
+    np.testing.assert_array_equal(np.asarray(after.buffers.extras["max_return"]), -5.0)

@@ -112,7 +112,8 @@ class RandomLevels:
         return proposal.replay
 
     def best_return(self, proposal: Proposal, best_return):
-        """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's."""
+        """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's
+        (``best_return``: the best return of an episode that ended in it, −inf where none did)."""
         return best_return
 
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):

@@ -224,7 +224,9 @@ def train_step(setup: Setup, runner: Runner):
     # 2. one rollout (with the tracker against the frozen levels), then score
     traj, adv, targets, mean_ret, best_ret = collect(setup, runner, k_roll, proposal.levels, frozen)
     traj = traj.replace(indist=proposal.explained(traj.indist))  # a rehearsal of frozen levels: no step explained
-    best_ret = adversary.best_return(proposal, best_ret)
+    # MaxMC's record takes only episodes that ended: an unfinished episode's partial return is no
+    # return (with negative rewards it would beat every full one and stay in the record)
+    best_ret = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), best_ret, -jnp.inf))
     scores = score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
     overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: new level overlapping a frozen one completely
     # 3. the adversary takes the scores: replayed levels rescored, new ones inserted unless they overlap

@@ -40,9 +40,9 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
 
     ``protagonist_mean``, ``protagonist_best``: f32[N], the protagonist's mean and best episodic
     return on each level (``scores.episode_returns``; in the train step the best is −inf where no
-    protagonist episode ended, so ``flexible`` then takes the antagonist's); ``antagonist_mean``, ``antagonist_best``:
-    the antagonist's (``paired``, ``flexible``); ``optimal``: f32[N], the task's optimal return
-    (``perfect``). ``estimator`` and ``clip_negative`` are static."""
+    protagonist episode ended, so ``flexible`` then takes the antagonist's); ``antagonist_mean``,
+    ``antagonist_best``: the antagonist's (``paired``, ``flexible``); ``optimal``: f32[N], the
+    task's optimal return (``perfect``). ``estimator`` and ``clip_negative`` are static."""
     if estimator == "paired":
         regret = antagonist_best - protagonist_mean
     elif estimator == "flexible":

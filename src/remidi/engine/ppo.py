@@ -235,7 +235,8 @@ def _minibatch_step(state: TrainState, carry, batch: Batch, cfg: PPOConfig, appl
     stepped = state.apply_gradients(grads=grads)
     any_unmasked = jnp.any(batch.mask)
     state = jax.tree.map(lambda new, old: jnp.where(any_unmasked, new, old), stepped, state)
-    metrics["grad_norm"] = jnp.where(any_unmasked, optax.tree.norm(grads), 0.0)
+    metrics["grad_norm"] = optax.tree.norm(grads)
+    metrics["trained"] = any_unmasked
     return state, metrics
 
 
@@ -256,7 +257,9 @@ def ppo_update(
     the action distribution (:mod:`remidi.engine.distributions`). Jit-able with ``cfg``,
     ``apply_fn`` and ``dist`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
     policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm, masked_fraction) are
-    averaged over all minibatch steps. Raises :class:`ConfigError` if ``cfg`` is invalid for N.
+    averaged over the minibatch steps that trained (an all-masked minibatch is skipped, and its
+    zeros would dilute them; NaN if none trained), ``masked_fraction`` over all of them. Raises
+    :class:`ConfigError` if ``cfg`` is invalid for N.
     """
     apply_fn = train_state.apply_fn if apply_fn is None else apply_fn
     num_envs = batch.mask.shape[1]
@@ -276,4 +279,8 @@ def ppo_update(
         return jax.lax.scan(minibatch, state, groups)
 
     train_state, metrics = jax.lax.scan(epoch, train_state, jax.random.split(rng, cfg.epochs))
-    return train_state, jax.tree.map(jnp.mean, metrics)
+    trained = metrics.pop("trained")  # bool[epochs, minibatches]
+    count = jnp.sum(trained)
+    out = {name: jnp.where(count > 0, jnp.sum(jnp.where(trained, v, 0.0)) / jnp.maximum(count, 1), jnp.nan)
+           for name, v in metrics.items() if name != "masked_fraction"}
+    return train_state, {**out, "masked_fraction": jnp.mean(metrics["masked_fraction"])}

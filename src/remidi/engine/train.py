@@ -197,8 +197,9 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
                            reward=traj.reward, solved=setup.task.solved)
 
 
-#: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs
-#: and minibatches; NaN on updates that do not train, left out of a block's mean)
+#: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs'
+#: minibatches that trained; NaN on updates that do not train or whose every step ReMiDi masked,
+#: left out of a block's mean)
 PPO_METRICS = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "grad_norm")
 
 

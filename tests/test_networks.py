@@ -158,27 +158,28 @@ def test_reset_lstm_is_flax_optimized_lstm_cell():
         np.testing.assert_array_equal(a, b)
     variables = jax.tree.map(lambda v: v + jnp.asarray(0.2 * rng.normal(size=v.shape), jnp.float32), variables)
 
-    def reference(params, carry):
+    def reference(params, carry, inputs):
         ys = []
         for k in range(t):
             carry = jax.tree.map(lambda c: jnp.where(reset[k][:, None], 0.0, c), carry)
-            carry, y = cell.apply({"params": params["cell"]}, carry, x[k])
+            carry, y = cell.apply({"params": params["cell"]}, carry, inputs[k])
             ys.append(y)
         return carry, jnp.stack(ys)
 
-    def loss(apply, params, carry):
-        (c, hh), ys = apply(params, carry)
+    def loss(apply, params, carry, inputs):
+        (c, hh), ys = apply(params, carry, inputs)
         return jnp.sum(ys ** 2) + jnp.sum(c * hh)
 
-    def apply_ours(params, carry):
-        return ours.apply({"params": params}, carry, (x, reset))
+    def apply_ours(params, carry, inputs):
+        return ours.apply({"params": params}, carry, (inputs, reset))
 
-    (c_a, h_a), y_a = apply_ours(variables["params"], carry0)
-    (c_b, h_b), y_b = reference(variables["params"], carry0)
+    (c_a, h_a), y_a = apply_ours(variables["params"], carry0, x)
+    (c_b, h_b), y_b = reference(variables["params"], carry0, x)
     for a, b in ((y_a, y_b), (c_a, c_b), (h_a, h_b)):
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
-    grads_a = jax.grad(functools.partial(loss, apply_ours), argnums=(0, 1))(variables["params"], carry0)
-    grads_b = jax.grad(functools.partial(loss, reference), argnums=(0, 1))(variables["params"], carry0)
+    # the parameters', the initial carry's and the inputs' gradients (the inputs' train the layers below)
+    grads_a = jax.grad(functools.partial(loss, apply_ours), argnums=(0, 1, 2))(variables["params"], carry0, x)
+    grads_b = jax.grad(functools.partial(loss, reference), argnums=(0, 1, 2))(variables["params"], carry0, x)
     for a, b in zip(jax.tree.leaves(grads_a), jax.tree.leaves(grads_b)):
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5)
 

@@ -5,6 +5,7 @@ page needs."""
 import csv
 import gzip
 import json
+import math
 
 import numpy as np
 import pytest
@@ -21,18 +22,19 @@ def test_the_page_and_the_readme_match_the_committed_data():
         assert rp.stale_blocks(text, generated) == [], f"{page}: run python -m remidi.experiments.results_page"
 
 
-def write_run(root, experiment, algo, seeds, summary=None, evaluate=None):
-    """A finished run folder as `remidi run` and `remidi evaluate` write it (metrics: name → per seed)."""
+def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attempts=30, update=100):
+    """A finished run folder (100 updates) as `remidi run` and `remidi evaluate` write it (metrics:
+    name → per seed); ``attempts`` and ``update``: what its evaluation recorded."""
     folder = root / experiment / f"{algo}-s{seeds[0]}"
     folder.mkdir(parents=True)
     entry = lambda per: {"mean": float(np.mean(per)), "std": 0.0, "per_seed": list(per)}  # noqa: E731
-    (folder / "config.json").write_text(json.dumps({"code": {"commit": "abc1234def"}}))
+    (folder / "config.json").write_text(json.dumps({"code": {"commit": "abc1234def"}, "config": {"num_updates": 100}}))
     (folder / "summary.json").write_text(json.dumps({
         "experiment": experiment, "algo": algo, "preset": "cpu", "seeds": list(seeds), "wall_s": 60.0,
         "metrics": {k: entry(v) for k, v in (summary or {}).items()}}))
     if evaluate:
-        (folder / "evaluate.json").write_text(json.dumps({"algorithms": {algo: {
-            "seeds": list(seeds), "metrics": {k: entry(v) for k, v in evaluate.items()}}}}))
+        (folder / "evaluate.json").write_text(json.dumps({"args": {"attempts": attempts}, "algorithms": {algo: {
+            "seeds": list(seeds), "update": update, "metrics": {k: entry(v) for k, v in evaluate.items()}}}}))
     return folder
 
 
@@ -44,6 +46,15 @@ def verdict_of(tmp_path, remidi, plr, mr):
     for algo, values in (("remidi", remidi), ("plr", plr), ("minimax-return", mr)):
         write_run(tmp_path, "tmaze", algo, list(range(len(values))), evaluate={"solve_rate/mean": values})
     return rp.evaluate_claim(CLAIM, rp.load_runs(tmp_path))
+
+
+@pytest.mark.parametrize("attempts, update, needle", [(10, 100, "--attempts 10"), (30, 60, "at update 60 of 100")])
+def test_an_evaluation_of_other_attempts_or_an_unfinished_run_is_refused(tmp_path, attempts, update, needle):
+    """The page states its evaluate: metrics as the final checkpoint's with 30 attempts."""
+    write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]}, attempts=attempts,
+              update=update)
+    with pytest.raises(ValueError, match=needle):
+        rp.load_runs(tmp_path)
 
 
 def test_clear_separation_on_ten_seeds_is_reproduced(tmp_path):
@@ -91,6 +102,19 @@ def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
     assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly"
 
 
+def test_an_empty_active_buffer_has_no_share_of_anything(tmp_path):
+    """buffer_fraction/<tag> is logged 0 for an empty buffer: the page reads it as undefined, so
+    a bound like [0, 0.1] fails rather than passes on a run whose buffer holds nothing."""
+    write_run(tmp_path, "lever-noisy", "remidi", [0, 1, 2],
+              summary={"buffer_fraction/hidden": [0.0, 0.0, 0.0], "buffer_size": [32.0, 0.0, 32.0]})
+    runs = rp.load_runs(tmp_path)
+    values = rp.metric_values(runs, "lever-noisy", "remidi", "summary:buffer_fraction/hidden")
+    assert values[0] == 0.0 and math.isnan(values[1]) and values[2] == 0.0
+    claim = rp.Claim("b", "x", "keeps hidden out", "summary:buffer_fraction/hidden", ("lever-noisy",),
+                     bounds=(("remidi", 0.0, 0.1),), min_seeds=3)
+    assert rp.evaluate_claim(claim, runs)["verdict"] != "reproduced"
+
+
 def test_parts_of_one_algorithm_are_merged_by_seed_and_a_seed_twice_is_an_error(tmp_path):
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
     write_run(tmp_path, "tmaze", "plr", [5, 6], evaluate={"solve_rate/mean": [0.3, 0.4]})
@@ -116,7 +140,8 @@ def test_provenance_names_every_part_of_a_resumed_run(tmp_path):
     old = write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
     summary = json.loads((old / "summary.json").read_text())
     (old / "summary.json").write_text(json.dumps({**summary, "resumed": True}))
-    (old / "config.json").write_text(json.dumps({"code": {"commit": "ccccccc3", "device": "cpu: cpu"}}))
+    (old / "config.json").write_text(json.dumps({"code": {"commit": "ccccccc3", "device": "cpu: cpu"},
+                                                 "config": {"num_updates": 100}}))
     table = rp.provenance_table(rp.load_runs(tmp_path))
     row = next(line for line in table.splitlines() if "| remidi |" in line)
     assert "aaaaaaa, bbbbbbb" in row and "cpu: cpu, gpu: NVIDIA H200" in row and "30.0 min |" in row

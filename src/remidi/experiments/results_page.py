@@ -242,6 +242,23 @@ def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder:
             per[seed] = math.nan if value is None else float(value)
 
 
+EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final checkpoint" metrics are
+
+
+def _check_evaluation(folder: Path, evaluated: dict, entry: dict, config: dict) -> None:
+    """The page states its ``evaluate:`` metrics as the final checkpoint's with
+    :data:`EVAL_ATTEMPTS` attempts: refuse (ValueError naming the run) an ``evaluate.json`` of
+    an unfinished run's checkpoint or with other attempts, rather than mix it in."""
+    attempts = evaluated.get("args", {}).get("attempts")
+    if attempts != EVAL_ATTEMPTS:
+        raise ValueError(f"{folder / 'evaluate.json'}: evaluated with --attempts {attempts}; the page's metrics are "
+                         f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
+    updates = config.get("config", {}).get("num_updates")
+    if entry.get("update") != updates:
+        raise ValueError(f"{folder / 'evaluate.json'}: evaluated at update {entry.get('update')} of {updates}; the page "
+                         f"reads the final checkpoint (finish the run, then evaluate it again)")
+
+
 def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     """``{(experiment, algo): Run}`` of every run folder under ``data``."""
     runs: dict[tuple[str, str], Run] = {}
@@ -253,7 +270,9 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
         if (folder / "evaluate.json").is_file():
-            entry = outputs.read_json(folder / "evaluate.json")["algorithms"][summary["algo"]]
+            evaluated = outputs.read_json(folder / "evaluate.json")
+            entry = evaluated["algorithms"][summary["algo"]]
+            _check_evaluation(folder, evaluated, entry, config)
             _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
         if (folder / "metrics.csv.gz").is_file():
             rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
@@ -294,10 +313,18 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
 
 
 def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:
-    """``{seed: value}`` of ``metric`` (``"source:name"``) for one experiment × algorithm ({} if none)."""
+    """``{seed: value}`` of ``metric`` (``"source:name"``) for one experiment × algorithm ({} if none).
+    A tag's share of the active buffer (``buffer_fraction/<tag>``) is NaN for a seed whose active
+    buffer is empty (``buffer_size`` 0): the run logs 0 there, which a bound like [0, 0.1] would pass."""
     source, name = metric.split(":", 1)
     run = runs.get((experiment, algo))
-    return dict(sorted(run.values.get(source, {}).get(name, {}).items())) if run else {}
+    if not run:
+        return {}
+    values = dict(sorted(run.values.get(source, {}).get(name, {}).items()))
+    if name.startswith("buffer_fraction/") and name.count("/") == 1:
+        sizes = run.values.get(source, {}).get("buffer_size", {})
+        values = {seed: (math.nan if sizes.get(seed, 1.0) == 0 else v) for seed, v in values.items()}
+    return values
 
 
 # ------------------------------------------------------------------------------------ verdict
@@ -369,7 +396,7 @@ def verdict_table(results: list[dict]) -> str:
         d = _digits(claim.metric)
         for i, t in enumerate(r["tests"]):
             head = (f"{claim.title}: {claim.statement}", f"`{claim.metric.split(':', 1)[1]}` "
-                    f"({'final checkpoint, 30 attempts' if claim.metric.startswith('evaluate') else 'last logged point'})"
+                    f"({f'final checkpoint, {EVAL_ATTEMPTS} attempts' if claim.metric.startswith('evaluate') else 'last logged point'})"
                     ) if i == 0 else ("", "")
             where = f" on {t['experiment']}" if len(claim.experiments) > 1 else ""
             if t["kind"] == "greater":

@@ -86,7 +86,7 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
     doc = json.loads((run / "evaluate.json").read_text())
     assert doc["args"]["cvar_levels"] == 40 and set(doc["algorithms"]) == {"plr", "remidi"}
     for algo, entry in doc["algorithms"].items():
-        assert entry["seeds"] == [0, 1] and entry["update"] == 40
+        assert entry["seeds"] == [0, 1] and entry["update"] == 40 and entry["cvar_levels_used"] == 40
         m = entry["metrics"]
         for name in ("solve_rate/visible", "solve_rate/hidden", "solve_rate/mean", "return/visible",
                      "cvar/solve_rate/1%", "cvar/solve_rate/10%", "cvar/solve_rate/100%", "cvar/return/1%"):

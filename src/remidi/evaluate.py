@@ -312,6 +312,8 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
         raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
         metrics = _summarise(raw, run.setup, optimal, tags)
         doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
+                                       # fewer than --cvar-levels where the generator rarely makes a solvable one
+                                       "cvar_levels_used": int(jax.tree.leaves(levels)[0].shape[0]),
                                        "metrics": outputs.summarize(metrics)}
         rows += [(run.algo, s, name, float(values[i])) for name, values in metrics.items()
                  for i, s in enumerate(run.seeds)]

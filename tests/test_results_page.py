@@ -53,7 +53,7 @@ def test_an_evaluation_of_other_attempts_or_an_unfinished_run_is_refused(tmp_pat
     """The page states its evaluate: metrics as the final checkpoint's with 30 attempts."""
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]}, attempts=attempts,
               update=update)
-    with pytest.raises(ValueError, match=needle):
+    with pytest.raises(ConfigError, match=needle):
         rp.load_runs(tmp_path)
 
 

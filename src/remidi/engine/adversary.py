@@ -118,8 +118,9 @@ class RandomLevels:
 
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
         """After scoring: ``(changed Runner fields, inserted bool[N], step metrics)``; nothing is
-        kept. ``mean_return`` f32[N]: the agent's mean episodic return on each level; ``rng`` for
-        an adversary that learns."""
+        kept. ``best_return``: :meth:`best_return`'s record (−inf where no episode ended);
+        ``mean_return`` f32[N]: the agent's mean episodic return on each level (the partial return
+        where no episode ended); ``rng`` for an adversary that learns."""
         return {}, jnp.zeros((setup.cfg.num_envs,), bool), {}
 
     def advance(self, setup, runner, proposal: Proposal, params) -> dict:

@@ -247,15 +247,15 @@ EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final check
 
 def _check_evaluation(folder: Path, evaluated: dict, entry: dict, config: dict) -> None:
     """The page states its ``evaluate:`` metrics as the final checkpoint's with
-    :data:`EVAL_ATTEMPTS` attempts: refuse (ValueError naming the run) an ``evaluate.json`` of
+    :data:`EVAL_ATTEMPTS` attempts: refuse (ConfigError naming the run) an ``evaluate.json`` of
     an unfinished run's checkpoint or with other attempts, rather than mix it in."""
     attempts = evaluated.get("args", {}).get("attempts")
     if attempts != EVAL_ATTEMPTS:
-        raise ValueError(f"{folder / 'evaluate.json'}: evaluated with --attempts {attempts}; the page's metrics are "
+        raise ConfigError(f"{folder / 'evaluate.json'}: evaluated with --attempts {attempts}; the page's metrics are "
                          f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
     updates = config.get("config", {}).get("num_updates")
     if entry.get("update") != updates:
-        raise ValueError(f"{folder / 'evaluate.json'}: evaluated at update {entry.get('update')} of {updates}; the page "
+        raise ConfigError(f"{folder / 'evaluate.json'}: evaluated at update {entry.get('update')} of {updates}; the page "
                          f"reads the final checkpoint (finish the run, then evaluate it again)")
 
 
@@ -321,7 +321,7 @@ def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[i
     if not run:
         return {}
     values = dict(sorted(run.values.get(source, {}).get(name, {}).items()))
-    if name.startswith("buffer_fraction/") and name.count("/") == 1:
+    if name.startswith("buffer_fraction/") and not re.search(r"/b\d+$", name):  # the active buffer's
         sizes = run.values.get(source, {}).get("buffer_size", {})
         values = {seed: (math.nan if sizes.get(seed, 1.0) == 0 else v) for seed, v in values.items()}
     return values
@@ -613,6 +613,9 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         summary = outputs.read_json(folder / "summary.json")
         exp, algo = summary["experiment"], summary["algo"]
         doc = outputs.read_json(folder / "config.json")
+        if (folder / "evaluate.json").is_file():  # refused before anything is copied
+            evaluated = outputs.read_json(folder / "evaluate.json")
+            _check_evaluation(folder, evaluated, evaluated["algorithms"][algo], doc)
         name = re.sub(r"[^a-z0-9]+", "-", label(algo, doc.get("config", {}), doc.get("command"))).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)

@@ -187,13 +187,13 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
         span = (hi - lo) or 1.0
         want_lo, want_hi = panel.ylim if panel.ylim is not None else (None, None)
         ax.set_ylim(lo - 0.05 * span if want_lo is None else want_lo, hi + 0.25 * span if want_hi is None else want_hi)
-        if panel.missing:
-            # under the panel, below its x label (inside it covered curves), wrapped to the panel's width
-            note = "\n".join(textwrap.wrap(f"n/a: {', '.join(panel.missing)}", 70))
-            ax.annotate(note, xy=(1, 0), xycoords="axes fraction", xytext=(0, -30), textcoords="offset points",
-                        fontsize=8, color="dimgray", ha="right", va="top")
         ax.set_title(panel.title)
         ax.set_xlabel(panel.xlabel)
+        if panel.missing:
+            # under the panel's x label (inside the panel it covered curves), wrapped to its width
+            note = "\n".join(textwrap.wrap(f"n/a: {', '.join(panel.missing)}", 70))
+            ax.annotate(note, xy=(1, 0), xycoords=("axes fraction", ax.xaxis.label), xytext=(0, -2),
+                        textcoords="offset points", fontsize=8, color="dimgray", ha="right", va="top")
         ax.set_ylabel(panel.ylabel)
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:

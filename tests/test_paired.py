@@ -40,6 +40,15 @@ def test_the_three_regret_estimates_equal_a_hand_computation():
         paired.regret_estimate("max", pm, pb, am, ab)
 
 
+def test_flexible_reads_a_protagonist_with_no_ended_episode_by_its_partial_return():
+    """The train step gives the protagonist's best as MaxMC's record: −inf where no episode ended.
+    The flexible estimate then reads its partial return (the mean), as the antagonist's is read,
+    and stays max(best) − mean of means ≥ 0 (with −inf it took the antagonist's −3: regret −1)."""
+    pm, pb = jnp.asarray([-1.0]), jnp.asarray([-jnp.inf])
+    am, ab = jnp.asarray([-3.0]), jnp.asarray([-3.0])
+    assert float(paired.regret_estimate("flexible", pm, pb, am, ab)[0]) == -1.0 - 0.5 * (-3.0 - 1.0)
+
+
 def test_regret_by_tag_splits_the_estimate_and_the_antagonists_luck_by_level_tag():
     """Four levels, two hidden: each tag's mean of the estimate, of the antagonist's best − mean,
     and of the exact regret, by hand; a tag no level carries is NaN, never 0."""

@@ -40,9 +40,11 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
 
     ``protagonist_mean``, ``protagonist_best``: f32[N], the protagonist's mean and best episodic
     return on each level (``scores.episode_returns``: the partial return where no episode
-    ended); ``antagonist_mean``, ``antagonist_best``: the antagonist's (``paired``, ``flexible``);
+    ended; a best of −inf, the train step's MaxMC record where no episode ended, reads as that
+    partial return, the mean, as the antagonist's is read); ``antagonist_mean``, ``antagonist_best``: the antagonist's (``paired``, ``flexible``);
     ``optimal``: f32[N], the task's optimal return (``perfect``). ``estimator`` and
     ``clip_negative`` are static."""
+    protagonist_best = jnp.where(jnp.isneginf(protagonist_best), protagonist_mean, protagonist_best)
     if estimator == "paired":
         regret = antagonist_best - protagonist_mean
     elif estimator == "flexible":
@@ -172,9 +174,6 @@ class LevelGenerator(RandomLevels):
         antagonist, _ = tr.learn(setup, as_antagonist, k_ant, traj, adv, targets)
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
-        # the train step gives MaxMC's record (−inf where no protagonist episode ended); the estimate
-        # reads the protagonist's best as the antagonist's is read: its partial return there, the mean
-        best_return = jnp.where(jnp.isneginf(best_return), mean_return, best_return)
         regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)
         paid = self._pay(setup, regret, overlap)
         # the generator: paid on its last step, no bootstrap past its episode

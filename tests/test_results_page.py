@@ -22,7 +22,7 @@ def test_the_page_and_the_readme_match_the_committed_data():
         assert rp.stale_blocks(text, generated) == [], f"{page}: run python -m remidi.experiments.results_page"
 
 
-def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attempts=30, update=100):
+def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attempts=30, update=100, cvar_levels=256):
     """A finished run folder (100 updates) as `remidi run` and `remidi evaluate` write it (metrics:
     name → per seed); ``attempts`` and ``update``: what its evaluation recorded."""
     folder = root / experiment / f"{algo}-s{seeds[0]}"
@@ -33,7 +33,8 @@ def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attemp
         "experiment": experiment, "algo": algo, "preset": "cpu", "seeds": list(seeds), "wall_s": 60.0,
         "metrics": {k: entry(v) for k, v in (summary or {}).items()}}))
     if evaluate:
-        (folder / "evaluate.json").write_text(json.dumps({"args": {"attempts": attempts}, "algorithms": {algo: {
+        (folder / "evaluate.json").write_text(json.dumps({"args": {"attempts": attempts, "cvar_levels": cvar_levels},
+                                                          "algorithms": {algo: {
             "seeds": list(seeds), "update": update, "metrics": {k: entry(v) for k, v in evaluate.items()}}}}))
     return folder
 
@@ -48,11 +49,14 @@ def verdict_of(tmp_path, remidi, plr, mr):
     return rp.evaluate_claim(CLAIM, rp.load_runs(tmp_path))
 
 
-@pytest.mark.parametrize("attempts, update, needle", [(10, 100, "--attempts 10"), (30, 60, "at update 60 of 100")])
-def test_an_evaluation_of_other_attempts_or_an_unfinished_run_is_refused(tmp_path, attempts, update, needle):
-    """The page states its evaluate: metrics as the final checkpoint's with 30 attempts."""
+@pytest.mark.parametrize("attempts, update, cvar_levels, needle", [
+    (10, 100, 256, "--attempts 10"), (30, 60, 256, "at update 60 of 100"), (30, 100, 64, "cvar_levels 64")])
+def test_an_evaluation_of_other_arguments_or_an_unfinished_run_is_refused(tmp_path, attempts, update, cvar_levels,
+                                                                          needle):
+    """The page states its evaluate: metrics as the final checkpoint's with 30 attempts, and
+    compares CVaR over the same levels."""
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]}, attempts=attempts,
-              update=update)
+              update=update, cvar_levels=cvar_levels)
     with pytest.raises(ConfigError, match=needle):
         rp.load_runs(tmp_path)
 

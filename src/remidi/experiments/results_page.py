@@ -247,16 +247,25 @@ EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final check
 
 def _check_evaluation(folder: Path, evaluated: dict, entry: dict, config: dict) -> None:
     """The page states its ``evaluate:`` metrics as the final checkpoint's with
-    :data:`EVAL_ATTEMPTS` attempts: refuse (ConfigError naming the run) an ``evaluate.json`` of
-    an unfinished run's checkpoint or with other attempts, rather than mix it in."""
-    attempts = evaluated.get("args", {}).get("attempts")
-    if attempts != EVAL_ATTEMPTS:
-        raise ConfigError(f"{folder / 'evaluate.json'}: evaluated with --attempts {attempts}; the page's metrics are "
-                         f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
+    :data:`EVAL_ATTEMPTS` attempts, and its CVaR and perfect-maze metrics as ``remidi
+    evaluate``'s defaults give them: refuse (ConfigError naming the run) an ``evaluate.json`` of an
+    unfinished run's checkpoint or with other arguments, rather than mix it in."""
+    from remidi.evaluate import DEFAULTS
+
+    where = folder / "evaluate.json"
+    args = evaluated.get("args", {})
+    if args.get("attempts") != EVAL_ATTEMPTS:
+        raise ConfigError(f"{where}: evaluated with --attempts {args.get('attempts')}; the page's metrics are "
+                          f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
+    for key, default in DEFAULTS.items():  # the CVaR and perfect-maze tables compare runs on the same levels
+        want = list(default) if isinstance(default, tuple) else default
+        if key != "attempts" and key in args and args[key] != want:
+            raise ConfigError(f"{where}: evaluated with {key} {args[key]!r}; the page compares runs evaluated with "
+                              f"remidi evaluate's default {want!r}")
     updates = config.get("config", {}).get("num_updates")
     if entry.get("update") != updates:
-        raise ConfigError(f"{folder / 'evaluate.json'}: evaluated at update {entry.get('update')} of {updates}; the page "
-                         f"reads the final checkpoint (finish the run, then evaluate it again)")
+        raise ConfigError(f"{where}: evaluated at update {entry.get('update')} of {updates}; the page reads the final "
+                          f"checkpoint (finish the run, then evaluate it again)")
 
 
 def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:

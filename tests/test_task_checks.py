@@ -74,8 +74,13 @@ def broken(corridor, kind: str):
         return dataclasses.replace(task, env=type("Wide", (_WideReward, env_class), {})())
     if kind == "done":
         return dataclasses.replace(task, env=type("IntDone", (_IntDone, env_class), {})())
+    if kind == "num_actions_space":  # more actions than the environment's Discrete(2)
+        return dataclasses.replace(task, num_actions=5)
     if kind == "eval_sets":  # one level where a batch belongs
         return dataclasses.replace(task, eval_sets={"one": corridor.sample_level(jax.random.PRNGKey(0))})
+    if kind == "eval_sets_numbers":  # one level of Python numbers, no arrays
+        level = corridor.sample_level(jax.random.PRNGKey(0))
+        return dataclasses.replace(task, eval_sets={"one": jax.tree.map(lambda x: x.item(), level)})
     if kind == "reseed_level":  # a batch of two where one level belongs
         return dataclasses.replace(task, reseed_level=lambda rng, level: jax.tree.map(lambda x: jnp.stack([x, x]), level))
     if kind == "level_builder":  # builds another task's levels (the lever game's)
@@ -96,7 +101,9 @@ def broken(corridor, kind: str):
     ("max_episode_steps", "task.max_episode_steps: must be an integer ≥ 1, got 0"),
     ("reward", "task.env: a step's reward must be a float scalar (f32[]) per environment, got float32[2]"),
     ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
+    ("num_actions_space", "task.num_actions: must be the environment's 2 actions (its action_space), got 5"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
+    ("eval_sets_numbers", "task.eval_sets: 'one' must be a batch of levels"),
     ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),
     ("level_builder", "task.level_builder: must build a level with the sampled level's shapes"),
     ("level_builder_size", "task.level_builder.num_steps: must be an integer ≥ 1, got 0"),

@@ -33,8 +33,37 @@ def _user_error(err: Exception) -> str:
 
 
 def _shapes(tree) -> str:
-    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages)."""
-    return ", ".join(f"{leaf.dtype}{list(leaf.shape)}" for leaf in jax.tree.leaves(tree))
+    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages); a leaf that is no
+    array (a Python number, a typed PRNG key's data) as NumPy reads it."""
+    def one(leaf):
+        if not hasattr(leaf, "dtype") or not hasattr(leaf, "shape"):
+            return f"{type(leaf).__name__}"
+        return f"{leaf.dtype}{list(leaf.shape)}"
+    return ", ".join(one(leaf) for leaf in jax.tree.leaves(tree))
+
+
+def _check_action_count(task) -> None:
+    """``task.num_actions`` against the environment's action space where it says (a gymnax
+    ``Discrete(n)``, or a ``Box`` of continuous actions): an action the environment does not
+    have would be taken silently (CartPole with 5 actions pushes 3, 5 and 7 times as hard)."""
+    import math
+
+    from remidi.errors import ConfigError
+
+    try:
+        space = task.env.action_space(task.params)
+    except Exception:  # noqa: BLE001 (an environment without a usable action space: nothing to compare)
+        return
+    if task.continuous:
+        shape = getattr(space, "shape", None)
+        count = math.prod(shape) if isinstance(shape, tuple) and shape else None
+    else:
+        n = getattr(space, "n", None)
+        count = int(n) if isinstance(n, (int, np.integer)) else None
+    if count is not None and count != task.num_actions:
+        kind = "continuous action dimensions" if task.continuous else "actions"
+        raise ConfigError(f"task.num_actions: must be the environment's {count} {kind} (its action_space), got "
+                          f"{task.num_actions}")
 
 
 def _traced(field: str, what: str, fn, *args):
@@ -105,6 +134,8 @@ def validate_task(task: UEDTask) -> None:
             raise ConfigError(f"task.eval_envs: {name!r} is no evaluation set; allowed: {', '.join(task.eval_sets)}")
         if not isinstance(env, UnderspecifiedEnv):
             raise ConfigError(f"task.eval_envs: {name!r} must be a jaxued UnderspecifiedEnv, got a {type(env).__name__}")
+
+    _check_action_count(task)
 
     rng = jax.random.PRNGKey(0)
     def first(k):
@@ -183,6 +214,10 @@ def validate_task(task: UEDTask) -> None:
             raise ConfigError(f"task.eval_sets: {name!r} must be a batch of levels, every leaf with the level's "
                               f"shape after one leading axis of the same length ≥ 1 (levels {_shapes(level)}; "
                               f"got {_shapes(levels) or 'no arrays'})")
+        if any(not hasattr(leaf, "dtype") or jax.dtypes.issubdtype(leaf.dtype, jax.dtypes.prng_key)
+               for leaf in leaves):
+            raise ConfigError(f"task.eval_sets: {name!r} must hold arrays (typed PRNG keys as jax.random.key_data), "
+                              f"got {_shapes(levels)}")
         if name not in task.eval_envs and _shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels)) != _shapes(level):
             raise ConfigError(f"task.eval_sets: {name!r}'s levels must have the sampled level's shapes "
                               f"({_shapes(level)}), got {_shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels))}")

@@ -148,10 +148,14 @@ def test_the_adapter_refuses_unknown_fields_and_empty_ranges_in_one_line():
     for kwargs, match in (({"level": {"gravty": (1.0, 2.0)}}, "level field 'gravty' is not a params field"),
                           ({"level": {"gravity": (2.0, 1.0)}}, "low must be ≤ high"),
                           ({"level": {"gravity": (1.0, 2.0)}, "eval_grid": {"length": (0.5,)}},
-                           "eval_grid field 'length' is not a level field")):
+                           "eval_grid field 'length' is not a level field"),
+                          ({"level": {"max_steps_in_episode": (100, 500)}}, "cannot vary by level")):
         with pytest.raises(ConfigError, match=match) as err:
             gymnax_task("CartPole-v1", **kwargs)
         assert "\n" not in str(err.value)
+    # Acrobot's torque noise comes from the step's key: the level no longer decides the episode
+    with pytest.raises(ConfigError, match="torque_noise_max > 0 draws noise from the step's key"):
+        gymnax_task("Acrobot-v1", {"link_mass_1": (0.5, 1.5)}, params={"torque_noise_max": 0.1})
     with pytest.raises(ConfigError, match="gymnax: cannot make 'NoSuchEnv-v0'"):
         gymnax_task("NoSuchEnv-v0", {"gravity": (1.0, 2.0)})
 
@@ -220,3 +224,16 @@ def test_all_algorithms_of_a_gymnax_experiment_are_those_its_task_supports():
         parse_algos(get_experiment("cartpole"), "dr,remidi-paired")
     with pytest.raises(ConfigError, match="^--algo: unknown value 'pared'"):
         parse_algos(get_experiment("cartpole"), "pared")
+
+
+def test_solve_thresholds_follow_the_episode_limit():
+    """Pendulum's threshold is a cost per step (−200 at gymnax's 200 steps); Acrobot's "up within
+    100 steps" becomes "up within the episode" when episodes are shorter: a failed episode (−1 per
+    step, −50 over 50 steps) would otherwise count as solved."""
+    np.testing.assert_array_equal(np.asarray(domain_task("pendulum", 100).solved(jnp.array([-150.0, -90.0]))),
+                                  [False, True])
+    assert bool(domain_task("pendulum").solved(jnp.array([-190.0]))[0])
+    np.testing.assert_array_equal(np.asarray(domain_task("acrobot", 50).solved(jnp.array([-50.0, -49.0]))),
+                                  [False, True])
+    np.testing.assert_array_equal(np.asarray(domain_task("acrobot", 500).solved(jnp.array([-101.0, -100.0]))),
+                                  [False, True])

@@ -188,6 +188,13 @@ def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed
                                   f"allowed: {', '.join(sorted(known))}")
     if not level:
         raise ConfigError(f"gymnax: give at least one params field of {env_name} as the level")
+    if "max_steps_in_episode" in level:  # the engine reads the limit once (max_episode_steps), not per level
+        raise ConfigError("gymnax: level field 'max_steps_in_episode' cannot vary by level: the episode limit is "
+                          "one number of the task (params={'max_steps_in_episode': N})")
+    noise = {**dict(params or {}), **dict(level)}.get("torque_noise_max", getattr(base, "torque_noise_max", 0.0))
+    if seed_in_level and (noise[1] if isinstance(noise, tuple) else noise) > 0:
+        raise ConfigError("gymnax: torque_noise_max > 0 draws noise from the step's key, so the level (with its "
+                          "seed) no longer decides the episode; keep it 0, or seed_in_level=False")
     for name, (lo, hi) in level.items():
         if not lo <= hi:
             raise ConfigError(f"gymnax: level field {name}: low must be ≤ high, got ({lo}, {hi})")

@@ -48,7 +48,10 @@ class GymnaxUEDConfig(UEDConfig):
 @dataclass(frozen=True)
 class Domain:
     """A built-in gymnax domain: the environment, the level's ranges, the held-out grid, what
-    counts as solved (``solved_at``; None: the whole episode, CartPole's pole never falling)."""
+    counts as solved (``solved_at`` at gymnax's own episode limit; None: the whole episode,
+    CartPole's pole never falling; ``solved_scales``: the threshold scales with the episode limit,
+    Pendulum's cost per step; otherwise −1 per step until the goal, Acrobot's "up within 100
+    steps", or within the episode when it is shorter: a failed episode never counts as solved)."""
 
     name: str
     env_name: str
@@ -56,6 +59,7 @@ class Domain:
     grid: dict
     solved_at: float | None
     reward_scale: float = 1.0
+    solved_scales: bool = False
     description: str = ""
 
 
@@ -70,7 +74,7 @@ DOMAINS = {d.name: d for d in (
            description="gymnax Acrobot: first link's length, both links' masses and start seed as the level"),
     Domain("pendulum", "Pendulum-v1",
            level={"g": (5.0, 15.0), "m": (0.5, 1.5), "l": (0.5, 1.5)},
-           grid={"g": (5.0, 10.0, 15.0), "l": (0.75, 1.0, 1.25)}, solved_at=-200.0, reward_scale=0.1,
+           grid={"g": (5.0, 10.0, 15.0), "l": (0.75, 1.0, 1.25)}, solved_at=-200.0, reward_scale=0.1, solved_scales=True,
            description="gymnax Pendulum (continuous torque): gravity, mass, length and start seed as the level"),
 )}
 
@@ -105,14 +109,18 @@ PRESETS = {"paper": {}, "smoke": SMOKE}
 def domain_task(name: str, max_steps: int = 0):
     """The domain's UED task (cached: one task per arguments, so runs share compiled programs);
     ``max_steps`` 0 keeps gymnax's episode limit."""
+    import gymnax
+
     d = DOMAINS[name]
     params = {"max_steps_in_episode": max_steps} if max_steps else {}
+    default = int(gymnax.make(d.env_name)[1].max_steps_in_episode)
+    limit = max_steps or default
     if d.solved_at is None:  # the whole episode: the limit's number of steps of reward 1
-        import gymnax
-
-        solved_at = float(max_steps or gymnax.make(d.env_name)[1].max_steps_in_episode)
-    else:
-        solved_at = d.solved_at
+        solved_at = float(limit)
+    elif d.solved_scales:  # a cost per step: the threshold at gymnax's limit, per step
+        solved_at = d.solved_at * limit / default
+    else:  # −1 per step until the goal: up within -solved_at steps, or within a shorter episode
+        solved_at = max(d.solved_at, -(limit - 1.0))
     return gymnax_task(d.env_name, d.level, params=params, eval_grid=d.grid, solved_at=solved_at)
 
 

@@ -72,6 +72,29 @@ def test_a_fresh_runner_is_typed_as_a_restored_one(monkeypatch):
     assert not any(leaf.weak_type for leaf in jax.tree.leaves(shapes))
 
 
+def test_a_diverged_network_never_replaces_the_last_good_checkpoint(tmp_path, monkeypatch):
+    """Parameters that turn NaN in the block after update 20 (a NaN reward, a learning rate too
+    high): one line saying so, and the checkpoint of update 20 stays as it was."""
+    from remidi.errors import RemidiError
+
+    real = driver._run_block
+
+    def diverging(setup, runner, length):
+        runner, metrics = real(setup, runner, length)
+        if int(np.asarray(runner.update).max()) > 20:
+            params = jax.tree.map(lambda x: x * jnp.nan, runner.train_state.params)
+            runner = runner.replace(train_state=runner.train_state.replace(params=params))
+        return runner, metrics
+
+    monkeypatch.setattr(driver, "_run_block", diverging)
+    with pytest.raises(RemidiError, match="^training diverged: .* after update 30 .*the last checkpoint before it is kept$"):
+        driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path, progress=False)
+    from remidi.engine import train as tr
+
+    runner, meta = driver.load_run_state(tr.make_setup(TASK, TINY, "remidi"), [0, 1], tmp_path / "checkpoint.npz")
+    assert meta["done"] == 20 and all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(runner.train_state.params))
+
+
 def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, monkeypatch):
     path = tmp_path / "checkpoint.npz"
     runner = {"a": jnp.arange(3), "b": jnp.ones(2)}

@@ -193,6 +193,19 @@ def _put(tree, sharding):
     return jax.tree.map(one, tree)
 
 
+def _check_finite(runner, done: int) -> None:
+    """RemidiError (one line) when the agent's network parameters hold a NaN or an infinity:
+    training diverged, and writing the checkpoint would overwrite the last good one with it."""
+    from remidi.errors import RemidiError
+
+    params = jax.tree.leaves(runner.train_state.params)
+    bad = [i for i, leaf in enumerate(params) if not bool(np.all(np.isfinite(np.asarray(leaf))))]
+    if bad:
+        raise RemidiError(f"training diverged: the agent's network parameters are not finite after update {done} "
+                          f"(NaN or inf; e.g. a NaN reward, or a learning rate too high); the last checkpoint before "
+                          f"it is kept")
+
+
 def _to_host(tree):
     """NumPy copies of ``tree``'s arrays; arrays spread over several hosts are gathered first
     (a collective: every process must call it)."""
@@ -325,6 +338,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
             preempted = ckpt is not None and preemption.requested()
             if ckpt is not None and (done % checkpoint_every < length or done == num_updates or preempted):
                 host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
+                _check_finite(host_runner, done)  # a diverged network never replaces the last good checkpoint
                 if writer:  # process 0 writes
                     save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part(done)])
             if on_block is not None:

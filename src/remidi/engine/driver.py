@@ -198,9 +198,7 @@ def _check_finite(runner, done: int) -> None:
     training diverged, and writing the checkpoint would overwrite the last good one with it."""
     from remidi.errors import RemidiError
 
-    params = jax.tree.leaves(runner.train_state.params)
-    bad = [i for i, leaf in enumerate(params) if not bool(np.all(np.isfinite(np.asarray(leaf))))]
-    if bad:
+    if not all(np.isfinite(np.asarray(leaf)).all() for leaf in jax.tree.leaves(runner.train_state.params)):
         raise RemidiError(f"training diverged: the agent's network parameters are not finite after update {done} "
                           f"(NaN or inf; e.g. a NaN reward, or a learning rate too high); the last checkpoint before "
                           f"it is kept")

@@ -41,9 +41,9 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
     ``protagonist_mean``, ``protagonist_best``: f32[N], the protagonist's mean and best episodic
     return on each level (``scores.episode_returns``: the partial return where no episode
     ended; a best of −inf, the train step's MaxMC record where no episode ended, reads as that
-    partial return, the mean, as the antagonist's is read); ``antagonist_mean``, ``antagonist_best``: the antagonist's (``paired``, ``flexible``);
-    ``optimal``: f32[N], the task's optimal return (``perfect``). ``estimator`` and
-    ``clip_negative`` are static."""
+    partial return, the mean, as the antagonist's is read); ``antagonist_mean``,
+    ``antagonist_best``: the antagonist's (``paired``, ``flexible``); ``optimal``: f32[N], the
+    task's optimal return (``perfect``). ``estimator`` and ``clip_negative`` are static."""
     protagonist_best = jnp.where(jnp.isneginf(protagonist_best), protagonist_mean, protagonist_best)
     if estimator == "paired":
         regret = antagonist_best - protagonist_mean

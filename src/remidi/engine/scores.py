@@ -143,10 +143,10 @@ class ScoreInputs:
     units: ``mean_return`` f32[N] (the mean return of the finished episodes, discounted for
     perfect regret under ``discounted_regret``), ``values`` and ``advantages`` f32[T, N] (the
     critic's, GAE), ``max_return`` f32[N] (MaxMC's record: the best return of an episode that
-    ended on the level, in this rollout or a replay before; −inf where none has), ``done`` bool[T, N], ``reward``
-    f32[T, N], ``optimal_return`` f32[N] (the task's optimum, given only to a score that
-    ``needs_optimum``); ``solved`` (the task's ``return -> bool``, static) for one that
-    ``needs_solved``."""
+    ended on the level, in this rollout or a replay before; −inf where none has), ``done``
+    bool[T, N], ``reward`` f32[T, N], ``optimal_return`` f32[N] (the task's optimum, given only to
+    a score that ``needs_optimum``); ``solved`` (the task's ``return -> bool``, static) for one
+    that ``needs_solved``."""
 
     mean_return: jax.Array
     values: jax.Array

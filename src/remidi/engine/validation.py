@@ -34,7 +34,7 @@ def _user_error(err: Exception) -> str:
 
 def _shapes(tree) -> str:
     """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages); a leaf that is no
-    array (a Python number, a typed PRNG key's data) as NumPy reads it."""
+    array (a Python number) by its type's name."""
     def one(leaf):
         if not hasattr(leaf, "dtype") or not hasattr(leaf, "shape"):
             return f"{type(leaf).__name__}"

@@ -74,7 +74,8 @@ DOMAINS = {d.name: d for d in (
            description="gymnax Acrobot: first link's length, both links' masses and start seed as the level"),
     Domain("pendulum", "Pendulum-v1",
            level={"g": (5.0, 15.0), "m": (0.5, 1.5), "l": (0.5, 1.5)},
-           grid={"g": (5.0, 10.0, 15.0), "l": (0.75, 1.0, 1.25)}, solved_at=-200.0, reward_scale=0.1, solved_scales=True,
+           grid={"g": (5.0, 10.0, 15.0), "l": (0.75, 1.0, 1.25)}, solved_at=-200.0, solved_scales=True,
+           reward_scale=0.1,
            description="gymnax Pendulum (continuous torque): gravity, mass, length and start seed as the level"),
 )}
 

@@ -245,15 +245,16 @@ def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder:
 EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final checkpoint" metrics are
 
 
-def _check_evaluation(folder: Path, evaluated: dict, entry: dict, config: dict) -> None:
-    """The page states its ``evaluate:`` metrics as the final checkpoint's with
+def _evaluation(folder: Path, algo: str, config: dict) -> dict:
+    """``algo``'s entry of the run's ``evaluate.json``, checked. The page states its ``evaluate:`` metrics as the final checkpoint's with
     :data:`EVAL_ATTEMPTS` attempts, and its CVaR and perfect-maze metrics as ``remidi
     evaluate``'s defaults give them: refuse (ConfigError naming the run) an ``evaluate.json`` of an
     unfinished run's checkpoint or with other arguments, rather than mix it in."""
     from remidi.evaluate import DEFAULTS
 
     where = folder / "evaluate.json"
-    args = evaluated.get("args", {})
+    evaluated = outputs.read_json(where)
+    entry, args = evaluated["algorithms"][algo], evaluated.get("args", {})
     if args.get("attempts") != EVAL_ATTEMPTS:
         raise ConfigError(f"{where}: evaluated with --attempts {args.get('attempts')}; the page's metrics are "
                           f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
@@ -266,6 +267,7 @@ def _check_evaluation(folder: Path, evaluated: dict, entry: dict, config: dict) 
     if entry.get("update") != updates:
         raise ConfigError(f"{where}: evaluated at update {entry.get('update')} of {updates}; the page reads the final "
                           f"checkpoint (finish the run, then evaluate it again)")
+    return entry
 
 
 def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
@@ -279,9 +281,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
         if (folder / "evaluate.json").is_file():
-            evaluated = outputs.read_json(folder / "evaluate.json")
-            entry = evaluated["algorithms"][summary["algo"]]
-            _check_evaluation(folder, evaluated, entry, config)
+            entry = _evaluation(folder, summary["algo"], config)
             _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
         if (folder / "metrics.csv.gz").is_file():
             rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
@@ -623,8 +623,7 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         exp, algo = summary["experiment"], summary["algo"]
         doc = outputs.read_json(folder / "config.json")
         if (folder / "evaluate.json").is_file():  # refused before anything is copied
-            evaluated = outputs.read_json(folder / "evaluate.json")
-            _check_evaluation(folder, evaluated, evaluated["algorithms"][algo], doc)
+            _evaluation(folder, algo, doc)
         name = re.sub(r"[^a-z0-9]+", "-", label(algo, doc.get("config", {}), doc.get("command"))).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)

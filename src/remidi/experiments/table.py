@@ -76,9 +76,9 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
     regret estimator (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief
     tracker); a buffer sequence's with what differs from its exact single-policy form
     (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``,
-    ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's ``command`` asked for the default policy by name: a
-    baseline run beside its variants, kept apart from the plain runs of earlier claims); the
-    others by name."""
+    ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's
+    ``command`` asked for the default policy by name: a baseline run beside its variants, kept
+    apart from the plain runs of earlier claims); the others by name."""
     estimator = config.get("paired", {}).get("estimator")
     if algo in ("paired", "remidi-paired") and estimator:
         belief = algo == "remidi-paired" and config.get("remidi", {}).get("tracker") == "belief"

@@ -5,7 +5,8 @@ JAX fixes its device count when it initialises, so the sharded runs happen in a 
 lever configuration of tests/test_cli.py for 4 seeds on 1 and on 4 devices, resumes the 4-device
 run (from its final checkpoint: an interrupted resume compiles the block program once more, which
 the test's time budget does not allow), and reports what it saw; the argument errors that need no
-second device are checked in this process.
+second device are checked in this process. Two processes (``jax.distributed``, 2 devices each) then
+train the same run, one of them signalled (SIGTERM), and resume it.
 """
 
 import csv
@@ -82,6 +83,63 @@ print("REPORT " + json.dumps(report))
 """
 
 
+# one process of a two-process run (jax.distributed on this machine, 2 CPU devices each, gloo's
+# collectives): RUN on all 4 devices, where process 1 alone sees a SIGTERM during the first block
+# (remidi.preemption's request, what the command line's handler records), then the resume
+PROCESS = r"""
+import json, sys
+
+import jax
+
+jax.config.update("jax_cpu_collectives_implementation", "gloo")
+index, port, out, run = int(sys.argv[1]), sys.argv[2], sys.argv[3], json.loads(sys.argv[4])
+jax.distributed.initialize(coordinator_address=f"localhost:{port}", num_processes=2, process_id=index)
+import numpy as np
+
+from remidi import preemption
+from remidi.cli import main
+from remidi.engine import driver
+
+real, fired = driver._to_host, []
+
+
+def waited(tree):  # the driver's first wait for a block: the signal lands while it runs
+    if index == 1 and not fired:
+        fired.append(preemption.request())
+    return real(tree)
+
+
+driver._to_host = waited
+report = {"cut": main([*run, "--devices", "4", "--out", out])}
+if index == 0:
+    with np.load(f"{out}/checkpoint.npz") as saved:
+        report["checkpoint"] = json.loads(str(saved["meta"]))["done"]
+report["resumed"] = main(["run", "--resume", out, "--quiet"])
+print("REPORT " + json.dumps(report), flush=True)
+"""
+
+
+def _two_processes(out: Path) -> list[dict]:
+    import socket
+
+    with socket.socket() as probe:  # a free port for the coordinator
+        probe.bind(("localhost", 0))
+        port = str(probe.getsockname()[1])
+    env = subprocess_env(__name__, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    procs = [subprocess.Popen([sys.executable, "-c", PROCESS, str(i), port, str(out), json.dumps(RUN)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in (0, 1)]
+    reports = []
+    try:
+        for proc in procs:
+            stdout, stderr = proc.communicate(timeout=240)
+            assert proc.returncode == 0, stderr[-3000:]
+            reports.append(json.loads(next(x for x in stdout.splitlines() if x.startswith("REPORT "))[len("REPORT "):]))
+    finally:
+        for proc in procs:
+            proc.kill()
+    return reports
+
+
 def _metrics(folder: Path):
     with open(folder / "metrics.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -132,6 +190,14 @@ def test_seeds_sharded_over_four_devices(tmp_path, capsys):
     # a device count that does not divide the seeds: one line, exit 2, nothing written
     assert report["bad_err"] == "remidi: error: --devices: 3 does not divide the 4 seeds; allowed: 1, 2, 4\n"
     assert not report["never_exists"]
+
+    # Two processes (jax.distributed), 2 devices each: a SIGTERM that reaches one process stops
+    # both at the same block with its checkpoint (before, the signalled process gathered the runner
+    # while the other gathered the next block's metrics, and the job aborted on the mismatched
+    # collective), and the resumed run equals the one-process run on 4 devices byte for byte
+    first, second = _two_processes(out / "two")
+    assert first == {"cut": 143, "checkpoint": 2, "resumed": 0} and second == {"cut": 143, "resumed": 0}
+    assert (out / "two" / "metrics.csv").read_text() == (out / "d4" / "metrics.csv").read_text()
 
     # resuming the 4-device run in this process, which sees fewer devices: the same kind of error
     n = jax.device_count()

@@ -204,6 +204,19 @@ def _check_finite(runner, done: int) -> None:
                           f"it is kept")
 
 
+def _in_any_process(flag: bool) -> bool:
+    """Whether ``flag`` holds in any process of the run. In a multi-process run (``jax.distributed``)
+    this is a collective that every process calls at the same point (after each block): a SIGTERM
+    that one process has seen stops them all at the same block, so they take the checkpoint's
+    gather together. Decided by each process alone, the signalled one gathered the runner while the
+    others gathered the next block's metrics, and the job aborted on the mismatched collective."""
+    if jax.process_count() == 1:
+        return flag
+    from jax.experimental import multihost_utils
+
+    return bool(np.any(multihost_utils.process_allgather(np.asarray(flag, np.int32))))
+
+
 def _to_host(tree):
     """NumPy copies of ``tree``'s arrays; arrays spread over several hosts are gathered first
     (a collective: every process must call it)."""
@@ -306,7 +319,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
         earlier = list(meta.get("parts") or [{"updates": [0, done], "code": None}])  # older checkpoints: unrecorded
     part = new_part(done) if ckpt is not None else None
 
-    if ckpt is not None and preemption.requested():  # SIGTERM came as the previous algorithm finished
+    if ckpt is not None and _in_any_process(preemption.requested()):  # SIGTERM came as the previous algorithm finished
         raise preemption.Preempted(None)
     bar = _progress(num_updates, done, desc, progress and writer)
     with ExitStack() as stack:
@@ -333,7 +346,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
             if bar is not None:
                 bar.update(length)
             # SIGTERM (remidi.preemption): checkpoint this block whatever checkpoint_every says, then stop
-            preempted = ckpt is not None and preemption.requested()
+            preempted = ckpt is not None and _in_any_process(preemption.requested())
             if ckpt is not None and (done % checkpoint_every < length or done == num_updates or preempted):
                 host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
                 _check_finite(host_runner, done)  # a diverged network never replaces the last good checkpoint

@@ -216,6 +216,19 @@ def test_duplicate_check_updates_existing_entry():
     assert not bool(inserted) and int(idx) == -1 and float(same.scores[1]) == 2.0
 
 
+def test_keep_higher_keeps_a_duplicates_highest_score():
+    """keep_higher (a reservoir's keys, GeneratorSequence): a duplicate raises its entry's score,
+    never lowers it; a new level is inserted as without it."""
+    cfg = config(duplicate_check=True)
+    state = B.init_buffer(cfg, make_level(0))
+    state, _, _ = B.insert(state, cfg, make_level(5), 0.9, keep_higher=True)
+    lower, inserted, idx = B.insert(state, cfg, make_level(5), 0.2, keep_higher=True)
+    assert not bool(inserted) and int(idx) == 0 and float(lower.scores[0]) == np.float32(0.9)
+    higher, _, _ = B.insert(lower, cfg, make_level(5), 0.95, keep_higher=True)
+    assert float(higher.scores[0]) == np.float32(0.95)
+    assert float(B.insert(state, cfg, make_level(5), 0.2)[0].scores[0]) == np.float32(0.2)  # the default: replaced
+
+
 def test_duplicate_keeps_running_max_of_max_extras_and_overwrites_others():
     cfg = config(duplicate_check=True)
     state = B.init_buffer(cfg, make_level(0), extra_names=("max_return", "last_return"))

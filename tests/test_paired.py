@@ -33,20 +33,31 @@ def test_the_three_regret_estimates_equal_a_hand_computation():
     np.testing.assert_allclose(ab, [5.0, 1.0])
     est = lambda kind, **kw: np.asarray(paired.regret_estimate(kind, pm, pb, am, ab, OPTIMAL, **kw))  # noqa: E731
     np.testing.assert_allclose(est("paired"), [5 - 2, 1 - 1])
-    np.testing.assert_allclose(est("flexible"), [5 - (3.5 + 2) / 2, 2 - (1 + 1) / 2])
+    np.testing.assert_allclose(est("flexible"), [5 - 2, 2 - 1])  # the antagonist is better, then the protagonist
     np.testing.assert_allclose(est("perfect"), [4 - 2, 0.5 - 1])  # negative: the protagonist beats the optimum given
     np.testing.assert_allclose(est("perfect", clip_negative=True), [2.0, 0.0])
     with pytest.raises(ValueError, match="regret estimator must be one of"):
         paired.regret_estimate("max", pm, pb, am, ab)
 
 
+def test_flexible_is_the_better_agents_best_minus_the_others_mean():
+    """DCD's flexible PAIRED (adversarial_runner.py, ``flexible_paired``): whichever agent has the
+    higher best return (the protagonist on a tie, the third level) is the antagonist of that
+    level: 3, 3 and 4 here. Not the population regret max(best) − mean of means (2.25, 4 and
+    3.5), nor the antagonist on a tie (3 at the third level)."""
+    pm, pb = jnp.asarray([2.0, 1.0, 1.0]), jnp.asarray([3.0, 6.0, 4.0])
+    am, ab = jnp.asarray([3.5, 3.0, 0.0]), jnp.asarray([5.0, 5.0, 4.0])
+    np.testing.assert_allclose(paired.regret_estimate("flexible", pm, pb, am, ab), [5 - 2, 6 - 3, 4 - 0])
+
+
 def test_flexible_reads_a_protagonist_with_no_ended_episode_by_its_partial_return():
     """The train step gives the protagonist's best as MaxMC's record: −inf where no episode ended.
-    The flexible estimate then reads its partial return (the mean), as the antagonist's is read,
-    and stays max(best) − mean of means ≥ 0 (with −inf it took the antagonist's −3: regret −1)."""
+    The flexible estimate then reads its partial return (the mean), as the antagonist's is read:
+    the protagonist (−1) beats the antagonist's best (−3) and the regret is −1 − (−3) = 2 (with
+    −inf the antagonist would have been the better agent: −3 − (−1) = −2)."""
     pm, pb = jnp.asarray([-1.0]), jnp.asarray([-jnp.inf])
     am, ab = jnp.asarray([-3.0]), jnp.asarray([-3.0])
-    assert float(paired.regret_estimate("flexible", pm, pb, am, ab)[0]) == -1.0 - 0.5 * (-3.0 - 1.0)
+    assert float(paired.regret_estimate("flexible", pm, pb, am, ab)[0]) == 2.0
 
 
 def test_regret_by_tag_splits_the_estimate_and_the_antagonists_luck_by_level_tag():
@@ -171,6 +182,27 @@ def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist(generator
         assert int(after.antagonist.step) > int(before.antagonist.step)
 
 
+def test_one_generator_is_paired_with_a_reservoir():
+    """remidi.num_buffers=1 (as for remidi, where one buffer is PLR⊥): one generator, never
+    switched. Its train step traces (before, it read the later generators, which do not exist,
+    and failed with an AttributeError while compiling)."""
+    import dataclasses
+
+    import jax
+
+    from remidi.engine import train as tr
+    from remidi.engine.validation import validate_ued_config
+    from test_ued_engine import TASK, TINY
+
+    cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=1))
+    validate_ued_config(cfg, "remidi-paired", TASK)
+    setup = tr.make_setup(TASK, cfg, "remidi-paired")
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
+    assert runner.next_generators is None
+    after, _ = jax.eval_shape(lambda r: tr.train_step(setup, r), runner)
+    assert after.active.shape == () and after.generator.step.shape == ()
+
+
 def test_a_complete_overlap_trains_the_protagonist_nothing_and_pays_the_lowest_regret(generator_sequence):
     """Update 3, the second generator's first: a level whose every step a level of the first
     generator's reservoir explains (the lever game: a hidden level, whichever lever) gives the
@@ -287,13 +319,10 @@ def test_paired_pays_in_the_agents_reward_units_and_normalises_both_agents_with_
     assert abs(float(m1["paired/regret"])) > 0.1  # a regret of 0 would not tell the scales apart
 
 
-def test_a_generators_support_is_a_reservoir_of_the_levels_it_generated():
-    """GeneratorSequence keeps a reservoir of its generator's levels: every generated level draws
-    an i.i.d. uniform key and the active buffer keeps the remidi.buffer_capacity levels of highest
-    key seen so far (a uniform sample of all generated). Ten updates of 8 distinct lever levels
-    into a reservoir of 8: it holds exactly the 8 of the 80 with the highest keys. (With
-    buffer.duplicate_check, on here as in every preset, a level generated again would update its
-    entry's key instead of taking a second slot.)"""
+def _reservoir(batches):
+    """GeneratorSequence's reservoir after ``_keep`` of ``batches`` (each 8 lever level ids: id
+    = correct + 64·hidden, so ids 0..127 are the 128 levels), update u drawing its keys from
+    PRNGKey(100 + u) as the step would hand it: (held ids, held scores, the keys drawn)."""
     import jax
 
     from remidi.engine import buffer as buf
@@ -303,27 +332,53 @@ def test_a_generators_support_is_a_reservoir_of_the_levels_it_generated():
     from test_ued_engine import TASK, TINY
 
     setup = tr.make_setup(TASK, TINY, "remidi-paired")
-    runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    seq = setup.algo.adversary
     assert setup.cfg.remidi.buffer_capacity == 8 == setup.cfg.num_envs
+    assert setup.cfg.buffer.duplicate_check  # as in every preset
+    seq = setup.algo.adversary
 
-    def keep(runner, levels, rng):
-        proposal = Proposal(replay=jnp.asarray(False), levels=levels, buffer=None, slots=None, train=jnp.asarray(True))
-        changed, inserted = seq._keep(setup, runner, proposal, rng)
-        return runner.replace(**changed), inserted
-
-    keep = jax.jit(keep)
-    ids, keys = [], []
-    for u in range(10):
-        level_ids = jnp.arange(8 * u, 8 * u + 8)  # (correct lever, visible) distinct across the 80
+    @jax.jit
+    def keep(runner, level_ids, rng):
         levels = LeverLevel(correct=(level_ids % 64).astype(jnp.int32), visible=level_ids < 64)
+        proposal = Proposal(replay=jnp.asarray(False), levels=levels, buffer=None, slots=None, train=jnp.asarray(True))
+        changed, _ = seq._keep(setup, runner, proposal, rng)
+        return runner.replace(**changed)
+
+    runner, keys = tr.init_runner(setup, jax.random.PRNGKey(0)), []
+    for u, ids in enumerate(batches):
         rng = jax.random.PRNGKey(100 + u)
-        runner, _ = keep(runner, levels, rng)
-        ids.append(np.asarray(level_ids))
+        runner = keep(runner, jnp.asarray(ids, jnp.int32), rng)
         keys.append(np.asarray(jax.random.uniform(rng, (8,))))  # the keys _keep draws from that rng
-    ids, keys = np.concatenate(ids), np.concatenate(keys)
     held = buf.select_buffer(runner.buffers, runner.active)
     assert np.asarray(held.valid).all()
     held_ids = np.asarray(held.levels.correct) + 64 * ~np.asarray(held.levels.visible)
-    assert sorted(held_ids.tolist()) == sorted(ids[np.argsort(keys)[-8:]].tolist())
-    np.testing.assert_allclose(np.sort(np.asarray(held.scores)), np.sort(keys)[-8:])
+    return held_ids, np.asarray(held.scores), np.concatenate(keys)
+
+
+def test_a_generators_support_is_a_reservoir_of_the_levels_it_generated():
+    """GeneratorSequence keeps a reservoir of its generator's levels: every generated level draws
+    an i.i.d. uniform key and the active buffer keeps the remidi.buffer_capacity levels of highest
+    key. A level generated again (buffer.duplicate_check, on in every preset) keeps the highest of
+    its keys in its one entry, so the reservoir holds the distinct levels whose best draw is
+    highest: a level generated m times is kept as if any of its m copies had been, a sample
+    weighted by how often the generator makes it.
+
+    Ten updates of 8 distinct levels (80 in all) into a reservoir of 8: exactly the 8 of highest
+    key. Then twenty updates over 12 levels, with repeats within an update and across updates:
+    the 8 whose highest key is highest. (Before, a repeat overwrote its entry's key with the
+    newest draw: a level made in every update had one uniform key like a level made once, and
+    a lever generator that made visible levels 3 % of the time still froze about a third of its
+    reservoir visible, each of them then masked for the protagonist.)"""
+    distinct = [np.arange(8 * u, 8 * u + 8) for u in range(10)]
+    held, scores, keys = _reservoir(distinct)
+    ids = np.concatenate(distinct)
+    assert sorted(held.tolist()) == sorted(ids[np.argsort(keys)[-8:]].tolist())
+    np.testing.assert_allclose(np.sort(scores), np.sort(keys)[-8:])
+
+    draw = np.random.default_rng(0)
+    repeated = [draw.choice(12, size=8, replace=True) for _ in range(20)]  # in-batch repeats too
+    held, scores, keys = _reservoir(repeated)
+    ids = np.concatenate(repeated)
+    best = {int(i): float(keys[ids == i].max()) for i in np.unique(ids)}
+    top = sorted(best, key=best.get)[-8:]
+    assert sorted(held.tolist()) == sorted(top)
+    np.testing.assert_allclose(np.sort(scores), np.sort([best[i] for i in top]))

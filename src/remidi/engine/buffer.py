@@ -352,15 +352,15 @@ def _lowest_weight_index(state: BufferState, config: BufferConfig) -> jax.Array:
     return jnp.argmax(jnp.where(candidates, ranks, 0)).astype(jnp.int32)
 
 
-@partial(jax.jit, static_argnames=("config",))
-def insert(state: BufferState, config: BufferConfig, level, score, extras=None):
+@partial(jax.jit, static_argnames=("config", "keep_higher"))
+def insert(state: BufferState, config: BufferConfig, level, score, extras=None, keep_higher: bool = False):
     """Try to insert one level; stamps a written entry with the current time (no clock tick).
 
     Rules, in order:
       * a score of ``-inf`` or NaN is never written (not even into an empty slot);
       * with ``duplicate_check``, a level equal (all leaves) to a valid entry updates that entry's
-        score, given extras (``max_*`` extras keep their maximum) and ``last_seen`` instead
-        (``inserted = False``, ``idx`` = that entry);
+        score (``keep_higher``: to the higher of the two), given extras (``max_*`` extras keep
+        their maximum) and ``last_seen`` instead (``inserted = False``, ``idx`` = that entry);
       * if there is an empty slot the level goes into the first one;
       * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked), only if its
         score is strictly higher than that entry's score.
@@ -408,6 +408,8 @@ def insert(state: BufferState, config: BufferConfig, level, score, extras=None):
             return jnp.where(updated, jnp.maximum(stored, given), given)
         return given
 
+    if keep_higher:
+        score = jnp.where(updated, jnp.maximum(state.scores[duplicate_idx], score), score)
     state = state.replace(
         levels=jax.tree.map(scatter, state.levels, level),
         scores=scatter(state.scores, score),
@@ -418,11 +420,11 @@ def insert(state: BufferState, config: BufferConfig, level, score, extras=None):
     return state, inserted, idx
 
 
-@partial(jax.jit, static_argnames=("config",))
-def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extras=None):
+@partial(jax.jit, static_argnames=("config", "keep_higher"))
+def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extras=None, keep_higher: bool = False):
     """Advance the clock by one, then :func:`insert` the ``n`` levels one after another.
 
-    Later insertions see earlier ones (``lax.scan``).
+    Later insertions see earlier ones (``lax.scan``); ``keep_higher``: as in :func:`insert`.
 
     Args:
         levels: level pytree with leaves of leading dim ``[n]``.
@@ -436,7 +438,7 @@ def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extra
 
     def step(carry, item):
         level, score, extra = item
-        carry, inserted, idx = insert(carry, config, level, score, extra)
+        carry, inserted, idx = insert(carry, config, level, score, extra, keep_higher)
         return carry, (inserted, idx)
 
     scores = jnp.asarray(scores, jnp.float32)

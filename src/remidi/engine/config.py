@@ -92,7 +92,7 @@ class PairedConfig:
 
     estimator: str = field(default="paired", metadata={
         "help": "PAIRED: the generator's regret estimate: paired (antagonist's best − protagonist's mean), "
-                "flexible (best of both − mean of both) or perfect (the task's optimum − protagonist's mean)"})
+                "flexible (the better agent's best − the other's mean) or perfect (the task's optimum − protagonist's mean)"})
     clip_negative: bool = field(default=False, metadata={
         "help": "PAIRED: pay the generator max(regret, 0) instead of the regret"})
     generator_network: str = field(default="mlp", metadata={

@@ -7,8 +7,9 @@ level-building MDP (:mod:`remidi.envs.builder`), a *protagonist* (the agent UED 
 level, the generator receives a regret estimate on its episode's last step, and nothing before:
 
 * ``paired``: the antagonist's best episodic return minus the protagonist's mean (the original);
-* ``flexible``: the best return of either agent minus the mean of both agents' means (Jiang et
-  al., 2021's "flexible PAIRED": neither agent is tied to a role);
+* ``flexible``: the better agent's best episodic return minus the other agent's mean, the
+  better being the one with the higher best return, the protagonist on a tie (Jiang et al.,
+  2021's "flexible PAIRED", as DCD computes it: neither agent is tied to a role);
 * ``perfect``: the task's exact optimal return minus the protagonist's mean (the paper's
   "antagonist that is optimal on each level and does not learn"; needs ``UEDTask.optimal_return``).
 
@@ -48,7 +49,8 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
     if estimator == "paired":
         regret = antagonist_best - protagonist_mean
     elif estimator == "flexible":
-        regret = jnp.maximum(antagonist_best, protagonist_best) - 0.5 * (antagonist_mean + protagonist_mean)
+        antagonist_better = antagonist_best > protagonist_best
+        regret = jnp.where(antagonist_better, antagonist_best - protagonist_mean, protagonist_best - antagonist_mean)
     elif estimator == "perfect":
         regret = optimal - protagonist_mean
     else:
@@ -219,9 +221,10 @@ class GeneratorSequence(LevelGenerator):
     buffer of ``runner.buffers`` (``remidi.buffer_capacity`` levels), filled by reservoir
     sampling (every generated level gets an i.i.d. uniform key and the reservoir keeps the levels
     with the highest keys: without ``buffer.duplicate_check`` a uniform sample of all it
-    generated; with it, on in every preset, a level generated again takes its newest key in its
-    entry instead of a second slot, so the reservoir holds distinct levels, a level generated
-    often weighted between once and as often as it was generated). The frozen generators'
+    generated; with it, on in every preset, a level generated again keeps the highest of its keys
+    in its one entry instead of taking a second slot, so the reservoir holds the distinct levels
+    whose best draw is highest: a level generated m times is kept as if any of its m copies had
+    been, a sample weighted by how often the generator makes it). The frozen generators'
     reservoirs are the tracker's frozen levels. A generated level whose rollout a frozen level
     explains at every step (a complete overlap) gives the protagonist no gradient (every step is
     masked) and pays the generator ``paired.overlap_regret`` (``lowest``: the lowest regret
@@ -269,7 +272,7 @@ class GeneratorSequence(LevelGenerator):
         active = buf.select_buffer(runner.buffers, runner.active)
         keys = jax.random.uniform(rng, (setup.cfg.num_envs,))
         new_buf, inserted, _ = buf.insert_batch(active, bcfg, proposal.levels, keys,
-                                                {"max_return": jnp.zeros((setup.cfg.num_envs,))})
+                                                {"max_return": jnp.zeros((setup.cfg.num_envs,))}, keep_higher=True)
         return {"buffers": buf.replace_buffer(runner.buffers, runner.active, new_buf)}, inserted
 
     def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
@@ -289,6 +292,8 @@ class GeneratorSequence(LevelGenerator):
         next and start a fresh generator (new parameters and optimiser state); with
         ``remidi.tracker=belief`` the train step freezes its model (:func:`~remidi.engine.adversary.belief_freezes`)."""
         out = super().advance(setup, runner, proposal, params)
+        if runner.next_generators is None:  # remidi.num_buffers=1: one generator, never switched
+            return out
         switch = switches(setup, runner, out["count"])
         fresh = jax.tree.map(lambda x: x[jnp.minimum(runner.active, x.shape[0] - 1)], runner.next_generators)
         old = runner.generator

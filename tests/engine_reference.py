@@ -30,6 +30,11 @@ zeros of skipped (all-masked) minibatches (``ppo.ppo_update``): ``plr`` and ``mi
 moved only in ``ppo/policy_loss`` (float32 rounding of the changed program, at most 4e-4);
 ``accel``'s training drifted by rounding as before (its policy head's parameters, its worst
 regrets by up to 4e-3).
+
+Written again (2026-11-26) for ``tmaze-accel`` and ``tmaze-remidi-accel``, with the suite's XLA
+flags, when the maze editor (``envs.maze.mutate_maze``) took minimax's and jaxued's no-op edit: each
+edit is a no-op, a wall flip or a goal move with equal odds (before, a flip or a goal move with
+1/2 each). Results meant to change; the lever cases (the lever's own editor) did not move.
 """
 
 import dataclasses

@@ -47,6 +47,23 @@ def test_a_maze_edit_changes_at_most_num_edits_cells_and_keeps_the_goal_placeabl
     assert np.any((edited.goal_pos != levels.goal_pos).any(axis=1) & ordinary)  # goals do move
 
 
+def test_a_maze_edit_is_a_no_op_a_wall_flip_or_a_goal_move_with_equal_odds():
+    """minimax's and jaxued's maze editor (``move_goal_flip_walls``): each edit draws one of
+    NO_OP, FLIP_WALL and MOVE_GOAL uniformly, so one edit leaves a third of the levels as they
+    were (and num_edits=5 makes 3.3 real edits on average). A flip or a goal move always changes
+    the level (never the agent's or the goal's own cell)."""
+    task = maze_task("maze")
+    keys = jax.random.split(jax.random.PRNGKey(0), 600)
+    levels = jax.jit(jax.vmap(task.sample_level))(keys)
+    edited = jax.jit(jax.vmap(lambda k, lv: mutate_maze(k, lv, 1)))(jax.random.split(jax.random.PRNGKey(1), 600),
+                                                                    levels)
+    walls = np.asarray((levels.wall_map != edited.wall_map).reshape(600, -1).any(axis=1))
+    goals = np.asarray((levels.goal_pos != edited.goal_pos).any(axis=1))
+    assert not np.any(walls & goals)  # one edit: one kind
+    shares = [np.mean(~walls & ~goals), np.mean(walls), np.mean(goals)]
+    np.testing.assert_allclose(shares, 1 / 3, atol=0.07)  # 600 draws: 3 standard deviations ≈ 0.058
+
+
 def test_an_edited_tmaze_stays_a_tmaze_that_plays_like_the_original(maze_edits):
     levels, edited = maze_edits
     tmaze = np.flatnonzero(levels.tmaze)

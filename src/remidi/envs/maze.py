@@ -196,15 +196,17 @@ def tmaze_level(rng, size: int = TRAIN_SIZE, view: int = VIEW) -> MazeLevel:
 
 
 def mutate_maze(rng, level: MazeLevel, num_edits: int, view: int = VIEW) -> MazeLevel:
-    """ACCEL's maze editor (minimax's and jaxued's edits): ``num_edits`` edits, each with
-    probability 1/2 flipping one wall cell (adding or removing a wall; never on the agent's or the
-    goal's cell) or moving the goal to a free cell other than the agent's. The agent never moves,
-    so at most ``num_edits`` wall cells change and the goal always stands on a free cell.
+    """ACCEL's maze editor (minimax's and jaxued's ``move_goal_flip_walls``): ``num_edits`` edits,
+    each drawing one of three kinds with equal odds: nothing (a no-op), flipping one wall cell
+    (adding or removing a wall; never on the agent's or the goal's cell) or moving the goal to a
+    free cell other than the agent's. The agent never moves, so at most ``num_edits`` wall cells
+    change and the goal always stands on a free cell.
 
     A T-maze stays a T-maze and a blind level stays blind (the flags are kept): an edit of a level
     whose regret is irreducible is again one. A T-maze's edits flip only cells the agent cannot
-    see from the junction and never move the goal, so an edited T-maze plays exactly like the
-    original (same observations, same one-move outcome): ReMiDi over ACCEL rejects it.
+    see from the junction and never move the goal (a goal move is a no-op there), so an edited
+    T-maze plays exactly like the original (same observations, same one-move outcome): ReMiDi
+    over ACCEL rejects it.
     """
     size = level.wall_map.shape[0]
     cells = jnp.arange(size * size)
@@ -223,8 +225,9 @@ def mutate_maze(rng, level: MazeLevel, num_edits: int, view: int = VIEW) -> Maze
         flipped = walls.at[flip].set(~walls[flip])
         free = ~walls & ~occupied
         goal = jax.random.choice(k_goal, cells, p=free / jnp.maximum(free.sum(), 1))
-        move_goal = jax.random.bernoulli(k_kind) & ~lv.tmaze & jnp.any(free)
-        do_flip = ~move_goal & jnp.any(flippable)
+        kind = jax.random.randint(k_kind, (), 0, 3)  # 0 nothing, 1 flip a wall, 2 move the goal
+        move_goal = (kind == 2) & ~lv.tmaze & jnp.any(free)
+        do_flip = (kind == 1) & jnp.any(flippable)
         new_goal = jnp.stack([goal % size, goal // size]).astype(jnp.uint32)
         return lv.replace(wall_map=jnp.where(do_flip, flipped, walls).reshape(size, size),
                           goal_pos=jnp.where(move_goal, new_goal, lv.goal_pos)), None

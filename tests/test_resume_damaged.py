@@ -59,6 +59,15 @@ def _flip(folder):
     path.write_bytes(bytes(data))
 
 
+def _older_history(folder):
+    """checkpoint.history.npz of an earlier checkpoint (the first block only) beside the last
+    checkpoint.npz: what copying a folder while its run trains can give (the history sorts first)."""
+    path = folder / "checkpoint.history.npz"
+    with np.load(path) as saved:
+        first = {key: saved[key] for key in saved.files if key.split("|")[0] in ("h0", "p0")}
+    np.savez(path, **first)
+
+
 DAMAGE = {
     "truncated config.json": (_truncate("config.json"), "config.json is not a readable run config"),
     "truncated checkpoint": (_truncate("checkpoint.npz"), "checkpoint.npz cannot be read"),
@@ -76,6 +85,11 @@ DAMAGE = {
     "algo edited": (_edit_config("algo", "plr"), "does not match the run's config.json"),
     "config.json not an object": (lambda f: (f / "config.json").write_text("[1, 2]"),
                                   "config.json is not a readable run config"),
+    # edits the state's shapes do not show: before, each resumed silently and the files misstated the run
+    "seeds relabelled": (_edit_config("seeds", [5, 6]), "does not match the run's config.json (seeds: [5, 6] there"),
+    "learning rate edited": (_edit_config("config.ppo.lr", 0.5), "(config.ppo.lr: 0.5 there"),
+    "num_updates below the checkpoint": (_edit_config("config.num_updates", 10), "(config.num_updates: 10 there"),
+    "history older than the checkpoint": (_older_history, "checkpoint.history.npz holds the metrics of 1 of the 4 blocks"),
 }
 
 
@@ -111,3 +125,6 @@ def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp
     assert main(["run", "--resume", str(folder), "--quiet"]) == 0
     assert not any(path.exists() for path in stale)
     assert (folder / ".notes.tmp").read_text() == "mine"
+    # the checkpoint was the last update: this resume trained nothing and adds no part (before: [40, 40])
+    parts = json.loads((folder / "summary.json").read_text())["parts"]
+    assert [part["updates"] for part in parts] == [[0, 40]]

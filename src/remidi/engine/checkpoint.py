@@ -111,15 +111,52 @@ def load_history(path: Path, meta: dict):
                           f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
     try:
         with np.load(path) as saved:
-            return _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
+            history, per_step = _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
     except _UNREADABLE as err:
         raise _unreadable(path, err) from None
+    for blocks in (history, per_step):  # every block the checkpoint counts, each with the same metrics
+        held = sum(1 for block in blocks if block)
+        if held < len(blocks) or any(block.keys() != blocks[0].keys() for block in blocks):
+            raise ConfigError(f"--resume: {path} holds the metrics of {held} of the {len(blocks)} blocks "
+                              f"{path.with_name(CHECKPOINT)} needs: an older copy (was the folder copied while the run trained, "
+                              f"or written by two processes?); restore the pair, or delete both to train the run "
+                              f"from the start")
+    return history, per_step
 
 
-def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None) -> None:
+def check_run(path: Path, meta: dict, run: dict | None) -> None:
+    """ConfigError (one line) when the run a checkpoint was written for (``meta["run"]``: its
+    algorithm, seeds and config, :func:`save_run`) differs from ``run``, the one config.json
+    describes now: an edited config.json would otherwise resume silently wherever the state's
+    shapes still match (relabelled seeds, a learning rate, ``num_updates``, dr for plr). Keys
+    only one side has are not compared (a version of remidi that added a config key reads an
+    older run with its default); checkpoints written before runs were recorded are not checked."""
+    if run is None or not isinstance(meta.get("run"), dict):
+        return
+    was, now = _flat(meta["run"]), _flat(json.loads(json.dumps(run)))
+    for key in was:
+        if key in now and was[key] != now[key]:
+            raise ConfigError(f"--resume: {path} does not match the run's config.json ({key}: {now[key]!r} there, "
+                              f"{was[key]!r} when the checkpoint was written): was config.json edited? Put it back, "
+                              f"or start a new run")
+
+
+def _flat(tree, prefix: str = "") -> dict:
+    """A nested dict as ``{"a.b": value}``."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run: dict | None = None) -> None:
     """Write a run's state at ``done`` updates: the metrics logged so far (``steps``, ``history``
     and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``
-    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.driver.drive`)."""
+    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.driver.drive`,
+    and ``run``, the algorithm, seeds and config it trains: :func:`check_run`)."""
     arrays = {}
     for i, h in enumerate(history):
         arrays.update({f"h{i}|{k}": v for k, v in h.items()})
@@ -130,6 +167,8 @@ def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None) -> 
     meta = {"done": done, "steps": steps, "num_blocks": len(per_step)}
     if parts is not None:
         meta["parts"] = parts
+    if run is not None:
+        meta["run"] = run
     save_checkpoint(ckpt, runner, meta)
 
 

@@ -27,6 +27,7 @@ runs on different hardware do. A sharded run is itself deterministic and resumes
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -46,8 +47,8 @@ from remidi.engine import train as tr
 from remidi.engine.config import UEDConfig
 from remidi.engine.seeds import SEED_BATCH
 from remidi.engine.validation import validate_ued_config
-from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, load_checkpoint, load_history, remove_stale_temporaries,
-                                      save_run)
+from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
+                                      remove_stale_temporaries, save_run)
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.files import code_version
@@ -285,16 +286,19 @@ def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | tr.Algorithm, seeds: 
     setup = tr.make_setup(task, cfg, algo)
     desc = f"{setup.algo.name} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + \
         (f" on {devices} devices" if devices > 1 else "")
+    run = {"algo": setup.algo.name, "seeds": [int(s) for s in seeds], "config": dataclasses.asdict(cfg)}
     return drive(ued_programs(setup, devices), seeds, num_updates=cfg.num_updates, eval_every=cfg.eval_every,
                  checkpoint_every=cfg.checkpoint_every, num_envs=cfg.num_envs, out=out, resume=resume,
-                 progress=progress, desc=desc, on_block=on_block)
+                 progress=progress, desc=desc, on_block=on_block, run=run)
 
 
 def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every: int, checkpoint_every: int,
           num_envs: int, out: Path | None = None, resume: bool = False, progress: bool = True, desc: str = "",
-          on_block: Callable[[int, dict], None] | None = None) -> TrainResult:
+          on_block: Callable[[int, dict], None] | None = None, run: dict | None = None) -> TrainResult:
     """Run ``programs`` for every seed in blocks of ``eval_every`` updates (see
-    :func:`train_seeds`; ``num_envs`` turns replay counts into replay fractions)."""
+    :func:`train_seeds`; ``num_envs`` turns replay counts into replay fractions). ``run``: the
+    algorithm, seeds and config trained, recorded in each checkpoint and checked on resume
+    (:func:`~remidi.engine.checkpoint.check_run`)."""
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
     mesh = programs.mesh
     sharding = None if mesh is None else NamedSharding(mesh, P(SEED_AXIS))
@@ -312,12 +316,13 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
     earlier: list[dict] = []  # the parts before this invocation's
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
+        check_run(ckpt, meta, run)
         if sharding is not None:
             runner = _put(runner, sharding)
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
         earlier = list(meta.get("parts") or [{"updates": [0, done], "code": None}])  # older checkpoints: unrecorded
-    part = new_part(done) if ckpt is not None else None
+    part, first = (new_part(done) if ckpt is not None else None), done
 
     if ckpt is not None and _in_any_process(preemption.requested()):  # SIGTERM came as the previous algorithm finished
         raise preemption.Preempted(None)
@@ -351,7 +356,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
                 host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
                 _check_finite(host_runner, done)  # a diverged network never replaces the last good checkpoint
                 if writer:  # process 0 writes
-                    save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part(done)])
+                    save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part(done)], run)
             if on_block is not None:
                 on_block(done, history[-1])
             if preempted:
@@ -363,7 +368,8 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
     names = history[0].keys()
     hist = {name: np.stack([h[name] for h in history], axis=1) for name in names}
     raw = {name: np.concatenate([p[name] for p in per_step], axis=1) for name in per_step[0]}
-    return TrainResult(np.asarray(steps), hist, raw, runner, earlier + [part(done)] if part is not None else [])
+    trained = [part(done)] if part is not None and done > first else []  # a resume of a trained-out checkpoint adds no part
+    return TrainResult(np.asarray(steps), hist, raw, runner, earlier + trained)
 
 
 def new_part(start: int):

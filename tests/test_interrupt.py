@@ -5,6 +5,7 @@ ends where an uninterrupted one does."""
 
 import json
 import signal
+from pathlib import Path
 import subprocess
 import sys
 import time
@@ -176,6 +177,37 @@ def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
     assert (out / "remidi" / "summary.json").exists()
+
+
+@pytest.mark.parametrize("algos", ["remidi", "plr,remidi"])
+def test_a_run_stopped_while_it_plots_is_plotted_when_resumed(tmp_path, capsys, monkeypatch, algos):
+    """Ctrl-C (or SIGTERM, which exits at once after training) while the plots are drawn: the
+    last algorithm's summary.json, which marks a run finished, is not written yet, so --resume
+    trains nothing more and draws the plots (a several-algorithm run's comparison plots too).
+    Before, summary.json came first: the folder kept no plot, and --resume called it finished."""
+    from remidi.cli import main
+    from remidi.experiments import plots
+
+    out = tmp_path / "run"
+    real, drawn, saved = plots._save, [], []  # (this file's plots are not rendered: no_png)
+
+    def stopped(fig, path):  # the first plot of one algorithm's run; a several-algorithm run's comparison
+        if not drawn and (algos == "remidi" or Path(path).parent == out):
+            drawn.append(path)
+            raise KeyboardInterrupt
+        saved.append(path)
+        real(fig, path)
+
+    monkeypatch.setattr(plots, "_save", stopped)
+    argv = ["run", "lever", "--algo", algos, "--seeds", "2", "--quiet", *LEVER_TINY, "--out", str(out)]
+    assert main(argv) == 130
+    last = out / "remidi" if "," in algos else out
+    assert drawn and not (last / "summary.json").exists() and (last / "checkpoint.npz").exists()
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (last / "summary.json").exists() and drawn[0] in saved
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0  # now finished
+    assert "the run is finished" in capsys.readouterr().out
 
 
 @pytest.mark.slow

@@ -443,18 +443,20 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
     for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
-    finished = finished_run(folder)
-    for sub, exp, algo, preset, seeds, config in runs:
+    unfinished = [run for run in runs if not (run[0] / "summary.json").exists()]
+
+    def compare(last: dict[str, RunResult]) -> None:  # with the last unfinished algorithm's result, before its summary
+        exp, config = runs[0][1], runs[0][5]
+        exp.plot(folder, {algo: last[algo] if algo in last else result_from_files(sub) for sub, _, algo, *_ in runs},
+                 config)
+
+    for sub, exp, algo, preset, seeds, config in runs:  # nothing trained (finished): the folder stays as it is
         if (sub / "summary.json").exists():
             summaries[algo] = outputs.read_json(sub / "summary.json")
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
-                                              progress=progress, devices=devices[sub], log=logs[sub]))
-    if finished:  # nothing trained: the folder stays as it is
-        return summaries
-    exp, config = runs[0][1], runs[0][5]
-    results = {algo: result_from_files(sub) for sub, _, algo, *_ in runs}
-    exp.plot(folder, results, config)
+                                              progress=progress, devices=devices[sub], log=logs[sub],
+                                              compare=compare if sub == unfinished[-1][0] else None))
     return summaries
 
 
@@ -493,9 +495,17 @@ def write_run_config(folder: Path, exp: Experiment, algo: str, preset: str, seed
     })
 
 
-def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress, devices=1, log=()):
+def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progress, devices=1, log=(),
+                     compare: Callable[[dict[str, RunResult]], None] | None = None):
+    """Train each of ``folders``' algorithms and write its outputs: metrics.csv, the plots, then
+    summary.json, which marks the run finished (:func:`finished_run`), so a run stopped while it
+    plots is resumed and plotted again. ``compare(results)`` draws a several-algorithm run's
+    comparison plots (default, for several ``folders``: at ``out``); it runs before the last
+    algorithm's summary.json is written, for the same reason."""
     results: dict[str, RunResult] = {}
     summaries: dict[str, dict] = {}
+    if compare is None and len(folders) > 1:
+        compare = lambda finished: exp.plot(out, finished, config)  # noqa: E731
     for algo, folder in folders.items():
         tracker = None
         if log:
@@ -519,13 +529,13 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}
         results[algo] = result
         outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(result.steps, result.history, seeds))
+        exp.plot(folder, {algo: result}, config)
+        if compare is not None and algo == list(folders)[-1]:
+            compare(results)
         summaries[algo] = outputs.write_summary(
             folder / "summary.json", experiment=exp.name, algo=algo, preset=preset, seeds=seeds,
             final=result.final_metrics(), **timing, **result.extra)
-        exp.plot(folder, {algo: result}, config)
         if tracker is not None:
             tracker.log_history(result.steps, result.history)  # what was not streamed (the tabular games)
             tracker.finish(summaries[algo], sorted(folder.glob("*.png")))
-    if len(folders) > 1:
-        exp.plot(out, results, config)
     return summaries

@@ -9,6 +9,7 @@ dashes, markers at different positions).
 from __future__ import annotations
 
 import math
+import os
 import textwrap
 import warnings
 from dataclasses import dataclass, field
@@ -228,7 +229,7 @@ def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.nd
 def _save(fig, path: Path) -> None:
     """Save atomically (temporary file, then rename) and close the figure."""
     fig.tight_layout()
-    tmp = Path(path).with_name(f".{Path(path).name}.tmp.png")
+    tmp = Path(path).with_name(f".{Path(path).name}.{os.getpid()}.tmp.png")  # two writers never share one
     try:
         fig.savefig(tmp, dpi=110)
         tmp.replace(path)

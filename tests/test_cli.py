@@ -193,6 +193,9 @@ def test_resume_errors_are_one_line(tmp_path, capsys):
     assert code == 2 and "holds no run" in err and err.count("\n") == 1
     code, _, err = run_cli(capsys, "run", "lever", "--resume", str(tmp_path))
     assert code == 2 and "--resume: takes only the run folder" in err
+    for flag in (["--preset", "paper"], ["--seed", "3"], ["--seed", "0"]):  # before, these were ignored
+        code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path), *flag)
+        assert code == 2 and "--resume: takes only the run folder" in err, flag
 
 
 @pytest.mark.parametrize("argv, needle", [

@@ -112,6 +112,20 @@ def test_resume_of_a_damaged_run_is_one_line_and_changes_nothing(runs, tmp_path,
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
+@pytest.mark.parametrize("text", ['{"experiment": "lever"', "[1, 2]"])
+def test_resume_of_a_finished_run_with_a_damaged_summary_is_one_line(runs, tmp_path, capsys, text):
+    """A finished run's summary.json is read back by --resume: damaged, one line that says how to
+    write it again (before: a JSONDecodeError traceback)."""
+    folder = tmp_path / "run"
+    shutil.copytree(runs / "remidi", folder)
+    (folder / "summary.json").write_text(text)
+    capsys.readouterr()
+    assert main(["run", "--resume", str(folder), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"remidi: error: --resume: {folder / 'summary.json'}") and err.count("\n") == 1, err
+    assert "delete it, and --resume writes the run's outputs again" in err
+
+
 def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp_path, capsys):
     """SIGKILL during an atomic checkpoint write leaves ``.checkpoint.npz.<random>.tmp``: the next
     resume deletes those (and only those) before it writes."""

@@ -96,6 +96,24 @@ def test_a_malformed_summary_is_one_line_exit_2(tmp_path, capsys, text, needle):
 
 
 @pytest.mark.parametrize("text, needle", [
+    ('{"algo": "dr"', "config.json cannot be read (JSONDecodeError"),
+    ("[1, 2]", "config.json is a JSON list, not an object"),
+    ('{"algo": "dr", "config": [1]}', "config.json: config is not an object"),
+])
+@pytest.mark.parametrize("several", [False, True])
+def test_a_malformed_config_is_one_line_exit_2(tmp_path, capsys, text, needle, several):
+    """A run's config.json names its row (and a several-algorithm run's order): damaged, it is one
+    line naming the file (before: a JSONDecodeError or AttributeError traceback)."""
+    run = tmp_path / "run"
+    folder = run / "dr" if several else run
+    write_run(folder, "lever", "dr", {"solve_rate/visible": [1.0, 1.0]})
+    (folder / "config.json").write_text(text)
+    assert main(["table", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err and str(folder / "config.json") in err, err
+
+
+@pytest.mark.parametrize("text, needle", [
     ("", "metrics.csv, line 1: the file is empty"),
     ("seed,step,metric,value\n0,10,solve_rate/mean,0.5\n0,20,solve_rate/mean,abc\n",
      "metrics.csv, line 3: expected seed,step,metric,value"),

@@ -238,7 +238,7 @@ def _cmd_run(args) -> int:
             raise RemidiError(f"{flag}: must name a folder, got {value!r}")
     if args.resume is not None:
         if (args.experiment is not None or args.algo or args.out is not None or args.sets or args.seeds is not None
-                or args.devices is not None or args.log):
+                or args.seed is not None or args.preset is not None or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
         from remidi.experiments.base import finished_run
@@ -264,9 +264,10 @@ def _cmd_run(args) -> int:
     num_seeds = args.seeds if args.seeds is not None else exp.preset_seeds[args.preset]
     if num_seeds < 1:
         raise RemidiError(f"--seeds: must be an integer ≥ 1, got {num_seeds}")
-    if args.seed < 0:
-        raise RemidiError(f"--seed: must be an integer ≥ 0, got {args.seed}")
-    seeds = list(range(args.seed, args.seed + num_seeds))
+    first = 0 if args.seed is None else args.seed
+    if first < 0:
+        raise RemidiError(f"--seed: must be an integer ≥ 0, got {first}")
+    seeds = list(range(first, first + num_seeds))
     out = Path(args.out) if args.out is not None else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)
     log = parse_log(args.log)  # a missing package: one line naming the extra, before anything is written
@@ -384,7 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
                                       "as module:function: default, the engine's UEDConfig)")
     run.add_argument("--seeds", type=int, help="number of seeds (default: the preset's)")
-    run.add_argument("--seed", type=int, default=0, help="first seed (default 0): seeds are SEED … SEED+N−1")
+    run.add_argument("--seed", type=int, help="first seed (default 0): seeds are SEED … SEED+N−1")
     run.add_argument("--out", help="output folder (default: runs/EXPERIMENT/TIMESTAMP); must not hold a run")
     run.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
                      help="override a configuration value (repeatable; keys: `remidi list`)")

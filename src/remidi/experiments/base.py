@@ -339,9 +339,16 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
     devices = _saved_devices(folder)
     _check_devices(exp, devices, len(seeds))
     if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
-        return {algo: outputs.read_json(folder / "summary.json")}
+        return {algo: _finished_summary(folder)}
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
+
+
+def _finished_summary(folder: Path) -> dict:
+    """A finished run's summary.json, checked: a damaged one is a one-line error (the run's
+    outputs are written again from its last checkpoint once it is deleted)."""
+    return outputs.read_json_object(folder / "summary.json", "--resume",
+                                    f"; delete it, and --resume writes the run's outputs again from checkpoint.npz")
 
 
 def _saved_log(folder: Path) -> list[str]:
@@ -452,7 +459,7 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
 
     for sub, exp, algo, preset, seeds, config in runs:  # nothing trained (finished): the folder stays as it is
         if (sub / "summary.json").exists():
-            summaries[algo] = outputs.read_json(sub / "summary.json")
+            summaries[algo] = _finished_summary(sub)
         else:
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
                                               progress=progress, devices=devices[sub], log=logs[sub],

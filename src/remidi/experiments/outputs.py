@@ -85,6 +85,20 @@ def read_json(path: Path) -> Any:
         return json.load(fh)
 
 
+def read_json_object(path: Path, flag: str, advice: str = "") -> dict:
+    """A run file's JSON object; ConfigError (one line: ``flag``, the file, what is wrong, then
+    ``advice``) when it cannot be read or is not an object (a damaged or hand-edited file)."""
+    try:
+        doc = read_json(path)
+    except (OSError, ValueError) as err:  # ValueError: JSONDecodeError, UnicodeDecodeError
+        detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        raise ConfigError(f"{flag}: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''})"
+                          f"{advice}") from None
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{flag}: {path} is a JSON {type(doc).__name__}, not an object{advice}")
+    return doc
+
+
 def metric_rows(steps: np.ndarray, history: Mapping[str, np.ndarray], seeds: Iterable[int]) -> Iterable[tuple]:
     """Long-format rows ``(seed, step, metric, value)`` from ``history[name]`` f[S, T]."""
     seeds = list(seeds)

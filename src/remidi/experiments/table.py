@@ -65,7 +65,7 @@ def summaries(folders: list[Path]) -> list[dict]:
             raise ConfigError(f"RUN: no summary.json in {folder} (give finished run folders, or folders of them)")
         docs = [{**_read_summary(p), "folder": str(p.parent)} for p in subs]
         config = subs[0].parent / "config.json"  # each algorithm's config.json records the run's order
-        order = outputs.read_json(config).get("algos", []) if config.is_file() else []
+        order = outputs.read_json_object(config, "RUN").get("algos", []) if config.is_file() else []
         docs.sort(key=lambda d: (order.index(d["algo"]) if d["algo"] in order else len(order), d["algo"]))
         found.extend(docs)
     return found
@@ -161,7 +161,9 @@ def _name(doc: dict) -> str:
     config = Path(doc["folder"]) / "config.json"
     if not config.is_file():
         return doc["algo"]
-    run = outputs.read_json(config)
+    run = outputs.read_json_object(config, "RUN")
+    if not isinstance(run.get("config", {}), dict):
+        raise ConfigError(f"RUN: {config}: config is not an object")
     return label(doc["algo"], run.get("config", {}), run.get("command"))
 
 

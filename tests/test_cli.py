@@ -464,6 +464,17 @@ def test_a_full_disk_is_one_line_and_loses_nothing(tmp_path, capsys, monkeypatch
         outputs.atomic_write(path, full)
     assert err.value.filename == str(path) and path.read_text() == "before"
     assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]
+    # the temporary itself cannot be made (a read-only folder, a full quota): the file meant is named too
+    import tempfile
+
+    def refused(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / ".summary.json.x.tmp"))
+
+    with monkeypatch.context() as patch:
+        patch.setattr(tempfile, "mkstemp", refused)
+        with pytest.raises(OSError) as err:
+            outputs.atomic_write(path, full)
+    assert err.value.filename == str(path) and path.read_text() == "before"
     real = outputs.atomic_write
 
     def full_at_summary(target, write, binary=False):

@@ -126,6 +126,27 @@ def test_resume_of_a_finished_run_with_a_damaged_summary_is_one_line(runs, tmp_p
     assert "delete it, and --resume writes the run's outputs again" in err
 
 
+def test_resume_of_a_folder_it_cannot_write_is_one_line_before_training(runs, tmp_path, capsys, monkeypatch):
+    """A read-only run folder (tests run as root, so its check is made to fail): refused at once,
+    before compiling (before: a block trained, then the checkpoint write failed); a finished run
+    there is still read."""
+    import os
+
+    folder = tmp_path / "run"
+    shutil.copytree(runs / "remidi", folder)
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: False if os.fspath(path) == os.fspath(folder) else real(path, mode))
+    capsys.readouterr()
+    assert main(["run", "--resume", str(folder), "--quiet"]) == 0  # finished: nothing to write
+    (folder / "summary.json").unlink()
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert main(["run", "--resume", str(folder), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"remidi: error: --resume: {folder} is not writable: the resumed run could not write its " \
+                  f"checkpoints and results; resume a writable copy of it\n"
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
 def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp_path, capsys):
     """SIGKILL during an atomic checkpoint write leaves ``.checkpoint.npz.<random>.tmp``: the next
     resume deletes those (and only those) before it writes."""

@@ -8,10 +8,15 @@ import tempfile
 from pathlib import Path
 
 
-def _umask() -> int:
+def _read_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+# read once, at import: setting the umask to read it opens a moment in which another thread (a
+# progress bar's monitor, a tracking backend) would create world-writable files
+_UMASK = _read_umask()
 
 
 def atomic_write(path: Path, write, binary: bool = False) -> None:
@@ -19,17 +24,17 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
 
     A write that is interrupted leaves ``path`` as it was (and no temporary file behind).
     """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
+    path, tmp = Path(path), None
+    try:  # an error creating the temporary too names the file meant (a read-only folder, a full quota)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", newline="")) as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results are ordinary files
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are ordinary files
         os.replace(tmp, path)
     except BaseException as err:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
             raise OSError(err.errno, err.strerror or str(err), str(path)) from None

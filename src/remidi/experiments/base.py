@@ -22,6 +22,7 @@ shards the seeds over N devices for the experiments that support it (``Experimen
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import sys
@@ -340,8 +341,17 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
     _check_devices(exp, devices, len(seeds))
     if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
         return {algo: _finished_summary(folder)}
+    _check_writable(folder)
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
+
+
+def _check_writable(folder: Path) -> None:
+    """ConfigError (one line) for a run folder to resume that cannot be written: before, the run
+    compiled and trained a block before its first checkpoint failed."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError(f"--resume: {folder} is not writable: the resumed run could not write its checkpoints "
+                          f"and results; resume a writable copy of it")
 
 
 def _finished_summary(folder: Path) -> dict:
@@ -451,6 +461,8 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
     unfinished = [run for run in runs if not (run[0] / "summary.json").exists()]
+    for sub in [folder, *(run[0] for run in unfinished)] if unfinished else []:
+        _check_writable(sub)
 
     def compare(last: dict[str, RunResult]) -> None:  # with the last unfinished algorithm's result, before its summary
         exp, config = runs[0][1], runs[0][5]

@@ -86,7 +86,8 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
     doc = json.loads((run / "evaluate.json").read_text())
     assert doc["args"]["cvar_levels"] == 40 and set(doc["algorithms"]) == {"plr", "remidi"}
     for algo, entry in doc["algorithms"].items():
-        assert entry["seeds"] == [0, 1] and entry["update"] == 40 and entry["cvar_levels_used"] == 40
+        assert entry["seeds"] == [0, 1] and entry["update"] == entry["num_updates"] == 40
+        assert entry["cvar_levels_used"] == 40
         m = entry["metrics"]
         for name in ("solve_rate/visible", "solve_rate/hidden", "solve_rate/mean", "return/visible",
                      "cvar/solve_rate/1%", "cvar/solve_rate/10%", "cvar/solve_rate/100%", "cvar/return/1%"):
@@ -153,6 +154,10 @@ def test_evaluate_png_is_titled_with_the_experiment_and_the_run(tmp_path, monkey
            "algorithms": {"plr": entry, "remidi": entry}}
     evaluate._plot(tmp_path / "evaluate.png", doc)
     assert titles == ["lever: solve rate of lever/20261124-2338's final checkpoint, update 300"]
+    # a run evaluated before it finished says so (before: "final checkpoint" for update 300 of 600)
+    unfinished = {**entry, "num_updates": 600}
+    evaluate._plot(tmp_path / "evaluate.png", {**doc, "algorithms": {"plr": unfinished, "remidi": unfinished}})
+    assert titles[1] == "lever: solve rate of lever/20261124-2338's last checkpoint (unfinished), update 300"
 
 
 def test_generator_metrics_by_tag_are_the_scoring_rollouts_means_over_that_kind():

@@ -149,6 +149,19 @@ def test_default_columns_are_the_claims_metrics_the_headline_and_the_level_share
                      "seeds", "preset", "wall time"], head
 
 
+def test_an_unfinished_algorithm_of_a_several_algorithm_run_is_noted(tmp_path, capsys):
+    """Its sub-folder holds config.json but no summary.json: the table shows the finished ones and
+    a note names the one left out (before: silently one row fewer)."""
+    write_run(tmp_path / "remidi", "lever", "remidi", {"solve_rate/visible": [1.0, 1.0]}, algos=["plr", "remidi"])
+    (tmp_path / "plr").mkdir()
+    (tmp_path / "plr" / "config.json").write_text(json.dumps({"algo": "plr", "algos": ["plr", "remidi"]}))
+    assert main(["table", str(tmp_path)]) == 0
+    captured = capsys.readouterr()
+    assert "| remidi |" in captured.out and "| plr |" not in captured.out
+    assert captured.err == (f"remidi: note: {tmp_path / 'plr'} is left out: unfinished (no summary.json; "
+                            f"remidi run --resume {tmp_path} finishes it)\n")
+
+
 def test_two_runs_of_one_algorithm_in_different_forms_get_two_names(tmp_path, capsys):
     """ReMiDi's masked and combine runs (and a run without config.json) are told apart by what
     their config changes, as the results page names them."""

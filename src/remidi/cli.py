@@ -312,7 +312,17 @@ def _cmd_table(args) -> int:
 
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
     print(markdown_table(summaries(args.runs), metrics, args.last))
+    _note_unfinished(args.runs)
     return 0
+
+
+def _note_unfinished(runs) -> None:
+    """A note per algorithm of a several-algorithm run left out for want of a summary.json."""
+    from remidi.experiments.table import unfinished
+
+    for folder in unfinished(runs):
+        print(f"remidi: note: {folder} is left out: unfinished (no summary.json; remidi run --resume "
+              f"{folder.parent} finishes it)", file=sys.stderr)
 
 
 def _cmd_compare(args) -> int:
@@ -324,6 +334,7 @@ def _cmd_compare(args) -> int:
     result = compare_runs(summaries(args.runs), args.metric, args.algo, args.baseline, paired=args.paired,
                           last=args.last)
     print(format_comparison(result))
+    _note_unfinished(args.runs)
     if args.out is not None:
         plot_comparison(result, Path(args.out))
         print(f"\nwrote {args.out}")

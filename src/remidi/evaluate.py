@@ -306,12 +306,14 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
         perfect = {size: (env, batch) for size, (env, batch, _) in mazes.items()} if is_maze else {}
         optimal = {size: opt for size, (_, _, opt) in mazes.items()} if is_maze else {}
         if log is not None:
+            total = run.setup.cfg.num_updates
             log(f"evaluating {run.folder} ({run.algo}, {len(run.seeds)} seed{'s' if len(run.seeds) != 1 else ''}, "
-                f"checkpoint of update {run.update})")
+                f"checkpoint of update {run.update} of {total}{'' if run.update >= total else ': unfinished'})")
         keys = jax.vmap(jax.random.PRNGKey)(np.asarray(run.seeds, np.uint32) + np.uint32(seed))
         raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
         metrics = _summarise(raw, run.setup, optimal, tags)
         doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
+                                       "num_updates": run.setup.cfg.num_updates,
                                        # fewer than --cvar-levels where the generator rarely makes a solvable one
                                        "cvar_levels_used": int(jax.tree.leaves(levels)[0].shape[0]),
                                        "metrics": outputs.summarize(metrics)}
@@ -345,7 +347,9 @@ def _plot(path: Path, doc: dict) -> None:
     name = str(run) if len(run.parts) <= 2 else str(Path(*run.parts[-2:]))  # e.g. tmaze/20261124-2338
     updates = sorted({entry["update"] for entry in algos.values()})
     at = f", update {updates[0]}" if len(updates) == 1 else ""
-    plot_bars(path, f"{doc.get('experiment') or 'run'}: {kind.replace('_', ' ')} of {name}'s final checkpoint{at}",
+    unfinished = any(entry["update"] < entry.get("num_updates", entry["update"]) for entry in algos.values())
+    which = "last checkpoint (unfinished)" if unfinished else "final checkpoint"
+    plot_bars(path, f"{doc.get('experiment') or 'run'}: {kind.replace('_', ' ')} of {name}'s {which}{at}",
               shown, series, kind, ylim=(0.0, 1.0) if kind == "solve_rate" else None)
 
 

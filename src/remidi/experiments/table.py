@@ -71,6 +71,17 @@ def summaries(folders: list[Path]) -> list[dict]:
     return found
 
 
+def unfinished(folders: list[Path]) -> list[Path]:
+    """The algorithms' sub-folders under ``folders`` (several-algorithm runs) that hold a run but
+    no summary.json yet: :func:`summaries` leaves them out, and the commands say so."""
+    found = []
+    for folder in map(Path, folders):
+        if folder.is_dir() and not (folder / "summary.json").is_file():
+            found += sorted(sub for sub in folder.iterdir() if (sub / "config.json").is_file()
+                            and not (sub / "summary.json").is_file())
+    return found
+
+
 def label(algo: str, config: dict, command: list | None = None) -> str:
     """How a table and the results page name an algorithm's runs: a learned generator's with its
     regret estimator (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief

@@ -234,6 +234,34 @@ def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, c
     assert (out / "plr" / "metrics.csv").read_text() == plr_before  # finished runs are left alone
 
 
+def test_resume_trains_an_algorithm_whose_config_was_never_written(tmp_path, capsys, monkeypatch):
+    """A several-algorithm run writes each algorithm's config.json, one after another, before it
+    trains; stopped in between (Ctrl-C), its --resume writes the missing one from a written one
+    and trains it (before: it trained the others only and then called the run finished)."""
+    from remidi.experiments import base
+
+    real, calls = base.write_run_config, []
+
+    def stopped(*args, **kwargs):
+        calls.append(args[0])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(base, "write_run_config", stopped)
+    out = tmp_path / "both"
+    code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY,
+                         "--out", str(out))
+    assert code == 130 and (out / "plr" / "config.json").exists() and not (out / "remidi" / "config.json").exists()
+    monkeypatch.setattr(base, "write_run_config", real)
+    code, _, err = run_cli(capsys, "run", "--resume", str(out), "--quiet")
+    assert code == 0, err
+    assert (out / "plr" / "summary.json").exists() and (out / "remidi" / "summary.json").exists()
+    saved = [json.loads((out / a / "config.json").read_text()) for a in ("plr", "remidi")]
+    same = ("experiment", "algos", "preset", "seeds", "devices", "log", "config", "command")
+    assert [saved[1][k] for k in same] == [saved[0][k] for k in same] and saved[1]["algo"] == "remidi"
+
+
 def test_undefined_metrics_print_as_na(capsys):
     from remidi.cli import _print_summaries
 

@@ -327,13 +327,47 @@ def finished_run(folder: Path) -> bool:
     if (folder / "config.json").exists():
         return (folder / "summary.json").exists()
     subs = [p for p in folder.iterdir() if (p / "config.json").exists()] if folder.is_dir() else []
-    return bool(subs) and all((p / "summary.json").exists() for p in subs)
+    return (bool(subs) and all((p / "summary.json").exists() for p in subs)
+            and not _missing_algorithms(folder, subs))
+
+
+def _missing_algorithms(folder: Path, subs: list[Path]) -> list[str]:
+    """The algorithms a several-algorithm run records (``algos`` in its config.json files) that
+    have no sub-folder with a config.json: a run stopped while it wrote them (one after another,
+    before training) never trained them. A damaged config.json records nothing here (resuming
+    it says what is wrong)."""
+    try:
+        algos = outputs.read_json(subs[0] / "config.json").get("algos") or []
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [a for a in algos if isinstance(a, str) and a and Path(a).name == a
+            and not (folder / a / "config.json").exists()]
+
+
+def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path]) -> list[Path]:
+    """Write the config.json of :func:`_missing_algorithms` from one that was written (every
+    algorithm of a several-algorithm run shares its experiment, preset, seeds, config, devices,
+    tracking and command), so that --resume trains them; returns their sub-folders."""
+    missing = _missing_algorithms(folder, subs)
+    if not missing:
+        return []
+    exp, _, preset, seeds, config = _saved_run(exp_lookup, subs[0])
+    saved = outputs.read_json(subs[0] / "config.json")
+    command = saved.get("command") if isinstance(saved.get("command"), list) else ["remidi"]
+    made = []
+    for algo in missing:
+        sub = outputs.prepare_out_dir(folder / algo)
+        write_run_config(sub, exp, algo, preset, seeds, config, command[1:], devices=_saved_devices(subs[0]),
+                         algos=saved["algos"], log=_saved_log(subs[0]))
+        made.append(sub)
+    return made
 
 
 def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
         if subs:
+            subs = sorted(subs + _write_missing_configs(exp_lookup, folder, subs))
             return _resume_several(exp_lookup, folder, subs, progress)
     folder = outputs.prepare_out_dir(folder, resume=True)
     exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)

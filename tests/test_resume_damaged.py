@@ -147,6 +147,31 @@ def test_resume_of_a_folder_it_cannot_write_is_one_line_before_training(runs, tm
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
+def test_a_run_folder_another_process_writes_is_refused(runs, tmp_path, capsys):
+    """While one process writes a run (its folder locked: flock on the folder, which conflicts
+    across open descriptions as across processes), a --resume of it or a new run into it is one
+    line, exit 2, and changes nothing; before, the second deleted the first's checkpoint
+    temporaries (the first then failed) and their checkpoints could interleave."""
+    from remidi.experiments.outputs import folder_lock
+
+    folder = tmp_path / "run"
+    shutil.copytree(runs / "remidi", folder)
+    (folder / "summary.json").unlink()
+    (folder / ".checkpoint.npz.inflight.tmp").write_bytes(b"the other process's write")
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    capsys.readouterr()
+    with folder_lock(folder, "--resume"), folder_lock(empty, "--out"):
+        assert main(["run", "--resume", str(folder), "--quiet"]) == 2
+        assert capsys.readouterr().err == (f"remidi: error: --resume: {folder} is in use by another remidi process "
+                                           f"(a run writing there); wait for it to end, or write elsewhere\n")
+        assert main(["run", "lever", "--algo", "remidi", "--seeds", "2", "--quiet", *LEVER_TINY,
+                     "--out", str(empty)]) == 2
+        assert f"--out: {empty} is in use by another remidi process" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before and not any(empty.iterdir())
+
+
 def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp_path, capsys):
     """SIGKILL during an atomic checkpoint write leaves ``.checkpoint.npz.<random>.tmp``: the next
     resume deletes those (and only those) before it writes."""

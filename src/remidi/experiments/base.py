@@ -184,12 +184,16 @@ def _write_and_train(exp, algos, preset, seeds, config, out: Path, notes, progre
         print(f"remidi: {note}", file=sys.stderr, flush=True)
     before = _existing_paths(out, list(folders.values()))
     try:
-        for algo, folder in folders.items():
-            outputs.prepare_out_dir(folder)
-            write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices, algos=list(folders),
-                             log=list(log))
-        return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
-                                devices=devices, log=list(log))
+        outputs.prepare_out_dir(out)
+        with outputs.folder_lock(out, "--out"):
+            for folder in dict.fromkeys([out, *folders.values()]):  # again: a run another process began here since
+                outputs.prepare_out_dir(folder, create=False)
+            for algo, folder in folders.items():
+                outputs.prepare_out_dir(folder)
+                write_run_config(folder, exp, algo, preset, seeds, config, argv, devices=devices,
+                                 algos=list(folders), log=list(log))
+            return _train_and_write(exp, folders, preset, seeds, config, out, resume=False, progress=progress,
+                                    devices=devices, log=list(log))
     except TooLarge as err:  # resuming would fail the same way: remove what this run wrote, keep finished algorithms
         finished = [algo for algo, folder in folders.items() if (folder / "summary.json").exists()]
         _remove_new_paths(out, [folders[algo] for algo in folders if algo not in finished], before)
@@ -317,7 +321,10 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # resume a scratch copy of it
             shutil.copytree(folder, Path(scratch) / "run")
             return _resume(exp_lookup, Path(scratch) / "run", progress=False)
-    return _resume(exp_lookup, folder, progress)
+    if not folder.is_dir():  # _resume says what is wrong
+        return _resume(exp_lookup, folder, progress)
+    with outputs.folder_lock(folder, "--resume"):  # one process writes a run at a time
+        return _resume(exp_lookup, folder, progress)
 
 
 def finished_run(folder: Path) -> bool:

@@ -21,6 +21,7 @@ import io
 import json
 import math
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -56,6 +57,34 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
         except OSError as err:
             raise ConfigError(f"--out: {out} cannot be made ({err.strerror or type(err).__name__})") from None
     return out
+
+
+@contextmanager
+def folder_lock(folder: Path, flag: str):
+    """Within: this process holds an exclusive lock on the run folder ``folder`` (``flock`` on the
+    folder itself: no file is added to it, and the lock ends with the process). A second remidi
+    process that would write the same run (two ``--resume`` of one folder: a scheduler's requeue
+    while the old job still drains, a resume by hand) gets ConfigError (one line) instead of
+    deleting the first's temporaries and interleaving checkpoints. Where the file system has no
+    such locks (some network file systems) nothing is locked."""
+    try:
+        import fcntl
+
+        fd = os.open(folder, os.O_RDONLY)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(f"{flag}: {folder} is in use by another remidi process (a run writing there); wait "
+                              f"for it to end, or write elsewhere") from None
+        except OSError:  # no locks on this file system
+            pass
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def _clean(obj: Any) -> Any:

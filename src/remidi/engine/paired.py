@@ -13,6 +13,10 @@ level, the generator receives a regret estimate on its episode's last step, and 
 * ``perfect``: the task's exact optimal return minus the protagonist's mean (the paper's
   "antagonist that is optimal on each level and does not learn"; needs ``UEDTask.optimal_return``).
 
+All three are in undiscounted episodic returns (``optimal_return``, not the discounted optimum
+that PLR's ``perfect_regret`` score uses under ``discounted_regret``), as the references pay
+PAIRED's generator.
+
 Negative regret (the protagonist beats the antagonist's best) is passed on as it is, unless
 ``clip_negative`` asks for 0: clipping hides from the generator which levels the antagonist has
 not learned yet. All functions are pure, shapes in their docstrings.

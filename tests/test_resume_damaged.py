@@ -178,7 +178,9 @@ def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp
     folder = tmp_path / "run"
     shutil.copytree(runs / "remidi", folder)
     (folder / "summary.json").unlink()  # unfinished (killed after its last checkpoint): a finished run is not resumed
-    stale = [folder / ".checkpoint.npz.k1ll3d.tmp", folder / ".checkpoint.history.npz.x9.tmp"]
+    stale = [folder / ".checkpoint.npz.k1ll3d.tmp", folder / ".checkpoint.history.npz.x9.tmp",
+             # and the outputs' (Ctrl-C exits at once, before a write renames or removes its temporary)
+             folder / ".metrics.csv.a1b2.tmp", folder / ".summary.json.q.tmp", folder / ".training.png.4242.tmp.png"]
     for path in stale:
         path.write_bytes(b"\0" * 4096)
     (folder / ".notes.tmp").write_text("mine")

@@ -383,6 +383,7 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
     if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
         return {algo: _finished_summary(folder)}
     _check_writable(folder)
+    outputs.remove_stale_temporaries(folder)
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
 
@@ -504,6 +505,7 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
     unfinished = [run for run in runs if not (run[0] / "summary.json").exists()]
     for sub in [folder, *(run[0] for run in unfinished)] if unfinished else []:
         _check_writable(sub)
+        outputs.remove_stale_temporaries(sub)
 
     def compare(last: dict[str, RunResult]) -> None:  # with the last unfinished algorithm's result, before its summary
         exp, config = runs[0][1], runs[0][5]

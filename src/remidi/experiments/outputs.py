@@ -59,6 +59,22 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
     return out
 
 
+OUTPUT_FILES = ("config.json", "metrics.csv", "summary.json", "evaluate.json", "evaluate.csv")
+
+
+def remove_stale_temporaries(folder: Path) -> list[Path]:
+    """Delete the temporaries that an interrupted write of a run's outputs left in ``folder``
+    (``.<name>.<random>.tmp`` of :data:`OUTPUT_FILES`, ``.<plot>.png[.<pid>].tmp.png``): Ctrl-C
+    exits at once, before an atomic write renames or removes its temporary. Called by --resume
+    with the folder locked (:func:`folder_lock`), so no other process's write is under way."""
+    found = [p for name in OUTPUT_FILES for p in folder.glob(f".{name}.*.tmp")]
+    found += folder.glob(".*.png.tmp.png")
+    found += [p for p in folder.glob(".*.png.*.tmp.png") if p.name.split(".")[-3].isdigit()]
+    for path in found:
+        path.unlink(missing_ok=True)
+    return found
+
+
 @contextmanager
 def folder_lock(folder: Path, flag: str):
     """Within: this process holds an exclusive lock on the run folder ``folder`` (``flock`` on the

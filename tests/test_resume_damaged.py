@@ -172,6 +172,53 @@ def test_a_run_folder_another_process_writes_is_refused(runs, tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before and not any(empty.iterdir())
 
 
+def test_one_algorithm_of_a_several_algorithm_run_is_locked_with_the_whole_run(runs, tmp_path, capsys):
+    """A resume of OUT/remidi while another process writes OUT (a run or resume of the whole
+    several-algorithm run, which locks OUT) is refused too."""
+    from remidi.experiments.outputs import folder_lock
+
+    whole = tmp_path / "both"
+    for algo in ("plr", "remidi"):
+        shutil.copytree(runs / algo, whole / algo)
+        _edit_config("algos", ["plr", "remidi"])(whole / algo)
+    (whole / "remidi" / "summary.json").unlink()
+    capsys.readouterr()
+    with folder_lock(whole, "--resume"):
+        assert main(["run", "--resume", str(whole / "remidi"), "--quiet"]) == 2
+    assert f"--resume: {whole} is in use by another remidi process" in capsys.readouterr().err
+
+
+def test_history_blocks_may_log_more_metrics_than_the_first(tmp_path):
+    """Blocks trained by a version of remidi that added a metric log more than the earlier ones:
+    read as they are; a block without one of block 0's metrics is a damaged file."""
+    from remidi.engine.checkpoint import load_history
+    from remidi.errors import ConfigError
+
+    path = tmp_path / "checkpoint.history.npz"
+    meta = {"done": 20, "steps": [10, 20], "num_blocks": 2}
+    np.savez(path, **{"h0|a": np.zeros(2), "h1|a": np.ones(2), "h1|b": np.ones(2), "p0|r": np.zeros(2),
+                      "p1|r": np.zeros(2)})
+    history, _ = load_history(path, meta)
+    assert [sorted(h) for h in history] == [["a"], ["a", "b"]]
+    np.savez(path, **{"h0|a": np.zeros(2), "h0|b": np.zeros(2), "h1|a": np.ones(2), "p0|r": np.zeros(2),
+                      "p1|r": np.zeros(2)})
+    with pytest.raises(ConfigError, match="is damaged: block 1 lacks b"):
+        load_history(path, meta)
+
+
+def test_a_checkpoint_records_a_config_given_with_numpy_values(tmp_path):
+    """Through the Python API a config may hold NumPy scalars: the checkpoint's record of the run
+    takes them (before, json.dumps raised a TypeError at the first checkpoint)."""
+    from remidi.engine.checkpoint import check_run, load_checkpoint, save_run
+
+    run = {"algo": "plr", "seeds": [0], "config": {"ppo": {"lr": np.float32(3e-4)}, "shape": np.arange(2)}}
+    save_run(tmp_path / "checkpoint.npz", {"w": np.zeros(2)}, 10, [10], [{"m": np.zeros(1)}], [{"r": np.zeros(1)}],
+             run=run)
+    _, meta = load_checkpoint(tmp_path / "checkpoint.npz", {"w": np.zeros(2)})
+    assert meta["run"]["config"]["shape"] == [0, 1]
+    check_run(tmp_path / "checkpoint.npz", meta, run)  # the same run: no error
+
+
 def test_resume_removes_the_temporaries_a_killed_checkpoint_write_left(runs, tmp_path, capsys):
     """SIGKILL during an atomic checkpoint write leaves ``.checkpoint.npz.<random>.tmp``: the next
     resume deletes those (and only those) before it writes."""

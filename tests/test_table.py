@@ -162,6 +162,26 @@ def test_an_unfinished_algorithm_of_a_several_algorithm_run_is_noted(tmp_path, c
                             f"remidi run --resume {tmp_path} finishes it)\n")
 
 
+def test_a_folder_of_separate_runs_is_no_several_algorithm_run(tmp_path, capsys):
+    """runs/lever/<time>/ of single-algorithm runs: the note names the unfinished run itself, the
+    folder is finished when every run in it is, and --resume of the folder is refused (it would
+    have written a config.json for each recorded algorithm named after it and trained new runs)."""
+    from remidi.experiments.base import finished_run
+
+    write_run(tmp_path / "t1", "lever", "plr", {"solve_rate/visible": [1.0, 1.0]})
+    write_run(tmp_path / "t2", "lever", "remidi", {"solve_rate/visible": [1.0, 1.0]})
+    assert finished_run(tmp_path)
+    (tmp_path / "t3").mkdir()
+    (tmp_path / "t3" / "config.json").write_text(json.dumps({"algo": "plr", "algos": ["plr"]}))
+    assert not finished_run(tmp_path)
+    assert main(["table", str(tmp_path)]) == 0
+    assert capsys.readouterr().err == (f"remidi: note: {tmp_path / 't3'} is left out: unfinished (no summary.json; "
+                                       f"remidi run --resume {tmp_path / 't3'} finishes it)\n")
+    assert main(["run", "--resume", str(tmp_path)]) == 2
+    assert f"--resume: {tmp_path} holds separate runs, not one several-algorithm run" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t1", "t2", "t3"]
+
+
 def test_two_runs_of_one_algorithm_in_different_forms_get_two_names(tmp_path, capsys):
     """ReMiDi's masked and combine runs (and a run without config.json) are told apart by what
     their config changes, as the results page names them."""

@@ -320,9 +320,9 @@ def _note_unfinished(runs) -> None:
     """A note per algorithm of a several-algorithm run left out for want of a summary.json."""
     from remidi.experiments.table import unfinished
 
-    for folder in unfinished(runs):
+    for folder, resume in unfinished(runs):
         print(f"remidi: note: {folder} is left out: unfinished (no summary.json; remidi run --resume "
-              f"{folder.parent} finishes it)", file=sys.stderr)
+              f"{resume} finishes it)", file=sys.stderr)
 
 
 def _cmd_compare(args) -> int:

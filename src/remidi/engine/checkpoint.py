@@ -33,7 +33,14 @@ def _named_leaves(tree) -> dict[str, object]:
 def save_checkpoint(path: Path, runner, meta: dict) -> None:
     """Write the runner's arrays (by tree path) and ``meta`` (JSON) to ``path`` atomically."""
     leaves = {name: np.asarray(x) for name, x in _named_leaves(jax.device_get(runner)).items()}
-    atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(json.dumps(meta)), **leaves), binary=True)
+    text = json.dumps(meta, default=_plain)
+    atomic_write(path, lambda fh: np.savez(fh, meta=np.asarray(text), **leaves), binary=True)
+
+
+def _plain(value):
+    """JSON for what ``json`` does not know in a meta: NumPy and JAX scalars and arrays (a config
+    given through the Python API with ``np.float32`` values), anything else by its text."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
 # what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
@@ -114,12 +121,17 @@ def load_history(path: Path, meta: dict):
             history, per_step = _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
     except _UNREADABLE as err:
         raise _unreadable(path, err) from None
-    for blocks in (history, per_step):  # every block the checkpoint counts, each with the same metrics
+    for blocks in (history, per_step):  # every block the checkpoint counts
         held = sum(1 for block in blocks if block)
-        if held < len(blocks) or any(block.keys() != blocks[0].keys() for block in blocks):
+        if held < len(blocks):
             raise ConfigError(f"--resume: {path} holds the metrics of {held} of the {len(blocks)} blocks "
-                              f"{path.with_name(CHECKPOINT)} needs: an older copy (was the folder copied while the run trained, "
-                              f"or written by two processes?); restore the pair, or delete both to train the run "
+                              f"{path.with_name(CHECKPOINT)} needs: an older copy (was the folder copied while the "
+                              f"run trained, or written by two processes?); restore the pair, or delete both to "
+                              f"train the run from the start")
+        lacking = next(((i, k) for i, block in enumerate(blocks) for k in blocks[0] if k not in block), None)
+        if lacking is not None:  # (a later block may log more: a version of remidi that added a metric)
+            raise ConfigError(f"--resume: {path} is damaged: block {lacking[0]} lacks {lacking[1]}, which block 0 "
+                              f"logged; restore it, or delete it and {path.with_name(CHECKPOINT)} to train the run "
                               f"from the start")
     return history, per_step
 
@@ -133,7 +145,7 @@ def check_run(path: Path, meta: dict, run: dict | None) -> None:
     older run with its default); checkpoints written before runs were recorded are not checked."""
     if run is None or not isinstance(meta.get("run"), dict):
         return
-    was, now = _flat(meta["run"]), _flat(json.loads(json.dumps(run)))
+    was, now = _flat(meta["run"]), _flat(json.loads(json.dumps(run, default=_plain)))
     for key in was:
         if key in now and was[key] != now[key]:
             raise ConfigError(f"--resume: {path} does not match the run's config.json ({key}: {now[key]!r} there, "

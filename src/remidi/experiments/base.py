@@ -323,7 +323,9 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
             return _resume(exp_lookup, Path(scratch) / "run", progress=False)
     if not folder.is_dir():  # _resume says what is wrong
         return _resume(exp_lookup, folder, progress)
-    with outputs.folder_lock(folder, "--resume"):  # one process writes a run at a time
+    # one process writes a run at a time; one algorithm of a several-algorithm run locks the whole run
+    part_of = (folder / "config.json").exists() and outputs.several_algorithm_run(folder.parent)
+    with outputs.folder_lock(folder.parent if part_of else folder, "--resume"):
         return _resume(exp_lookup, folder, progress)
 
 
@@ -339,14 +341,13 @@ def finished_run(folder: Path) -> bool:
 
 
 def _missing_algorithms(folder: Path, subs: list[Path]) -> list[str]:
-    """The algorithms a several-algorithm run records (``algos`` in its config.json files) that
-    have no sub-folder with a config.json: a run stopped while it wrote them (one after another,
-    before training) never trained them. A damaged config.json records nothing here (resuming
-    it says what is wrong)."""
-    try:
-        algos = outputs.read_json(subs[0] / "config.json").get("algos") or []
-    except (OSError, ValueError, AttributeError):
+    """The algorithms a several-algorithm run (:func:`outputs.several_algorithm_run`) records
+    (``algos`` in its config.json files) that have no sub-folder with a config.json: a run stopped
+    while it wrote them (one after another, before training) never trained them. None for a
+    folder of separate runs, or where a config.json is damaged (resuming it says what is wrong)."""
+    if not outputs.several_algorithm_run(folder):
         return []
+    algos = outputs.read_json(subs[0] / "config.json").get("algos") or []
     return [a for a in algos if isinstance(a, str) and a and Path(a).name == a
             and not (folder / a / "config.json").exists()]
 
@@ -373,6 +374,9 @@ def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path]) -> list[P
 def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
+        if subs and not outputs.several_algorithm_run(folder):
+            raise ConfigError(f"--resume: {folder} holds separate runs, not one several-algorithm run; resume each "
+                              f"(e.g. remidi run --resume {subs[0]})")
         if subs:
             subs = sorted(subs + _write_missing_configs(exp_lookup, folder, subs))
             return _resume_several(exp_lookup, folder, subs, progress)
@@ -585,7 +589,8 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
                 tracker.close()
             message = too_large_message(err, config)
             if message is not None:  # a resumed run keeps its folder: it resumes on a larger device
-                raise TooLarge(message + (f"; {folder} keeps its last checkpoint" if resume else "")) from None
+                kept = resume and (folder / "checkpoint.npz").exists()
+                raise TooLarge(message + (f"; {folder} keeps its last checkpoint" if kept else "")) from None
             raise
         # wall time of the training (compilation included) in this invocation: a resumed run counts its last part
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}

@@ -59,20 +59,55 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
     return out
 
 
-OUTPUT_FILES = ("config.json", "metrics.csv", "summary.json", "evaluate.json", "evaluate.csv")
+OUTPUT_FILES = ("config.json", "metrics.csv", "summary.json")  # written by the run alone (not evaluate, render)
 
 
 def remove_stale_temporaries(folder: Path) -> list[Path]:
     """Delete the temporaries that an interrupted write of a run's outputs left in ``folder``
-    (``.<name>.<random>.tmp`` of :data:`OUTPUT_FILES`, ``.<plot>.png[.<pid>].tmp.png``): Ctrl-C
-    exits at once, before an atomic write renames or removes its temporary. Called by --resume
-    with the folder locked (:func:`folder_lock`), so no other process's write is under way."""
+    (``.<name>.<random>.tmp`` of :data:`OUTPUT_FILES`; a plot's ``.<plot>.png[.<pid>].tmp.png``
+    whose process is gone): Ctrl-C exits at once, before an atomic write renames or removes its
+    temporary. Called by --resume with the folder locked (:func:`folder_lock`); a ``remidi
+    evaluate`` or ``render`` writing there takes no lock, so its plots' temporaries are kept
+    while their process lives."""
     found = [p for name in OUTPUT_FILES for p in folder.glob(f".{name}.*.tmp")]
-    found += folder.glob(".*.png.tmp.png")
-    found += [p for p in folder.glob(".*.png.*.tmp.png") if p.name.split(".")[-3].isdigit()]
+    found += folder.glob(".*.png.tmp.png")  # before plots carried their process id
+    for path in folder.glob(".*.png.*.tmp.png"):
+        pid = path.name.split(".")[-3]
+        if pid.isdigit() and not _alive(int(pid)):
+            found.append(path)
     for path in found:
         path.unlink(missing_ok=True)
     return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process
+        return True
+    return True
+
+
+def several_algorithm_run(folder: Path) -> bool:
+    """Whether ``folder`` is one several-algorithm run (``remidi run --algo a,b --out folder``): its
+    sub-folders that hold a run are named after their algorithm, and their config.json lists more
+    than one algorithm, theirs among them. A folder of separate runs (``runs/lever/<time>/``, which
+    ``remidi table`` also reads) is not."""
+    if not Path(folder).is_dir():
+        return False
+    subs = [p for p in Path(folder).iterdir() if (p / "config.json").is_file()]
+    try:
+        saved = [read_json(p / "config.json") for p in subs]
+        algos = saved[0].get("algos") if saved else None
+        named = all(p.name == doc.get("algo") for p, doc in zip(subs, saved))
+    except (OSError, ValueError, AttributeError):
+        return False
+    if algos is None:  # runs written before config.json recorded the algorithms
+        return named and len(subs) > 1
+    return (isinstance(algos, list) and len(algos) > 1 and all(isinstance(a, str) for a in algos)
+            and named and all(p.name in algos for p in subs))
 
 
 @contextmanager
@@ -81,8 +116,9 @@ def folder_lock(folder: Path, flag: str):
     folder itself: no file is added to it, and the lock ends with the process). A second remidi
     process that would write the same run (two ``--resume`` of one folder: a scheduler's requeue
     while the old job still drains, a resume by hand) gets ConfigError (one line) instead of
-    deleting the first's temporaries and interleaving checkpoints. Where the file system has no
-    such locks (some network file systems) nothing is locked."""
+    deleting the first's temporaries and interleaving checkpoints. On NFS, where ``flock`` of a
+    folder is refused, a POSIX lock on a hidden ``.remidi.lock`` file in it does the same; where
+    the file system has no locks at all, nothing is locked."""
     try:
         import fcntl
 
@@ -90,14 +126,22 @@ def folder_lock(folder: Path, flag: str):
     except (ImportError, OSError):
         yield
         return
+    busy = ConfigError(f"{flag}: {folder} is in use by another remidi process (a run writing there); wait for it "
+                       f"to end, or write elsewhere")
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ConfigError(f"{flag}: {folder} is in use by another remidi process (a run writing there); wait "
-                              f"for it to end, or write elsewhere") from None
-        except OSError:  # no locks on this file system
-            pass
+            raise busy from None
+        except OSError:  # NFS: flock becomes a POSIX lock, which needs a file open for writing
+            os.close(fd)
+            fd = os.open(Path(folder) / ".remidi.lock", os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except (BlockingIOError, PermissionError):
+                raise busy from None
+            except OSError:  # no locks at all here
+                pass
         yield
     finally:
         os.close(fd)  # releases the lock

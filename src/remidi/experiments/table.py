@@ -71,14 +71,17 @@ def summaries(folders: list[Path]) -> list[dict]:
     return found
 
 
-def unfinished(folders: list[Path]) -> list[Path]:
-    """The algorithms' sub-folders under ``folders`` (several-algorithm runs) that hold a run but
-    no summary.json yet: :func:`summaries` leaves them out, and the commands say so."""
+def unfinished(folders: list[Path]) -> list[tuple[Path, Path]]:
+    """The runs in the sub-folders of ``folders`` (several-algorithm runs, or folders of runs)
+    that have no summary.json yet, each with the folder whose --resume finishes it (the
+    several-algorithm run's, or its own): :func:`summaries` leaves them out, and the commands say
+    so."""
     found = []
     for folder in map(Path, folders):
         if folder.is_dir() and not (folder / "summary.json").is_file():
-            found += sorted(sub for sub in folder.iterdir() if (sub / "config.json").is_file()
-                            and not (sub / "summary.json").is_file())
+            whole = outputs.several_algorithm_run(folder)
+            found += sorted((sub, folder if whole else sub) for sub in folder.iterdir()
+                            if (sub / "config.json").is_file() and not (sub / "summary.json").is_file())
     return found
 
 

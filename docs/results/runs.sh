@@ -88,8 +88,11 @@ for m in ant halfcheetah hopper walker2d; do
   for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
 done
 
-# issue #29: PAIRED and ReMiDi over PAIRED on the lever game, at the commit that stated their claims
-at 76e7226
+# issue #29: PAIRED and ReMiDi over PAIRED on the lever game. Their claims were stated at 76e7226
+# and first run there; both rerun at ab3ea79, where a generator's reservoir keeps a repeated
+# level's highest key (at 76e7226 a repeat took its newest key, and the untrained generator's
+# early levels crowded the frozen support: about a third of it visible levels, each then masked)
+at ab3ea79
 run paired-perfect-s0 lever paired 0 10 paper --set paired.estimator=perfect
 run remidi-paired-perfect-s0 lever remidi-paired 0 10 paper --set paired.estimator=perfect
 # PAIRED's own estimator, exploratory: at the commit that logs where its regret comes from (the
@@ -156,3 +159,13 @@ run remidi-belief-s0 tmaze remidi 0 5 cpu --set remidi.tracker=belief
 at 3e5a339
 run remidi-paired-perfect-s0 lever-noisy remidi-paired 0 10 paper --set paired.estimator=perfect
 run remidi-paired-perfect-belief-s0 lever-noisy remidi-paired 0 10 paper --set paired.estimator=perfect --set remidi.tracker=belief
+
+# ReMiDi over PAIRED on the T-maze again, at ab3ea79, where a generator's reservoir keeps a repeated
+# level's highest key (the runs above, at 569c639, froze supports in which a T-maze made in every
+# update had one uniform key, like a maze made once). When both land, their data replace
+# remidi-paired-perfect-s0 and -s5 on the page (PAIRED's runs stay at 569c639: the reservoir is ReMiDi over
+# PAIRED's alone)
+at ab3ea79
+for s in 0 5; do
+  run "remidi-paired-perfect-keephigh-s$s" tmaze remidi-paired $s 5 cpu --set paired.estimator=perfect
+done

@@ -63,6 +63,12 @@ class _IntDone:
         return obs, state, reward, done.astype(jnp.int32), info
 
 
+class _RandomStart:  # a start drawn from the reset's key, claimed deterministic by the example's task
+    def reset_env_to_level(self, rng, level, params):
+        obs, state = super().reset_env_to_level(rng, level, params)
+        return jax.tree.map(lambda x: jnp.where(jax.random.bernoulli(rng), x, x * 0), obs), state
+
+
 def broken(corridor, kind: str):
     task = corridor.make_task()
     env_class = type(task.env)
@@ -74,6 +80,8 @@ def broken(corridor, kind: str):
         return dataclasses.replace(task, env=type("Wide", (_WideReward, env_class), {})())
     if kind == "done":
         return dataclasses.replace(task, env=type("IntDone", (_IntDone, env_class), {})())
+    if kind == "deterministic_reset":
+        return dataclasses.replace(task, env=type("RandomStart", (_RandomStart, env_class), {})())
     if kind == "num_actions_space":  # more actions than the environment's Discrete(2)
         return dataclasses.replace(task, num_actions=5)
     if kind == "eval_sets":  # one level where a batch belongs
@@ -102,6 +110,8 @@ def broken(corridor, kind: str):
     ("reward", "task.env: a step's reward must be a float scalar (f32[]) per environment, got float32[2]"),
     ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
     ("num_actions_space", "task.num_actions: must be the environment's 2 actions (its action_space), got 5"),
+    ("deterministic_reset", "task.deterministic_reset: true promises that env.reset_to_level ignores its key, but "
+                            "what it returns depends on the key (traced)"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
     ("eval_sets_numbers", "task.eval_sets: 'one' must be a batch of levels"),
     ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),

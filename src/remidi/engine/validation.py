@@ -93,6 +93,21 @@ def _task_size(field: str, value) -> None:
         raise ConfigError(f"{field}: must be an integer ≥ 1, got {value!r}")
 
 
+def _reset_reads_its_key(task: UEDTask, rng, level) -> bool:
+    """Whether the outputs of ``task.env.reset_to_level`` depend on its key, read from its traced
+    program (JAX's dead-code elimination keeps the inputs an output uses; nothing is compiled). A
+    task that claims ``deterministic_reset`` falsely would be replayed from one start per level
+    and judged wrongly by ReMiDi's trackers. False where this JAX lacks the (internal) pass."""
+    try:
+        from jax.interpreters import partial_eval as pe
+
+        closed = jax.make_jaxpr(lambda k, lv: task.env.reset_to_level(k, lv, task.params))(rng, level)
+        _, used = pe.dce_jaxpr(closed.jaxpr, [True] * len(closed.jaxpr.outvars))
+    except Exception:  # noqa: BLE001 (a JAX without this pass, or a reset that traces only abstractly elsewhere)
+        return False
+    return bool(used[0])  # the key is the program's first input
+
+
 def validate_task(task: UEDTask) -> None:
     """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
     train: field types and ranges (``num_actions`` ≥ 1, ``max_episode_steps`` ≥ 1, the functions
@@ -150,6 +165,10 @@ def validate_task(task: UEDTask) -> None:
                           f"its levels)") from None
     if not jax.tree.leaves(obs):
         raise ConfigError("task.env: reset_to_level returned an observation without arrays")
+    if task.deterministic_reset and _reset_reads_its_key(task, rng, level):
+        raise ConfigError("task.deterministic_reset: true promises that env.reset_to_level ignores its key, but what "
+                          "it returns depends on the key (traced); set it false (the reference tracker then "
+                          "replays every start), or put the start's randomness into the level")
     action = (jax.ShapeDtypeStruct((task.num_actions,), jnp.float32) if task.continuous
               else jax.ShapeDtypeStruct((), jnp.int32))
     stepped = _traced("env", "a step of the environment", lambda k, s, a: task.env.step(k, s, a, task.params),

@@ -95,6 +95,7 @@ jax.config.update("jax_cpu_collectives_implementation", "gloo")
 index, port, out, run = int(sys.argv[1]), sys.argv[2], sys.argv[3], json.loads(sys.argv[4])
 jax.distributed.initialize(coordinator_address=f"localhost:{port}", num_processes=2, process_id=index)
 import numpy as np
+from jax.experimental import multihost_utils
 
 from remidi import preemption
 from remidi.cli import main
@@ -111,6 +112,9 @@ def waited(tree):  # the driver's first wait for a block: the signal lands while
 
 driver._to_host = waited
 report = {"cut": main([*run, "--devices", "4", "--out", out])}
+# the resume starts once process 0 has written the checkpoint (process 1 reads a copy of the
+# folder; a job resumed by a scheduler starts after the stopped one has ended)
+multihost_utils.sync_global_devices("stopped")
 if index == 0:
     with np.load(f"{out}/checkpoint.npz") as saved:
         report["checkpoint"] = json.loads(str(saved["meta"]))["done"]

@@ -41,6 +41,17 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
         raise
 
 
+def remove_temporaries(folder: Path, names) -> list[Path]:
+    """Delete the temporaries that interrupted :func:`atomic_write` calls of ``folder/<name>``, for
+    each of ``names``, left behind (``.<name>.<random>.tmp``: SIGKILL, or Ctrl-C's immediate exit,
+    stops a write before its rename or its clean-up); returns what was removed. Only for a folder
+    no other process is writing."""
+    removed = [tmp for name in names for tmp in Path(folder).glob(f".{name}.*.tmp")]
+    for tmp in removed:
+        tmp.unlink(missing_ok=True)
+    return removed
+
+
 def code_version() -> dict:
     """What code, libraries and device a run used, for its ``config.json``: the git commit of the
     checkout the ``remidi`` package was imported from (``dirty``: uncommitted changes under

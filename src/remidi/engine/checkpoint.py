@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from remidi.errors import ConfigError
-from remidi.files import atomic_write
+from remidi.files import atomic_write, remove_temporaries
 
 CHECKPOINT = "checkpoint.npz"
 PREFIX = "leaf:"  # a runner array's name in checkpoint.npz: PREFIX + its tree path
@@ -97,15 +97,10 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
 
 
 def remove_stale_temporaries(ckpt: Path) -> list[Path]:
-    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt`` (atomic
-    writes go through ``.<name>.<random>.tmp``; SIGKILL stops them before the rename or the clean-up).
-    Called when a run starts or resumes, before it writes; returns what was removed."""
-    removed = []
-    for name in (ckpt.name, HISTORY):
-        for tmp in ckpt.parent.glob(f".{name}.*.tmp"):
-            tmp.unlink(missing_ok=True)
-            removed.append(tmp)
-    return removed
+    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt``
+    (:func:`remidi.files.remove_temporaries`). Called when a run starts or resumes, before it
+    writes; returns what was removed."""
+    return remove_temporaries(ckpt.parent, (ckpt.name, HISTORY))
 
 
 def load_history(path: Path, meta: dict):

@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from remidi.errors import ConfigError
-from remidi.files import atomic_write
+from remidi.files import atomic_write, remove_temporaries
 
 
 def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> Path:
@@ -69,15 +69,14 @@ def remove_stale_temporaries(folder: Path) -> list[Path]:
     temporary. Called by --resume with the folder locked (:func:`folder_lock`); a ``remidi
     evaluate`` or ``render`` writing there takes no lock, so its plots' temporaries are kept
     while their process lives."""
-    found = [p for name in OUTPUT_FILES for p in folder.glob(f".{name}.*.tmp")]
-    found += folder.glob(".*.png.tmp.png")  # before plots carried their process id
+    plots = list(folder.glob(".*.png.tmp.png"))  # before plots carried their process id
     for path in folder.glob(".*.png.*.tmp.png"):
         pid = path.name.split(".")[-3]
         if pid.isdigit() and not _alive(int(pid)):
-            found.append(path)
-    for path in found:
+            plots.append(path)
+    for path in plots:
         path.unlink(missing_ok=True)
-    return found
+    return remove_temporaries(folder, OUTPUT_FILES) + plots
 
 
 def _alive(pid: int) -> bool:

@@ -136,22 +136,20 @@ for e in blindfold tmaze; do
   run remidi-rehearsal0.3-s0 $e remidi 0 5 cpu --set remidi.rehearsal=0.3
 done
 
-# issue #31: the simulated belief model (remidi.tracker=simulated). Its claims were stated at f199ddc;
-# the runs use aeff7a8 (branch runs-f199ddc-seeds): f199ddc with the seed-batch branch of main's
-# 7369c07, the same computation (a 2-seed smoke run: identical metrics and checkpoint) 8.2x faster
-# per update at 5 seeds (f199ddc recalibrated at every update of a multi-seed run)
-at aeff7a8
+# issue #31: the simulated belief model (remidi.tracker=simulated) and the learned belief tracker
+# (remidi.tracker=belief) on the mazes, cpu preset, 5 seeds each. The simulated model's claims were
+# stated at f199ddc, the belief tracker's at e113661. Their first runs (at aeff7a8, f199ddc with the
+# seed-batch branch of 7369c07, and at b6e5399) were lost unfinished with the machine that trained
+# them, aeff7a8 with it (a local branch); all four start again at cc0e7b3, the trackers after their
+# reviews: the GRU model (the simulated model's reference, and the belief tracker's model) predicts
+# episode ends (b96ae29), rare branches stay branches over seeds (7369c07, 8x faster per update
+# at 5 seeds)
+at cc0e7b3
 for e in blindfold-noisy tmaze; do
   run remidi-simulated-s0 $e remidi 0 5 cpu --set remidi.tracker=simulated --set remidi.belief_reference=true \
     --set remidi.belief_false_rate=0 --set remidi.belief_margin=5
 done
-
-# issue #31: the learned belief tracker on the mazes (cpu preset, 5 seeds; GPU jobs). Their claims
-# were stated at e113661; the runs use b6e5399, the tracker after its review (monotone judgement,
-# per-length thresholds up to the episode limit), whose smoke measurements the README reports
-at b6e5399
-run remidi-belief-s0 blindfold-noisy remidi 0 5 cpu --set remidi.tracker=belief
-run remidi-belief-s0 tmaze remidi 0 5 cpu --set remidi.tracker=belief
+for e in blindfold-noisy tmaze; do run remidi-belief-s0 $e remidi 0 5 cpu --set remidi.tracker=belief; done
 
 # issue #31: ReMiDi over PAIRED on lever-noisy (perfect regret), the exact tracker and the learned
 # belief tracker (a model of each generator's trajectories), the lever's paper preset, 10 seeds,

@@ -104,6 +104,15 @@ def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
     assert rp.evaluate_claim(claim, rp.load_runs(tmp_path / "in"))["verdict"] == "reproduced"
     edge = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "edge"))
     assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly"
+    write_run(tmp_path / "out", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.25, 0.23]})
+    out = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "out"))  # a claim of bounds only: none holds in the mean
+    assert not out["tests"][0]["in_mean"] and out["verdict"] == "not reproduced"
+
+
+def test_the_summary_names_the_smallest_and_largest_group(tmp_path):
+    r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(12)], [0.1 + 0.01 * i for i in range(10)],
+                   [0.2 + 0.01 * i for i in range(10)])
+    assert "(10–12 seeds)" in rp.summary_lines([r])
 
 
 def test_an_empty_active_buffer_has_no_share_of_anything(tmp_path):

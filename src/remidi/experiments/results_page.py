@@ -14,8 +14,9 @@ an error), so seeds can be run in parts.
 claim of the paper has one primary metric, read from the final checkpoint (``evaluate.json``)
 or the final logged point (``summary.json``), and its comparisons "A's mean > B's" or bounds
 "A's mean lies in [lo, hi]". A comparison *passes* when the ordering holds in the mean and the
-probability of improvement's 95% interval lies above 0.5 or the one-sided exact permutation
-p-value, Holm-adjusted over the claim's comparisons, is below 0.05 (independent groups: the
+probability of improvement's 95% interval lies above 0.5 or the one-sided permutation p-value
+(exact up to :data:`remidi.stats.MAX_EXACT` arrangements, every design of at most 10 seeds per
+group; beyond, a Monte Carlo estimate), Holm-adjusted over the claim's comparisons, is below 0.05 (independent groups: the
 seeds of two algorithms share their initial network but not their curricula, so they are not
 paired). A bound passes when the 95% bootstrap interval of the mean lies inside it. A claim is
 **reproduced** when all of its tests pass, **partly** when all hold in the mean but not all pass
@@ -470,8 +471,9 @@ def summary_lines(results: list[dict]) -> str:
                 for name, mean in zip(names, t["mean"]):
                     means[f"{name}{where}"] = mean
         numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
-        n = min((min(t["n"]) for t in r["tests"] if "mean" in t), default=0)  # of the settings with data
-        detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({n} seeds)" if numbers else ""
+        counts = [n for t in r["tests"] if "mean" in t for n in t["n"]]  # of the settings with data
+        seeds = "" if not counts else f"{min(counts)}" + (f"–{max(counts)}" if max(counts) > min(counts) else "")
+        detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({seeds} seeds)" if numbers else ""
         lines.append(f"- {claim.title}: {claim.statement}: **{r['verdict']}**{detail}")
     return "\n".join(lines)
 

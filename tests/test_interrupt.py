@@ -177,6 +177,7 @@ def test_sigterm_as_an_algorithm_finishes_stops_before_the_next(tmp_path, capsys
     monkeypatch.setattr(ued, "train_seeds", real)
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
     assert (out / "remidi" / "summary.json").exists()
+    assert capsys.readouterr().err.startswith(f"remidi: note: {out / 'remidi'} has no checkpoint yet")
 
 
 @pytest.mark.parametrize("algos", ["remidi", "plr,remidi"])

@@ -320,7 +320,7 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
     if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # resume a scratch copy of it
             shutil.copytree(folder, Path(scratch) / "run")
-            return _resume(exp_lookup, Path(scratch) / "run", progress=False)
+            return _resume(exp_lookup, Path(scratch) / "run", progress=False, notes=False)
     if not folder.is_dir():  # _resume says what is wrong
         return _resume(exp_lookup, folder, progress)
     # one process writes a run at a time; one algorithm of a several-algorithm run locks the whole run
@@ -371,7 +371,10 @@ def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path]) -> list[P
     return made
 
 
-def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool) -> dict[str, dict]:
+def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool,
+            notes: bool = True) -> dict[str, dict]:
+    """Resume ``folder`` (:func:`resume_experiment`); ``notes``: say which runs have no checkpoint
+    yet (process 0 only)."""
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
         if subs and not outputs.several_algorithm_run(folder):
@@ -379,7 +382,7 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
                               f"(e.g. remidi run --resume {subs[0]})")
         if subs:
             subs = sorted(subs + _write_missing_configs(exp_lookup, folder, subs))
-            return _resume_several(exp_lookup, folder, subs, progress)
+            return _resume_several(exp_lookup, folder, subs, progress, notes)
     folder = outputs.prepare_out_dir(folder, resume=True)
     exp, algo, preset, seeds, config = _saved_run(exp_lookup, folder)
     devices = _saved_devices(folder)
@@ -388,8 +391,18 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
         return {algo: _finished_summary(folder)}
     _check_writable(folder)
     outputs.remove_stale_temporaries(folder)
+    if notes:
+        _note_fresh_start(folder)
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
+
+
+def _note_fresh_start(folder: Path) -> None:
+    """Say so when the run to resume in ``folder`` has no checkpoint yet (it stopped before its
+    first): --resume then trains it from its start."""
+    if not (folder / "checkpoint.npz").exists():
+        print(f"remidi: note: {folder} has no checkpoint yet (the run stopped before its first); "
+              f"it trains from its start", file=sys.stderr, flush=True)
 
 
 def _check_writable(folder: Path) -> None:
@@ -498,7 +511,7 @@ def _run_order(sub: Path, exp: Experiment, algo: str) -> tuple[int, int]:
     return given, exp.algorithms.index(algo) if algo in exp.algorithms else len(exp.algorithms)
 
 
-def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) -> dict[str, dict]:
+def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, notes: bool) -> dict[str, dict]:
     runs = [(sub, *_saved_run(exp_lookup, sub)) for sub in subs]
     runs.sort(key=lambda run: _run_order(run[0], run[1], run[2]))
     devices = {sub: _saved_devices(sub) for sub in subs}
@@ -520,6 +533,8 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool) 
         if (sub / "summary.json").exists():
             summaries[algo] = _finished_summary(sub)
         else:
+            if notes:
+                _note_fresh_start(sub)
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
                                               progress=progress, devices=devices[sub], log=logs[sub],
                                               compare=compare if sub == unfinished[-1][0] else None))

@@ -233,3 +233,13 @@ def test_a_claim_figure_shows_its_whole_title_and_the_verdict(tmp_path, monkeypa
     title = max(texts, key=lambda t: len(t.get_text())).get_text()
     assert title.splitlines()[-1] == "verdict: not reproduced"
     assert claim.title in title.replace("\n", " ")
+
+
+def test_the_verdict_table_names_where_each_metric_comes_from():
+    """The generator and CVaR metrics come from remidi evaluate's generated levels and their own
+    attempts, not from the held-out sets' 30 attempts."""
+    assert rp.metric_source("evaluate:solve_rate/mean") == "final checkpoint, 30 attempts"
+    assert rp.metric_source("evaluate:generator/solve_rate/blind") == \
+        "final checkpoint, the tag's levels among 256 generated, 4 attempts each"
+    assert rp.metric_source("evaluate:cvar/solve_rate/10%").endswith("256 generated levels, 4 attempts each")
+    assert rp.metric_source("summary:buffer_fraction/blind") == "last logged point"

@@ -398,6 +398,23 @@ def _p(p: float) -> str:
     return "n/a" if not math.isfinite(p) else f"{p:.2g}" if p >= 0.001 else "< 0.001"
 
 
+def metric_source(metric: str) -> str:
+    """Where a claim's metric (``evaluate:NAME`` or ``summary:NAME``) comes from, as the verdict
+    table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`EVAL_ATTEMPTS`
+    attempts per level, its CVaR and generator metrics its default generated levels and attempts."""
+    from remidi.evaluate import DEFAULTS
+
+    kind, name = metric.split(":", 1)
+    if kind != "evaluate":
+        return "last logged point"
+    levels, attempts = DEFAULTS["cvar_levels"], DEFAULTS["cvar_attempts"]
+    if name.startswith("generator/"):
+        return f"final checkpoint, the tag's levels among {levels} generated, {attempts} attempts each"
+    if name.startswith("cvar/"):
+        return f"final checkpoint, {levels} generated levels, {attempts} attempts each"
+    return f"final checkpoint, {EVAL_ATTEMPTS} attempts"
+
+
 def verdict_table(results: list[dict]) -> str:
     lines = ["| claim | primary metric | test | A | B | P(A > B) [95% CI] | p (Holm) | seeds | verdict |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -405,8 +422,7 @@ def verdict_table(results: list[dict]) -> str:
         claim = r["claim"]
         d = _digits(claim.metric)
         for i, t in enumerate(r["tests"]):
-            head = (f"{claim.title}: {claim.statement}", f"`{claim.metric.split(':', 1)[1]}` "
-                    f"({f'final checkpoint, {EVAL_ATTEMPTS} attempts' if claim.metric.startswith('evaluate') else 'last logged point'})"
+            head = (f"{claim.title}: {claim.statement}", f"`{claim.metric.split(':', 1)[1]}` ({metric_source(claim.metric)})"
                     ) if i == 0 else ("", "")
             where = f" on {t['experiment']}" if len(claim.experiments) > 1 else ""
             if t["kind"] == "greater":

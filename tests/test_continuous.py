@@ -231,3 +231,17 @@ def test_observation_statistics_survive_a_resume(tmp_path):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     for name in full:
         np.testing.assert_array_equal(full[name], resumed[name], err_msg=name)
+
+
+def test_brax_floors_play_the_evaluated_levels_with_zero_and_with_normal_actions():
+    """The floors of docs/results.md's Brax section (remidi.experiments.brax_floors), on the toy
+    task: zero action earns 1 − |target|² on each level; N(0, 1) actions lose their variance,
+    2 more in expectation."""
+    from remidi.experiments.brax_floors import floor_returns
+
+    levels = TASK.eval_sets["shown"]
+    task = dataclasses.replace(TASK, eval_sets={"undisturbed": levels})
+    expected = 1.0 - np.sum(np.square(np.asarray(levels.target)), axis=1)
+    np.testing.assert_allclose(np.asarray(floor_returns(task, 0.0, 1))[:, 0], expected, rtol=1e-5)
+    noisy = np.asarray(floor_returns(task, 1.0, 4000)).mean(axis=1)
+    np.testing.assert_allclose(noisy, expected - 2.0, atol=0.25)

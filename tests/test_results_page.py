@@ -243,3 +243,11 @@ def test_the_verdict_table_names_where_each_metric_comes_from():
         "final checkpoint, the tag's levels among 256 generated, 4 attempts each"
     assert rp.metric_source("evaluate:cvar/solve_rate/10%").endswith("256 generated levels, 4 attempts each")
     assert rp.metric_source("summary:buffer_fraction/blind") == "last logged point"
+
+
+def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_path):
+    for algo, values in (("plr", [-70.0, -80.0]), ("remidi", [90.0, 110.0])):
+        write_run(tmp_path, "brax-ant", algo, [0, 1], evaluate={"return/undisturbed": values})
+    table = rp.floors_table(rp.load_runs(tmp_path), {"ant": {"zero_action": 83.2, "normal_actions": -74.7}})
+    assert "| ant | 83.2 | -74.7 | -75.0 | — | 100.0 | remidi |" in table.splitlines()
+    assert table.splitlines()[-1].endswith("| remidi |")  # one row: the morphologies without floors are left out

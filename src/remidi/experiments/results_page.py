@@ -51,6 +51,7 @@ DATA = ROOT / "docs" / "results" / "data"
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 FIGURES = ROOT / "docs" / "results"
+FLOORS = ROOT / "docs" / "results" / "references" / "brax-floors.json"  # python -m remidi.experiments.brax_floors
 ALPHA = 0.05
 
 
@@ -659,6 +660,26 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
     return written
 
 
+def floors_table(runs: dict, floors: dict) -> str:
+    """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
+    policy (``floors``: :mod:`remidi.experiments.brax_floors`'s document) beside each algorithm's
+    mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's."""
+    algos = ("plr", "minimax-return", "remidi")
+    metric = "evaluate:return/undisturbed"
+    lines = ["| morphology | zero action | N(0, 1) actions | " + " | ".join(algos) + " | above zero action |",
+             "| --- |" + " --- |" * (len(algos) + 3)]
+    for exp in BRAX:
+        floor = floors.get(exp.removeprefix("brax-"))
+        if floor is None:
+            continue
+        means = {a: float(np.mean(list(v.values()))) for a in algos if (v := metric_values(runs, exp, a, metric))}
+        above = [a for a, m in means.items() if m > floor["zero_action"]]
+        lines.append(f"| {exp.removeprefix('brax-')} | {_f(floor['zero_action'], 1)} | {_f(floor['normal_actions'], 1)} | "
+                     + " | ".join(_f(means[a], 1) if a in means else "—" for a in algos)
+                     + f" | {', '.join(above) or 'none'} |")
+    return "\n".join(lines)
+
+
 # --------------------------------------------------------------------------------------- page
 def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
     """``{block name: Markdown}`` of every generated block, and the claims' results."""
@@ -674,6 +695,7 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
         present = [a for a in algos if (exp, a) in runs
                    and any(m.split(":", 1)[1] in runs[exp, a].values.get(m.split(":", 1)[0], {}) for m in metrics)]
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
+    out["brax-floors"] = floors_table(runs, outputs.read_json(FLOORS)) if FLOORS.is_file() else "_No committed data yet._"
     return out, results
 
 

@@ -392,15 +392,17 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
     _check_writable(folder)
     outputs.remove_stale_temporaries(folder)
     if notes:
-        _note_fresh_start(folder)
+        _note_fresh_start(exp, folder)
     return _train_and_write(exp, {algo: folder}, preset, seeds, config, folder, resume=True, progress=progress,
                             devices=devices, log=_saved_log(folder))
 
 
-def _note_fresh_start(folder: Path) -> None:
-    """Say so when the run to resume in ``folder`` has no checkpoint yet (it stopped before its
-    first): --resume then trains it from its start."""
-    if not (folder / "checkpoint.npz").exists():
+def _note_fresh_start(exp: Experiment, folder: Path) -> None:
+    """Say so when the UED run to resume in ``folder`` has no checkpoint yet (it stopped before
+    its first): --resume then trains it from its start. (The tabular games keep no checkpoint.)"""
+    from remidi.engine.checkpoint import CHECKPOINT
+
+    if exp.make_task is not None and not (folder / CHECKPOINT).exists():
         print(f"remidi: note: {folder} has no checkpoint yet (the run stopped before its first); "
               f"it trains from its start", file=sys.stderr, flush=True)
 
@@ -534,7 +536,7 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, 
             summaries[algo] = _finished_summary(sub)
         else:
             if notes:
-                _note_fresh_start(sub)
+                _note_fresh_start(exp, sub)
             summaries.update(_train_and_write(exp, {algo: sub}, preset, seeds, config, sub, resume=True,
                                               progress=progress, devices=devices[sub], log=logs[sub],
                                               compare=compare if sub == unfinished[-1][0] else None))

@@ -23,7 +23,6 @@ import json
 import sys
 from pathlib import Path
 
-MORPHOLOGIES = ("ant", "halfcheetah", "hopper", "walker2d")
 OUT = Path(__file__).resolve().parents[3] / "docs" / "results" / "references" / "brax-floors.json"
 
 
@@ -55,16 +54,17 @@ def floor_returns(task, noise_std: float, attempts: int, seed: int = 0):
     return jnp.asarray(jax.jit(per_level)(keys, levels))
 
 
-def measure(morphologies=MORPHOLOGIES, attempts: int = 30, seed: int = 0) -> dict:
-    """``{"config": ..., "<morphology>": {"zero_action": mean, "normal_actions": mean, per level}}``."""
+def measure(morphologies=None, attempts: int = 30, seed: int = 0) -> dict:
+    """``{"config": ..., "<morphology>": {"zero_action": mean, "normal_actions": mean, per level}}``
+    for ``morphologies`` (default: every one of :mod:`remidi.envs.brax`)."""
     import numpy as np
 
-    from remidi.envs.brax import DEFAULT_BACKEND, brax_task
+    from remidi.envs.brax import DEFAULT_BACKEND, MORPHOLOGIES, brax_task
     from remidi.files import code_version
 
     out = {"config": {"backend": DEFAULT_BACKEND, "attempts": attempts, "seed": seed, "code": code_version(),
                       "command": "python -m remidi.experiments.brax_floors"}}
-    for m in morphologies:
+    for m in morphologies or MORPHOLOGIES:
         task = brax_task(m)
         zero = np.asarray(floor_returns(task, 0.0, 1, seed))[:, 0]
         noisy = np.asarray(floor_returns(task, 1.0, attempts, seed)).mean(axis=1)

@@ -41,6 +41,7 @@ import numpy as np
 from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
+from remidi.experiments.brax_floors import OUT as BRAX_FLOORS
 from remidi.experiments.compare import compare
 from remidi.experiments.table import _cells as table_cells
 from remidi.experiments.table import _digits as table_digits
@@ -51,7 +52,7 @@ DATA = ROOT / "docs" / "results" / "data"
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 FIGURES = ROOT / "docs" / "results"
-FLOORS = ROOT / "docs" / "results" / "references" / "brax-floors.json"  # python -m remidi.experiments.brax_floors
+FLOORS = BRAX_FLOORS  # python -m remidi.experiments.brax_floors
 ALPHA = 0.05
 
 
@@ -231,6 +232,7 @@ class Run:
     commits: set = field(default_factory=set)
     wall_s: float = 0.0
     resumed: bool = False  # some part was resumed: its summary's wall time is its last part's alone
+    config: dict = field(default_factory=dict)  # the first part's config.json "config"
     devices: set = field(default_factory=set)
     preset: str = ""
 
@@ -298,6 +300,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
                 old = run.curves.get(name, (steps, np.zeros((0, len(steps)))))[1]
                 run.curves[name] = (steps, np.concatenate([old, values]))
         run.seeds += seeds
+        run.config = run.config or config.get("config", {})
         page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
         run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
                            else str(folder))
@@ -663,8 +666,10 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
 def floors_table(runs: dict, floors: dict) -> str:
     """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
     policy (``floors``: :mod:`remidi.experiments.brax_floors`'s document) beside each algorithm's
-    mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's."""
+    mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's
+    ("—" without runs). ConfigError for a run on another Brax back end than the floors'."""
     algos = ("plr", "minimax-return", "remidi")
+    backend = floors.get("config", {}).get("backend")
     metric = "evaluate:return/undisturbed"
     lines = ["| morphology | zero action | N(0, 1) actions | " + " | ".join(algos) + " | above zero action |",
              "| --- |" + " --- |" * (len(algos) + 3)]
@@ -673,10 +678,15 @@ def floors_table(runs: dict, floors: dict) -> str:
         if floor is None:
             continue
         means = {a: float(np.mean(list(v.values()))) for a in algos if (v := metric_values(runs, exp, a, metric))}
-        above = [a for a, m in means.items() if m > floor["zero_action"]]
+        for a in means:
+            ran = runs[exp, a].config.get("brax", {}).get("backend")
+            if backend is not None and ran != backend:
+                raise ConfigError(f"data: {exp} {a} ran on the Brax back end {ran!r}, the floors on {backend!r}: "
+                                  f"python -m remidi.experiments.brax_floors measures them again")
+        above = ", ".join(a for a, m in means.items() if m > floor["zero_action"]) or ("none" if means else "—")
         lines.append(f"| {exp.removeprefix('brax-')} | {_f(floor['zero_action'], 1)} | {_f(floor['normal_actions'], 1)} | "
                      + " | ".join(_f(means[a], 1) if a in means else "—" for a in algos)
-                     + f" | {', '.join(above) or 'none'} |")
+                     + f" | {above} |")
     return "\n".join(lines)
 
 

@@ -130,11 +130,9 @@ def count_rollout(counts, env, params, coding: ObsCoding, reseed, levels, obs, a
 
     def copies(level, acts, rs, k):
         k1, k2, k3 = jax.random.split(k, 3)
-        if reseed is None:  # both copies are the level itself, played with the same keys: one replay
-            once = replay_level(env, params, coding, level, acts, rs, k3)
-            return once, once
-        return (replay_level(env, params, coding, reseed(k1, level), acts, rs, k3),
-                replay_level(env, params, coding, reseed(k2, level), acts, rs, k3))
+        l1, l2 = (level, level) if reseed is None else (reseed(k1, level), reseed(k2, level))
+        return (replay_level(env, params, coding, l1, acts, rs, k3),
+                replay_level(env, params, coding, l2, acts, rs, k3))
 
     s1, s2 = jax.vmap(copies, in_axes=(0, 1, 1, 0), out_axes=1)(levels, actions, resets, jax.random.split(key, n))
     return count_triples(counts, recorded_codes(coding, obs, resets), s1, s2)
@@ -254,9 +252,7 @@ class SimulatedTracker:
         """The state at the envs' first coded observations ``agent`` i32[N, E + 1]."""
         n = agent.shape[0]
         key0 = jax.random.PRNGKey(0)  # the reset ignores it
-        reset = jax.vmap(env.reset_to_level, in_axes=(None, 0, None))
-        firsts = [reset(key0, lv, params) for lv in self._copies(frozen)] if self.reseed is not None else \
-            [reset(key0, frozen.levels, params)] * 2  # both copies are the level itself
+        firsts = [jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(key0, lv, params) for lv in self._copies(frozen)]
         c1, c2 = (with_end(self.coding, obs, jnp.zeros(frozen.valid.shape, bool)) for obs, _ in firsts)
         index, total = jax.vmap(candidates, in_axes=(None, 0, None, None, None, None))(
             frozen.belief.logq, agent, c1, c2, frozen.valid, self.budget)  # [N, S]
@@ -285,11 +281,7 @@ class SimulatedTracker:
         step = jax.vmap(jax.vmap(jax.vmap(env.step, in_axes=(None, 0, None, None)),  # the two copies
                                  in_axes=(None, 0, None, None)),  # the slots
                         in_axes=(0, 0, 0, None))  # the envs
-        if self.reseed is None:  # both copies are the level itself, stepped with the same keys: step one
-            obs, one, _, ended, _ = step(step_keys, jax.tree.map(lambda x: x[:, :, :1], state.copies), action, params)
-            obs, copies, ended = jax.tree.map(lambda x: jnp.concatenate([x, x], axis=2), (obs, one, ended))
-        else:
-            obs, copies, _, ended, _ = step(step_keys, state.copies, action, params)
+        obs, copies, _, ended, _ = step(step_keys, state.copies, action, params)
         codes = with_end(self.coding, obs, ended)  # [N, S, 2, E + 1]
         lq = step_logq(frozen.belief.logq, agent[:, None], codes[:, :, 0], codes[:, :, 1])  # [N, S]
         total = jnp.where(state.index >= 0, state.total + lq, -jnp.inf)

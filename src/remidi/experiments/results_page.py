@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import math
 import re
-import shutil
 import sys
 import textwrap
 import warnings
@@ -40,6 +39,7 @@ import numpy as np
 
 from remidi import stats
 from remidi.errors import ConfigError
+from remidi.files import atomic_write
 from remidi.experiments import outputs
 from remidi.experiments.brax_floors import OUT as BRAX_FLOORS
 from remidi.experiments.compare import compare
@@ -649,9 +649,9 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         name = re.sub(r"[^a-z0-9]+", "-", label(algo, doc.get("config", {}), doc.get("command"))).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)
-        for name in ("config.json", "summary.json", "evaluate.json"):
+        for name in ("config.json", "summary.json", "evaluate.json"):  # each whole or not at all
             if (folder / name).is_file():
-                shutil.copyfile(folder / name, target / name)
+                atomic_write(target / name, lambda f, src=folder / name: f.write(src.read_bytes()), binary=True)
         keep = set(SECTIONS.get(exp, ([], [], []))[2]) | {m.split(":", 1)[1] for e, _, metrics in EXTRA_TABLES.values()
                                                            if e == exp for m in metrics if m.startswith("run:")}
         rows = [r for r in outputs.read_metrics_csv(folder / "metrics.csv") if r[2] in keep]

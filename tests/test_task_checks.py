@@ -11,6 +11,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from remidi.cli import main
@@ -89,6 +90,10 @@ def broken(corridor, kind: str):
     if kind == "eval_sets_numbers":  # one level of Python numbers, no arrays
         level = corridor.sample_level(jax.random.PRNGKey(0))
         return dataclasses.replace(task, eval_sets={"one": jax.tree.map(lambda x: x.item(), level)})
+    if kind == "eval_sets_numpy":  # a batch built with NumPy: int64 where the level holds int32
+        level = corridor.sample_level(jax.random.PRNGKey(0))
+        return dataclasses.replace(task, eval_sets={"np": jax.tree.map(
+            lambda x: np.asarray(x)[None].astype(np.int64 if x.dtype == jnp.int32 else x.dtype), level)})
     if kind == "reseed_level":  # a batch of two where one level belongs
         return dataclasses.replace(task, reseed_level=lambda rng, level: jax.tree.map(lambda x: jnp.stack([x, x]), level))
     if kind == "level_builder":  # builds another task's levels (the lever game's)
@@ -114,6 +119,8 @@ def broken(corridor, kind: str):
                             "what it returns depends on the key (traced)"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),
     ("eval_sets_numbers", "task.eval_sets: 'one' must be a batch of levels"),
+    ("eval_sets_numpy", "task.eval_sets: the levels of 'np' must have the sampled level's dtypes and shapes; they "
+                        "differ in .decor (int32[] sampled, int64[] here)"),
     ("reseed_level", "task.reseed_level: must return a level with the sampled level's shapes"),
     ("level_builder", "task.level_builder: must build a level with the sampled level's shapes"),
     ("level_builder_size", "task.level_builder.num_steps: must be an integer ≥ 1, got 0"),
@@ -228,3 +235,15 @@ def test_run_ued_refuses_a_task_ref_that_does_not_import_before_writing(corridor
         run_ued(corridor.make_task(), TINY, ["plr"], [0], tmp_path / "out", progress=False,
                 task_ref=f"{MODULE}:make_nothing")
     assert not (tmp_path / "out").exists()
+
+
+def test_the_discounted_utility_error_names_the_score_in_use(corridor, monkeypatch):
+    """A score of a plugin that needs the optimum, on a task without a discounted one: the error
+    names that score (it named perfect_regret whatever the score)."""
+    from remidi.engine import scores as sc
+    from remidi.engine.validation import validate_ued_config
+
+    monkeypatch.setitem(sc.SCORES, "gap", dataclasses.replace(sc.SCORES["perfect_regret"], name="gap"))
+    task = dataclasses.replace(corridor.make_task(), optimal_discounted_return=None)
+    with pytest.raises(ConfigError, match="so gap cannot use the discounted utility"):
+        validate_ued_config(dataclasses.replace(TINY, score="gap", discounted_regret=True), "plr", task)

@@ -237,9 +237,14 @@ def validate_task(task: UEDTask) -> None:
                for leaf in leaves):
             raise ConfigError(f"task.eval_sets: {name!r} must hold arrays (typed PRNG keys as jax.random.key_data), "
                               f"got {_shapes(levels)}")
-        if name not in task.eval_envs and _shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels)) != _shapes(level):
-            raise ConfigError(f"task.eval_sets: {name!r}'s levels must have the sampled level's shapes "
-                              f"({_shapes(level)}), got {_shapes(jax.tree.map(lambda x: np.asarray(x)[0], levels))}")
+        one = jax.tree.map(lambda x: np.asarray(x)[0], levels)
+        if name not in task.eval_envs and _shapes(one) != _shapes(level):
+            differ = [f"{jax.tree_util.keystr(path) or 'the level'} ({_shapes(a)} sampled, {_shapes(b)} here)"
+                      for (path, a), b in zip(jax.tree_util.tree_flatten_with_path(level)[0], jax.tree.leaves(one))
+                      if _shapes(a) != _shapes(b)]
+            raise ConfigError(f"task.eval_sets: the levels of {name!r} must have the sampled level's dtypes and "
+                              f"shapes; they differ in {'; '.join(differ)} (NumPy's int64 or float64: cast them, "
+                              f"e.g. with jnp.asarray)")
         env = task.eval_envs.get(name, task.env)
         first = _traced("eval_sets", f"resetting to a level of {name!r}",
                         lambda k, lvs, env=env: env.reset_to_level(k, jax.tree.map(lambda x: x[0], lvs),
@@ -381,9 +386,9 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
             raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(fits)}")
     require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
     if score.needs_optimum and cfg.discounted_regret and task.optimal_discounted_return is None:
-        raise ConfigError("discounted_regret: this task gives no discounted optimal return "
-                          "(UEDTask.optimal_discounted_return), so perfect_regret cannot use the discounted utility; "
-                          "allowed: false (undiscounted returns on both sides)")
+        raise ConfigError(f"discounted_regret: this task gives no discounted optimal return "
+                          f"(UEDTask.optimal_discounted_return), so {score.name} cannot use the discounted utility; "
+                          f"allowed: false (undiscounted returns on both sides)")
     for key in ("hidden_size", "lstm_size"):
         require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
                 "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))

@@ -149,13 +149,19 @@ def test_the_adapter_refuses_unknown_fields_and_empty_ranges_in_one_line():
                           ({"level": {"gravity": (2.0, 1.0)}}, "low must be ≤ high"),
                           ({"level": {"gravity": (1.0, 2.0)}, "eval_grid": {"length": (0.5,)}},
                            "eval_grid field 'length' is not a level field"),
-                          ({"level": {"max_steps_in_episode": (100, 500)}}, "cannot vary by level")):
+                          ({"level": {"max_steps_in_episode": (100, 500)}}, "cannot vary by level"),
+                          ({"level": {"gravity": 9.8}}, r"level field gravity must be a \(low, high\) pair"),
+                          ({"level": {"gravity": (1.0, 2.0)}, "eval_grid": {"gravity": 9.8}},
+                           "eval_grid field gravity must be a non-empty list of numbers")):
         with pytest.raises(ConfigError, match=match) as err:
             gymnax_task("CartPole-v1", **kwargs)
         assert "\n" not in str(err.value)
     # Acrobot's torque noise comes from the step's key: the level no longer decides the episode
     with pytest.raises(ConfigError, match="torque_noise_max > 0 draws noise from the step's key"):
         gymnax_task("Acrobot-v1", {"link_mass_1": (0.5, 1.5)}, params={"torque_noise_max": 0.1})
+    # an integer field would be drawn as a float: MemoryChain's episode end (time == memory_length) never came
+    with pytest.raises(ConfigError, match="level field memory_length is int32 in MemoryChain-bsuite's params"):
+        gymnax_task("MemoryChain-bsuite", {"memory_length": (2, 10)})
     with pytest.raises(ConfigError, match="gymnax: cannot make 'NoSuchEnv-v0'"):
         gymnax_task("NoSuchEnv-v0", {"gravity": (1.0, 2.0)})
 

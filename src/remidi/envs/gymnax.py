@@ -158,12 +158,16 @@ class LevelSpace:
         return sets
 
 
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) or (hasattr(x, "ndim") and x.ndim == 0)
+
+
 def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed_in_level: bool = True,
                 params: Mapping[str, Any] | None = None, eval_grid: Mapping[str, Sequence[float]] | None = None,
                 eval_seeds: int = 4, tags: Mapping[str, Callable[[dict], jax.Array]] | None = None,
                 edit_size: float = 0.1, solved_at: float | None = None, derive=None) -> UEDTask:
     """The gymnax environment ``env_name`` (``gymnax.make``) as a UED task whose level is the
-    params fields of ``level`` (``{field: (low, high)}``, each drawn uniformly) and, with
+    params fields of ``level`` (``{field: (low, high)}``, float fields, each drawn uniformly) and, with
     ``seed_in_level``, the start seed.
 
     ``params``: other params fields, fixed (e.g. ``{"max_steps_in_episode": 200}``);
@@ -191,6 +195,17 @@ def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed
     if "max_steps_in_episode" in level:  # the engine reads the limit once (max_episode_steps), not per level
         raise ConfigError("gymnax: level field 'max_steps_in_episode' cannot vary by level: the episode limit is "
                           "one number of the task (params={'max_steps_in_episode': N})")
+    for name, bounds in level.items():
+        if not (isinstance(bounds, (tuple, list)) and len(bounds) == 2 and all(_is_number(b) for b in bounds)):
+            raise ConfigError(f"gymnax: level field {name} must be a (low, high) pair of numbers, got {bounds!r}")
+        given = getattr(base, name)
+        if not jnp.issubdtype(jnp.asarray(given).dtype, jnp.floating):  # the level draws floats uniformly
+            raise ConfigError(f"gymnax: level field {name} is {jnp.asarray(given).dtype} in {env_name}'s params "
+                              f"(default {given!r}), and a level draws its fields as floats; allowed: a float field "
+                              f"(give {name} a fixed value in params)")
+    for name, values in (eval_grid or {}).items():
+        if not (isinstance(values, (tuple, list)) and values and all(_is_number(v) for v in values)):
+            raise ConfigError(f"gymnax: eval_grid field {name} must be a non-empty list of numbers, got {values!r}")
     noise = {**dict(params or {}), **dict(level)}.get("torque_noise_max", getattr(base, "torque_noise_max", 0.0))
     if seed_in_level and (noise[1] if isinstance(noise, tuple) else noise) > 0:
         raise ConfigError("gymnax: torque_noise_max > 0 draws noise from the step's key, so the level (with its "

@@ -247,3 +247,22 @@ def test_the_discounted_utility_error_names_the_score_in_use(corridor, monkeypat
     task = dataclasses.replace(corridor.make_task(), optimal_discounted_return=None)
     with pytest.raises(ConfigError, match="so gap cannot use the discounted utility"):
         validate_ued_config(dataclasses.replace(TINY, score="gap", discounted_regret=True), "plr", task)
+
+
+def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
+    """`--algo all` on a user's task without a level mutator or builder trains what it can run;
+    naming another says why, and every refusal lists the same algorithms (each listed the
+    algorithms the other refused)."""
+    from remidi.engine.validation import validate_ued_config
+    from remidi.experiments.base import parse_algos
+    from remidi.experiments.custom import task_experiment
+
+    task = corridor.make_task()
+    exp = task_experiment("corridor", lambda: task)
+    assert parse_algos(exp, "all") == ["dr", "plr", "minimax-return", "remidi"]
+    with pytest.raises(ConfigError, match=r"^--algo: accel cannot run on corridor: accel edits levels, but this task "
+                                          r"has no level mutator .*; allowed: dr, plr, minimax-return, remidi, all$"):
+        parse_algos(exp, "accel")
+    for algo in ("accel", "paired"):
+        with pytest.raises(ConfigError, match=r"; allowed: dr, plr, minimax-return, remidi$"):
+            validate_ued_config(TINY, algo, task)

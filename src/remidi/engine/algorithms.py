@@ -101,7 +101,8 @@ class RegisteredNames(Sequence):
     so algorithms registered after the experiment was built (:func:`register_algorithm`) are
     allowed by ``--algo`` and listed by ``remidi list``. ``where(Algorithm) -> bool`` keeps the
     ones the experiment's task supports (a task with no level-building MDP: no learned generator);
-    ``why``: the sentence that says why an algorithm ``where`` leaves out is not among them."""
+    ``why``: the sentence that says why an algorithm ``where`` leaves out is not among them, or a
+    function of that algorithm giving it."""
 
     def __init__(self, where=None, why: str | None = None):
         self.where, self.why = where, why
@@ -110,7 +111,8 @@ class RegisteredNames(Sequence):
         """Why the registered algorithm ``name`` is left out here (None: it is not left out, or
         no algorithm of that name is registered)."""
         if name in ALGORITHMS and self.where is not None and not self.where(ALGORITHMS[name]):
-            return self.why or "this experiment's task does not support it"
+            why = self.why(ALGORITHMS[name]) if callable(self.why) else self.why
+            return why or "this experiment's task does not support it"
         return None
 
     def _names(self) -> tuple[str, ...]:

@@ -351,6 +351,22 @@ def validate_section(prefix: str, validate) -> None:
         raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
 
 
+def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
+    """Why ``task`` cannot run ``algo`` (None: it can): an algorithm that edits levels needs a
+    level mutator, one that learns a level generator a level-building MDP."""
+    if algo.edits and task.mutate_level is None:
+        return f"{algo.name} edits levels, but this task has no level mutator (UEDTask.mutate_level)"
+    if isinstance(algo.adversary, LevelGenerator) and task.level_builder is None:
+        return (f"{algo.name} learns a level generator, but this task has no level-building MDP "
+                f"(UEDTask.level_builder)")
+    return None
+
+
+def supported_algorithms(task: UEDTask) -> list[str]:
+    """The registered algorithms ``task`` can run (:func:`task_refusal`), in their order."""
+    return [name for name, algo in ALGORITHMS.items() if task_refusal(algo, task) is None]
+
+
 def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
     """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
     from remidi.engine.ppo import validate_ppo_config
@@ -456,16 +472,13 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     positive_int("accel.num_edits", cfg.accel.num_edits)
     require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
     if algo.edits and task.mutate_level is None:
-        raise ConfigError(f"--algo: {algo.name} edits levels, but this task has no level mutator "
-                          f"(UEDTask.mutate_level); allowed: {', '.join(a for a in ALGORITHMS if not ALGORITHMS[a].edits)}")
+        raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
     if algo.edits and cfg.accel.easy_start and task.easy_level is None:
         raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
                           "allowed: false")
     if isinstance(algo.adversary, LevelGenerator):
         if task.level_builder is None:
-            raise ConfigError(f"--algo: {algo.name} learns a level generator, but this task has no level-building MDP "
-                              f"(UEDTask.level_builder); allowed: "
-                              f"{', '.join(a for a in ALGORITHMS if not isinstance(ALGORITHMS[a].adversary, LevelGenerator))}")
+            raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
         p = cfg.paired
         choice("paired.estimator", p.estimator, ESTIMATORS)
         if p.estimator == "perfect" and task.optimal_return is None:

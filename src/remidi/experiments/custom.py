@@ -38,7 +38,7 @@ from typing import Any, Callable
 import jax
 
 from remidi.engine.config import UEDConfig
-from remidi.engine.validation import validate_task
+from remidi.engine.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, resume_experiment, run_experiment
@@ -71,6 +71,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
         name=name, description=description, task_factory=lambda cfg: task, config_factory=lambda: base,
         presets={PRESET: {}}, preset_seeds={PRESET: 2}, summary_metrics=rates + regrets + shares,
         plot_panels_spec=panels or (("mean_return", "mean training return"),),
+        refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
     )
     return dataclasses.replace(exp, task_ref=task_ref)
 

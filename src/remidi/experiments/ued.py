@@ -107,10 +107,16 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
                         summary_metrics, plot_panels_spec, derive=None, bar_chart=None,
-                        preset_reasons=None, builds_levels: bool = True) -> Experiment:
+                        preset_reasons=None, builds_levels: bool = True, refusal=None) -> Experiment:
     """A UED experiment over the task ``task_factory(cfg)`` builds. ``builds_levels``: whether
     its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
-    a learned level generator are not among its algorithms (``--algo all`` leaves them out)."""
+    a learned level generator are not among its algorithms (``--algo all`` leaves them out).
+    ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
+    (None: it can; :func:`remidi.engine.validation.task_refusal` of one task)."""
+    if refusal is None and not builds_levels:
+        def refusal(algo):
+            return (f"{name}'s task has no level-building MDP (UEDTask.level_builder), which a learned level "
+                    f"generator needs" if isinstance(algo.adversary, LevelGenerator) else None)
     tasks: dict[UEDConfig, UEDTask] = {}
 
     def task_for(cfg: UEDConfig) -> UEDTask:
@@ -126,9 +132,7 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
 
     return Experiment(
         name=name, description=description, default_algorithms=PAPER_ALGORITHMS,
-        algorithms=RegisteredNames(None if builds_levels else lambda algo: not isinstance(algo.adversary, LevelGenerator),
-                                   why=f"{name}'s task has no level-building MDP (UEDTask.level_builder), which a "
-                                       f"learned level generator needs"),
+        algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
         train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),

@@ -64,6 +64,12 @@ class _IntDone:
         return obs, state, reward, done.astype(jnp.int32), info
 
 
+class _Slip:  # each step a coin from the step's key replaces the observation: randomness outside the level
+    def step_env(self, rng, state, action, params):
+        obs, state, reward, done, info = super().step_env(rng, state, action, params)
+        return jax.tree.map(lambda x: jnp.where(jax.random.bernoulli(rng), x, x * 0), obs), state, reward, done, info
+
+
 class _RandomStart:  # a start drawn from the reset's key, claimed deterministic by the example's task
     def reset_env_to_level(self, rng, level, params):
         obs, state = super().reset_env_to_level(rng, level, params)
@@ -161,6 +167,24 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
     assert "score -inf and are never inserted" in warning
     assert run_warnings(dataclasses.replace(TINY, num_steps=14), "plr", task) == []
     assert all(score.needs_finished_episodes for score in SCORES.values())  # every built-in score reads episodes
+
+
+def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(corridor):
+    """ReMiDi's exact tracker steps frozen levels with the agent's draws: a step with randomness of
+    its own is warned of (not for PLR⊥, nor with a belief tracker, nor for the example's step)."""
+    from remidi.engine.validation import run_warnings
+
+    task = corridor.make_task()
+    slipping = dataclasses.replace(task, env=type("Slip", (_Slip, type(task.env)), {})())
+    full = dataclasses.replace(TINY, num_steps=14, remidi=dataclasses.replace(TINY.remidi, num_buffers=2))
+    (warning,) = run_warnings(full, "remidi", slipping, check_step=True)
+    assert warning.startswith("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact "
+                              "tracker steps each frozen level with the agent's own draws"), warning
+    assert run_warnings(full, "remidi", task, check_step=True) == []
+    assert run_warnings(full, "plr", slipping, check_step=True) == []
+    belief = dataclasses.replace(full, remidi=dataclasses.replace(full.remidi, tracker="belief"))
+    assert run_warnings(belief, "remidi", slipping, check_step=True) == []
+    assert run_warnings(full, "remidi", slipping) == []  # the library's own experiments skip the trace
 
 
 # ------------------------------------------------------------------------------ B: rebuilt from anywhere

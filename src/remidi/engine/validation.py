@@ -24,6 +24,7 @@ from remidi.envs.interface import UEDTask, UnderspecifiedEnv, tree_equal
 
 
 _VALIDATED: weakref.WeakSet = weakref.WeakSet()  # tasks validate_task passed (UEDTask hashes by identity)
+_STEP_READS_KEY: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # task -> _step_reads_its_key, once
 
 
 def _user_error(err: Exception) -> str:
@@ -305,7 +306,31 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
                       f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
 
 
-def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[str]:
+def _step_reads_its_key(task: UEDTask) -> bool:
+    """Whether the outputs of ``task.env.step_env`` depend on its key (a step that draws its own
+    randomness), read from its traced program as :func:`_reset_reads_its_key` reads the reset's,
+    at a sampled level's first state and a zero action. False where this JAX lacks the pass.
+    Traced once per task."""
+    if task not in _STEP_READS_KEY:
+        _STEP_READS_KEY[task] = _trace_step_key_use(task)
+    return _STEP_READS_KEY[task]
+
+
+def _trace_step_key_use(task: UEDTask) -> bool:
+    try:
+        from jax.interpreters import partial_eval as pe
+
+        level = task.sample_level(jax.random.PRNGKey(0))
+        _, state = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
+        action = jnp.zeros((task.num_actions,), jnp.float32) if task.continuous else jnp.zeros((), jnp.int32)
+        closed = jax.make_jaxpr(lambda k: task.env.step_env(k, state, action, task.params))(jax.random.PRNGKey(1))
+        _, used = pe.dce_jaxpr(closed.jaxpr, [True] * len(closed.jaxpr.outvars))
+    except Exception:  # noqa: BLE001 (a JAX without this pass, or a step that does not trace this way)
+        return False
+    return bool(used[0])
+
+
+def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_step: bool = False) -> list[str]:
     """One-line warnings about a valid run that would train degenerately without saying so:
 
     * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
@@ -315,7 +340,11 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[s
       or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which);
     * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
       give different first observations): the tracker assumes an episode is a function of the
-      level and the actions, so it may judge identical levels distinguishable.
+      level and the actions, so it may judge identical levels distinguishable;
+    * with ``check_step`` (a user's task: tracing a step costs seconds for Brax, whose steps are
+      known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
+      it steps each frozen level with the agent's own draws, so a prefix another draw of that level
+      would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
     """
     out = []
     algo = get_algorithm(algo)
@@ -331,6 +360,12 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> list[s
             out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
                        "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
                        "actions; put the random seed into the level (UEDTask.deterministic_reset)")
+    if check_step and algo.buffer_sequence and cfg.remidi.num_buffers > 1 \
+            and cfg.remidi.tracker in ("prefix", "per_step") and _step_reads_its_key(task):
+        out.append("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
+                   "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
+                   "would give counts as distinguishable; put the randomness into the level (UEDTask.reseed_level) "
+                   "or judge with remidi.tracker=belief or simulated")
     return out
 
 

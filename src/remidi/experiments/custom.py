@@ -72,6 +72,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
         presets={PRESET: {}}, preset_seeds={PRESET: 2}, summary_metrics=rates + regrets + shares,
         plot_panels_spec=panels or (("mean_return", "mean training return"),),
         refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
+        check_step=True,  # warn of a step with randomness of its own under ReMiDi's exact tracker
     )
     return dataclasses.replace(exp, task_ref=task_ref)
 

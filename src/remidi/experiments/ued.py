@@ -35,16 +35,18 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
 
 
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
-               derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None):
+               derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
+               check_step: bool = False):
     """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
-    over evaluation sets), f[S, T] each."""
+    over evaluation sets), f[S, T] each. ``check_step``: warn of a step that draws from its key
+    (:func:`~remidi.engine.validation.run_warnings`; a user's task)."""
 
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
         # validation: train_seeds (the engine's entry point, for every caller) checks the config with
         # validate_ued_config; run_experiment calls the same function before it writes anything
-        for warning in run_warnings(cfg, ctx.algo, task):
+        for warning in run_warnings(cfg, ctx.algo, task, check_step):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
         on_block = None
         if ctx.on_block is not None:  # stream each block's metrics, with the derived ones (e.g. solve_rate/mean)
@@ -107,12 +109,14 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
                         summary_metrics, plot_panels_spec, derive=None, bar_chart=None,
-                        preset_reasons=None, builds_levels: bool = True, refusal=None) -> Experiment:
+                        preset_reasons=None, builds_levels: bool = True, refusal=None,
+                        check_step: bool = False) -> Experiment:
     """A UED experiment over the task ``task_factory(cfg)`` builds. ``builds_levels``: whether
     its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
-    (None: it can; :func:`remidi.engine.validation.task_refusal` of one task)."""
+    (None: it can; :func:`remidi.engine.validation.task_refusal` of one task). ``check_step``: warn
+    of a step that draws from its key (a user's task, :func:`make_train`)."""
     if refusal is None and not builds_levels:
         def refusal(algo):
             return (f"{name}'s task has no level-building MDP (UEDTask.level_builder), which a learned level "
@@ -135,7 +139,7 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_for, summary_metrics, derive), plot=make_plot(plot_panels_spec, bar_chart),
+        train=make_train(task_for, summary_metrics, derive, check_step), plot=make_plot(plot_panels_spec, bar_chart),
         scaled_keys=SCALED_KEYS,
         divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N

@@ -160,8 +160,14 @@ def test_the_adapter_refuses_unknown_fields_and_empty_ranges_in_one_line():
     with pytest.raises(ConfigError, match="torque_noise_max > 0 draws noise from the step's key"):
         gymnax_task("Acrobot-v1", {"link_mass_1": (0.5, 1.5)}, params={"torque_noise_max": 0.1})
     # an integer field would be drawn as a float: MemoryChain's episode end (time == memory_length) never came
-    with pytest.raises(ConfigError, match="level field memory_length is int32 in MemoryChain-bsuite's params"):
+    with pytest.raises(ConfigError, match=r"level field memory_length is int32\[\] in MemoryChain-bsuite's params"):
         gymnax_task("MemoryChain-bsuite", {"memory_length": (2, 10)})
+    with pytest.raises(ConfigError, match=r"level field available_torque is float32\[3\] in Acrobot-v1's params"):
+        gymnax_task("Acrobot-v1", {"available_torque": (0.5, 1.5)})  # one float per level field, not an array
+    # ranges and grids as any one-dimensional sequence of numbers (arrays, ranges)
+    task = gymnax_task("CartPole-v1", {"gravity": np.array([5.0, 15.0])}, eval_grid={"gravity": np.linspace(5, 15, 3)})
+    assert len(task.eval_sets) == 3
+    gymnax_task("CartPole-v1", {"gravity": (5, 15)}, eval_grid={"gravity": range(5, 16, 5)})
     with pytest.raises(ConfigError, match="gymnax: cannot make 'NoSuchEnv-v0'"):
         gymnax_task("NoSuchEnv-v0", {"gravity": (1.0, 2.0)})
 

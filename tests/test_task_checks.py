@@ -70,6 +70,12 @@ class _Slip:  # each step a coin from the step's key replaces the observation: r
         return jax.tree.map(lambda x: jnp.where(jax.random.bernoulli(rng), x, x * 0), obs), state, reward, done, info
 
 
+class _NoisyReward:  # randomness in the reward alone: the tracker compares observations and ends, not rewards
+    def step_env(self, rng, state, action, params):
+        obs, state, reward, done, info = super().step_env(rng, state, action, params)
+        return obs, state, reward + 0.01 * jax.random.normal(rng), done, info
+
+
 class _RandomStart:  # a start drawn from the reset's key, claimed deterministic by the example's task
     def reset_env_to_level(self, rng, level, params):
         obs, state = super().reset_env_to_level(rng, level, params)
@@ -185,6 +191,8 @@ def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(c
     belief = dataclasses.replace(full, remidi=dataclasses.replace(full.remidi, tracker="belief"))
     assert run_warnings(belief, "remidi", slipping, check_step=True) == []
     assert run_warnings(full, "remidi", slipping) == []  # the library's own experiments skip the trace
+    noisy_reward = dataclasses.replace(task, env=type("NoisyReward", (_NoisyReward, type(task.env)), {})())
+    assert run_warnings(full, "remidi", noisy_reward, check_step=True) == []
 
 
 # ------------------------------------------------------------------------------ B: rebuilt from anywhere

@@ -104,7 +104,7 @@ class RegisteredNames(Sequence):
     ``why``: the sentence that says why an algorithm ``where`` leaves out is not among them, or a
     function of that algorithm giving it."""
 
-    def __init__(self, where=None, why: str | None = None):
+    def __init__(self, where=None, why=None):  # why: str, or Algorithm -> str | None
         self.where, self.why = where, why
 
     def refusal(self, name: str) -> str | None:

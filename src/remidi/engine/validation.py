@@ -307,9 +307,10 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
 
 
 def _step_reads_its_key(task: UEDTask) -> bool:
-    """Whether the outputs of ``task.env.step_env`` depend on its key (a step that draws its own
-    randomness), read from its traced program as :func:`_reset_reads_its_key` reads the reset's,
-    at a sampled level's first state and a zero action. False where this JAX lacks the pass.
+    """Whether the observation, state or end that ``task.env.step_env`` returns depend on its key
+    (a step that draws its own randomness; a random reward or info alone does not change what the
+    tracker compares), read from its traced program as :func:`_reset_reads_its_key` reads the
+    reset's, at a sampled level's first state and a zero action. False where this JAX lacks the pass.
     Traced once per task."""
     if task not in _STEP_READS_KEY:
         _STEP_READS_KEY[task] = _trace_step_key_use(task)
@@ -323,8 +324,12 @@ def _trace_step_key_use(task: UEDTask) -> bool:
         level = task.sample_level(jax.random.PRNGKey(0))
         _, state = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
         action = jnp.zeros((task.num_actions,), jnp.float32) if task.continuous else jnp.zeros((), jnp.int32)
-        closed = jax.make_jaxpr(lambda k: task.env.step_env(k, state, action, task.params))(jax.random.PRNGKey(1))
-        _, used = pe.dce_jaxpr(closed.jaxpr, [True] * len(closed.jaxpr.outvars))
+        closed, out = jax.make_jaxpr(lambda k: task.env.step_env(k, state, action, task.params),
+                                     return_shape=True)(jax.random.PRNGKey(1))
+        obs, nstate, reward, done, info = out  # the tracker reads observations and ends (and the state on)
+        kept = [True] * len(jax.tree.leaves((obs, nstate))) + [False] * len(jax.tree.leaves(reward)) \
+            + [True] * len(jax.tree.leaves(done)) + [False] * len(jax.tree.leaves(info))
+        _, used = pe.dce_jaxpr(closed.jaxpr, kept)
     except Exception:  # noqa: BLE001 (a JAX without this pass, or a step that does not trace this way)
         return False
     return bool(used[0])
@@ -364,8 +369,9 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_ste
             and cfg.remidi.tracker in ("prefix", "per_step") and _step_reads_its_key(task):
         out.append("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
                    "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
-                   "would give counts as distinguishable; put the randomness into the level (UEDTask.reseed_level) "
-                   "or judge with remidi.tracker=belief or simulated")
+                   "would give counts as distinguishable; draw the step's randomness from a seed the level holds "
+                   "(remidi.envs.noisy does; UEDTask.reseed_level redraws it) or judge with remidi.tracker=belief "
+                   "or simulated")
     return out
 
 

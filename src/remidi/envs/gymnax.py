@@ -43,6 +43,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
@@ -158,8 +159,18 @@ class LevelSpace:
         return sets
 
 
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) or (hasattr(x, "ndim") and x.ndim == 0)
+def _numbers(values, what: str, allowed: str, pair: bool = False) -> tuple[float, ...]:
+    """``values`` (a tuple, list, range or 1-D array of real numbers; two for a ``pair``) as a
+    tuple of floats; ConfigError naming ``what`` otherwise."""
+    try:
+        array = np.asarray(values)
+        ok = (array.ndim == 1 and array.size >= 1 and (array.size == 2 or not pair)
+              and (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ConfigError(f"gymnax: {what} must be {allowed}, got {values!r}")
+    return tuple(float(v) for v in array)
 
 
 def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed_in_level: bool = True,
@@ -195,17 +206,16 @@ def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed
     if "max_steps_in_episode" in level:  # the engine reads the limit once (max_episode_steps), not per level
         raise ConfigError("gymnax: level field 'max_steps_in_episode' cannot vary by level: the episode limit is "
                           "one number of the task (params={'max_steps_in_episode': N})")
-    for name, bounds in level.items():
-        if not (isinstance(bounds, (tuple, list)) and len(bounds) == 2 and all(_is_number(b) for b in bounds)):
-            raise ConfigError(f"gymnax: level field {name} must be a (low, high) pair of numbers, got {bounds!r}")
+    level = {name: _numbers(bounds, f"level field {name}", "a (low, high) pair of numbers", pair=True)
+             for name, bounds in level.items()}
+    for name in level:
         given = getattr(base, name)
-        if not jnp.issubdtype(jnp.asarray(given).dtype, jnp.floating):  # the level draws floats uniformly
-            raise ConfigError(f"gymnax: level field {name} is {jnp.asarray(given).dtype} in {env_name}'s params "
-                              f"(default {given!r}), and a level draws its fields as floats; allowed: a float field "
-                              f"(give {name} a fixed value in params)")
-    for name, values in (eval_grid or {}).items():
-        if not (isinstance(values, (tuple, list)) and values and all(_is_number(v) for v in values)):
-            raise ConfigError(f"gymnax: eval_grid field {name} must be a non-empty list of numbers, got {values!r}")
+        if not jnp.issubdtype(jnp.asarray(given).dtype, jnp.floating) or jnp.ndim(given):  # drawn: a float scalar
+            raise ConfigError(f"gymnax: level field {name} is {jnp.asarray(given).dtype}{list(jnp.shape(given))} in "
+                              f"{env_name}'s params (default {given!r}), and a level draws each field as one float; "
+                              f"allowed: a float scalar field (give {name} a fixed value in params)")
+    eval_grid = {name: _numbers(values, f"eval_grid field {name}", "a non-empty list of numbers")
+                 for name, values in (eval_grid or {}).items()}
     noise = {**dict(params or {}), **dict(level)}.get("torque_noise_max", getattr(base, "torque_noise_max", 0.0))
     if seed_in_level and (noise[1] if isinstance(noise, tuple) else noise) > 0:
         raise ConfigError("gymnax: torque_noise_max > 0 draws noise from the step's key, so the level (with its "

@@ -32,14 +32,16 @@ def _algo_help() -> str:
     from remidi.experiments import all_experiments
     from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
 
-    groups: dict[tuple, list[str]] = {}  # (default algorithms, every algorithm) → experiments
+    groups: dict[tuple, list[str]] = {}  # (default algorithms, every algorithm, qualifier) → experiments
     for exp in all_experiments().values():
-        groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), tuple(exp.algorithms)), []).append(exp.name)
-    groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS)), []).append("module:function")
+        groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), tuple(exp.algorithms), ""),
+                          []).append(exp.name)
+    # a user's task: what its level mutator and builder allow (custom.task_experiment's refusal)
+    groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS), " that the task can run"), []).append("module:function")
     parts = []
-    for (default, every), names in groups.items():
+    for (default, every, can), names in groups.items():
         extra = [a for a in every if a not in default]
-        parts.append(f"{', '.join(names)}: {', '.join(default)}" + (f" (all adds {', '.join(extra)})" if extra else ""))
+        parts.append(f"{', '.join(names)}: {', '.join(default)}" + (f" (all adds {', '.join(extra)}{can})" if extra else ""))
     return ("algorithm, comma-separated list, or 'all' (every algorithm of the experiment); default: the "
             "experiment's default set — " + "; ".join(parts))
 

@@ -233,15 +233,15 @@ def test_observation_statistics_survive_a_resume(tmp_path):
         np.testing.assert_array_equal(full[name], resumed[name], err_msg=name)
 
 
-def test_brax_floors_play_the_evaluated_levels_with_zero_and_with_normal_actions():
-    """The floors of docs/results.md's Brax section (remidi.experiments.brax_floors), on the toy
+def test_floors_play_the_evaluated_levels_with_zero_and_with_normal_actions():
+    """The floors of docs/results.md's Brax section (remidi.experiments.floors), on the toy
     task: zero action earns 1 − |target|² on each level; N(0, 1) actions lose their variance,
     2 more in expectation; the episodes after the first, inside the scan, do not count."""
-    from remidi.experiments.brax_floors import floor_returns
+    from remidi.experiments.floors import floor_returns
 
     levels = TASK.eval_sets["shown"]  # one-step episodes in a 3-step scan: the first episode's return only
     task = dataclasses.replace(TASK, eval_sets={"undisturbed": levels}, max_episode_steps=3)
     expected = 1.0 - np.sum(np.square(np.asarray(levels.target)), axis=1)
-    np.testing.assert_allclose(np.asarray(floor_returns(task, 0.0, 1))[:, 0], expected, rtol=1e-5)
-    noisy = np.asarray(floor_returns(task, 1.0, 4000)).mean(axis=1)
+    np.testing.assert_allclose(np.asarray(floor_returns(task, "undisturbed", "zero", 1))[:, 0], expected, rtol=1e-5)
+    noisy = np.asarray(floor_returns(task, "undisturbed", "normal", 4000)).mean(axis=1)
     np.testing.assert_allclose(noisy, expected - 2.0, atol=0.25)

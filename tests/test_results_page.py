@@ -248,7 +248,8 @@ def test_the_verdict_table_names_where_each_metric_comes_from():
 def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_path):
     for algo, values in (("plr", [-70.0, -80.0]), ("remidi", [90.0, 110.0])):
         write_run(tmp_path, "brax-ant", algo, [0, 1], evaluate={"return/undisturbed": values})
-    floors = {"ant": {"zero_action": 83.2, "normal_actions": -74.7}, "hopper": {"zero_action": 97.6, "normal_actions": 16.9}}
+    floors = {"brax-ant": {"zero_action": 83.2, "normal_actions": -74.7},
+              "brax-hopper": {"zero_action": 97.6, "normal_actions": 16.9}}
     rows = rp.floors_table(rp.load_runs(tmp_path), floors).splitlines()[2:]
     # a row per morphology with floors, "—" where it has no run
     assert rows == ["| ant | 83.2 | -74.7 | -75.0 | — | 100.0 | remidi |", "| hopper | 97.6 | 16.9 | — | — | — | — |"]

@@ -41,7 +41,8 @@ from remidi import stats
 from remidi.errors import ConfigError
 from remidi.files import atomic_write
 from remidi.experiments import outputs
-from remidi.experiments.brax_floors import OUT as BRAX_FLOORS
+from remidi.envs.maze_names import HELD_OUT_NAMES
+from remidi.experiments.floors import OUT as FLOORS_FILE
 from remidi.experiments.compare import compare
 from remidi.experiments.table import _cells as table_cells
 from remidi.experiments.table import _digits as table_digits
@@ -52,7 +53,7 @@ DATA = ROOT / "docs" / "results" / "data"
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 FIGURES = ROOT / "docs" / "results"
-FLOORS = BRAX_FLOORS  # python -m remidi.experiments.brax_floors
+FLOORS = FLOORS_FILE  # python -m remidi.experiments.floors
 ALPHA = 0.05
 
 
@@ -665,7 +666,7 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
 
 def floors_table(runs: dict, floors: dict) -> str:
     """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
-    policy (``floors``: :mod:`remidi.experiments.brax_floors`'s document) beside each algorithm's
+    policy (``floors``: :mod:`remidi.experiments.floors`' document) beside each algorithm's
     mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's
     ("—" without runs). ConfigError for a run on another Brax back end than the floors'."""
     algos = ("plr", "minimax-return", "remidi")
@@ -674,7 +675,7 @@ def floors_table(runs: dict, floors: dict) -> str:
     lines = ["| morphology | zero action | N(0, 1) actions | " + " | ".join(algos) + " | above zero action |",
              "| --- |" + " --- |" * (len(algos) + 3)]
     for exp in BRAX:
-        floor = floors.get(exp.removeprefix("brax-"))
+        floor = floors.get(exp)
         if floor is None:
             continue
         means = {a: float(np.mean(list(v.values()))) for a in algos if (v := metric_values(runs, exp, a, metric))}
@@ -682,11 +683,29 @@ def floors_table(runs: dict, floors: dict) -> str:
             ran = runs[exp, a].config.get("brax", {}).get("backend")
             if backend is not None and ran != backend:
                 raise ConfigError(f"data: {exp} {a} ran on the Brax back end {ran!r}, the floors on {backend!r}: "
-                                  f"python -m remidi.experiments.brax_floors measures them again")
+                                  f"python -m remidi.experiments.floors measures them again")
         above = ", ".join(a for a, m in means.items() if m > floor["zero_action"]) or ("none" if means else "—")
         lines.append(f"| {exp.removeprefix('brax-')} | {_f(floor['zero_action'], 1)} | {_f(floor['normal_actions'], 1)} | "
                      + " | ".join(_f(means[a], 1) if a in means else "—" for a in algos)
                      + f" | {above} |")
+    return "\n".join(lines)
+
+
+def maze_floors_table(runs: dict, floors: dict) -> str:
+    """The held-out mazes' solve rate of uniform random actions (``floors["mazes"]``:
+    :mod:`remidi.experiments.floors`) beside the T-maze and blindfold algorithms' means over seeds
+    (Fig. 6's metric), per maze and their mean."""
+    metrics = [f"solve_rate/{name}" for name in HELD_OUT_NAMES] + ["solve_rate/mean"]
+    rows = [("uniform random actions", floors["mazes"]["uniform_actions"])]
+    for exp in ("tmaze", "blindfold"):
+        for algo in ("plr", "remidi"):
+            values = {m: metric_values(runs, exp, algo, f"evaluate:{m}") for m in metrics}
+            if all(values.values()):
+                rows.append((f"{algo} ({exp})", {m: float(np.mean(list(v.values()))) for m, v in values.items()}))
+    lines = ["| policy | " + " | ".join(m.split("/", 1)[1] for m in metrics) + " |",
+             "| --- |" + " --- |" * len(metrics)]
+    lines += [f"| {name} | " + " | ".join(f"{means[m]:.4f}" if means[m] < 0.01 else _f(means[m]) for m in metrics) + " |"
+              for name, means in rows]
     return "\n".join(lines)
 
 
@@ -705,7 +724,9 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
         present = [a for a in algos if (exp, a) in runs
                    and any(m.split(":", 1)[1] in runs[exp, a].values.get(m.split(":", 1)[0], {}) for m in metrics)]
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
-    out["brax-floors"] = floors_table(runs, outputs.read_json(FLOORS)) if FLOORS.is_file() else "_No committed data yet._"
+    floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
+    out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
+    out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
     return out, results
 
 

@@ -255,3 +255,15 @@ def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_pat
     assert rows == ["| ant | 83.2 | -74.7 | -75.0 | — | 100.0 | remidi |", "| hopper | 97.6 | 16.9 | — | — | — | — |"]
     with pytest.raises(ConfigError, match="back end"):  # the runs' back end is not the floors'
         rp.floors_table(rp.load_runs(tmp_path), {**floors, "config": {"backend": "spring"}})
+
+
+def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):
+    from remidi.envs.maze_names import HELD_OUT_NAMES
+
+    metrics = [f"solve_rate/{n}" for n in HELD_OUT_NAMES] + ["solve_rate/mean"]
+    write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={m: [0.0, 0.01] for m in metrics})
+    floors = {"mazes": {"uniform_actions": {m: (0.0067 if "Small" in m else 0.0) for m in metrics}}}
+    rows = rp.maze_floors_table(rp.load_runs(tmp_path), floors).splitlines()[2:]
+    # the random policy first; PLR⊥ on the T-maze task (no ReMiDi run, no blindfold run: no rows)
+    assert rows[0].startswith("| uniform random actions | 0 | 0 |") and "| 0.0067 |" in rows[0]
+    assert rows[1:] == ["| plr (tmaze) | " + " | ".join(["0.0050"] * len(metrics)) + " |"]

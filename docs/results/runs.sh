@@ -87,8 +87,8 @@ at d071065
 for m in ant halfcheetah hopper walker2d; do
   for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
 done
-# (the Brax section's floors, two policies that learn nothing, are no run: `python -m
-# remidi.experiments.brax_floors` writes docs/results/references/brax-floors.json in minutes)
+# (the floors of the Brax and maze sections, policies that learn nothing, are no run: `python -m
+# remidi.experiments.floors` writes docs/results/references/floors.json in minutes)
 
 # issue #29: PAIRED and ReMiDi over PAIRED on the lever game. Their claims were stated at 76e7226
 # and first run there; both rerun at ab3ea79, where a generator's reservoir keeps a repeated

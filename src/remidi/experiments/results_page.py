@@ -704,8 +704,8 @@ def maze_floors_table(runs: dict, floors: dict) -> str:
                 rows.append((f"{algo} ({exp})", {m: float(np.mean(list(v.values()))) for m, v in values.items()}))
     lines = ["| policy | " + " | ".join(m.split("/", 1)[1] for m in metrics) + " |",
              "| --- |" + " --- |" * len(metrics)]
-    lines += [f"| {name} | " + " | ".join(f"{means[m]:.4f}" if means[m] < 0.01 else _f(means[m]) for m in metrics) + " |"
-              for name, means in rows]
+    cell = lambda v: "0" if v == 0 else f"{v:.4f}" if v < 0.01 else _f(v)  # noqa: E731 (the floor is near 0)
+    lines += [f"| {name} | " + " | ".join(cell(means[m]) for m in metrics) + " |" for name, means in rows]
     return "\n".join(lines)
 
 

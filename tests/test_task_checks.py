@@ -298,3 +298,17 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
     for algo in ("accel", "paired"):
         with pytest.raises(ConfigError, match=r"; allowed: dr, plr, minimax-return, remidi$"):
             validate_ued_config(TINY, algo, task)
+
+
+def test_the_floor_of_uniform_actions_plays_a_discrete_tasks_evaluation_sets(corridor):
+    """remidi.experiments.floors on a discrete task: uniform random actions, one return per level
+    and attempt (the corridor's returns lie in [-1, 1]); the continuous floors are refused."""
+    from remidi.experiments.floors import floor_returns
+
+    task = corridor.make_task()
+    name = sorted(task.eval_sets)[0]
+    levels = jax.tree.leaves(task.eval_sets[name])[0].shape[0]
+    returns = np.asarray(floor_returns(task, name, "uniform", 8))
+    assert returns.shape == (levels, 8) and np.all(np.abs(returns) <= 1.0) and len(np.unique(returns)) > 1
+    with pytest.raises(ValueError, match="allowed: uniform$"):
+        floor_returns(task, name, "zero", 1)

@@ -40,9 +40,10 @@ def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):
 
     from remidi.engine.evaluation import first_episode_return
 
-    if policy not in POLICIES or (policy == "uniform") == bool(task.continuous):
-        raise ValueError(f"policy {policy!r} does not fit a task with {'continuous' if task.continuous else 'discrete'} "
-                         f"actions; allowed: {', '.join(POLICIES)}")
+    fits = ("zero", "normal") if task.continuous else ("uniform",)
+    if policy not in fits:
+        raise ValueError(f"policy: {policy!r} for a task with {'continuous' if task.continuous else 'discrete'} "
+                         f"actions; allowed: {', '.join(fits)}")
     env, params, levels = task.eval_envs.get(name, task.env), task.params, task.eval_sets[name]
     num_levels = jax.tree.leaves(levels)[0].shape[0]
 

@@ -17,8 +17,8 @@ a bad one).
 Each plays the levels ``remidi evaluate`` scores (``task.eval_sets``, in the environment of each
 set, ``task.eval_envs``), scored by the same first-episode return over the task's episode limit
 (:func:`remidi.engine.evaluation.first_episode_return`) and, for the mazes, the task's solve
-criterion; ``attempts`` independent attempts per level (zero action one: its episode is
-determined by the level). Brax's physics is the experiments' default back end.
+criterion; independent attempts per level (zero action one: its episode is determined by the
+level). Brax's physics is the experiments' default back end.
 """
 
 from __future__ import annotations
@@ -68,9 +68,12 @@ def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):
     return jnp.asarray(jax.jit(per_level)(keys, levels))
 
 
-def measure(attempts: int = 30, seed: int = 0) -> dict:
+def measure(attempts: int = 30, maze_attempts: int = 1000, seed: int = 0) -> dict:
     """``{"config": ..., "brax-<m>": {"zero_action", "normal_actions", per level},
-    "mazes": {"uniform_actions": {"solve_rate/<maze>": ..., "solve_rate/mean": ...}}}``."""
+    "mazes": {"uniform_actions": {"solve_rate/<maze>": ..., "solve_rate/mean": ...}}}``: the Brax
+    floors over ``attempts`` per level (as the agents' evaluation), the mazes' over
+    ``maze_attempts`` (a random policy's solve rate is a few in a thousand at most: 30 attempts
+    would see a handful of successes in all)."""
     import numpy as np
 
     from remidi.envs.brax import DEFAULT_BACKEND, MORPHOLOGIES, brax_task
@@ -78,7 +81,8 @@ def measure(attempts: int = 30, seed: int = 0) -> dict:
     from remidi.envs.maze_names import HELD_OUT_NAMES
     from remidi.files import code_version
 
-    out = {"config": {"backend": DEFAULT_BACKEND, "attempts": attempts, "seed": seed, "code": code_version(),
+    out = {"config": {"backend": DEFAULT_BACKEND, "attempts": attempts, "maze_attempts": maze_attempts, "seed": seed,
+                      "code": code_version(),
                       "command": "python -m remidi.experiments.floors"}}
     for m in MORPHOLOGIES:
         task = brax_task(m)
@@ -89,8 +93,8 @@ def measure(attempts: int = 30, seed: int = 0) -> dict:
                             "normal_actions_per_level": [round(float(v), 3) for v in noisy]}
         print(f"brax-{m}: zero action {zero.mean():.1f}, N(0, 1) actions {noisy.mean():.1f}", file=sys.stderr, flush=True)
     task = maze_task("tmaze")  # its held-out sets are the blindfold's too
-    rates = {f"solve_rate/{name}": float(np.mean(task.solved(np.asarray(floor_returns(task, name, "uniform", attempts,
-                                                                                       seed)))))
+    rates = {f"solve_rate/{name}": float(np.mean(task.solved(np.asarray(floor_returns(task, name, "uniform",
+                                                                                       maze_attempts, seed)))))
              for name in HELD_OUT_NAMES}
     rates["solve_rate/mean"] = float(np.mean(list(rates.values())))  # as experiments/maze.py derives it
     out["mazes"] = {"uniform_actions": rates}

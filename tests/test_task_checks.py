@@ -76,6 +76,11 @@ class _NoisyReward:  # randomness in the reward alone: the tracker compares obse
         return obs, state, reward + 0.01 * jax.random.normal(rng), done, info
 
 
+class _BrokenStep:  # a step that fails on the sampled level (e.g. one of the wrong shape)
+    def step_env(self, rng, state, action, params):
+        raise ValueError("cannot concatenate")
+
+
 class _RandomStart:  # a start drawn from the reset's key, claimed deterministic by the example's task
     def reset_env_to_level(self, rng, level, params):
         obs, state = super().reset_env_to_level(rng, level, params)
@@ -93,6 +98,8 @@ def broken(corridor, kind: str):
         return dataclasses.replace(task, env=type("Wide", (_WideReward, env_class), {})())
     if kind == "done":
         return dataclasses.replace(task, env=type("IntDone", (_IntDone, env_class), {})())
+    if kind == "step":
+        return dataclasses.replace(task, env=type("BrokenStep", (_BrokenStep, env_class), {})())
     if kind == "deterministic_reset":
         return dataclasses.replace(task, env=type("RandomStart", (_RandomStart, env_class), {})())
     if kind == "num_actions_space":  # more actions than the environment's Discrete(2)
@@ -127,6 +134,8 @@ def broken(corridor, kind: str):
     ("reward", "task.env: a step's reward must be a float scalar (f32[]) per environment, got float32[2]"),
     ("done", "task.env: a step's done must be a boolean scalar (bool[]) per environment, got int32[]"),
     ("num_actions_space", "task.num_actions: must be the environment's 2 actions (its action_space), got 5"),
+    ("step", "task.env: a step of the environment failed: ValueError: cannot concatenate (from a level of "
+             "sample_level: bool[], bool[], int32[])"),
     ("deterministic_reset", "task.deterministic_reset: true promises that env.reset_to_level ignores its key, but "
                             "what it returns depends on the key (traced)"),
     ("eval_sets", "task.eval_sets: 'one' must be a batch of levels"),

@@ -67,15 +67,15 @@ def _check_action_count(task) -> None:
                           f"{task.num_actions}")
 
 
-def _traced(field: str, what: str, fn, *args):
+def _traced(field: str, what: str, fn, *args, hint: str = ""):
     """``jax.eval_shape(fn, *args)``; ConfigError ``task.FIELD: WHAT failed: Type: message`` (one
-    line) when the user's code raises."""
+    line, ``hint`` appended) when the user's code raises."""
     from remidi.errors import ConfigError
 
     try:
         return jax.eval_shape(fn, *args)
     except Exception as err:  # noqa: BLE001 (the user's code: report its own error in one line)
-        raise ConfigError(f"task.{field}: {what} failed: {_user_error(err)}") from None
+        raise ConfigError(f"task.{field}: {what} failed: {_user_error(err)}{hint}") from None
 
 
 def _is_scalar(x, kind: str) -> bool:
@@ -173,7 +173,7 @@ def validate_task(task: UEDTask) -> None:
     action = (jax.ShapeDtypeStruct((task.num_actions,), jnp.float32) if task.continuous
               else jax.ShapeDtypeStruct((), jnp.int32))
     stepped = _traced("env", "a step of the environment", lambda k, s, a: task.env.step(k, s, a, task.params),
-                      rng, state, action)
+                      rng, state, action, hint=f" (from a level of sample_level: {_shapes(level)})")
     if not isinstance(stepped, tuple) or len(stepped) != 5:
         raise ConfigError("task.env: step must return (obs, state, reward, done, info)")
     next_obs, next_state, reward, done, _ = stepped

@@ -99,12 +99,23 @@ def _reset_reads_its_key(task: UEDTask, rng, level) -> bool:
     program (JAX's dead-code elimination keeps the inputs an output uses; nothing is compiled). A
     task that claims ``deterministic_reset`` falsely would be replayed from one start per level
     and judged wrongly by ReMiDi's trackers. False where this JAX lacks the (internal) pass."""
+    return _reads_key(lambda k, lv: task.env.reset_to_level(k, lv, task.params), rng, level)
+
+
+def _reads_key(fn, key, *args, kept=lambda out: True) -> bool:
+    """Whether the outputs of ``fn(key, *args)`` that ``kept`` (the output pytree -> a pytree of
+    bools, or one bool for all) marks depend on ``key``: JAX's dead-code elimination of the traced
+    program keeps the inputs those outputs use (nothing is compiled; arrays or ShapeDtypeStructs).
+    False where this JAX lacks the (internal) pass, or ``fn`` does not trace this way."""
     try:
         from jax.interpreters import partial_eval as pe
 
-        closed = jax.make_jaxpr(lambda k, lv: task.env.reset_to_level(k, lv, task.params))(rng, level)
-        _, used = pe.dce_jaxpr(closed.jaxpr, [True] * len(closed.jaxpr.outvars))
-    except Exception:  # noqa: BLE001 (a JAX without this pass, or a reset that traces only abstractly elsewhere)
+        closed, out = jax.make_jaxpr(fn, return_shape=True)(key, *args)
+        marks = kept(out)
+        flags = [bool(m) for m in jax.tree.leaves(marks)] if not isinstance(marks, bool) else \
+            [marks] * len(closed.jaxpr.outvars)
+        _, used = pe.dce_jaxpr(closed.jaxpr, flags)
+    except Exception:  # noqa: BLE001 (a JAX without this pass, or a function that traces only abstractly elsewhere)
         return False
     return bool(used[0])  # the key is the program's first input
 
@@ -319,20 +330,18 @@ def _step_reads_its_key(task: UEDTask) -> bool:
 
 def _trace_step_key_use(task: UEDTask) -> bool:
     try:
-        from jax.interpreters import partial_eval as pe
-
         level = task.sample_level(jax.random.PRNGKey(0))
         _, state = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
-        action = jnp.zeros((task.num_actions,), jnp.float32) if task.continuous else jnp.zeros((), jnp.int32)
-        closed, out = jax.make_jaxpr(lambda k: task.env.step_env(k, state, action, task.params),
-                                     return_shape=True)(jax.random.PRNGKey(1))
-        obs, nstate, reward, done, info = out  # the tracker reads observations and ends (and the state on)
-        kept = [True] * len(jax.tree.leaves((obs, nstate))) + [False] * len(jax.tree.leaves(reward)) \
-            + [True] * len(jax.tree.leaves(done)) + [False] * len(jax.tree.leaves(info))
-        _, used = pe.dce_jaxpr(closed.jaxpr, kept)
-    except Exception:  # noqa: BLE001 (a JAX without this pass, or a step that does not trace this way)
+    except Exception:  # noqa: BLE001 (validate_task reports a failing reset)
         return False
-    return bool(used[0])
+    action = jnp.zeros((task.num_actions,), jnp.float32) if task.continuous else jnp.zeros((), jnp.int32)
+
+    def kept(out):  # the tracker reads observations and ends (and the state carries them on), not reward or info
+        obs, nstate, reward, done, info = out
+        return jax.tree.map(lambda _: True, (obs, nstate)), jax.tree.map(lambda _: False, reward), \
+            jax.tree.map(lambda _: True, done), jax.tree.map(lambda _: False, info)
+
+    return _reads_key(lambda k: task.env.step_env(k, state, action, task.params), jax.random.PRNGKey(1), kept=kept)
 
 
 def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_step: bool = False) -> list[str]:

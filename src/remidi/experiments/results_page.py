@@ -42,7 +42,7 @@ from remidi.errors import ConfigError
 from remidi.files import atomic_write
 from remidi.experiments import outputs
 from remidi.envs.maze_names import HELD_OUT_NAMES
-from remidi.experiments.floors import OUT as FLOORS_FILE
+from remidi.experiments.floors import OUT as FLOORS  # python -m remidi.experiments.floors writes it
 from remidi.experiments.compare import compare
 from remidi.experiments.table import _cells as table_cells
 from remidi.experiments.table import _digits as table_digits
@@ -53,7 +53,6 @@ DATA = ROOT / "docs" / "results" / "data"
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 FIGURES = ROOT / "docs" / "results"
-FLOORS = FLOORS_FILE  # python -m remidi.experiments.floors
 ALPHA = 0.05
 
 

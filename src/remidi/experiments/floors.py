@@ -28,7 +28,6 @@ import sys
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[3] / "docs" / "results" / "references" / "floors.json"
-POLICIES = ("zero", "normal", "uniform")
 
 
 def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):

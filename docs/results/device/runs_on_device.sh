@@ -3,7 +3,11 @@
 # run no other copy holds, as the CPU lanes do), SIGTERM to every run at DEADLINE s (each
 # finishes the block under way, checkpoints it and stops: Python sees the signal only when XLA's
 # call returns, so HARD − DEADLINE should exceed one block), SIGKILL at HARD s, and the run folders back under
-# $OUT as a gzipped tar split into 15 MiB parts (a call brings back at most 8 files of 16 MiB).
+# $OUT: each run xz-compressed on its own, as many whole runs as fit in BACK MiB (default 60; a call
+# brings back at most 8 files of 16 MiB, 64 MiB in all) in one tar split into 15 MiB parts. The runs
+# that do not fit are named (they stay on the device while it is warm: fetch them with a second call
+# from $W/pack). A gzipped tar of all four 5-seed maze runs of 2026-11-26 came to 80 MB and its last
+# part was left out: hence one archive per run and the size check.
 #
 #   on the device, from the checkout root:  [ONLY="EXP/NAME ..."] bash docs/results/device/runs_on_device.sh [JOBS]
 #
@@ -12,9 +16,11 @@
 #
 # It expects, carried along (README): `.whl` (the wheels the image lacks), `.gpu/<commit>` (a
 # depth-1 clone of each commit whose runs are still to train: runs.sh trains from
-# $W/frozen-<commit>, linked to it, so no git history is needed) and, optionally, `.gpu/runs.tgz`
-# (run folders to resume, as `tar -C RUNS_DIR -czf .gpu/runs.tgz EXP/NAME ...` packs them).
-# Unpack what comes back with `cat runs.tgz.part-* | tar -C RUNS_DIR -xzf -`.
+# $W/frozen-<commit>, linked to it, so no git history is needed) and, optionally, `.gpu/runs.txz`
+# (run folders to resume, as `tar -C RUNS_DIR -cf - EXP/NAME ... | xz -T0 -6 > .gpu/runs.txz` packs
+# them: a 5-seed cpu-preset simulated-model checkpoint, 95 MB, packs to 22 MB; `.gpu/runs.tgz` is
+# read too). Unpack what comes back with
+#   cat runs.tar.part-* | tar -C PACK -xf - && for f in PACK/*.txz; do tar -C RUNS_DIR -xJf "$f"; done
 #
 # Test the orchestration on the CPU without training (a stand-in python that sleeps until SIGTERM):
 #   STANDIN=1 DEADLINE=20 HARD=30 OUT=/tmp/out W=/tmp/w bash docs/results/device/runs_on_device.sh 3
@@ -32,6 +38,7 @@ else
 fi
 for c in .gpu/*/; do c=${c%/}; [ -d "$c/src/remidi" ] && ln -s "$PWD/$c" "$W/frozen-${c#.gpu/}" && echo "clone ${c#.gpu/}"; done
 [ -f .gpu/runs.tgz ] && tar -C "$R" -xzf .gpu/runs.tgz
+[ -f .gpu/runs.txz ] && tar -C "$R" -xJf .gpu/runs.txz
 updates() {  # the last checkpointed update of every run folder
   for d in "$R"/*/*/; do [ -f "$d/checkpoint.npz" ] || continue
     echo "${d#$R/} $($NP -c "import numpy as np; print(int(np.load('$d/checkpoint.npz')['leaf:.update'].max()))" 2>/dev/null)"; done; }
@@ -48,5 +55,14 @@ while alive && [ "$(el)" -lt "$HARD" ]; do sleep 2; done
 kill -KILL $runs 2>/dev/null; echo "stopped at $(el) s"
 updates > "$W/updates-after.txt"; join -a 2 -e - -o 0,1.2,2.2 "$W/updates-before.txt" "$W/updates-after.txt"  # run, before, after
 cp "$W"/job*.log "$W"/updates-*.txt "$R/" 2>/dev/null
-tar -C "$R" -czf - . | split -b 15m - "$OUT/runs.tgz.part-"
-ls -la "$OUT"; echo "done at $(el) s"
+# one xz archive per run (its folder and log), then as many whole runs as fit in BACK MiB, by folder name
+P=$W/pack; mkdir -p "$P"; cap=$(( ${BACK:-60} * 1024 * 1024 )); used=0; taken=()
+tar -C "$R" -cJf "$P/logs.txz" $(cd "$R" && ls job*.log updates-*.txt 2>/dev/null); taken+=(logs.txz)
+for d in "$R"/*/*/; do run=${d#$R/}; run=${run%/}; f=${run/\//+}.txz
+  tar -C "$R" -cf - "$run" $(cd "$R" && ls "$run.log" 2>/dev/null) | xz -T0 -6 > "$P/$f"
+  size=$(stat -c %s "$P/$f")
+  if [ $(( used + size )) -le "$cap" ]; then used=$(( used + size )); taken+=("$f")
+  else echo "LEFT ON THE DEVICE ($(( size / 1048576 )) MiB, over BACK): $P/$f"; fi
+done
+tar -C "$P" -cf - "${taken[@]}" | split -b 15m - "$OUT/runs.tar.part-"
+ls -la "$OUT"; echo "back: ${taken[*]}"; echo "done at $(el) s"

@@ -34,6 +34,46 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
     return replay_fractions({name: values[:, window] for name, values in raw.items()}, num_envs)
 
 
+def stalled_seeds(metrics: dict[str, np.ndarray], num_envs: int, length: int) -> np.ndarray:
+    """bool[S]: the seeds whose block of ``length`` updates (``metrics``: the driver's block
+    metrics, f[S] each) trained the agent on nothing because ReMiDi rejected every level it
+    played: no update replayed or rehearsed, and every env of every update played a level a frozen
+    adversary explains at every step (``rejected`` = ``num_envs`` × ``length``), so every step the
+    loss could see was masked. With the exact tracker the frozen buffers explain every level drawn;
+    with ``remidi.tracker=belief`` or ``simulated`` the frozen models may explain too much."""
+    if not {"rejected", "replay"} <= metrics.keys():
+        return np.zeros(0, bool)
+    stalled = (np.asarray(metrics["rejected"]) >= num_envs * length) & (np.asarray(metrics["replay"]) == 0)
+    if "rehearsal" in metrics:
+        stalled &= np.asarray(metrics["rehearsal"]) == 0
+    return stalled
+
+
+def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> Callable[[int, dict], list[str]]:
+    """A block callback ``(done, metrics) -> warnings``: one line for each seed the first time one
+    of its blocks (of ``block`` updates, ``eval_every``, the last one possibly shorter) is
+    :func:`stalled_seeds`."""
+    warned: set[int] = set()
+    start: list[int | None] = [None]  # where the block before ended (None: the first of this invocation)
+
+    def check(done: int, metrics: dict) -> list[str]:
+        first = start[0] if start[0] is not None else (done - 1) // block * block
+        start[0] = done
+        lines = []
+        for i in np.flatnonzero(stalled_seeds(metrics, num_envs, done - first)):
+            if seeds[i] not in warned:
+                warned.add(seeds[i])
+                cause = ("the frozen buffers explain every level drawn (the refinement has nothing left)"
+                         if tracker in ("prefix", "per_step") else
+                         f"with remidi.tracker={tracker} the frozen models may explain too much "
+                         f"(README, \"The learned belief tracker\")")
+                lines.append(f"seed {seeds[i]}: in updates {first + 1}–{done} a frozen adversary explained every "
+                             f"level played and none was replayed, so the agent trained on nothing: {cause}")
+        return lines
+
+    return check
+
+
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                check_step: bool = False):
@@ -48,9 +88,12 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         # validate_ued_config; run_experiment calls the same function before it writes anything
         for warning in run_warnings(cfg, ctx.algo, task, check_step):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
-        on_block = None
-        if ctx.on_block is not None:  # stream each block's metrics, with the derived ones (e.g. solve_rate/mean)
-            def on_block(done, metrics):
+        stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every)
+
+        def on_block(done, metrics):
+            for warning in stalls(done, metrics):
+                print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
+            if ctx.on_block is not None:  # stream each block's metrics, with the derived ones (e.g. solve_rate/mean)
                 more = derive({k: np.asarray(v)[:, None] for k, v in metrics.items()}) if derive is not None else {}
                 ctx.on_block(done, {**metrics, **{k: np.asarray(v)[:, 0] for k, v in more.items()}})
 

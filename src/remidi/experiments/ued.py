@@ -15,7 +15,7 @@ import jax
 import numpy as np
 
 from remidi.engine.driver import replay_fractions, train_seeds
-from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames, get_algorithm
+from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames
 from remidi.engine.config import UEDConfig
 from remidi.engine.paired import LevelGenerator
 from remidi.engine.validation import run_warnings, validate_ued_config
@@ -35,27 +35,24 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
     return replay_fractions({name: values[:, window] for name, values in raw.items()}, num_envs)
 
 
-def stalled_seeds(metrics: dict[str, np.ndarray], num_envs: int, length: int, trains_on_fresh: bool) -> np.ndarray:
-    """bool[S]: the seeds whose block of ``length`` updates (``metrics``: the driver's block
-    metrics, f[S] each) trained the agent on nothing while ReMiDi rejected levels (``rejected``
-    > 0: a frozen adversary explained them at every step). An algorithm that learns only from
-    replays (PLR⊥'s family, ``trains_on_fresh`` False) trained on nothing when no update of the
-    block replayed or rehearsed; one that learns from every rollout (``trains_on_fresh``, a
-    generator's), when every env of every update played such a level (``rejected`` =
-    ``num_envs`` × ``length``), so every step the loss could see was masked."""
-    rejected = np.asarray(metrics["rejected"])
-    idle = np.asarray(metrics["replay"]) == 0
-    if "rehearsal" in metrics:
-        idle &= np.asarray(metrics["rehearsal"]) == 0
-    masked = rejected >= num_envs * length
-    return (rejected > 0) & idle & (masked if trains_on_fresh else True)
+def stalled_seeds(metrics: dict[str, np.ndarray]) -> np.ndarray:
+    """bool[S]: the seeds whose block of updates (``metrics``: the driver's block metrics, f[S]
+    each) trained the agent on nothing while ReMiDi rejected levels: a frozen adversary explained
+    some level at every step (``rejected`` > 0), and no update of the block had a step to learn
+    from (``ppo/policy_loss`` NaN: it is NaN on an update that does not train or whose every step
+    was masked, and the block's mean leaves those out). For PLR⊥'s family that is a block without
+    a replay (the active buffer never reached its replay minimum), for an algorithm that trains on
+    every rollout a block whose every level was explained."""
+    loss = metrics.get("ppo/policy_loss")
+    if loss is None:
+        return np.zeros(0, bool)
+    return (np.asarray(metrics["rejected"]) > 0) & np.isnan(np.asarray(loss))
 
 
-def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int,
-                 trains_on_fresh: bool) -> Callable[[int, dict], list[str]]:
-    """A block callback ``(done, metrics) -> warnings``: one line for each seed the first time one
-    of its blocks (of ``block`` updates, ``eval_every``, the last one possibly shorter: a run
-    resumes at a block's end) is :func:`stalled_seeds`, with the block's counts."""
+def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> Callable[[int, dict], list[str]]:
+    """A block callback ``(done, metrics) -> warnings``: one line for each seed the first time (in
+    this invocation) one of its blocks (of ``block`` updates, ``eval_every``, the last one possibly
+    shorter: a run resumes at a block's end) is :func:`stalled_seeds`, with the block's counts."""
     warned: set[int] = set()
     start: list[int | None] = [None]  # where the block before ended (None: the first of this invocation)
     hint = ("" if tracker in ("prefix", "per_step") else
@@ -66,13 +63,12 @@ def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int,
         first = start[0] if start[0] is not None else (done - 1) // block * block
         start[0] = done
         lines = []
-        for i in np.flatnonzero(stalled_seeds(metrics, num_envs, done - first, trains_on_fresh)):
+        for i in np.flatnonzero(stalled_seeds(metrics)):
             if seeds[i] not in warned:
                 warned.add(seeds[i])
-                inserted = f", {metrics['inserted'][i]:.0f} entered the active buffer" if "inserted" in metrics else ""
                 lines.append(f"seed {seeds[i]}: in updates {first + 1}–{done} the agent trained on nothing: a frozen "
                              f"adversary explained {metrics['rejected'][i]:.0f} of the {num_envs * (done - first)} "
-                             f"levels played{inserted} and none was replayed{hint}")
+                             f"levels played{hint}")
         return lines
 
     return check
@@ -92,8 +88,7 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         # validate_ued_config; run_experiment calls the same function before it writes anything
         for warning in run_warnings(cfg, ctx.algo, task, check_step):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
-        stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every,
-                              get_algorithm(ctx.algo).trains_on_fresh)
+        stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every)
 
         def on_block(done, metrics):
             for warning in stalls(done, metrics) if jax.process_index() == 0 else ():  # one process says it

@@ -51,10 +51,19 @@ def test_the_warning_names_the_seed_updates_and_counts_once_and_the_belief_hint(
     assert last.startswith("seed 0: in updates 901–1000") and "of the 3200 levels played" in last
 
 
+def test_the_stalled_updates_of_a_whole_run_merge_following_blocks():
+    steps = np.array([150, 300, 450, 600])
+    history = {"rejected": np.array([[0.0, 4800, 4800, 4700], [4800, 10, 4800, 0]]),
+               "ppo/policy_loss": np.array([[0.1, NAN, NAN, NAN], [NAN, 0.2, NAN, NAN]])}
+    assert ued.stalled_updates([0, 1], steps, history) == {"0": [[151, 600]], "1": [[1, 150], [301, 450]]}
+    assert ued.stalled_updates([0, 1], steps, {"rejected": history["rejected"]}) == {}
+
+
 @pytest.mark.parametrize("process", [0, 1])
 def test_training_prints_it_in_the_first_process(monkeypatch, capsys, process):
     """make_train's block callback prints the warning whatever the experiment tracking, once
-    across processes (each gets every seed's metrics)."""
+    across processes (each gets every seed's metrics), and the run's summary lists the stalled
+    updates."""
     from remidi.engine.driver import TrainResult
 
     def fake_train_seeds(task, cfg, algo, seeds, *, on_block=None, **kwargs):
@@ -68,6 +77,7 @@ def test_training_prints_it_in_the_first_process(monkeypatch, capsys, process):
     monkeypatch.setattr(ued.jax, "process_index", lambda: process)
     cfg = UEDConfig(num_envs=ENVS, eval_every=BLOCK, num_updates=BLOCK)
     train = ued.make_train(lambda c: None, ())
-    train(RunContext(experiment="x", algo="remidi", preset="smoke", seeds=[7], config=cfg, out=None))
+    result = train(RunContext(experiment="x", algo="remidi", preset="smoke", seeds=[7], config=cfg, out=None))
     printed = "remidi: warning: seed 7: in updates 1–150 the agent trained on nothing" in capsys.readouterr().err
     assert printed == (process == 0)
+    assert result.extra["stalled_updates"] == {"7": [[1, 150]]}  # summary.json keeps it, for every process

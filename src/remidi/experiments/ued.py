@@ -74,6 +74,26 @@ def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> C
     return check
 
 
+def stalled_updates(seeds: list[int], steps: np.ndarray, history: dict[str, np.ndarray]) -> dict[str, list]:
+    """``{seed: [[first, last], ...]}``: the update ranges (inclusive, merged where blocks follow
+    each other) of each seed's blocks that were :func:`stalled_seeds`, from the whole run's
+    ``history`` ({name: f[S, T]}, blocks ending at ``steps`` i[T]; resumed parts included); seeds
+    without one are left out. Written to summary.json as ``stalled_updates``."""
+    if "ppo/policy_loss" not in history:
+        return {}
+    out: dict[str, list] = {}
+    for k, end in enumerate(np.asarray(steps).tolist()):
+        begin = int(steps[k - 1]) + 1 if k else 1
+        block = {name: np.asarray(history[name])[:, k] for name in ("rejected", "ppo/policy_loss")}
+        for i in np.flatnonzero(stalled_seeds(block)):
+            ranges = out.setdefault(str(seeds[i]), [])
+            if ranges and ranges[-1][1] == begin - 1:
+                ranges[-1][1] = int(end)
+            else:
+                ranges.append([int(begin), int(end)])
+    return out
+
+
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                check_step: bool = False):
@@ -106,8 +126,11 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         final.update(final_replay_fractions(result.per_step, cfg.num_envs))
         ordered = {name: final[name] for name in summary_metrics if name in final}
         ordered.update({k: v for k, v in final.items() if k not in ordered})
-        return RunResult(steps=result.steps, history=history, final=ordered,
-                         extra={"parts": list(result.parts)} if result.parts else {})
+        extra = {"parts": list(result.parts)} if result.parts else {}
+        stalled = stalled_updates(ctx.seeds, result.steps, result.history)
+        if stalled:  # the blocks a seed trained on nothing while a frozen adversary rejected levels
+            extra["stalled_updates"] = stalled
+        return RunResult(steps=result.steps, history=history, final=ordered, extra=extra)
 
     return train
 

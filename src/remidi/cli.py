@@ -327,6 +327,14 @@ def _note_unfinished(runs) -> None:
               f"{resume} finishes it)", file=sys.stderr)
 
 
+def _cmd_status(args) -> int:
+    from remidi.experiments.status import run_folders, run_status
+
+    for folder in run_folders(args.runs):
+        print("\n".join(run_status(folder)))
+    return 0
+
+
 def _cmd_compare(args) -> int:
     from remidi.experiments.compare import compare_runs, format_comparison, plot_comparison
     from remidi.experiments.table import summaries
@@ -494,6 +502,17 @@ def build_parser() -> argparse.ArgumentParser:
                                                               "points (metrics.csv) instead of its final value")
     compare.add_argument("--out", metavar="FIG.png", help="also draw the interval plot into FIG.png")
     compare.set_defaults(func=_cmd_compare)
+
+    status = sub.add_parser("status", help="where runs stand: finished, or the update of their last checkpoint, "
+                                           "the time left, stalled seeds",
+                            description="Read run folders without loading a model: finished (summary.json; "
+                                        "evaluated or not) or the update of the last checkpoint and when it was "
+                                        "written, each part's updates, device and seconds per update, the time "
+                                        "left at the last part's rate, and the updates in which a seed trained "
+                                        "on nothing while a frozen adversary rejected levels.")
+    status.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR",
+                        help="run folders, or a several-algorithm run's folder")
+    status.set_defaults(func=_cmd_status)
 
     from remidi.bench import BENCHMARKS, DEFAULT
 

@@ -1,0 +1,115 @@
+"""``remidi status RUN_DIR ...``: where runs stand, read from their folders without loading a
+model: finished (``summary.json``; evaluated when ``evaluate.json`` is there) or the update of the
+last checkpoint, each part's updates, device and seconds per update, the time left at the last
+part's rate, and the updates in which a seed trained on nothing while a frozen adversary rejected
+levels (:func:`remidi.experiments.ued.stalled_updates`, from the checkpoint's metrics)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from remidi.engine.checkpoint import CHECKPOINT, HISTORY, load_history
+from remidi.errors import ConfigError
+
+
+def run_folders(folders: list[Path]) -> list[Path]:
+    """Each folder that holds a ``config.json`` of one algorithm's run, in the order given (a
+    several-algorithm run's folder: its algorithms' folders, by name)."""
+    found = []
+    for folder in map(Path, folders):
+        config = folder / "config.json"
+        subs = sorted(p.parent for p in folder.glob("*/config.json")) if folder.is_dir() else []
+        if config.is_file() and "algo" in _read_json(config):
+            found.append(folder)
+        elif subs:
+            found.extend(subs)
+        else:
+            raise ConfigError(f"RUN_DIR: {folder} holds no run (no config.json written by remidi run)")
+    return found
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"RUN_DIR: {path} cannot be read ({type(err).__name__})") from None
+    return doc if isinstance(doc, dict) else {}
+
+
+def _duration(seconds: float) -> str:
+    minutes = round(seconds / 60)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{max(minutes, 1)} min"
+
+
+def _part(part: dict) -> str:
+    first, last = part["updates"]
+    code = part.get("code") or {}
+    device = code.get("device") or "device not recorded"
+    rate = f", {part['wall_s'] / (last - first):.1f} s/update" if last > first and part.get("wall_s") else ""
+    return f"{first}–{last} on {device}{rate}"
+
+
+def _seeds(seeds: list[int]) -> str:
+    return f"seeds {seeds[0]}–{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 1 \
+        else "seed" + ("s " if len(seeds) > 1 else " ") + ", ".join(map(str, seeds))
+
+
+def _stalled_line(stalled: dict) -> str:
+    if not stalled:
+        return "stalled: none"
+    return "stalled (trained on nothing while a frozen adversary rejected levels): " + "; ".join(
+        f"seed {seed} updates " + ", ".join(f"{a}–{b}" for a, b in ranges) for seed, ranges in stalled.items())
+
+
+def run_status(folder: Path, now: float | None = None) -> list[str]:
+    """The lines ``remidi status`` prints for one algorithm's run folder."""
+    from remidi.experiments.ued import stalled_updates
+
+    config = _read_json(folder / "config.json")
+    seeds = [int(s) for s in config.get("seeds", [])]
+    total = (config.get("config") or {}).get("num_updates")
+    head = f"{folder}: {config.get('algo')} on {config.get('experiment')}, preset {config.get('preset')}, " \
+           f"{_seeds(seeds) if seeds else 'no seeds'}"
+    lines = [head]
+    summary = folder / "summary.json"
+    if summary.is_file():
+        doc = _read_json(summary)
+        evaluated = "evaluated" if (folder / "evaluate.json").is_file() else \
+            f"not evaluated (remidi evaluate {folder})"
+        lines.append(f"  finished{f' ({total} updates)' if total else ''}, {evaluated}")
+        lines += [f"  part {_part(p)}" for p in doc.get("parts") or []]
+        if "stalled_updates" in doc:
+            lines.append("  " + _stalled_line(doc["stalled_updates"]))
+        return lines
+    ckpt = folder / CHECKPOINT
+    if not ckpt.is_file():
+        lines.append(f"  no checkpoint yet (remidi run --resume {folder} trains it from the start)")
+        return lines
+    try:
+        with np.load(ckpt) as data:
+            meta = json.loads(str(data["meta"]))
+    except (OSError, ValueError, KeyError, EOFError) as err:
+        raise ConfigError(f"RUN_DIR: {ckpt} cannot be read ({type(err).__name__})") from None
+    done = int(meta["done"])
+    age = (now if now is not None else time.time()) - ckpt.stat().st_mtime
+    share = f" of {total} ({100 * done / total:.0f} %)" if total else ""
+    lines.append(f"  checkpoint at update {done}{share}, written {_duration(age)} ago "
+                 f"(remidi run --resume {folder} continues it)")
+    parts = meta.get("parts") or []
+    lines += [f"  part {_part(p)}" for p in parts]
+    last = parts[-1] if parts else None
+    if total and last and last.get("wall_s") and last["updates"][1] > last["updates"][0]:
+        rate = last["wall_s"] / (last["updates"][1] - last["updates"][0])
+        device = (last.get("code") or {}).get("device") or "its device"
+        lines.append(f"  left: {total - done} updates, about {_duration(rate * (total - done))} at the last "
+                     f"part's rate (on {device}; a resume compiles first)")
+    history, _ = load_history(ckpt.with_name(HISTORY), meta)
+    if history and all("rejected" in block and "ppo/policy_loss" in block for block in history):
+        stacked = {name: np.stack([np.asarray(block[name]) for block in history], axis=1)
+                   for name in ("rejected", "ppo/policy_loss")}
+        lines.append("  " + _stalled_line(stalled_updates(seeds, np.asarray(meta["steps"]), stacked)))
+    return lines

@@ -1,0 +1,81 @@
+"""`remidi status`: where runs stand, read from their folders (hand-written run folders: no
+training, no compiling)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from remidi.cli import main
+from remidi.engine.checkpoint import CHECKPOINT, save_run
+from remidi.errors import ConfigError
+from remidi.experiments.status import run_folders, run_status
+
+NAN = float("nan")
+
+
+def _config(folder, seeds=(0, 1), num_updates=1500):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "config.json").write_text(json.dumps({"experiment": "tmaze", "algo": "remidi", "preset": "cpu",
+                                                    "seeds": list(seeds), "config": {"num_updates": num_updates}}))
+    return folder
+
+
+def _unfinished(folder):
+    """Two blocks of 150 updates trained on a CPU in 600 s; seed 1 trained on nothing in the second
+    while every level it played was explained (4800 of 32 × 150)."""
+    _config(folder)
+    history = [{"rejected": np.array([0.0, 0.0]), "ppo/policy_loss": np.array([0.1, 0.2])},
+               {"rejected": np.array([100.0, 4800.0]), "ppo/policy_loss": np.array([0.1, NAN])}]
+    per_step = [{"replay": np.zeros((2, 150))}] * 2
+    parts = [{"updates": [0, 300], "wall_s": 600.0, "code": {"device": "cpu: test"}}]
+    save_run(folder / CHECKPOINT, {"x": np.zeros(2)}, 300, [150, 300], history, per_step, parts)
+    return folder
+
+
+def test_an_unfinished_run_shows_its_checkpoint_parts_time_left_and_stalled_seeds(tmp_path):
+    folder = _unfinished(tmp_path / "run")
+    os.utime(folder / CHECKPOINT, (1000.0, 1000.0))
+    lines = run_status(folder, now=1000.0 + 600)
+    assert lines == [
+        f"{folder}: remidi on tmaze, preset cpu, seeds 0–1",
+        f"  checkpoint at update 300 of 1500 (20 %), written 10 min ago (remidi run --resume {folder} continues it)",
+        "  part 0–300 on cpu: test, 2.0 s/update",
+        "  left: 1200 updates, about 40 min at the last part's rate (on cpu: test; a resume compiles first)",
+        "  stalled (trained on nothing while a frozen adversary rejected levels): seed 1 updates 151–300",
+    ]
+
+
+def test_a_finished_run_says_whether_it_was_evaluated(tmp_path):
+    folder = _config(tmp_path / "run", seeds=(3,))
+    (folder / "summary.json").write_text(json.dumps({
+        "parts": [{"updates": [0, 750], "wall_s": 450.0, "code": {"device": "gpu: H100"}},
+                  {"updates": [750, 1500], "wall_s": 7500.0, "code": None}],
+        "stalled_updates": {"3": [[151, 1500]]}}))
+    assert run_status(folder) == [
+        f"{folder}: remidi on tmaze, preset cpu, seed 3",
+        f"  finished (1500 updates), not evaluated (remidi evaluate {folder})",
+        "  part 0–750 on gpu: H100, 0.6 s/update",
+        "  part 750–1500 on device not recorded, 10.0 s/update",
+        "  stalled (trained on nothing while a frozen adversary rejected levels): seed 3 updates 151–1500"]
+    (folder / "evaluate.json").write_text("{}")
+    assert run_status(folder)[1] == "  finished (1500 updates), evaluated"
+
+
+def test_folders_of_several_algorithms_no_checkpoint_and_no_run(tmp_path, capsys):
+    both = tmp_path / "both"
+    _unfinished(both / "plr")
+    _config(both / "remidi")
+    assert run_folders([both]) == [both / "plr", both / "remidi"]
+    assert run_status(both / "remidi")[1] == f"  no checkpoint yet (remidi run --resume {both / 'remidi'} trains it " \
+                                              f"from the start)"
+    assert main(["status", str(both)]) == 0
+    out = capsys.readouterr().out
+    assert "checkpoint at update 300 of 1500" in out and "no checkpoint yet" in out
+    with pytest.raises(ConfigError, match=r"^RUN_DIR: .*empty holds no run"):
+        run_folders([tmp_path / "empty"])
+    assert main(["status", str(tmp_path / "empty")]) == 2
+    assert "holds no run" in capsys.readouterr().err

@@ -19,6 +19,9 @@
 #
 #   for l in 0 1; do LANES=2 LANE=$l nohup bash docs/results/runs.sh RUNS_DIR > lane$l.log 2>&1 & done
 #
+# The runs train with --quiet; `remidi status RUNS_DIR/*/*/` says where each stands (its last
+# checkpoint, each part's device and rate, the time left, stalled seeds).
+#
 # ONLY="EXPERIMENT/NAME ..." limits the queue to those runs; RUNS_PYTHONPATH is appended to each
 # commit's PYTHONPATH (device/runs_on_device.sh uses both on a lent GPU).
 set -u

@@ -51,6 +51,7 @@ def test_an_unfinished_run_shows_its_checkpoint_parts_time_left_and_stalled_seed
 
 def test_a_finished_run_says_whether_it_was_evaluated(tmp_path):
     folder = _config(tmp_path / "run", seeds=(3,))
+    (folder / CHECKPOINT).write_bytes(b"")  # a UED run keeps its checkpoint (remidi evaluate reads it)
     (folder / "summary.json").write_text(json.dumps({
         "parts": [{"updates": [0, 750], "wall_s": 450.0, "code": {"device": "gpu: H100"}},
                   {"updates": [750, 1500], "wall_s": 7500.0, "code": None}],
@@ -63,6 +64,8 @@ def test_a_finished_run_says_whether_it_was_evaluated(tmp_path):
         "  stalled (trained on nothing while a frozen adversary rejected levels): seed 3 updates 151–1500"]
     (folder / "evaluate.json").write_text("{}")
     assert run_status(folder)[1] == "  finished (1500 updates), evaluated"
+    (folder / CHECKPOINT).unlink()  # the tabular games: no checkpoint, nothing to evaluate
+    assert run_status(folder)[1] == "  finished (1500 updates)"
 
 
 def test_folders_of_several_algorithms_no_checkpoint_and_no_run(tmp_path, capsys):

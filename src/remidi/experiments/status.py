@@ -78,9 +78,9 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     summary = folder / "summary.json"
     if summary.is_file():
         doc = _read_json(summary)
-        evaluated = "evaluated" if (folder / "evaluate.json").is_file() else \
-            f"not evaluated (remidi evaluate {folder})"
-        lines.append(f"  finished{f' ({total} updates)' if total else ''}, {evaluated}")
+        evaluated = "" if not (folder / CHECKPOINT).is_file() else ", evaluated" if (folder / "evaluate.json").is_file() \
+            else f", not evaluated (remidi evaluate {folder})"  # a UED run keeps its checkpoint to evaluate
+        lines.append(f"  finished{f' ({total} updates)' if total else ''}{evaluated}")
         lines += [f"  part {_part(p)}" for p in doc.get("parts") or []]
         if "stalled_updates" in doc:
             lines.append("  " + _stalled_line(doc["stalled_updates"]))

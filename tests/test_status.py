@@ -49,6 +49,15 @@ def test_an_unfinished_run_shows_its_checkpoint_parts_time_left_and_stalled_seed
     ]
 
 
+def test_a_checkpoint_without_its_metrics_still_shows_where_it_stands(tmp_path):
+    folder = _unfinished(tmp_path / "run")
+    (folder / "checkpoint.history.npz").unlink()
+    lines = run_status(folder)
+    assert lines[1].startswith("  checkpoint at update 300 of 1500 (20 %)")
+    assert lines[-1] == f"  stalled: unknown ({folder / 'checkpoint.history.npz'} is missing (the metrics logged " \
+                        f"before the checkpoint))"
+
+
 def test_a_finished_run_says_whether_it_was_evaluated(tmp_path):
     folder = _config(tmp_path / "run", seeds=(3,))
     (folder / CHECKPOINT).write_bytes(b"")  # a UED run keeps its checkpoint (remidi evaluate reads it)

@@ -107,7 +107,11 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
         device = (last.get("code") or {}).get("device") or "its device"
         lines.append(f"  left: {total - done} updates, about {_duration(rate * (total - done))} at the last "
                      f"part's rate (on {device}; a resume compiles first)")
-    history, _ = load_history(ckpt.with_name(HISTORY), meta)
+    try:
+        history, _ = load_history(ckpt.with_name(HISTORY), meta)
+    except ConfigError as err:  # its message is for --resume: say what it means here
+        lines.append(f"  stalled: unknown ({str(err).removeprefix('--resume: ').split(';')[0]})")
+        return lines
     if history and all("rejected" in block and "ppo/policy_loss" in block for block in history):
         stacked = {name: np.stack([np.asarray(block[name]) for block in history], axis=1)
                    for name in ("rejected", "ppo/policy_loss")}

@@ -24,15 +24,15 @@ def _config(folder, seeds=(0, 1), num_updates=1500):
     return folder
 
 
-def _unfinished(folder):
-    """Two blocks of 150 updates trained on a CPU in 600 s; seed 1 trained on nothing in the second
-    while every level it played was explained (4800 of 32 × 150)."""
-    _config(folder)
+def _unfinished(folder, seeds=(0, 1), parts=None, **meta):
+    """Two blocks of 150 updates trained on a CPU in 600 s; the second seed trained on nothing in the
+    second block while every level it played was explained (4800 of 32 × 150)."""
+    _config(folder, seeds)
     history = [{"rejected": np.array([0.0, 0.0]), "ppo/policy_loss": np.array([0.1, 0.2])},
                {"rejected": np.array([100.0, 4800.0]), "ppo/policy_loss": np.array([0.1, NAN])}]
     per_step = [{"replay": np.zeros((2, 150))}] * 2
-    parts = [{"updates": [0, 300], "wall_s": 600.0, "code": {"device": "cpu: test"}}]
-    save_run(folder / CHECKPOINT, {"x": np.zeros(2)}, 300, [150, 300], history, per_step, parts)
+    parts = [{"updates": [0, 300], "wall_s": 600.0, "code": {"device": "cpu: test"}}] if parts is None else parts
+    save_run(folder / CHECKPOINT, {"x": np.zeros(2)}, 300, [150, 300], history, per_step, parts or None)
     return folder
 
 
@@ -47,6 +47,47 @@ def test_an_unfinished_run_shows_its_checkpoint_parts_time_left_and_stalled_seed
         "  left: 1200 updates, about 40 min at the last part's rate (on cpu: test; a resume compiles first)",
         "  stalled (trained on nothing while a frozen adversary rejected levels): seed 1 updates 151–300",
     ]
+
+
+def test_parts_rates_from_the_last_part_and_seeds_that_are_not_a_range(tmp_path):
+    parts = [{"updates": [0, 150], "wall_s": 3000.0, "code": None},  # an older part: device unknown
+             {"updates": [150, 300], "wall_s": 1500.0, "code": {"device": "gpu: H100"}}]
+    lines = run_status(_unfinished(tmp_path / "run", seeds=(2, 5), parts=parts))
+    assert lines[0].endswith("preset cpu, seeds 2, 5")
+    assert lines[2:5] == ["  part 0–150 on device not recorded, 20.0 s/update", "  part 150–300 on gpu: H100, 10.0 s/update",
+                          "  left: 1200 updates, about 3 h 20 min at the last part's rate (on gpu: H100; a resume "
+                          "compiles first)"]
+    assert lines[5].endswith("seed 5 updates 151–300")
+    older = run_status(_unfinished(tmp_path / "old", parts=[]))  # a checkpoint from before parts were recorded
+    assert older[2].startswith("  stalled") and len(older) == 3
+    no_time = [{"updates": [0, 300], "code": None}]  # no wall time: no rate, no time left
+    assert run_status(_unfinished(tmp_path / "no-time", parts=no_time))[2:4] == [
+        "  part 0–300 on device not recorded", "  stalled (trained on nothing while a frozen adversary rejected "
+                                               "levels): seed 1 updates 151–300"]
+
+
+@pytest.mark.parametrize("damage", ["truncated", "npy", "meta-list", "no-done"])
+def test_a_damaged_checkpoint_is_one_line(tmp_path, capsys, damage):
+    folder = _unfinished(tmp_path / "run")
+    ckpt = folder / CHECKPOINT
+    if damage == "truncated":
+        ckpt.write_bytes(ckpt.read_bytes()[:40])
+    elif damage == "npy":
+        with open(ckpt, "wb") as fh:
+            np.save(fh, np.zeros(3))
+    else:
+        with open(ckpt, "wb") as fh:
+            np.savez(fh, meta=np.asarray("[1]" if damage == "meta-list" else '{"steps": [150]}'))
+    assert main(["status", str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"remidi: error: RUN_DIR: {ckpt} cannot be read (") and err.count("\n") == 1, err
+
+
+def test_a_hand_edited_config_is_one_line(tmp_path, capsys):
+    folder = _config(tmp_path / "run")
+    (folder / "config.json").write_text(json.dumps({"algo": "remidi", "seeds": None, "config": "x"}))
+    assert main(["status", str(folder)]) == 2
+    assert "is not as remidi run writes it" in capsys.readouterr().err
 
 
 def test_a_checkpoint_without_its_metrics_still_shows_where_it_stands(tmp_path):

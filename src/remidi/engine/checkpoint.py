@@ -44,10 +44,12 @@ def _plain(value):
 
 
 # what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
-_UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
+UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
 
 
-def _unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
+def unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
+    """The one-line error for a checkpoint file that ``err`` (one of :data:`UNREADABLE`) kept from
+    being read, starting with ``flag`` (with ``--resume``: how to start the run again)."""
     detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
     advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
         if flag == "--resume" else ""
@@ -70,8 +72,8 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
             leaves = {name: np.asarray(data[name]) for name in wanted if name in data.files}
         if not isinstance(meta, dict):
             raise TypeError(f"its meta is a {type(meta).__name__}")
-    except _UNREADABLE as err:
-        raise _unreadable(path, err, flag) from None
+    except UNREADABLE as err:
+        raise unreadable(path, err, flag) from None
     if positional:
         raise ConfigError(f"{flag}: {path} was written by an older remidi, which stored the state's arrays by "
                           f"position; this version reads them by name: continue the run with the version that "
@@ -107,15 +109,15 @@ def load_history(path: Path, meta: dict):
     """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
     per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
     if not all(key in meta for key in ("done", "steps", "num_blocks")):
-        raise _unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
+        raise unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
     if not path.exists():
         raise ConfigError(f"--resume: {path} is missing (the metrics logged before the checkpoint); restore it, or "
                           f"delete {path.with_name(CHECKPOINT)} to train the run from the start")
     try:
         with np.load(path) as saved:
             history, per_step = _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
-    except _UNREADABLE as err:
-        raise _unreadable(path, err) from None
+    except UNREADABLE as err:
+        raise unreadable(path, err) from None
     for blocks in (history, per_step):  # every block the checkpoint counts
         held = sum(1 for block in blocks if block)
         if held < len(blocks):

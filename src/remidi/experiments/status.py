@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from remidi.engine.checkpoint import CHECKPOINT, HISTORY, load_history
+from remidi.engine.checkpoint import CHECKPOINT, HISTORY, UNREADABLE, load_history, unreadable
 from remidi.errors import ConfigError
 
 
@@ -70,8 +70,13 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     from remidi.experiments.ued import stalled_updates
 
     config = _read_json(folder / "config.json")
-    seeds = [int(s) for s in config.get("seeds", [])]
-    total = (config.get("config") or {}).get("num_updates")
+    try:  # a config.json edited by hand: say which file, not a traceback
+        seeds = [int(s) for s in config.get("seeds") or []]
+        total = (config.get("config") or {}).get("num_updates")
+        total = int(total) if total else None
+    except (TypeError, ValueError, AttributeError) as err:
+        raise ConfigError(f"RUN_DIR: {folder / 'config.json'} is not as remidi run writes it (seeds, "
+                          f"config.num_updates: {type(err).__name__})") from None
     head = f"{folder}: {config.get('algo')} on {config.get('experiment')}, preset {config.get('preset')}, " \
            f"{_seeds(seeds) if seeds else 'no seeds'}"
     lines = [head]
@@ -92,11 +97,13 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     try:
         with np.load(ckpt) as data:
             meta = json.loads(str(data["meta"]))
-    except (OSError, ValueError, KeyError, EOFError) as err:
-        raise ConfigError(f"RUN_DIR: {ckpt} cannot be read ({type(err).__name__})") from None
-    done = int(meta["done"])
+        if not isinstance(meta, dict) or "done" not in meta:
+            raise TypeError("its meta holds no update count")
+        done = int(meta["done"])
+    except UNREADABLE as err:
+        raise unreadable(ckpt, err, "RUN_DIR") from None
     age = (now if now is not None else time.time()) - ckpt.stat().st_mtime
-    share = f" of {total} ({100 * done / total:.0f} %)" if total else ""
+    share = f" of {total} ({100 * done // total} %)" if total else ""  # floored: 99 % until it is done
     lines.append(f"  checkpoint at update {done}{share}, written {_duration(age)} ago "
                  f"(remidi run --resume {folder} continues it)")
     parts = meta.get("parts") or []

@@ -14,6 +14,7 @@ import numpy as np
 
 from remidi.engine.checkpoint import CHECKPOINT, HISTORY, UNREADABLE, load_history, unreadable
 from remidi.errors import ConfigError
+from remidi.experiments.outputs import read_json_object
 
 
 def run_folders(folders: list[Path]) -> list[Path]:
@@ -23,21 +24,13 @@ def run_folders(folders: list[Path]) -> list[Path]:
     for folder in map(Path, folders):
         config = folder / "config.json"
         subs = sorted(p.parent for p in folder.glob("*/config.json")) if folder.is_dir() else []
-        if config.is_file() and "algo" in _read_json(config):
+        if config.is_file() and "algo" in read_json_object(config, "RUN_DIR"):
             found.append(folder)
         elif subs:
             found.extend(subs)
         else:
             raise ConfigError(f"RUN_DIR: {folder} holds no run (no config.json written by remidi run)")
     return found
-
-
-def _read_json(path: Path) -> dict:
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise ConfigError(f"RUN_DIR: {path} cannot be read ({type(err).__name__})") from None
-    return doc if isinstance(doc, dict) else {}
 
 
 def _duration(seconds: float) -> str:
@@ -69,7 +62,7 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     """The lines ``remidi status`` prints for one algorithm's run folder."""
     from remidi.experiments.ued import stalled_updates
 
-    config = _read_json(folder / "config.json")
+    config = read_json_object(folder / "config.json", "RUN_DIR")
     try:  # a config.json edited by hand: say which file, not a traceback
         seeds = [int(s) for s in config.get("seeds") or []]
         total = (config.get("config") or {}).get("num_updates")
@@ -82,7 +75,7 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     lines = [head]
     summary = folder / "summary.json"
     if summary.is_file():
-        doc = _read_json(summary)
+        doc = read_json_object(summary, "RUN_DIR")
         evaluated = "" if not (folder / CHECKPOINT).is_file() else ", evaluated" if (folder / "evaluate.json").is_file() \
             else f", not evaluated (remidi evaluate {folder})"  # a UED run keeps its checkpoint to evaluate
         lines.append(f"  finished{f' ({total} updates)' if total else ''}{evaluated}")

@@ -79,6 +79,17 @@ def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors
     assert out == "" and err.count("\n") == 1 and "maze-fast" in err and "maze-plr" in err
 
 
+def test_every_ratio_names_registered_workloads_and_each_issue_31_workload_has_its_ratio():
+    from remidi.bench import STEP_RATIOS
+
+    for workload, baseline, _ in STEP_RATIOS:
+        assert workload in BENCHMARKS and baseline in BENCHMARKS
+    one = {"seconds_per_call": 1.0, "env_steps_per_call": 100}
+    names = ["maze-remidi-combine", "maze-remidi-rehearsal", "maze-remidi-belief", "maze-remidi-simulated"]
+    r = ratios({"maze-remidi": one, **{n: {**one, "seconds_per_call": 1.0 + i} for i, n in enumerate(names)}})
+    assert [r[f"remidi_{n.removeprefix('maze-remidi-')}_step_over_remidi_step"] for n in names] == [1.0, 2.0, 3.0, 4.0]
+
+
 @pytest.mark.parametrize("setting, needle", [
     ("num_envs=-1", "num_envs: must be an integer ≥ 1, got -1"),
     ("ppo.minibatches=3", "ppo.minibatches"),

@@ -196,7 +196,12 @@ def test_noisy_experiments_are_registered_with_their_parents_presets():
     from remidi.experiments import maze as M
 
     names = {e.name: e for e in L.EXPERIMENTS + M.EXPERIMENTS}
-    assert {"lever-noisy", "blindfold-noisy"} <= set(names)
+    for noisy, parent, presets in (("lever-noisy", "lever", {"smoke", "paper"}),
+                                   ("blindfold-noisy", "blindfold", {"smoke", "cpu", "paper"})):
+        assert presets <= set(names[noisy].presets)  # the presets
+        assert names[noisy].presets == names[parent].presets  # the same run lengths and sizes as the parent's
+        assert names[noisy].preset_seeds == names[parent].preset_seeds
+        assert names[noisy].algorithms == names[parent].algorithms
 
 
 # ------------------------------------------------------------------------------- the headline run

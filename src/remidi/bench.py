@@ -513,30 +513,29 @@ def device_description() -> str:
            f"{cores} CPU cores, {platform.machine()}, jax {jax.__version__}"
 
 
+# (workload, baseline, key): the workload's time per env step over the baseline's, in one invocation
+STEP_RATIOS = (
+    ("maze-remidi", "maze-plr", "remidi_step_over_plr_step"),
+    ("maze-remidi-combine", "maze-remidi", "remidi_combine_step_over_remidi_step"),
+    ("maze-remidi-rehearsal", "maze-remidi", "remidi_rehearsal_step_over_remidi_step"),
+    ("maze-remidi-belief", "maze-remidi", "remidi_belief_step_over_remidi_step"),
+    ("maze-remidi-simulated", "maze-remidi", "remidi_simulated_step_over_remidi_step"),
+    ("maze-paired", "maze-plr", "paired_step_over_plr_step"),
+    ("maze-paired-reference", "maze-plr", "paired_reference_step_over_plr_step"),
+    ("maze-accel", "maze-plr", "accel_step_over_plr_step"),
+    ("maze-remidi-reference", "maze-plr", "remidi_reference_step_over_plr_step"),
+)
+
+
 def ratios(results: dict[str, dict]) -> dict[str, float]:
     out = {}
 
     def per_call(name):
         return results[name]["seconds_per_call"] / results[name]["env_steps_per_call"]
 
-    if "maze-remidi" in results and "maze-plr" in results:
-        out["remidi_step_over_plr_step"] = per_call("maze-remidi") / per_call("maze-plr")
-    if "maze-remidi-combine" in results and "maze-remidi" in results:
-        out["remidi_combine_step_over_remidi_step"] = per_call("maze-remidi-combine") / per_call("maze-remidi")
-    if "maze-remidi-rehearsal" in results and "maze-remidi" in results:
-        out["remidi_rehearsal_step_over_remidi_step"] = per_call("maze-remidi-rehearsal") / per_call("maze-remidi")
-    if "maze-remidi-belief" in results and "maze-remidi" in results:
-        out["remidi_belief_step_over_remidi_step"] = per_call("maze-remidi-belief") / per_call("maze-remidi")
-    if "maze-remidi-simulated" in results and "maze-remidi" in results:
-        out["remidi_simulated_step_over_remidi_step"] = per_call("maze-remidi-simulated") / per_call("maze-remidi")
-    if "maze-paired" in results and "maze-plr" in results:
-        out["paired_step_over_plr_step"] = per_call("maze-paired") / per_call("maze-plr")
-    if "maze-paired-reference" in results and "maze-plr" in results:
-        out["paired_reference_step_over_plr_step"] = per_call("maze-paired-reference") / per_call("maze-plr")
-    if "maze-accel" in results and "maze-plr" in results:
-        out["accel_step_over_plr_step"] = per_call("maze-accel") / per_call("maze-plr")
-    if "maze-remidi-reference" in results and "maze-plr" in results:
-        out["remidi_reference_step_over_plr_step"] = per_call("maze-remidi-reference") / per_call("maze-plr")
+    for numerator, denominator, key in STEP_RATIOS:
+        if numerator in results and denominator in results:
+            out[key] = per_call(numerator) / per_call(denominator)
     if "maze-plr" in results and "maze-env" in results:
         out["maze_plr_over_env"] = results["maze-plr"]["env_steps_per_s"] / results["maze-env"]["env_steps_per_s"]
     if results.get("maze-plr", {}).get("gflops_per_s") and "lstm-matmul" in results:

@@ -44,17 +44,38 @@ def _plain(value):
 
 
 # what reading a damaged .npz can raise: a truncated, empty, random or bit-flipped file
-UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
+_UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile)
 
 
 def unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
-    """The one-line error for a checkpoint file that ``err`` (one of :data:`UNREADABLE`) kept from
+    """The one-line error for a checkpoint file that ``err`` (one of :data:`_UNREADABLE`) kept from
     being read, starting with ``flag`` (with ``--resume``: how to start the run again)."""
     detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
     advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
         if flag == "--resume" else ""
     return ConfigError(f"{flag}: {path} cannot be read ({type(err).__name__}{': ' + detail if detail else ''})"
                        f"{advice}")
+
+
+def _read(path: Path, flag: str, names=()) -> tuple[dict, list[str], dict[str, np.ndarray]]:
+    """``(meta, the names of the stored arrays, {name: array} for those of ``names`` stored)`` from a
+    checkpoint file; ConfigError (:func:`unreadable`) when it cannot be read or its meta is no dict."""
+    try:
+        with np.load(path) as data:
+            meta = json.loads(str(data["meta"]))
+            stored = [name for name in data.files if name != "meta"]
+            arrays = {name: np.asarray(data[name]) for name in names if name in data.files}
+        if not isinstance(meta, dict):
+            raise TypeError(f"its meta is a {type(meta).__name__}")
+    except _UNREADABLE as err:
+        raise unreadable(path, err, flag) from None
+    return meta, stored, arrays
+
+
+def read_meta(path: Path, flag: str = "--resume") -> dict:
+    """The ``meta`` a checkpoint was saved with (``done``, ``steps``, ``parts``, ...), without reading
+    its arrays; ConfigError (one line, starting with ``flag``) when the file cannot be read."""
+    return _read(path, flag)[0]
 
 
 def load_checkpoint(path: Path, template, flag: str = "--resume"):
@@ -64,16 +85,8 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
     be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
     checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
     wanted = _named_leaves(template)
-    try:
-        with np.load(path) as data:
-            meta = json.loads(str(data["meta"]))
-            stored = [name for name in data.files if name != "meta"]
-            positional = any(name.startswith("leaf_") for name in stored)
-            leaves = {name: np.asarray(data[name]) for name in wanted if name in data.files}
-        if not isinstance(meta, dict):
-            raise TypeError(f"its meta is a {type(meta).__name__}")
-    except UNREADABLE as err:
-        raise unreadable(path, err, flag) from None
+    meta, stored, leaves = _read(path, flag, wanted)
+    positional = any(name.startswith("leaf_") for name in stored)
     if positional:
         raise ConfigError(f"{flag}: {path} was written by an older remidi, which stored the state's arrays by "
                           f"position; this version reads them by name: continue the run with the version that "
@@ -116,7 +129,7 @@ def load_history(path: Path, meta: dict):
     try:
         with np.load(path) as saved:
             history, per_step = _unstack(saved, "h", len(meta["steps"])), _unstack(saved, "p", meta["num_blocks"])
-    except UNREADABLE as err:
+    except _UNREADABLE as err:
         raise unreadable(path, err) from None
     for blocks in (history, per_step):  # every block the checkpoint counts
         held = sum(1 for block in blocks if block)

@@ -6,13 +6,12 @@ levels (:func:`remidi.experiments.ued.stalled_updates`, from the checkpoint's me
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
-from remidi.engine.checkpoint import CHECKPOINT, HISTORY, UNREADABLE, load_history, unreadable
+from remidi.engine.checkpoint import CHECKPOINT, HISTORY, load_history, read_meta, unreadable
 from remidi.errors import ConfigError
 from remidi.experiments.outputs import read_json_object
 
@@ -87,14 +86,11 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     if not ckpt.is_file():
         lines.append(f"  no checkpoint yet (remidi run --resume {folder} trains it from the start)")
         return lines
+    meta = read_meta(ckpt, "RUN_DIR")
     try:
-        with np.load(ckpt) as data:
-            meta = json.loads(str(data["meta"]))
-        if not isinstance(meta, dict) or "done" not in meta:
-            raise TypeError("its meta holds no update count")
         done = int(meta["done"])
-    except UNREADABLE as err:
-        raise unreadable(ckpt, err, "RUN_DIR") from None
+    except (KeyError, TypeError, ValueError):
+        raise unreadable(ckpt, TypeError("its meta holds no update count"), "RUN_DIR") from None
     age = (now if now is not None else time.time()) - ckpt.stat().st_mtime
     share = f" of {total} ({100 * done // total} %)" if total else ""  # floored: 99 % until it is done
     lines.append(f"  checkpoint at update {done}{share}, written {_duration(age)} ago "

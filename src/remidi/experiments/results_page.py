@@ -75,6 +75,17 @@ class Claim:
 
 
 BRAX = ("brax-ant", "brax-halfcheetah", "brax-hopper", "brax-walker2d")
+SCALE_TASKS = (("tmaze", "T-maze"), ("blindfold", "blindfold"))
+SCALE_PRESETS = ("cpu4x",)  # presets that differ from an experiment's claims' preset in training length only
+
+
+def run_label(summary: dict, config: dict) -> str:
+    """How the page names a run's algorithm: :func:`label`, and ``@PRESET`` for a scale-study
+    preset (``plr @cpu4x``), so that runs of one algorithm at two scales stay apart."""
+    name = label(summary["algo"], config.get("config", {}), config.get("command"))
+    return f"{name} @{summary['preset']}" if summary.get("preset") in SCALE_PRESETS else name
+
+
 CLAIMS = (
     Claim("tabular-distinct", "Fig. 3 (tabular, distinct)", "MMR-UED reaches regret ≈ 0 on all six levels "
           "(bound: the greatest regret over the levels ≤ 0.05)",
@@ -211,6 +222,21 @@ CLAIMS = (
     Claim("tmaze-keep-heldout", "beyond the paper (T-maze, #31)", "combine and rehearsal (0.1) keep ReMiDi's lead "
           "over PLR⊥ on the held-out mazes", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (combine)", "plr"), ("remidi (rehearsal 0.1)", "plr")), min_seeds=5),
+    # the scale study: the maze claims again at cpu4x (4× the cpu preset's environment steps),
+    # stated with the rule for "the gap closes / persists" (the page's scale section) before its runs
+    *(Claim(f"{exp}-heldout-cpu4x", f"scale study ({what}, cpu4x: 4× cpu's steps)", "ReMiDi solves more held-out "
+            "mazes than PLR⊥ at 4× the cpu preset's environment steps (1/5 of the paper's)", "evaluate:solve_rate/mean",
+            (exp,), greater=(("remidi @cpu4x", "plr @cpu4x"),), min_seeds=5) for exp, what in SCALE_TASKS),
+    *(Claim(f"{exp}-replay-cpu4x", f"scale study ({what}, cpu4x: 4× cpu's steps)", f"PLR⊥ replays {tag} "
+            "far more than ReMiDi (the last 10% of training) at 4× the cpu preset's environment steps",
+            f"summary:replay_fraction/{short}", (exp,), greater=(("plr @cpu4x", "remidi @cpu4x"),), min_seeds=5)
+      for (exp, what), tag, short in zip(SCALE_TASKS, ("T-mazes", "blind levels"), ("tmaze", "blind"))),
+    *(Claim(f"{exp}-heldout-cpu4x-minimax", f"scale study ({what}, cpu4x: 4× cpu's steps)", "ReMiDi solves more "
+            "held-out mazes than minimax return at 4× the cpu preset's environment steps", "evaluate:solve_rate/mean",
+            (exp,), greater=(("remidi @cpu4x", "minimax-return @cpu4x"),), min_seeds=5) for exp, what in SCALE_TASKS),
+    *(Claim(f"{exp}-plr-learns-cpu4x", f"scale study ({what}, cpu4x: 4× cpu's steps)", "PLR⊥ solves more "
+            "held-out mazes after 4× the cpu preset's environment steps than after cpu's", "evaluate:solve_rate/mean",
+            (exp,), greater=(("plr @cpu4x", "plr"),), min_seeds=5) for exp, what in SCALE_TASKS),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=5),
@@ -280,7 +306,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     for folder in sorted(p.parent for p in Path(data).glob("*/*/summary.json")):
         summary = outputs.read_json(folder / "summary.json")
         config = outputs.read_json(folder / "config.json")
-        key = (summary["experiment"], label(summary["algo"], config.get("config", {}), config.get("command")))
+        key = (summary["experiment"], run_label(summary, config))
         run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
@@ -524,13 +550,14 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                                            "summary:adversary_prob/theta5"],
                        ["regret/h1", "regret/h3", "regret/h5", "adversary_prob/theta5", "adversary_prob/theta6"]),
     "tmaze": (["dr", "plr", "minimax-return", "remidi", "remidi (belief)", "remidi (simulated, ratio, false rate 0, margin 5)", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
-               "remidi (rehearsal 0.3)", "paired (perfect)", "remidi-paired (perfect)"],
+               "remidi (rehearsal 0.3)", "paired (perfect)", "remidi-paired (perfect)", "plr @cpu4x", "minimax-return @cpu4x",
+               "remidi @cpu4x"],
               ["evaluate:solve_rate/mean", "summary:replay_fraction/tmaze", "evaluate:cvar/solve_rate/100%",
                "evaluate:cvar/solve_rate/10%", "evaluate:generator/solve_rate/tmaze",
                "evaluate:perfect21/solve_rate", "summary:generated/tmaze", "summary:belief/agreement"],
               ["solve_rate/mean", "replay_fraction/tmaze", "buffer_fraction/tmaze", "generated/tmaze"]),
     "blindfold": (["dr", "plr", "minimax-return", "remidi", "remidi (masked)", "remidi (combine)", "remidi (rehearsal 0.1)",
-                   "remidi (rehearsal 0.3)"],
+                   "remidi (rehearsal 0.3)", "plr @cpu4x", "minimax-return @cpu4x", "remidi @cpu4x"],
                   ["evaluate:solve_rate/mean", "summary:replay_fraction/blind", "evaluate:cvar/solve_rate/100%",
                    "evaluate:cvar/solve_rate/10%", "evaluate:generator/solve_rate/blind",
                    "evaluate:perfect21/solve_rate"],
@@ -646,7 +673,7 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         doc = outputs.read_json(folder / "config.json")
         if (folder / "evaluate.json").is_file():  # refused before anything is copied
             _evaluation(folder, algo, doc)
-        name = re.sub(r"[^a-z0-9]+", "-", label(algo, doc.get("config", {}), doc.get("command"))).strip("-")
+        name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)
         for name in ("config.json", "summary.json", "evaluate.json"):  # each whole or not at all

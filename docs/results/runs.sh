@@ -175,3 +175,19 @@ at ab3ea79
 for s in 0 5; do
   run "remidi-paired-perfect-keephigh-s$s" tmaze remidi-paired $s 5 cpu --set paired.estimator=perfect
 done
+
+# The scale study: the maze claims at the cpu4x preset (4× cpu's environment steps), 5 seeds of
+# PLR⊥ and ReMiDi on both tasks, at the commit that stated its claims and its rule (the results
+# page's scale section); minimax return after the Brax seeds, as lane time allows
+at 8214e56
+for e in tmaze blindfold; do for a in plr remidi; do run "$a-cpu4x-s0" $e $a 0 5 cpu4x; done; done
+
+# Table 1 at the paper's 10 seeds: seeds 5–9 of PLR⊥, minimax return and ReMiDi on every
+# morphology, at the commit of seeds 0–4
+at d071065
+for m in ant halfcheetah hopper walker2d; do
+  for a in plr minimax-return remidi; do run "$a-s5" "brax-$m" "$a" 5 5 cpu; done
+done
+
+at 8214e56
+for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5 cpu4x; done

@@ -45,3 +45,24 @@ def test_cpu_preset_lists_each_deviation_from_paper_with_its_reason(name, capsys
     for key in differing:
         line = next(line for line in out.splitlines() if line.strip().startswith(key + " "))
         assert exp.preset_reasons["cpu"][key] in line
+
+
+@pytest.mark.parametrize("text, value", [
+    ("1000000000000000000000000000000", 10**30), ("1e30", 10**30), (10**30, 10**30), ("3.0", 3), (3.0, 3),
+    (" 7 ", 7), ("-2", -2)])
+def test_integers_stay_exact_integers(text, value):
+    from remidi.engine.config import UEDConfig
+    from remidi.experiments.config import apply_overrides
+
+    got = apply_overrides(UEDConfig(), {"num_updates": text}).num_updates
+    assert type(got) is int and got == value
+
+
+@pytest.mark.parametrize("text", ["1.5", "nan", "inf", "abc", "", "1e-30", "1e99999999999", True])
+def test_a_non_integer_is_refused_in_one_line(text):
+    from remidi.errors import ConfigError
+    from remidi.engine.config import UEDConfig
+    from remidi.experiments.config import apply_overrides
+
+    with pytest.raises(ConfigError, match=r"^num_updates: expected an integer"):
+        apply_overrides(UEDConfig(), {"num_updates": text})

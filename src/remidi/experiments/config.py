@@ -9,6 +9,7 @@ dotted to reach nested dataclasses (``--set ppo.lr=3e-4``). Every problem raises
 from __future__ import annotations
 
 import dataclasses
+import decimal
 import math
 import sys
 import typing
@@ -77,12 +78,12 @@ def _convert(key: str, text: Any, kind) -> Any:
     if kind is int:
         if isinstance(text, bool):
             raise ConfigError(f"{key}: expected an integer, got {text!r}")
-        try:
-            number = float(text)
-        except (TypeError, ValueError):
+        try:  # exact decimal arithmetic: 10**30 or "1e30" stays 10**30 (a float would round it)
+            number = decimal.Decimal(str(text).strip())
+        except (TypeError, ValueError, decimal.InvalidOperation):
             raise ConfigError(f"{key}: expected an integer, got {text!r}") from None
-        if not math.isfinite(number) or number != int(number):
-            raise ConfigError(f"{key}: expected an integer, got {text!r}")
+        if not number.is_finite() or number.adjusted() > 100 or number != number.to_integral_value():
+            raise ConfigError(f"{key}: expected an integer (at most 100 digits), got {text!r}")
         return int(number)
     if kind is float:
         if isinstance(text, bool):

@@ -4,6 +4,7 @@ and the whole command on a tiny lever run (keys, files, one-line errors)."""
 import csv
 import json
 import shutil
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -116,6 +117,58 @@ def test_bad_evaluate_arguments_are_one_line(lever_run, capsys, argv, needle):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err
     assert not (lever_run / "evaluate.json").exists()
+
+
+def test_a_run_that_cannot_be_written_is_refused_before_evaluating(lever_run, tmp_path, capsys, monkeypatch):
+    import remidi.evaluate as ev
+
+    run = tmp_path / "run"
+    shutil.copytree(lever_run, run)
+    before = sorted(p.relative_to(run) for p in run.rglob("*"))
+    monkeypatch.setattr(ev, "writable", lambda folder: Path(folder) != run)
+
+    def no_evaluation(*args, **kwargs):
+        raise AssertionError("evaluated a run whose results could not be written")
+
+    monkeypatch.setattr(ev, "_load", no_evaluation)
+    assert main(["evaluate", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{run} is not writable" in err
+    assert sorted(p.relative_to(run) for p in run.rglob("*")) == before
+
+
+def _read_only_folder(tmp_path):
+    """A folder no file can be made in, for this process: a read-only tmpfs mounted on it (root,
+    where mounting is allowed) or its write bits taken away (anyone else); None if neither is possible."""
+    import os
+    import subprocess
+
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    if os.geteuid() != 0:
+        folder.chmod(0o555)
+        return folder
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro", "tmpfs", str(folder)], capture_output=True).returncode:
+        return None
+    return folder
+
+
+def test_writable_says_no_where_no_file_can_be_made(tmp_path):
+    import os
+    import subprocess
+
+    from remidi.files import writable
+
+    assert writable(tmp_path)
+    folder = _read_only_folder(tmp_path)
+    if folder is None:
+        pytest.skip("root without permission to mount: no read-only folder can be made here")
+    try:
+        assert not writable(folder)
+        assert list(folder.iterdir()) == []  # the probe leaves nothing behind
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["umount", str(folder)], check=False)
 
 
 def test_a_folder_that_is_no_ued_run_is_one_line(tmp_path, capsys):

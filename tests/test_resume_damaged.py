@@ -4,6 +4,7 @@ or flax)."""
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -127,15 +128,14 @@ def test_resume_of_a_finished_run_with_a_damaged_summary_is_one_line(runs, tmp_p
 
 
 def test_resume_of_a_folder_it_cannot_write_is_one_line_before_training(runs, tmp_path, capsys, monkeypatch):
-    """A read-only run folder (tests run as root, so its check is made to fail): refused at once,
-    before compiling (before: a block trained, then the checkpoint write failed); a finished run
-    there is still read."""
-    import os
+    """A read-only run folder (its probe made to fail: no permission stops root's writes;
+    test_evaluate tests files.writable on a real read-only folder): refused at once, before
+    compiling; a finished run there is still read."""
+    from remidi.experiments import base
 
     folder = tmp_path / "run"
     shutil.copytree(runs / "remidi", folder)
-    real = os.access
-    monkeypatch.setattr(os, "access", lambda path, mode: False if os.fspath(path) == os.fspath(folder) else real(path, mode))
+    monkeypatch.setattr(base, "writable", lambda path: Path(path) != folder)
     capsys.readouterr()
     assert main(["run", "--resume", str(folder), "--quiet"]) == 0  # finished: nothing to write
     (folder / "summary.json").unlink()

@@ -47,6 +47,7 @@ from typing import Any, Callable
 import numpy as np
 
 from remidi.errors import ConfigError, RemidiError
+from remidi.files import writable
 
 ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
 DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
@@ -284,7 +285,11 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
 
     _check_args(attempts, cvar_levels, cvar_attempts, tuple(perfect_sizes), perfect_count, seed)
     run_dir = Path(run_dir)
-    loaded = [_load(folder, task) for folder in _run_folders(run_dir)]  # every run checked before any is evaluated
+    folders = _run_folders(run_dir)
+    if not writable(run_dir):  # before minutes of evaluation whose results could not be written
+        raise ConfigError(f"RUN_DIR: {run_dir} is not writable: evaluate writes evaluate.json, evaluate.csv and "
+                          f"evaluate.png there; evaluate a writable copy of the run")
+    loaded = [_load(folder, task) for folder in folders]  # every run checked before any is evaluated
     args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
     doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args, "algorithms": {}}

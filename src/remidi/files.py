@@ -41,6 +41,17 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
         raise
 
 
+def writable(folder: Path) -> bool:
+    """Whether a file can be made in ``folder``, found by making (and removing) one: unlike
+    ``os.access``, this also says no to root on a read-only file system or a folder of other
+    permissions it cannot override."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".remidi-write-probe.", suffix=".tmp"):
+            return True
+    except OSError:
+        return False
+
+
 def remove_temporaries(folder: Path, names) -> list[Path]:
     """Delete the temporaries that interrupted :func:`atomic_write` calls of ``folder/<name>``, for
     each of ``names``, left behind (``.<name>.<random>.tmp``: SIGKILL, or Ctrl-C's immediate exit,

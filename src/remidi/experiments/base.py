@@ -36,7 +36,7 @@ import numpy as np
 
 from remidi import __version__
 from remidi.errors import ConfigError, one_of
-from remidi.files import code_version
+from remidi.files import code_version, writable
 from remidi.experiments import outputs
 from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict, scale_dependents
 
@@ -410,7 +410,7 @@ def _note_fresh_start(exp: Experiment, folder: Path) -> None:
 def _check_writable(folder: Path) -> None:
     """ConfigError (one line) for a run folder to resume that cannot be written: before, the run
     compiled and trained a block before its first checkpoint failed."""
-    if not os.access(folder, os.W_OK | os.X_OK):
+    if not writable(folder):
         raise ConfigError(f"--resume: {folder} is not writable: the resumed run could not write its checkpoints "
                           f"and results; resume a writable copy of it")
 

@@ -107,31 +107,46 @@ def runs(tmp_path_factory):
 
 
 def sheet_size(rows: int, columns: int, tile: int, size: int = 13, row_header: bool = False):
-    """(width, height) of a render sheet (see remidi.render's module docstring)."""
+    """(width, height) of a render sheet (see remidi.render's module docstring): a buffer sheet
+    (``row_header``) with the buffers' colour key, a maze sheet with the mazes'."""
     tile_px = (size + 2) * tile
     row_h = (render.ROW_HEADER if row_header else 0) + render.CAPTION + tile_px + render.PAD
     width = render.PAD + columns * (tile_px + render.PAD)
-    key = render.key_height(width) if row_header else 0  # a buffer sheet's colour key
+    key = render.key_height(width, render.KEY if row_header else render.MAZE_KEY)
     return width, render.HEADER + key + rows * row_h + render.PAD
 
 
+def maze_tile(rows: int, columns: int, tile: int, size: int) -> int:
+    """The pixels per cell of a maze sheet asked for ``tile``: the least from ``tile`` on whose
+    sheet is at least MIN_SIDE pixels on its short side."""
+    while min(sheet_size(rows, columns, tile, size)) < render.MIN_SIDE:
+        tile += 1
+    return tile
+
+
 # ------------------------------------------------------------------------------------- maze
-@pytest.mark.parametrize("name, rows, columns, size", [
-    ("SmallCorridor", 2, 5, 13),  # 10 goal placements
-    ("LargeCorridor", 2, 8, 19),  # 16
-    ("SixteenRooms", 1, 1, 13),
+@pytest.mark.parametrize("name, rows, columns, size, tile", [
+    ("SmallCorridor", 2, 5, 13, 4),  # 10 goal placements; 4 pixels per cell would be too small to read
+    ("LargeCorridor", 2, 8, 19, 16),  # 16; the default cells are large enough
+    ("SixteenRooms", 1, 1, 13, 16),
+    ("SixteenRooms", 1, 1, 13, 50),  # larger than needed: as asked
 ])
-def test_render_maze_writes_the_grid_of_goal_placements(tmp_path, capsys, monkeypatch, name, rows, columns, size):
+def test_render_maze_writes_the_grid_of_goal_placements(tmp_path, capsys, monkeypatch, name, rows, columns, size,
+                                                         tile):
     monkeypatch.chdir(tmp_path)
-    code, out, err = run_cli(capsys, "render", "maze", name, "--tile", 4)
+    code, out, err = run_cli(capsys, "render", "maze", name, "--tile", tile)
     assert code == 0, err
     assert out == f"wrote {name}.png\n"
     with Image.open(tmp_path / f"{name}.png") as img:
         assert img.format == "PNG"
-        assert img.size == sheet_size(rows, columns, 4, size)
+        assert img.size == sheet_size(rows, columns, maze_tile(rows, columns, tile, size), size)
+        assert min(img.size) >= render.MIN_SIDE
 
 
-def test_render_maze_tiles_are_the_renderers(tmp_path):
+def test_render_maze_tiles_are_the_renderers_under_one_title_and_a_key(tmp_path):
+    """The tiles are jaxued's renderer's, at the least readable size; the sheet says the maze's
+    name once (its title: a tile is captioned with its goal), and its key shows every colour the
+    tiles use (wall, floor, goal, agent, the agent's view) with its name."""
     from jaxued.environments.maze.renderer import MazeRenderer
 
     from remidi.envs.maze import MazeEnv, held_out_sets
@@ -140,12 +155,32 @@ def test_render_maze_tiles_are_the_renderers(tmp_path):
     img = np.asarray(Image.open(path).convert("RGB"))
     _, levels = held_out_sets()["SmallCorridor"]
     env = MazeEnv(13)
-    tile_px = 15 * 3
+    tile = maze_tile(2, 5, 3, 13)
+    tile_px = 15 * tile
     # goal placement #3 is the second row (bottom dead ends), second column
-    want = np.asarray(MazeRenderer(env.maze, 3).render_level(jax.tree.map(lambda x: x[3], levels), env.default_params))
-    top = render.HEADER + (render.CAPTION + tile_px + render.PAD) + render.CAPTION
+    want = np.asarray(MazeRenderer(env.maze, tile).render_level(jax.tree.map(lambda x: x[3], levels),
+                                                                env.default_params))
+    head = render.HEADER + render.key_height(img.shape[1], render.MAZE_KEY)
+    top = head + (render.CAPTION + tile_px + render.PAD) + render.CAPTION
     left = render.PAD + (tile_px + render.PAD)
     np.testing.assert_array_equal(img[top:top + tile_px, left:left + tile_px], want)
+    key = img[render.HEADER:head].reshape(-1, 3)
+    for colour, _ in render.MAZE_KEY:
+        assert (key == colour).all(axis=1).sum() >= (render.SWATCH - 2) ** 2, colour
+    names = " ".join(label for _, label in render.MAZE_KEY)
+    assert all(word in names for word in ("wall", "floor", "goal", "agent", "view"))
+    assert "active buffer" not in names
+
+
+def test_render_maze_names_a_single_maze_once(tmp_path, monkeypatch):
+    """A maze of one goal placement: the title names it, the tile's caption gives its goal."""
+    captions = []
+    real = render._sheet
+    monkeypatch.setattr(render, "_sheet", lambda title, rows, *a, **k: captions.append(
+        (title, [c for row in rows for c in row["captions"]])) or real(title, rows, *a, **k))
+    render.render_maze("SixteenRooms", out=tmp_path / "s.png")
+    ((title, tiles),) = captions
+    assert title == "SixteenRooms (13x13)" and tiles == ["goal (11, 11)"]
 
 
 # ---------------------------------------------------------------------------------- buffers

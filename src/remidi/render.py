@@ -1,20 +1,23 @@
 """``remidi render``: pictures of maze levels, of what the adversary chose, and of the agent playing.
 
-* :func:`render_maze`: a held-out maze (the corridor mazes: one tile per goal placement) as a PNG.
+* :func:`render_maze`: a held-out maze (the corridor mazes: one tile per goal placement) as a PNG,
+  with a colour key, at least :data:`MIN_SIDE` pixels on its short side (larger cells than
+  ``tile`` where the maze would be smaller).
 * :func:`render_buffers`: the top-K scored levels of every level buffer in a maze run's
   checkpoint, one row per buffer (the active one marked), each tile captioned with its score and
   tags (T-maze / blind), as a PNG.
 * :func:`render_episode`: the checkpoint's agent playing one episode on a held-out maze, as an
   animated GIF whose frames show the maze (the agent's 5×5 view highlighted) beside what the agent
-  observes.
+  observes, under a colour key (:data:`EPISODE_KEY`).
 
 Tiles are drawn by ``jaxued``'s :class:`~jaxued.environments.maze.renderer.MazeRenderer`; the
 sheets are assembled with NumPy and Pillow and written atomically. Geometry (so it can be
-checked): a sheet is ``HEADER`` pixels of title, then its rows; a row is its own header band
-(``ROW_HEADER``, buffer sheets only), a caption band (``CAPTION``) and the tiles, followed by
-``PAD``; tiles are ``(size + 2) · tile`` pixels square (the maze plus its border) with ``PAD``
-pixels between and around them. A buffer sheet has a colour key under its title (:data:`KEY`):
-:func:`key_height` pixels, ``KEY_ROW`` per line of swatches that fits the sheet's width.
+checked): a sheet is ``HEADER`` pixels of title, then its colour key, then its rows; a row is its
+own header band (``ROW_HEADER``, buffer sheets only), a caption band (``CAPTION``) and the tiles,
+followed by ``PAD``; tiles are ``(size + 2) · tile`` pixels square (the maze plus its border) with
+``PAD`` pixels between and around them (:func:`sheet_size`). The key of a buffer sheet is
+:data:`KEY`, of a maze sheet :data:`MAZE_KEY` (without the buffers' mark): :func:`key_height`
+pixels, ``KEY_ROW`` per line of swatches that fits the sheet's width.
 
 Every bad input raises :class:`~remidi.errors.RemidiError` (one line) before anything is written.
 """
@@ -39,6 +42,7 @@ MAX_COLUMNS = 8  # tiles per row of a maze sheet
 DEFAULT_TILE = 16
 TILE_RANGE = (2, 64)
 DEFAULT_TOP = 8
+MIN_SIDE = 600  # pixels: a maze sheet's short side is at least this (as far as TILE_RANGE allows), to be read
 EPISODE_STEPS = 250
 MAZE_EXPERIMENTS = ("tmaze", "blindfold", "blindfold-noisy")
 
@@ -53,6 +57,8 @@ SWATCH = 10  # a colour key's swatch, pixels square
 KEY = (((100, 100, 100), "wall"), ((0, 0, 0), "floor"), ((0, 255, 0), "goal"),
        ((255, 0, 0), "agent (pointing where it faces)"),
        ((76, 76, 76), "its 5x5 view (cells lightened 30%)"), (ACTIVE_BAND, "active buffer"))
+MAZE_KEY = KEY[:-1]  # a maze sheet's: the renderer's colours
+EPISODE_KEY = MAZE_KEY + ((UNSEEN, "in its view: cells it cannot see"),)  # an episode frame's
 MIN_FRAME_WIDTH = 320  # pixels: an episode frame is at least this wide, so its captions fit
 FRAME_MS = 150
 LAST_FRAME_MS = 2000
@@ -128,11 +134,11 @@ def _render_levels(levels, size: int, tile: int) -> np.ndarray:
     return np.asarray(jax.vmap(renderer.render_level, in_axes=(0, None))(levels, env.default_params))
 
 
-def _key_lines(width: int) -> list[list[tuple[int, tuple, str]]]:
-    """:data:`KEY` laid out in lines that fit ``width`` pixels: ``[(x, colour, label)]`` per line
-    (an entry wider than the sheet gets a line of its own, clipped)."""
+def _key_lines(width: int, key=KEY) -> list[list[tuple[int, tuple, str]]]:
+    """``key`` ((colour, label) pairs) laid out in lines that fit ``width`` pixels:
+    ``[(x, colour, label)]`` per line (an entry wider than the sheet gets a line of its own, clipped)."""
     lines, x = [[]], PAD
-    for colour, label in KEY:
+    for colour, label in key:
         w = SWATCH + 4 + int(_font().getlength(label)) + 12
         if lines[-1] and x + w > width:
             lines.append([])
@@ -142,13 +148,13 @@ def _key_lines(width: int) -> list[list[tuple[int, tuple, str]]]:
     return lines
 
 
-def key_height(width: int) -> int:
-    """Pixels of the colour key of a buffer sheet ``width`` pixels wide."""
-    return KEY_ROW * len(_key_lines(width))
+def key_height(width: int, key=KEY) -> int:
+    """Pixels of the colour key ``key`` (default: a buffer sheet's) of a sheet ``width`` pixels wide."""
+    return KEY_ROW * len(_key_lines(width, key))
 
 
-def _draw_key(canvas: np.ndarray, top: int) -> None:
-    for i, line in enumerate(_key_lines(canvas.shape[1])):
+def _draw_key(canvas: np.ndarray, top: int, key=KEY) -> None:
+    for i, line in enumerate(_key_lines(canvas.shape[1], key)):
         y = top + i * KEY_ROW
         for x, colour, label in line:
             s = (KEY_ROW - SWATCH) // 2
@@ -158,18 +164,35 @@ def _draw_key(canvas: np.ndarray, top: int) -> None:
             _text(canvas, (x + SWATCH + 2, y), max(0, right - x - SWATCH - 2), KEY_ROW, label)
 
 
-def _sheet(title: str, rows: list[dict], columns: int, tile_px: int, row_header: bool,
-           key: bool = False) -> np.ndarray:
-    """Assemble a sheet. ``rows``: ``{"tiles": u8[n, P, P, 3] (n ≤ columns), "captions": [str],
-    "label": str, "active": bool}``; ``key``: the colour key under the title."""
-    row_h = (ROW_HEADER if row_header else 0) + CAPTION + tile_px + PAD
+def sheet_size(rows: int, columns: int, tile_px: int, row_header: bool, key=None) -> tuple[int, int]:
+    """``(width, height)`` in pixels of a sheet of ``rows`` rows of ``columns`` tiles ``tile_px``
+    pixels square, with a header band per row or not, and the colour key ``key`` (None: none)."""
     width = PAD + columns * (tile_px + PAD)
-    head = HEADER + (key_height(width) if key else 0)
-    height = head + len(rows) * row_h + PAD
+    row_h = (ROW_HEADER if row_header else 0) + CAPTION + tile_px + PAD
+    return width, HEADER + (key_height(width, key) if key else 0) + rows * row_h + PAD
+
+
+def readable_tile(tile: int, rows: int, columns: int, cells: int, key=None) -> int:
+    """The pixels per cell of a sheet of ``rows`` × ``columns`` mazes of ``cells`` cells a side
+    (their border included): ``tile``, or more where the sheet's short side would be under
+    :data:`MIN_SIDE` pixels (at most ``TILE_RANGE``'s end)."""
+    while tile < TILE_RANGE[1] and min(sheet_size(rows, columns, cells * tile, False, key)) < MIN_SIDE:
+        tile += 1
+    return tile
+
+
+def _sheet(title: str, rows: list[dict], columns: int, tile_px: int, row_header: bool,
+           key=None) -> np.ndarray:
+    """Assemble a sheet. ``rows``: ``{"tiles": u8[n, P, P, 3] (n ≤ columns), "captions": [str],
+    "label": str, "active": bool}``; ``key``: the colour key under the title ((colour, label)
+    pairs; None: none)."""
+    row_h = (ROW_HEADER if row_header else 0) + CAPTION + tile_px + PAD
+    width, height = sheet_size(len(rows), columns, tile_px, row_header, key)
+    head = HEADER + (key_height(width, key) if key else 0)
     canvas = np.full((height, width, 3), BACKGROUND, np.uint8)
     _text(canvas, (0, 0), width, HEADER, title)
     if key:
-        _draw_key(canvas, HEADER)
+        _draw_key(canvas, HEADER, key)
     for r, row in enumerate(rows):
         top = head + r * row_h
         if row_header:
@@ -209,21 +232,23 @@ def _save_gif(path: Path, frames: list[np.ndarray]) -> None:
 
 # --------------------------------------------------------------------------------- render maze
 def render_maze(name: str, out=None, tile: int = DEFAULT_TILE) -> Path:
-    """Draw the held-out maze ``name`` (every goal placement of a corridor maze) as a PNG."""
+    """Draw the held-out maze ``name`` (every goal placement of a corridor maze) as a PNG titled
+    with its name, each tile captioned with its goal, a colour key under the title; ``tile``
+    pixels per cell, or more where the picture would be too small to read (:func:`readable_tile`)."""
     _check_tile(tile)
     size, levels = _check_maze_name(name, "maze")
     path = _check_out(out, Path(f"{name}.png"), ".png")
-    tiles = _render_levels(levels, size, tile)
-    n = tiles.shape[0]
+    goals = np.asarray(levels.goal_pos)  # [n, 2]
+    n = goals.shape[0]
     nrows = math.ceil(n / MAX_COLUMNS)
     ncols = math.ceil(n / nrows)
-    goals = np.asarray(levels.goal_pos)
+    tiles = _render_levels(levels, size, readable_tile(tile, nrows, ncols, size + 2, MAZE_KEY))
     rows = [{"tiles": [], "captions": []} for _ in range(nrows)]
     for i in range(n):  # column-major: a corridor's top dead ends on the first row, bottom ones below
         rows[i % nrows]["tiles"].append(tiles[i])
-        rows[i % nrows]["captions"].append(f"#{i} goal ({goals[i][0]}, {goals[i][1]})" if n > 1 else name)
+        rows[i % nrows]["captions"].append(f"{f'#{i} ' if n > 1 else ''}goal ({goals[i][0]}, {goals[i][1]})")
     what = f", {n} goal placements (--goal-index 0..{n - 1})" if n > 1 else ""
-    canvas = _sheet(f"{name} ({size}x{size}){what}", rows, ncols, tiles.shape[1], row_header=False)
+    canvas = _sheet(f"{name} ({size}x{size}){what}", rows, ncols, tiles.shape[1], row_header=False, key=MAZE_KEY)
     _save_png(path, canvas)
     return path
 
@@ -355,7 +380,7 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
         n += len(slots)
     title = (f"{run.experiment} / {run.algo}, seed {seed}: level buffers at update {meta.get('done', '?')} "
              f"(active: buffer {active})")
-    _save_png(path, _sheet(title, rows, columns, tile_px, row_header=True, key=True))
+    _save_png(path, _sheet(title, rows, columns, tile_px, row_header=True, key=KEY))
     return path
 
 
@@ -466,17 +491,20 @@ def render_episode(run_dir, maze: str, seed: int | None = None, attempt_seed: in
     view_px = env.view * view_tile
     width = max(PAD + board_px + 2 * PAD + view_px + PAD, MIN_FRAME_WIDTH)  # room for the captions
     body = max(board_px, CAPTION + view_px)
-    height = HEADER + body + PAD + CAPTION + PAD
+    head = HEADER + key_height(width, EPISODE_KEY)  # the title, then the colour key
+    height = head + body + PAD + CAPTION + PAD
     goal = f" goal #{index}" if count > 1 else ""
     title = f"{maze}{goal}: {run.experiment} / {run.algo}, seed {seed}, attempt seed {attempt_seed}"
+    blank = np.full((height, width, 3), BACKGROUND, np.uint8)  # what every frame shares: title and key
+    _text(blank, (0, 0), width, HEADER, title)
+    _draw_key(blank, HEADER, EPISODE_KEY)
     frames, total = [], 0.0
     for t in range(steps + 1):
-        canvas = np.full((height, width, 3), BACKGROUND, np.uint8)
-        _text(canvas, (0, 0), width, HEADER, title)
-        canvas[HEADER:HEADER + board_px, PAD:PAD + board_px] = boards[t]
+        canvas = blank.copy()
+        canvas[head:head + board_px, PAD:PAD + board_px] = boards[t]
         left = PAD + board_px + 2 * PAD
-        _text(canvas, (left, HEADER), view_px + PAD, CAPTION, "agent's view")
-        canvas[HEADER + CAPTION:HEADER + CAPTION + view_px, left:left + view_px] = \
+        _text(canvas, (left, head), view_px + PAD, CAPTION, "agent's view")
+        canvas[head + CAPTION:head + CAPTION + view_px, left:left + view_px] = \
             _view_panel(observations.image[t], atlas)
         if t == 0:
             caption = f"step 0/{EPISODE_STEPS}: start"
@@ -487,7 +515,7 @@ def render_episode(run_dir, maze: str, seed: int | None = None, attempt_seed: in
         if t == steps:
             caption = (f"end after {steps} steps: return {episode_return:+.3f}, "
                        f"{'solved' if solved else 'not solved'}")
-        _text(canvas, (0, HEADER + body + PAD), width, CAPTION, caption)
+        _text(canvas, (0, head + body + PAD), width, CAPTION, caption)
         frames.append(canvas)
     _save_gif(path, frames)
     return Episode(path=path, maze=maze, goal_index=index if count > 1 else None, seed=seed, steps=steps,

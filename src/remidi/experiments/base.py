@@ -86,7 +86,9 @@ class Experiment:
     preset_seeds: dict[str, int]  # default number of seeds per preset
     validate: Callable[[Any, str], None]  # (config, algo) → raise ConfigError
     train: Callable[[RunContext], RunResult]
-    plot: Callable[[Path, dict[str, RunResult], Any], None]  # (folder, {algo: result}, config)
+    # (folder, {algo: result}, config, preset=..., seeds=...): the preset and seeds the run was given,
+    # named in the figures
+    plot: Callable[..., None]
     # length key → keys measured against it, scaled in proportion when only the length is set
     # (config.scale_dependents), e.g. {"num_updates": ("eval_every", ...)}
     scaled_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
@@ -527,9 +529,9 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, 
         outputs.remove_stale_temporaries(sub)
 
     def compare(last: dict[str, RunResult]) -> None:  # with the last unfinished algorithm's result, before its summary
-        exp, config = runs[0][1], runs[0][5]
+        exp, preset, seeds, config = runs[0][1], runs[0][3], runs[0][4], runs[0][5]
         exp.plot(folder, {algo: last[algo] if algo in last else result_from_files(sub) for sub, _, algo, *_ in runs},
-                 config)
+                 config, preset=preset, seeds=seeds)
 
     for sub, exp, algo, preset, seeds, config in runs:  # nothing trained (finished): the folder stays as it is
         if (sub / "summary.json").exists():
@@ -588,7 +590,7 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
     results: dict[str, RunResult] = {}
     summaries: dict[str, dict] = {}
     if compare is None and len(folders) > 1:
-        compare = lambda finished: exp.plot(out, finished, config)  # noqa: E731
+        compare = lambda finished: exp.plot(out, finished, config, preset=preset, seeds=seeds)  # noqa: E731
     for algo, folder in folders.items():
         tracker = None
         if log:
@@ -613,7 +615,7 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
         timing = {"wall_s": round(time.perf_counter() - started, 1), "resumed": resume}
         results[algo] = result
         outputs.write_metrics_csv(folder / "metrics.csv", outputs.metric_rows(result.steps, result.history, seeds))
-        exp.plot(folder, {algo: result}, config)
+        exp.plot(folder, {algo: result}, config, preset=preset, seeds=seeds)
         if compare is not None and algo == list(folders)[-1]:
             compare(results)
         summaries[algo] = outputs.write_summary(

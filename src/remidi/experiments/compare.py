@@ -179,26 +179,34 @@ def format_comparison(result: dict) -> str:
     return "\n".join(lines)
 
 
-def plot_comparison(result: dict, path: Path) -> None:
-    """rliable-style interval plot into the PNG ``path``: panels mean, IQM and P(algo > baseline);
-    per experiment and algorithm a bar over the 95% interval with a tick at the point estimate
-    (``result`` as for :func:`format_comparison`)."""
-    from remidi.experiments.plots import _save, algorithm_style  # sets the Agg backend
+def comparison_figure(result: dict):
+    """rliable-style interval figure: panels mean, IQM and P(algo > baseline); per experiment and
+    algorithm a bar over the 95% interval, capped at both ends, and a white diamond at the point
+    estimate (``result`` as for :func:`format_comparison`). Each value axis reaches past the
+    intervals (P's past [0, 1]), so an interval's clipped end stays visible; the caption says
+    what a bar, a cap, a diamond and the dashed line are."""
     import matplotlib.pyplot as plt
 
-    algo, base, rows = result["algo"], result["baseline"], result["experiments"]
+    from remidi.experiments.plots import _captioned, algorithm_style, padded  # sets the Agg backend
+
+    algo, base, rows, metric = result["algo"], result["baseline"], result["experiments"], result["metric"]
     several = len(rows) > 1
-    fig, axes = plt.subplots(1, 3, figsize=(11, 0.7 + 0.45 * (2 * len(rows) + several + 1)))
-    for ax, key, title in ((axes[0], "mean", "mean"), (axes[1], "iqm", "IQM")):
-        labels = []
+    count = 2 * len(rows)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 1.9 + 0.42 * max(count, len(rows) + several)), layout="constrained")
+    for ax, key, what in ((axes[0], "mean", "mean"), (axes[1], "iqm", "IQM")):
+        labels, found = [], []
         for exp, r in rows.items():
             for name, side in ((algo, r["algo"]), (base, r["baseline"])):
                 y = len(labels)
-                labels.append(f"{exp} / {name}" if several else name)
+                labels.append(f"{exp} / {name} ({side['n']})" if several else f"{name} ({side['n']} seeds)")
                 _interval(ax, y, side[key], side[f"{key}_ci"], algorithm_style(name)["color"])
-        ax.set_yticks(range(len(labels)), labels, fontsize=8)
-        ax.invert_yaxis()
-        ax.set_title(f"{title} ({result['metric']})", fontsize=9)
+                found += [v for v in (side[key], *side[f"{key}_ci"]) if math.isfinite(v)]
+        _rows(ax, labels)
+        if found:
+            ax.set_xlim(*padded(min(found), max(found)))
+        ax.locator_params(axis="x", nbins=5)
+        ax.set_title(f"{what} over seeds", fontsize=9)
+        ax.set_xlabel(f"{metric} ({what} over seeds)", fontsize=9)
     ax = axes[2]
     labels = list(rows) + (["average"] if several else [])
     points = [(r["probability_of_improvement"], r["poi_ci"]) for r in rows.values()]
@@ -207,19 +215,44 @@ def plot_comparison(result: dict, path: Path) -> None:
     for y, (value, ci) in enumerate(points):
         _interval(ax, y, value, ci, algorithm_style(algo)["color"])
     ax.axvline(0.5, color="k", linestyle="--", linewidth=0.8)
-    ax.set_xlim(-0.02, 1.02)
-    ax.set_yticks(range(len(labels)), labels, fontsize=8)
-    ax.invert_yaxis()
+    ax.set_xlim(*padded(0.0, 1.0))
+    _rows(ax, labels)
     ax.set_title(f"P({algo} > {base})", fontsize=9)
+    ax.set_xlabel("probability of improvement", fontsize=9)
     for ax in axes:
         ax.grid(alpha=0.3, axis="x")
-    _save(fig, path)
+    _captioned(fig, f"{metric}: {algo} against {base}",
+               f"bar: the {CONFIDENCE:.0%} interval (percentile bootstrap over seeds, {stats.N_RESAMPLES:,} "
+               f"resamples), its ends capped; white diamond: the estimate; (n): seeds; P({algo} > {base}): the "
+               f"probability that a seed of {algo} scores higher than one of {base}, ties counting ½; dashed: "
+               f"P = 0.5, no difference")
+    return fig
+
+
+def plot_comparison(result: dict, path: Path) -> None:
+    """Save :func:`comparison_figure` into the PNG ``path``."""
+    from remidi.experiments.plots import _save
+
+    _save(comparison_figure(result), path)
+
+
+def _rows(ax, labels: list[str]) -> None:
+    """One row per label, top to bottom, with room above the first and below the last."""
+    ax.set_yticks(range(len(labels)), labels, fontsize=8)
+    ax.set_ylim(len(labels) - 0.3, -0.7)
 
 
 def _interval(ax, y: float, value: float, ci, color: str) -> None:
-    """One row of an interval plot: a bar over ``ci`` and a black tick at ``value`` (what is
-    undefined is left out)."""
-    if math.isfinite(ci[0]):
-        ax.barh(y, ci[1] - ci[0], left=ci[0], height=0.6, color=color, alpha=0.75)
+    """One row of an interval plot: a bar over ``ci`` with a cap at each end (an interval of a
+    single point is its caps) and a white diamond edged in black at ``value``; what is undefined
+    is left out. The row's height (± 0.4) counts for autoscaling, so a caller that leaves the
+    limits to matplotlib keeps the caps off the frame."""
+    ends = [v for v in (*ci, value) if math.isfinite(v)]
+    if ends:
+        ax.update_datalim([(min(ends), y - 0.4), (max(ends), y + 0.4)])
+    if math.isfinite(ci[0]) and math.isfinite(ci[1]):
+        ax.plot([ci[0], ci[1]], [y, y], color=color, linewidth=8, alpha=0.6, solid_capstyle="butt")
+        ax.plot([ci[0], ci[1]], [y, y], linestyle="none", marker="|", markersize=15, markeredgewidth=2, color=color)
     if math.isfinite(value):
-        ax.vlines(value, y - 0.3, y + 0.3, color="k", linewidth=2)
+        ax.plot([value], [y], linestyle="none", marker="D", markersize=6, markerfacecolor="white",
+                markeredgecolor="k", markeredgewidth=1.2)

@@ -4,6 +4,12 @@ Every algorithm keeps one colour, line style and marker in every plot of every e
 (:func:`algorithm_style`), and the algorithms appear in the order the run was given them, so a
 resumed run draws exactly what a fresh one does and two identical curves stay visible (different
 dashes, markers at different positions).
+
+Every figure shows what it claims: its value axes contain every curve, band, interval and
+reference line with a margin (:func:`padded`), so nothing lies on a frame; legends sit outside
+the axes, off the data; the title names the run as the experiment gave it (experiment, preset,
+seeds: :func:`run_title`) and the caption says what a line, band or bar is. Figures are built
+(``*_figure``) apart from saving, so tests can walk them.
 """
 
 from __future__ import annotations
@@ -109,12 +115,59 @@ class Panel:
     ylabel: str = ""
     xlabel: str = "step"
     references: list[tuple[float, str]] = field(default_factory=list)  # dashed horizontal lines, in the legend
-    ylim: tuple[float, float] | None = None
+    # the y range shown at least (either end None: the data's); the data and the references widen it
+    ylim: tuple[float | None, float | None] | None = None
     # draw curves whose means coincide (root-mean-square gap under 2% of the panel's range) once,
-    # labelled "a, b"
+    # labelled "a, b", in dashes of each one's colour
     merge_coinciding: bool = False
     # algorithms of the run for which the metric is undefined (DR's replay share): named in the panel
     missing: list[str] = field(default_factory=list)
+
+
+# what a panel figure draws, said in its caption
+MEAN_STD = "line: mean over seeds; band: ± 1 standard deviation over seeds"
+REFERENCE_LINES = "dashed black: the reference value its legend names"
+BARS_STD = "bar: mean over seeds; error bar: ± 1 standard deviation over seeds"
+MARGIN = 0.08  # of a value axis' shown range, left free beyond the data at each end
+DASH = 3.0  # a shared line's dash per curve, in line widths
+LEGEND_FONT = 8
+
+
+def seeds_text(seeds) -> str:
+    """``1 seed (3)``, ``3 seeds (0–2)``, ``4 seeds (0, 1, 5, 9)``: how many seeds, and which."""
+    seeds = sorted(int(s) for s in seeds)
+    spans: list[list[int]] = []
+    for s in seeds:
+        if spans and s == spans[-1][1] + 1:
+            spans[-1][1] = s
+        else:
+            spans.append([s, s])
+    which = ", ".join(str(a) if a == b else f"{a}, {b}" if b == a + 1 else f"{a}–{b}" for a, b in spans)
+    return f"{len(seeds)} seed{'' if len(seeds) == 1 else 's'} ({which})"
+
+
+def run_title(experiment: str = "", preset: str | None = None, seeds=None) -> str:
+    """The run a figure shows, as given to it: ``lever, preset smoke, 2 seeds (0, 1)`` (what is not
+    known left out)."""
+    parts = [experiment] if experiment else []
+    if preset:
+        parts.append(f"preset {preset}")
+    if seeds:
+        parts.append(seeds_text(seeds))
+    return ", ".join(parts)
+
+
+def padded(lo: float, hi: float, want: tuple[float | None, float | None] | None = None,
+           margin: float = MARGIN) -> tuple[float, float]:
+    """Limits of a value axis showing the data's range [``lo``, ``hi``] and ``want``'s given ends,
+    with ``margin`` of that range free beyond it at both ends: no curve, band, interval or
+    reference line lies on the frame, and axes asked for the same range (a share's [0, 1]) get
+    the same limits."""
+    want_lo, want_hi = want if want is not None else (None, None)
+    lo = lo if want_lo is None else min(lo, want_lo)
+    hi = hi if want_hi is None else max(hi, want_hi)
+    span = (hi - lo) or abs(hi) or 1.0
+    return lo - margin * span, hi + margin * span
 
 
 def algorithm_curves(results: dict, metric: str) -> list[Curve]:
@@ -130,105 +183,203 @@ def algorithm_curves(results: dict, metric: str) -> list[Curve]:
     return curves
 
 
-def _merge(curves: list[Curve], colors: list[str]) -> list[Curve]:
+def _merge(curves: list[Curve], colors: list[str]) -> list[list[Curve]]:
     """Curves with default styles get their colour by position first (so a curve keeps its colour
     whatever it is merged with); then each curve whose mean is within 2% of the panel's range of an
-    earlier one (root mean square over the log points) is folded into it, its label appended."""
+    earlier one (root mean square over the log points) joins its group: ``[[first, joined, ...]]``."""
     means = [np.nanmean(np.asarray(c.values, dtype=float), axis=0) for c in curves]
     finite = np.concatenate([m[np.isfinite(m)] for m in means]) if means else np.zeros(0)
     span = float(finite.max() - finite.min()) if finite.size else 0.0
     tol = max(0.02 * span, 1e-9)
-    groups: list[tuple[Curve, np.ndarray, list[str]]] = []
+    groups: list[tuple[list[Curve], np.ndarray]] = []
     for i, (curve, mean) in enumerate(zip(curves, means)):
-        style = curve.style or {"color": colors[i % len(colors)]}
-        for first, first_mean, labels in groups:
+        curve = Curve(curve.label, curve.steps, curve.values, curve.style or {"color": colors[i % len(colors)]})
+        for members, first_mean in groups:
             gap = mean - first_mean
-            if (np.array_equal(first.steps, curve.steps) and np.array_equal(np.isnan(mean), np.isnan(first_mean))
+            if (np.array_equal(members[0].steps, curve.steps) and np.array_equal(np.isnan(mean), np.isnan(first_mean))
                     and np.sqrt(np.nanmean(gap ** 2) if np.isfinite(gap).any() else 0.0) <= tol):
-                labels.append(curve.label)
+                members.append(curve)
                 break
         else:
-            groups.append((Curve(curve.label, curve.steps, curve.values, style), mean, [curve.label]))
-    return [Curve(", ".join(labels), first.steps, first.values, first.style) for first, _, labels in groups]
+            groups.append(([curve], mean))
+    return [members for members, _ in groups]
 
 
-def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int = 3) -> None:
-    """Save ``panels`` into the PNG ``path``, at most ``columns`` per row."""
+def _mean_std(values) -> tuple[np.ndarray, np.ndarray]:
+    values = np.asarray(values, dtype=float)
+    with warnings.catch_warnings():  # "mean of empty slice" where every seed is NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(values, axis=0), np.nanstd(values, axis=0)
+
+
+def _draw_group(ax, members: list[Curve], first: int, count: int):
+    """Draw the curves ``members`` (one, or several whose means coincide: the first one's mean and
+    band) and return the legend handle: one line, or for several a line in dashes of each member's
+    colour in turn (each member its own ``Line2D``, labelled with its curve), as a tuple.
+    ``first``: the index of the group's first line among the panel's ``count`` lines (marker
+    positions are spread over them, so coinciding curves each show theirs)."""
+    mean, std = _mean_std(members[0].values)
+    steps, k = members[0].steps, len(members)
+    lines = []
+    for j, curve in enumerate(members):
+        style = dict(curve.style)
+        if k > 1:  # pattern: on for one dash, off for the others'; member j's dash comes j-th
+            style["linestyle"] = (((k - j) % k) * DASH, (DASH, (k - 1) * DASH))
+        if style.get("marker"):  # at most ~8 markers, spread over the curves so coinciding ones show each
+            i, every = first + j, max(1, len(mean) // 8)
+            shift = i * every // count if count <= every else i % every
+            style["markevery"] = (shift, every) if every > 1 else 1
+            style.setdefault("markersize", 4)
+        (line,) = ax.plot(steps, mean, label=curve.label, linewidth=1.6, **style)
+        lines.append(line)
+    ax.fill_between(steps, mean - std, mean + std, color=lines[0].get_color(), alpha=0.15, linewidth=0)
+    return lines[0] if k == 1 else tuple(lines)
+
+
+def _data_range(panel: Panel) -> tuple[float, float] | None:
+    """The lowest and highest value a panel draws: means, mean ± std, references (None: none)."""
+    found = [float(y) for y, _ in panel.references]
+    for curve in panel.curves:
+        mean, std = _mean_std(curve.values)
+        for v in (mean, mean - std, mean + std):
+            found.extend(v[np.isfinite(v)].tolist())
+    return (min(found), max(found)) if found else None
+
+
+def _draw_panel(ax, panel: Panel, colors: list[str]) -> list[tuple[object, str]]:
+    """Draw ``panel`` into ``ax``; return its legend entries ``[(handle, label)]``."""
+    if panel.merge_coinciding:
+        groups = _merge(panel.curves, colors)
+    else:
+        groups = [[Curve(c.label, c.steps, c.values, c.style or {"color": colors[i % len(colors)]})]
+                  for i, c in enumerate(panel.curves)]
+    count = sum(len(g) for g in groups)
+    entries, first = [], 0
+    for members in groups:
+        entries.append((_draw_group(ax, members, first, count), ", ".join(c.label for c in members)))
+        first += len(members)
+    for y, label in panel.references:
+        line = ax.axhline(y, linestyle=(0, (4, 3)), color="black", linewidth=1, alpha=0.6, label=label)
+        if label not in {text for _, text in entries}:
+            entries.append((line, label))
+    found = _data_range(panel)
+    if found is None and panel.ylim is not None and None not in panel.ylim:
+        found = panel.ylim
+    if found is not None:
+        ax.set_ylim(*padded(*found, panel.ylim))
+    ax.set_title(panel.title)
+    ax.set_xlabel(panel.xlabel)
+    ax.set_ylabel(panel.ylabel)
+    if panel.missing:
+        # under the panel's x label (inside the panel it covered curves), wrapped to its width
+        note = "\n".join(textwrap.wrap(f"n/a: {', '.join(panel.missing)}", 70))
+        ax.annotate(note, xy=(1, 0), xycoords=("axes fraction", ax.xaxis.label), xytext=(0, -2),
+                    textcoords="offset points", fontsize=8, color="dimgray", ha="right", va="top")
+    ax.grid(alpha=0.3)
+    return entries
+
+
+def _legend_below(ax, entries: list[tuple[object, str]], renderer):
+    """The legend of ``entries`` under the axes' x axis and any note there, off the data, in as
+    many columns (at most 3) as fit the panel's width (its y axis included). Its place is set in
+    points below the axes' frame, so it stays under them however the layout moves the axes."""
+    from matplotlib.legend_handler import HandlerTuple
+    from matplotlib.transforms import ScaledTranslation
+
+    fig = ax.figure
+    left = ax.yaxis.get_tightbbox(renderer)
+    width = ax.bbox.x1 - (left.x0 if left is not None else ax.bbox.x0)  # the panel's, its y axis included
+    below = [ax.bbox, ax.xaxis.get_tightbbox(renderer)] + [t.get_window_extent(renderer) for t in ax.texts]
+    drop = (ax.bbox.y0 - min(b.y0 for b in below if b is not None)) * 72 / fig.dpi + 3  # points
+    anchor = ax.transAxes + ScaledTranslation(0, -drop / 72, fig.dpi_scale_trans)
+    handles, labels = [h for h, _ in entries], [label for _, label in entries]
+    for ncols in range(min(3, len(entries)), 0, -1):
+        legend = ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0), bbox_transform=anchor,
+                           ncols=ncols, fontsize=LEGEND_FONT, handler_map={tuple: HandlerTuple(ndivide=1, pad=0)},
+                           handlelength=2.5)
+        if ncols == 1 or legend.get_window_extent(renderer).width <= width:
+            break
+    return legend
+
+
+def _captioned(fig, title: str, caption: str) -> None:
+    """The figure's title above its panels and its caption (what lines, bands or bars are) below,
+    wrapped to the figure's width."""
+    width = int(fig.get_figwidth() * 15)  # characters of 9-point text per line
+    if title:
+        fig.suptitle("\n".join(textwrap.wrap(title, width)), fontsize=13, fontweight="bold")
+    if caption:
+        fig.supxlabel("\n".join(textwrap.wrap(caption, width)), fontsize=9)
+
+
+def panels_figure(panels: list[Panel], title: str = "", columns: int = 3, caption: str | None = None):
+    """The figure of ``panels``, at most ``columns`` per row, each with its legend below it;
+    ``title`` above (the run: :func:`run_title`), ``caption`` below (default: what a line, a band
+    and a dashed line are). Constrained layout: laid out as it is drawn or saved."""
     cols = min(columns, len(panels))
     rows = math.ceil(len(panels) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.0 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.0 * rows), squeeze=False, layout="constrained")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
-    for ax, panel in zip(axes.flat, panels):
-        curves = (_merge(panel.curves, colors) if panel.merge_coinciding else
-                  [Curve(c.label, c.steps, c.values, c.style or {"color": colors[i % len(colors)]})
-                   for i, c in enumerate(panel.curves)])
-        for i, curve in enumerate(curves):
-            values = np.asarray(curve.values, dtype=float)
-            with warnings.catch_warnings():  # "mean of empty slice" where every seed is NaN
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean, std = np.nanmean(values, axis=0), np.nanstd(values, axis=0)
-            style = dict(curve.style)
-            if style.get("marker"):  # at most ~8 markers, spread over the curves so coinciding ones show each
-                every = max(1, len(mean) // 8)
-                shift = i * every // len(curves) if len(curves) <= every else i % every
-                style["markevery"] = (shift, every) if every > 1 else 1
-                style.setdefault("markersize", 4)
-            ax.plot(curve.steps, mean, label=curve.label, linewidth=1.6, **style)
-            ax.fill_between(curve.steps, mean - std, mean + std, color=style.get("color"), alpha=0.15, linewidth=0)
-        seen = set()
-        for y, label in panel.references:
-            ax.axhline(y, linestyle=(0, (4, 3)), color="black", linewidth=1, alpha=0.6,
-                       label=None if label in seen else label)
-            seen.add(label)
-        # a fixed end of the range stays; a free one gets headroom, so that neither the frame nor the
-        # legend hides a curve or a reference line
-        lo, hi = ax.get_ylim()
-        span = (hi - lo) or 1.0
-        want_lo, want_hi = panel.ylim if panel.ylim is not None else (None, None)
-        ax.set_ylim(lo - 0.05 * span if want_lo is None else want_lo, hi + 0.25 * span if want_hi is None else want_hi)
-        ax.set_title(panel.title)
-        ax.set_xlabel(panel.xlabel)
-        if panel.missing:
-            # under the panel's x label (inside the panel it covered curves), wrapped to its width
-            note = "\n".join(textwrap.wrap(f"n/a: {', '.join(panel.missing)}", 70))
-            ax.annotate(note, xy=(1, 0), xycoords=("axes fraction", ax.xaxis.label), xytext=(0, -2),
-                        textcoords="offset points", fontsize=8, color="dimgray", ha="right", va="top")
-        ax.set_ylabel(panel.ylabel)
-        ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="best")
-    if title:
-        fig.suptitle(title)
-    _save(fig, path)
+    entries = [_draw_panel(ax, panel, colors) for ax, panel in zip(axes.flat, panels)]
+    renderer = fig.canvas.get_renderer()
+    extra = [0.0] * rows  # inches of legend under each row of panels
+    for k, (ax, found) in enumerate(zip(axes.flat, entries)):
+        if found:
+            height = _legend_below(ax, found, renderer).get_window_extent(renderer).height / fig.dpi
+            extra[k // cols] = max(extra[k // cols], height + 0.1)
+    fig.set_figheight(4.0 * rows + sum(extra))
+    if caption is None:
+        caption = MEAN_STD + ("; " + REFERENCE_LINES if any(p.references for p in panels) else "")
+    _captioned(fig, title, caption)
+    return fig
 
 
-def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
-              ylim: tuple[float, float] | None = None) -> None:
-    """Grouped bar chart into the PNG ``path``: one group per label, one bar per series (an
-    algorithm, in its fixed colour); ``series[name]`` f[len(labels), S] over seeds, drawn as mean
-    with a ± std error bar."""
-    fig, ax = plt.subplots(figsize=(min(14.0, max(6.0, 0.55 * len(labels) * max(1, len(series)) ** 0.5 + 2)), 4.2))
+def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int = 3,
+                caption: str | None = None) -> None:
+    """Save :func:`panels_figure` into the PNG ``path``."""
+    _save(panels_figure(panels, title, columns, caption), path)
+
+
+def bars_figure(title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
+                ylim: tuple[float, float] | None = None, caption: str | None = None):
+    """Grouped bar chart: one group per label, one bar per series (an algorithm, in its fixed
+    colour); ``series[name]`` f[len(labels), S] over seeds, drawn as mean with a ± std error bar.
+    ``ylim``: the range shown at least (the bars and error bars widen it); the legend right of the
+    axes; ``caption`` below (default: what a bar and an error bar are)."""
+    fig, ax = plt.subplots(figsize=(min(14.0, max(6.0, 0.55 * len(labels) * max(1, len(series)) ** 0.5 + 2)) + 1.5,
+                                    4.6), layout="constrained")
     width = 0.8 / max(1, len(series))
     x = np.arange(len(labels))
+    found = [0.0]  # the bars stand on 0
     for i, (name, values) in enumerate(series.items()):
-        values = np.asarray(values, dtype=float)
-        ax.bar(x + (i - (len(series) - 1) / 2) * width, values.mean(axis=1), width, yerr=values.std(axis=1),
-               label=name, color=algorithm_style(name)["color"], capsize=2)
+        mean, std = _mean_std(np.asarray(values, dtype=float).T)
+        ax.bar(x + (i - (len(series) - 1) / 2) * width, mean, width, yerr=std, label=name,
+               color=algorithm_style(name)["color"], capsize=2)
+        found.extend(v for v in np.concatenate([mean - std, mean + std]) if np.isfinite(v))
     ax.set_xticks(x, labels, rotation=35, ha="right", fontsize=8)
     ax.set_title(title)
     ax.set_ylabel(ylabel)
-    if ylim is not None:
-        ax.set_ylim(*ylim)
+    ax.set_ylim(*padded(min(found), max(found), ylim))
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=8)
-    _save(fig, path)
+    if series:
+        ax.legend(fontsize=LEGEND_FONT, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    _captioned(fig, "", BARS_STD if caption is None else caption)
+    return fig
+
+
+def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
+              ylim: tuple[float, float] | None = None, caption: str | None = None) -> None:
+    """Save :func:`bars_figure` into the PNG ``path``."""
+    _save(bars_figure(title, labels, series, ylabel, ylim, caption), path)
 
 
 def _save(fig, path: Path) -> None:
-    """Save atomically (temporary file, then rename) and close the figure."""
-    fig.tight_layout()
+    """Save atomically (temporary file, then rename) and close the figure; a figure without a
+    layout engine of its own is laid out tightly first."""
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     tmp = Path(path).with_name(f".{Path(path).name}.{os.getpid()}.tmp.png")  # two writers never share one
     try:
         fig.savefig(tmp, dpi=110)

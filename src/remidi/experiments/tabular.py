@@ -7,13 +7,14 @@ compares the result with the exact BLP solution computed by :mod:`remidi.solvers
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from remidi.errors import ConfigError, choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import Curve, Panel, plot_panels, series_style
+from remidi.experiments.plots import MEAN_STD, Curve, Panel, plot_panels, run_title, series_style
 from remidi.solvers.onestep import OneStepGame, solve_blp
 from remidi.tabular.games import paper_game
 from remidi.tabular.learner import TabularUEDConfig, train
@@ -89,10 +90,13 @@ def make_train(setting: str):
     return train_tabular
 
 
-def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig) -> None:
+def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig, preset: str | None = None,
+         seeds: list[int] | None = None, experiment: str = "") -> None:
     """``regret.png`` (greatest regret per observation, with the exact BLP regrets as dashed
     lines) and ``adversary.png`` (level probabilities), one panel per algorithm in the run's
-    order, mean ± std over seeds; curves that coincide are drawn once, labelled together."""
+    order, mean ± std over seeds, titled with the ``experiment``, ``preset`` and ``seeds`` of the
+    run. An observation or a level keeps its colour in every panel; levels whose curves coincide
+    are drawn once, labelled together, in dashes of each one's colour."""
     any_result = next(iter(results.values()))
     blp = any_result.extra["reference"]["blp_regret"]
     by_value: dict[float, list[str]] = {}
@@ -108,13 +112,17 @@ def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig) -> 
                                series_style(i)) for i, name in enumerate(names)]
         regret_panels.append(Panel(f"{algo}: greatest regret per observation", regret_curves,
                                    "greatest regret over the observation's levels", "iteration", refs))
-        adversary_curves = [Curve(name.split("/", 1)[1], result.steps, values)
-                            for name, values in result.history.items() if name.startswith("adversary_prob/")]
+        levels = [name for name in result.history if name.startswith("adversary_prob/")]
+        adversary_curves = [Curve(name.split("/", 1)[1], result.steps, result.history[name],
+                                  {"color": series_style(i)["color"]}) for i, name in enumerate(levels)]
         adversary_panels.append(Panel(f"{algo}: adversary level probabilities", adversary_curves,
                                       "probability the adversary samples the level", "iteration",
-                                      ylim=(-0.02, 1.02), merge_coinciding=True))
-    plot_panels(folder / "regret.png", regret_panels)
-    plot_panels(folder / "adversary.png", adversary_panels)
+                                      ylim=(0.0, 1.0), merge_coinciding=True))
+    title = run_title(experiment, preset, seeds)
+    plot_panels(folder / "regret.png", regret_panels, title=title,
+                caption=f"{MEAN_STD}; dashed black: the exact BLP solution's greatest regret per observation")
+    plot_panels(folder / "adversary.png", adversary_panels, title=title,
+                caption=f"{MEAN_STD}; a line for several levels is dashed in each level's colour")
 
 
 def _experiment(setting: str) -> Experiment:
@@ -127,7 +135,7 @@ def _experiment(setting: str) -> Experiment:
         preset_seeds=PRESET_SEEDS,
         validate=validate,
         train=make_train(setting),
-        plot=plot,
+        plot=partial(plot, experiment=f"tabular-{setting}"),
         scaled_keys={"iterations": ("log_every", "iters_per_adversary")},
     )
 

@@ -21,7 +21,7 @@ from remidi.engine.paired import LevelGenerator
 from remidi.engine.validation import run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels
+from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels, run_title
 
 
 # measured in updates: scaled with num_updates when only num_updates is set (config.scale_dependents)
@@ -138,28 +138,31 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
 UNIT_INTERVAL = ("solve_rate", "replay_fraction", "buffer_fraction", "generated")  # metrics in [0, 1]: fixed y-range
 
 
-def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | None = None):
+def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | None = None, name: str = ""):
     """``panels``: (metric, title) or (metric, title, options) tuples; one panel per metric, one
     curve per algorithm (fixed style per algorithm, in the run's order; algorithms without the
     metric, or that never define it, left out), saved as ``training.png``. ``options``:
-    ``references`` [(y, label)] dashed lines, ``ylim``, ``optional`` (left out when no algorithm of
-    the run has the metric: a learned generator's); metrics of a share or rate are drawn on
-    [0, 1]. ``bars``: (title, metrics): a bar chart of those metrics' final values per algorithm
-    (mean ± std over seeds), saved as ``final.png``."""
+    ``references`` [(y, label)] dashed lines, ``ylim`` (the range shown at least), ``optional``
+    (left out when no algorithm of the run has the metric: a learned generator's); metrics of a
+    share or rate are drawn on [0, 1]. ``bars``: (title, metrics): a bar chart of those metrics'
+    final values per algorithm (mean ± std over seeds), saved as ``final.png``. The figures' titles
+    name the experiment ``name`` and the run's ``preset`` and ``seeds``, as the run gives them."""
 
-    def plot(folder: Path, results: dict[str, RunResult], cfg) -> None:
+    def plot(folder: Path, results: dict[str, RunResult], cfg, preset: str | None = None,
+             seeds: list[int] | None = None) -> None:
+        run = run_title(name, preset, seeds)
         figure = []
         for metric, title, *more in panels:
             options = more[0] if more else {}
             kind = metric.split("/")[0]
-            ylim = options.get("ylim", (-0.03, 1.03) if kind in UNIT_INTERVAL else None)
+            ylim = options.get("ylim", (0.0, 1.0) if kind in UNIT_INTERVAL else None)
             curves = algorithm_curves(results, metric)
             if not curves and options.get("optional"):  # a panel for algorithms this run does not have
                 continue
             drawn = {c.label for c in curves}
             figure.append(Panel(title, curves, metric, "update", references=list(options.get("references", ())),
                                 ylim=ylim, missing=[algo for algo in results if algo not in drawn]))
-        plot_panels(folder / "training.png", figure)
+        plot_panels(folder / "training.png", figure, title=run)
         if bars is not None:
             title, metrics = bars
             finals = {algo: r.final_metrics() for algo, r in results.items()}
@@ -167,7 +170,7 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
                       if all(m in f for m in metrics)}  # [M, S] per algorithm
             labels = [m.split("/", 1)[-1] for m in metrics]
             kind = metrics[0].split("/")[0]
-            plot_bars(folder / "final.png", title, labels, series, kind,
+            plot_bars(folder / "final.png", f"{run}: {title}" if run else title, labels, series, kind,
                       ylim=(0.0, 1.0) if kind in UNIT_INTERVAL else None)
 
     return plot
@@ -205,7 +208,8 @@ def make_ued_experiment(*, name: str, description: str, task_factory, config_fac
         algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_for, summary_metrics, derive, check_step), plot=make_plot(plot_panels_spec, bar_chart),
+        train=make_train(task_for, summary_metrics, derive, check_step),
+        plot=make_plot(plot_panels_spec, bar_chart, name),
         scaled_keys=SCALED_KEYS,
         divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N

@@ -71,12 +71,25 @@ def test_clear_separation_on_ten_seeds_is_reproduced(tmp_path):
         assert t["p_holm"] == pytest.approx(2 / 184756)  # both comparisons equal: Holm multiplies the smaller by 2
 
 
-def test_an_ordering_in_the_mean_only_is_partly(tmp_path):
+def test_an_ordering_in_the_mean_only_says_that_no_test_passes(tmp_path):
+    """Every comparison holds in the mean and none passes: "partly" by the rule's letter, printed
+    "partly (no test passes)" wherever the verdict appears, so that no reader takes it for a claim
+    that holds in some settings."""
     rng = np.random.default_rng(0)
     noise = lambda: rng.normal(0, 0.3, 10)  # noqa: E731
     r = verdict_of(tmp_path, 0.35 + noise(), 0.3 + noise(), 0.3 + noise())
-    assert all(t["in_mean"] for t in r["tests"]) and not all(t["passes"] for t in r["tests"])
+    assert all(t["in_mean"] for t in r["tests"]) and not any(t["passes"] for t in r["tests"])
+    assert r["verdict"] == r["rule_verdict"] == "partly (no test passes)"
+    assert "| **partly (no test passes)** (`cpu` preset" in rp.verdict_table([r])
+    assert ": **partly (no test passes)** (`cpu` preset" in rp.summary_lines([r])
+
+
+def test_one_comparison_passing_and_one_holding_in_the_mean_only_is_plain_partly(tmp_path):
+    r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(10)], [0.1 + 0.01 * i for i in range(10)],
+                   [0.49 + 0.01 * i for i in range(10)])
+    assert [t["passes"] for t in r["tests"]] == [True, False] and all(t["in_mean"] for t in r["tests"])
     assert r["verdict"] == "partly"
+    assert "| **partly** (" in rp.verdict_table([r]) and "no test passes" not in rp.summary_lines([r])
 
 
 def test_one_comparison_passing_and_one_reversed_is_partly(tmp_path):
@@ -84,6 +97,54 @@ def test_one_comparison_passing_and_one_reversed_is_partly(tmp_path):
                    [0.9 + 0.01 * i for i in range(10)])
     assert [t["passes"] for t in r["tests"]] == [True, False]
     assert r["verdict"] == "partly"
+
+
+def test_each_verdict_names_the_scale_of_its_runs(tmp_path):
+    """The share of the paper preset's environment steps (num_updates × num_envs × num_steps), from
+    what the runs' config.json records, else from the preset an algorithm's name gives."""
+    r = verdict_of(tmp_path, [0.9] * 10, [0.1] * 10, [0.1] * 10)  # config.json: num_updates 100 only
+    assert r["scale"] == "`cpu` preset: 5% of the paper's environment steps"  # the cpu preset's 1500 × 32 × 256
+    runs = rp.load_runs(tmp_path)
+    for algo in ("remidi", "plr"):
+        runs["tmaze", algo].config.update(num_updates=6000, num_envs=32, num_steps=256)
+    assert rp.claim_scale(CLAIM, runs) == \
+        "`cpu` preset: 20% of the paper's environment steps; `cpu` preset: 5%"  # minimax-return still at cpu's
+    claim = rp.Claim("s", "x", "PLR⊥ learns with more steps", CLAIM.metric, ("tmaze",), greater=(("plr @cpu4x", "plr"),))
+    assert rp.claim_scale(claim, {}) == "`cpu4x` preset: 20% of the paper's environment steps"
+    brax = rp.Claim("b", "x", "walks", "evaluate:return/undisturbed", ("brax-ant",), greater=(("remidi @cpu", "plr"),))
+    assert rp.claim_scale(brax, {}) == "`cpu` preset: 15% of the paper's environment steps"  # 120 × 64 × 100
+    tab = rp.Claim("t", "x", "stagnates", "summary:regret/h1", ("tabular-shared",), greater=(("mmr @paper", "remidi"),))
+    assert rp.claim_scale(tab, {}) == "`paper` preset"
+
+
+def test_a_claim_on_runs_older_than_a_fix_it_needs_is_stale(tmp_path, monkeypatch):
+    """A run whose commits predate a correction its claim needs: the claim shows "stale" with the
+    commit and the change, not its verdict by the rule (kept apart); other claims are untouched."""
+    verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(10)], [0.1 + 0.01 * i for i in range(10)],
+               [0.2 + 0.01 * i for i in range(10)])  # every run at commit abc1234def
+    runs = rp.load_runs(tmp_path)
+    fix = rp.Fix("fff0000", "the reservoir keeps the highest key", runs=(("tmaze", "remidi"),), before=("abc1234",))
+    assert rp.stale_fix(CLAIM, runs, (fix,)) is fix
+    later = rp.Fix("fff0000", "later", runs=(("tmaze", "remidi"),), before=("9999999",))  # runs made after it
+    other = rp.Fix("fff0000", "other runs", runs=(("lever", "remidi"),), before=("abc1234",))
+    assert rp.stale_fix(CLAIM, runs, (later, other)) is None
+    monkeypatch.setattr(rp, "FIXES", (fix,))
+    r = rp.evaluate_claim(CLAIM, runs)
+    assert r["rule_verdict"] == "reproduced"
+    assert r["verdict"] == "stale: its runs predate fff0000 (the reservoir keeps the highest key); rerun queued"
+    assert "**stale: its runs predate fff0000" in rp.verdict_table([r])
+    assert rp.stale_fix(rp.CLAIMS[0], runs, (fix,)) is None  # a claim that reads none of those runs
+
+
+def test_the_t_maze_remidi_over_paired_claims_wait_for_their_rerun():
+    """Their committed runs (569c639) predate ab3ea79's reservoir fix; PAIRED's own claim does not
+    read them."""
+    runs = rp.load_runs(rp.DATA)
+    by_key = {c.key: c for c in rp.CLAIMS}
+    for key in ("tmaze-remidi-paired-generated", "tmaze-remidi-paired-heldout"):
+        assert rp.stale_fix(by_key[key], runs).commit == "ab3ea79"
+    assert rp.stale_fix(by_key["tmaze-paired"], runs) is None
+    assert rp.stale_fix(by_key["lever-remidi-paired"], runs) is None  # remade at ab3ea79
 
 
 def test_the_reverse_ordering_is_not_reproduced(tmp_path):
@@ -103,7 +164,7 @@ def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
     write_run(tmp_path / "edge", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.17, 0.19]})
     assert rp.evaluate_claim(claim, rp.load_runs(tmp_path / "in"))["verdict"] == "reproduced"
     edge = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "edge"))
-    assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly"
+    assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly (no test passes)"  # its one test fails
     write_run(tmp_path / "out", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.25, 0.23]})
     out = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "out"))  # a claim of bounds only: none holds in the mean
     assert not out["tests"][0]["in_mean"] and out["verdict"] == "not reproduced"

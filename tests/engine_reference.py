@@ -35,6 +35,13 @@ Written again (2026-11-26) for ``tmaze-accel`` and ``tmaze-remidi-accel``, with 
 flags, when the maze editor (``envs.maze.mutate_maze``) took minimax's and jaxued's no-op edit: each
 edit is a no-op, a wall flip or a goal move with equal odds (before, a flip or a goal move with
 1/2 each). Results meant to change; the lever cases (the lever's own editor) did not move.
+
+Written again (2026-11-28) for ``plr``, ``minimax-return``, ``accel`` and ``remidi-accel``, no
+code changed: on an AVX2 machine (no AVX-512) those four drifted beyond the tolerance, at the
+commit that wrote them too, in ``ppo/policy_loss`` (a sum that nearly cancels) and, through the
+sampled actions, a few evaluation episodes; every discrete outcome stayed the same. The suite
+now compiles for AVX2 on every x86-64 CPU (``tests/conftest.py``), and these values were written
+with its flags (``--xla_cpu_max_isa=AVX2`` added); the other cases pass as they were.
 """
 
 import dataclasses

@@ -22,11 +22,15 @@ convex), restricted to the levels whose maximum exceeded ``tol``. A plain LP dua
 vertex and could miss levels (e.g. with two duplicate levels it names only one). A level outside
 every equilibrium can reach at most ``slack / gap`` probability, where ``gap`` is how much
 adversary value a unit of its mass costs and ``slack`` is ``_VALUE_SLACK`` plus HiGHS's feasibility
-tolerance (1e-10), so with the default ``tol = 1e-7`` it is misclassified when ``gap`` is below
-about 1e-3 (normalised units): two supports whose values differ by less than that may be merged
-into one round (seen on a 100-level random game with a gap of 3e-5). The one-step solver
-(:mod:`remidi.solvers.onestep`) compares its observation games' values directly and has no such
-limit across observations.
+tolerance (1e-10), so with the default ``tol = 1e-7`` it would be misclassified when ``gap`` is
+below about 1e-3 (normalised units; seen on a 100-level random game with a gap of 3e-5, and
+whenever the value itself is that far below the payoff scale). Two tests keep such levels out:
+a level must be a *candidate* (its regret under the round's plan within ``_CANDIDATE_GAP``, and
+within ``CHECK_RTOL`` of the value, of the value), and a support level whose largest probability
+is below ``_PRUNE_MASS`` is dropped if some optimal plan lowers its regret by more than
+``_CANDIDATE_GAP`` (:func:`_in_no_equilibrium`). What remains is a tie within the LPs'
+resolution. The one-step solver (:mod:`remidi.solvers.onestep`) compares its observation
+games' values directly and has no such limit across observations.
 
 **Uniqueness.** A round's optimal plan need not be unique, and the behaviour it freezes decides
 what later rounds can achieve: with one observation and levels paying (1, 0, 0), (0, 1, 1) and
@@ -39,7 +43,32 @@ minimise and maximise that sequence's mass over the round's *optimal face* (the 
 regret on every available level is within ``_FACE_SLACK`` of the round's value); the frozen policy
 is unique iff every minimum and maximum agree within ``_UNIQUE_TOL``.
 
-Payoffs are divided by their largest magnitude before solving, so tolerances are relative.
+**Scaling.** Payoffs are divided by their largest magnitude before solving, so the tolerances
+above are relative to that *payoff scale*. A per-level shift of rewards leaves every regret
+unchanged, a global factor scales them all, and nothing else is free: a level whose regrets are
+many orders of magnitude below the scale is invisible to the LP (HiGHS treats matrix entries
+below 1e-9 as zero). The callers scale each LP on its own (one per observation in a one-step
+game) and centre each level's rewards first (:mod:`remidi.solvers.sequence_form`).
+
+**Checking.** Every answer is checked before it is returned (:func:`check_rounds`,
+:func:`check_final`), from numbers computed directly from the rewards with no LP: the regrets
+of the round's policy, the least expected regret any allowed policy achieves against the
+round's adversary (its *guarantee*), and the same for an optimal vertex adversary (the
+*bound*, a lower bound on the round's value). All are sums of non-negative *regret gaps*
+(:func:`regret_gaps`), so their rounding is relative to themselves, not to the payoff scale,
+and a bound is never negative. For a round of value ``v`` and ``T(v) = CHECK_RTOL * |v|`` plus
+``_ROUNDING`` of the largest regret of the level that attains it (the rounding of a value
+computed by subtracting returns): the value is the policy's worst regret and exceeds the bound
+by at most ``T(v)``, so every stated value is certified to ``CHECK_RTOL``, relatively, however
+far its LP's payoff scale ``s`` is above it; when the rewards' range hides the regrets that decide a round
+from its LP (below about 1e-9 of the scale, or 1e-16 in float64 itself), this check is what
+fails. The adversary's support must have regret within ``CHECK_RTOL * |v|`` (plus rounding) of
+the value, and its guarantee, which the LPs' value slack and feasibility tolerances loosen,
+within ``T_eq(v) = CHECK_RTOL * |v| + _EQUILIBRIUM_TOL * s``. A BLP round's value is at most the
+previous one's, and the final policy's regret on each round's support is that round's value
+(within ``T_eq``: the later LPs pin the frozen behaviour to their feasibility tolerance). A failed
+check, a HiGHS failure or an overflow raises :class:`SolverError`, naming the check and the
+range of the levels' regrets.
 """
 
 from __future__ import annotations
@@ -49,16 +78,35 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import linprog
 
+from remidi.errors import RemidiError
+
 #: HiGHS options: feasibility tolerances well below ``tol``, so LP noise never looks like support.
 _HIGHS_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
 #: Slack (normalised payoff units) by which an equilibrium adversary may miss the game value.
 _VALUE_SLACK = 1e-11
-#: A level whose regret under an optimal plan is this far below the value is in no support.
+#: A level whose regret under an optimal plan is this far below the value is in no support (or
+#: ``CHECK_RTOL`` of the value, plus rounding, if that is less: see :func:`solve_regret_game`).
 _CANDIDATE_GAP = 1e-9
 #: Plans whose regret exceeds a round's value by at most this (normalised units) are optimal.
 _FACE_SLACK = 1e-9
 #: Optimal plans differing by more than this on a frozen sequence make the frozen policy non-unique.
 _UNIQUE_TOL = 1e-6
+#: A level outside every equilibrium takes at most (value slack + HiGHS feasibility tolerance) /
+#: gap probability in the adversary LPs, so one with less than this may be there only by a gap
+#: of ``_CANDIDATE_GAP`` or more, which the optimal face shows (:func:`_in_no_equilibrium`).
+_PRUNE_MASS = (_VALUE_SLACK + 1e-10) / _CANDIDATE_GAP
+#: Relative accuracy to which every stated value is checked (the report prints 6 digits).
+CHECK_RTOL = 1e-6
+#: Rounding, relative to a level's largest regret, of its regret computed by subtracting returns.
+_ROUNDING = 1e-15
+#: Slack (normalised payoff units) of the checks on an adversary, which the LPs' value slack and
+#: feasibility tolerances loosen.
+_EQUILIBRIUM_TOL = 1e-9
+
+
+class SolverError(RemidiError):
+    """The exact solver cannot vouch for an answer: HiGHS failed, a check of the answer failed, or
+    the rewards' range is beyond what float64 LPs resolve. One line; ``remidi solve`` exits 2."""
 
 
 @dataclass(frozen=True)
@@ -97,27 +145,70 @@ class Polytope:
 
 @dataclass(frozen=True)
 class RawRound:
-    """One solved regret game: value, adversary [L], support [L] bool, plan [S], regret [L], and
-    (BLP rounds only, else None) whether the policy the round freezes is unique."""
+    """One solved regret game: value, adversary [L], support [L] bool, plan [S], regret [L],
+    certificate [L] (an optimal vertex adversary: the lower bound on the value that the checks
+    use), (BLP rounds only, else None) whether the policy the round freezes is unique, and
+    fixed [I] bool, the information sets whose behaviour the round's game takes from the
+    previous round's plan (None in round 1)."""
 
     value: float
     adversary: np.ndarray
     support: np.ndarray
     plan: np.ndarray
     regret: np.ndarray
+    certificate: np.ndarray
     unique: bool | None = None
+    fixed: np.ndarray | None = None
 
 
-def best_response_values(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
-    """Best return U*_l on each level alone [L], by backward induction over information sets.
+def _sequence_values(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
+    """Best continuation value [L, S] of every sequence on every level, bottom-up.
 
-    With perfect recall the best response is computed bottom-up: the value of a sequence is its
-    own terminal payoff plus, for each information set it leads to, the best child sequence.
+    With perfect recall the value of a sequence is its own terminal payoff plus, for each
+    information set it leads to, the best child sequence.
     """
     value = np.array(payoff, dtype=float)
     for info in reversed(range(len(poly.parent))):
         value[:, poly.parent[info]] += value[:, list(poly.children[info])].max(axis=1)
-    return value[:, 0]
+    return value
+
+
+def best_response_values(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
+    """Best return U*_l on each level alone [L], by backward induction over information sets."""
+    return _sequence_values(poly, payoff)[:, 0]
+
+
+def regret_gaps(poly: Polytope, payoff: np.ndarray) -> np.ndarray:
+    """Regret gaps G [L, S] >= 0 with ``R_l(x) = G[l] @ x`` for every realisation plan x.
+
+    ``G[l, (I, a)]`` is how much worse sequence ``(I, a)`` continues than the best action at
+    ``I`` (both followed by a best response); the empty sequence's gap is 0. Summing plan-weighted
+    gaps gives the regret without subtracting two large returns, so its rounding error is relative
+    to the regret (a one-step game's gaps are its action regrets).
+    """
+    value = _sequence_values(poly, payoff)
+    gaps = np.zeros_like(value)
+    for kids in poly.children:
+        kids = list(kids)
+        gaps[:, kids] = value[:, kids].max(axis=1, keepdims=True) - value[:, kids]
+    return gaps
+
+
+def least_regret(
+    poly: Polytope, cost: np.ndarray, fixed: np.ndarray | None = None, plan: np.ndarray | None = None
+) -> float:
+    """``min cost @ x`` over realisation plans x that play like ``plan`` [S] at the ``fixed`` [I]
+    information sets; ``cost`` [S] is an adversary's mixture of regret gaps (:func:`regret_gaps`),
+    so the result is the least expected regret any such policy achieves against it."""
+    value = np.array(cost, dtype=float)
+    for info in reversed(range(len(poly.parent))):
+        kids = list(poly.children[info])
+        if fixed is not None and fixed[info]:
+            best = poly.behaviour(plan, info) @ value[kids]
+        else:
+            best = value[kids].min()
+        value[poly.parent[info]] += best
+    return float(value[0])
 
 
 def regret_of_plan(payoff: np.ndarray, optimal: np.ndarray, plan: np.ndarray) -> np.ndarray:
@@ -126,9 +217,10 @@ def regret_of_plan(payoff: np.ndarray, optimal: np.ndarray, plan: np.ndarray) ->
 
 
 def _check(result, what: str):
-    """Return a linprog result, raising RuntimeError if HiGHS did not solve it."""
+    """Return a linprog result, raising SolverError if HiGHS did not solve it."""
     if result.status != 0:
-        raise RuntimeError(f"{what}: HiGHS failed ({result.message})")
+        message = " ".join(str(result.message).split())
+        raise SolverError(f"exact solver: {what}: HiGHS failed ({message})")
     return result
 
 
@@ -160,11 +252,13 @@ def _maximal_support_adversary(
     active: np.ndarray,
     candidates: np.ndarray,
     tol: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Maximal-support equilibrium adversary [L] and its support [L] bool (see module docstring).
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Maximal-support equilibrium adversary [L], its support [L] bool (see module docstring) and
+    the first LP's optimal vertex adversary [L].
 
-    Only ``candidates`` [L] bool are tried for support: by complementary slackness a level in
-    some equilibrium adversary's support has regret equal to the value under every optimal plan.
+    Only ``candidates`` [L] bool can be in the support: by complementary slackness a level in some
+    equilibrium adversary's support has regret equal to the value under every optimal plan, and
+    a level below it may still take up to ``slack / gap`` probability in the LPs' solutions.
 
     Adversary LP over (lambda [La], y [M]): the value of lambda is ``lambda @ U* + e @ y``
     subject to ``C_a.T @ lambda + E.T @ y <= 0`` (dual of the agent's best response),
@@ -188,8 +282,9 @@ def _maximal_support_adversary(
         return result.x
 
     first = solve(-value_row, a_ub, np.zeros(n_seq))
+    value = value_row @ first
     a_ub = np.vstack([a_ub, -value_row[None, :]])
-    b_ub = np.concatenate([np.zeros(n_seq), [_VALUE_SLACK - value_row @ first]])
+    b_ub = np.concatenate([np.zeros(n_seq), [_VALUE_SLACK - value]])
     solutions = [np.clip(first[:n_act], 0.0, None)]
     for k in np.flatnonzero(candidates[levels]):
         if any(sol[k] > tol for sol in solutions):
@@ -198,12 +293,39 @@ def _maximal_support_adversary(
         cost[k] = -1.0
         solutions.append(np.clip(solve(cost, a_ub, b_ub)[:n_act], 0.0, None))
     stacked = np.array(solutions)
-    support = stacked.max(axis=0) > tol
+    mass = stacked.max(axis=0)
+    support = (mass > tol) & candidates[levels]
+    for k in np.flatnonzero(support & (mass < _PRUNE_MASS)):
+        if _in_no_equilibrium(payoff, optimal, eq, active, value, levels[k]):
+            support[k] = False
+    if not support.any():  # the value's own levels are candidates; only LP noise gets here
+        support = stacked[0] == stacked[0].max()
     mean = np.where(support, stacked.mean(axis=0), 0.0)
     adversary, support_mask = np.zeros(len(active)), np.zeros(len(active), dtype=bool)
+    certificate = np.zeros(len(active))
     adversary[levels] = mean / mean.sum()
     support_mask[levels] = support
-    return adversary, support_mask
+    certificate[levels] = solutions[0] / solutions[0].sum()
+    return adversary, support_mask, certificate
+
+
+def _in_no_equilibrium(
+    payoff: np.ndarray, optimal: np.ndarray, eq: tuple[np.ndarray, np.ndarray], active: np.ndarray,
+    value: float, level: int,
+) -> bool:
+    """Whether some optimal plan gives ``level`` a regret more than ``_CANDIDATE_GAP`` below the
+    value, which puts it outside every equilibrium adversary's support (strict complementarity).
+
+    LP: minimise the level's regret over the plans whose regret on every active level is at most
+    the value. (A slack there would let an equilibrium level's regret fall by the slack over its
+    probability, which is more than ``_CANDIDATE_GAP`` when that is small.)
+    """
+    result = _check(
+        linprog(-payoff[level], A_ub=-payoff[active], b_ub=value - optimal[active],
+                A_eq=eq[0], b_eq=eq[1], bounds=(0, None), method="highs", options=_HIGHS_OPTIONS),
+        "support LP",
+    )
+    return optimal[level] + result.fun < value - _CANDIDATE_GAP
 
 
 def solve_regret_game(
@@ -215,14 +337,20 @@ def solve_regret_game(
 ) -> RawRound:
     """Solve min over plans (E x = e, x >= 0) of max over active levels [L] bool of regret.
 
-    ``payoff`` [L, S] and ``optimal`` [L] must already be normalised (magnitudes <= 1).
+    ``payoff`` [L, S] and ``optimal`` [L] must already be normalised (magnitudes <= 1). Levels
+    whose regret under the plan is below the value by more than ``_CANDIDATE_GAP``, or than
+    ``CHECK_RTOL`` of the value (plus the level's rounding), are in no support.
     """
     plan = _min_max_regret(payoff, optimal, eq, active)
     regret = regret_of_plan(payoff, optimal, plan)
     value = float(regret[active].max())
-    candidates = active & (regret >= value - _CANDIDATE_GAP)
-    adversary, support = _maximal_support_adversary(payoff, optimal, eq, active, candidates, tol)
-    return RawRound(value, adversary, support, plan, regret)
+    # relative to the value too: when it is far below the payoff scale, a level 1e-9 of the scale
+    # below it is no tie (the rounding of each level's regret is relative to its own size)
+    size = np.abs(payoff).max(axis=1) + np.abs(optimal)
+    gap = np.minimum(_CANDIDATE_GAP, CHECK_RTOL * abs(value) + _ROUNDING * size)
+    candidates = active & (regret >= value - gap)
+    adversary, support, certificate = _maximal_support_adversary(payoff, optimal, eq, active, candidates, tol)
+    return RawRound(value, adversary, support, plan, regret, certificate)
 
 
 def frozen_plan_is_unique(
@@ -307,7 +435,7 @@ def solve_mmr_plan(poly: Polytope, payoff: np.ndarray, tol: float) -> RawRound:
 
 
 def solve_blp_plans(
-    poly: Polytope, payoff: np.ndarray, reach: np.ndarray, tol: float, progress=None
+    poly: Polytope, payoff: np.ndarray, reach: np.ndarray, tol: float, progress=None, check=None
 ) -> list[RawRound]:
     """BLP by iterated refinement: the list of rounds, the last one holding the final plan.
 
@@ -315,9 +443,10 @@ def solve_blp_plans(
     every information set realisable on the union of the earlier supports, and lets the
     adversary choose only among levels outside those supports. Stops when every level is covered.
     Each round's ``unique`` tells whether the behaviour it fixes is the same in every optimal plan
-    of its regret game (:func:`frozen_plan_is_unique`). ``progress(value, support, covered,
-    total)``, if given, is called after each round with its value, its support's size, and how
-    many of the ``total`` levels the supports cover so far.
+    of its regret game (:func:`frozen_plan_is_unique`). ``check(rounds)``, if given, is called
+    with the rounds so far after each round is solved (and may raise); then ``progress(value,
+    support, covered, total)``, if given, with its value, its support's size, and how many of the
+    ``total`` levels the supports cover so far.
     """
     optimal = best_response_values(poly, payoff)
     scale = normalise(payoff, optimal)
@@ -337,9 +466,146 @@ def solve_blp_plans(
         frozen = np.array(sorted({seq for info in np.flatnonzero(fixed & ~before) for seq in poly.children[info]}),
                           dtype=int)
         unique = frozen_plan_is_unique(payoff_n, optimal_n, eq, active, raw.value, frozen)
-        rounds.append(_rescaled(replace(raw, unique=unique), scale))
+        rounds.append(_rescaled(replace(raw, unique=unique, fixed=before if rounds else None), scale))
+        if check is not None:
+            check(rounds)
         if progress is not None:
             progress(rounds[-1].value, int(raw.support.sum()), int(covered.sum()), len(covered))
         rows, rhs = fixing_equalities(poly, raw.plan, fixed)
         eq = (np.vstack([base[0], rows]), np.concatenate([base[1], rhs]))
     return rounds
+
+
+# ------------------------------------------------------------------------------ checking answers
+@dataclass(frozen=True)
+class Claims:
+    """Rounds 0..R-1 of an answer and the numbers, computed directly from the rewards, that vouch
+    for them (see the module docstring).
+
+    value [R]: the stated values; bound [R]: the least expected regret, over the policies each
+    round allows, against an optimal vertex adversary (a lower bound on the value); guarantee
+    [R]: the same against the stated adversary; round_of [L] int: the round whose support holds
+    each level (-1: covered before these rounds, R: not covered yet); adversary [L]: each level's
+    probability in its round's adversary; regret [L] or [R, L]: the regret of the rounds' policy
+    (or of each round's) on every level; scale [L]: the payoff scale of the LP that decided each
+    level. Real units throughout.
+    """
+
+    value: np.ndarray
+    bound: np.ndarray
+    guarantee: np.ndarray
+    round_of: np.ndarray
+    adversary: np.ndarray
+    regret: np.ndarray
+    scale: np.ndarray
+
+
+def _tolerance(value, scale, atol: float):
+    """``CHECK_RTOL * |value| + atol * scale`` (elementwise)."""
+    return CHECK_RTOL * np.abs(value) + atol * np.asarray(scale)
+
+
+def _spread(spread: np.ndarray) -> str:
+    """The range of the levels' largest regrets [L], for error messages."""
+    positive = spread[spread > 0]
+    if not positive.size:
+        return "every level's regret is 0 whatever the policy"
+    return f"the levels' largest regrets range from {positive.min():.3g} to {positive.max():.3g}"
+
+
+def _refuse(round_no: int, why: str, spread: np.ndarray):
+    raise SolverError(f"exact solver: cannot vouch for round {round_no}: {why} ({_spread(spread)})")
+
+
+def _worst(claims: Claims) -> np.ndarray:
+    """Per round [R], the level with the largest regret among those the round's adversary may
+    pick (``round_of >= k``)."""
+    n_rounds = len(claims.value)
+    later = claims.round_of >= 0
+    if claims.regret.ndim == 2:
+        masked = np.where(claims.round_of[None, :] >= np.arange(n_rounds)[:, None], claims.regret, -np.inf)
+        return masked.argmax(axis=1)
+    # one policy for every round: the per-round maxima, then a running maximum from the last round
+    levels = np.flatnonzero(later)
+    order = levels[np.lexsort((claims.regret[levels], claims.round_of[levels]))]
+    groups = claims.round_of[order]
+    last = np.flatnonzero(np.r_[groups[1:] != groups[:-1], True])
+    best_level = np.full(n_rounds + 1, -1)
+    best_level[groups[last]] = order[last]
+    best = np.where(best_level >= 0, claims.regret[np.maximum(best_level, 0)], -np.inf)
+    best_rev = best[::-1]
+    running = np.maximum.accumulate(best_rev)
+    where = np.maximum.accumulate(np.where(best_rev >= running, np.arange(n_rounds + 1), 0))
+    return best_level[::-1][where][::-1][:n_rounds]
+
+
+def _first_off_level(off: np.ndarray, round_of: np.ndarray, n_rounds: int) -> np.ndarray:
+    """Per round [R], the first level flagged in ``off`` [L] bool among its support (-1 if none)."""
+    first = np.full(n_rounds + 1, len(off))
+    np.minimum.at(first, round_of[off], np.flatnonzero(off))
+    return np.where(first[:n_rounds] < len(off), first[:n_rounds], -1)
+
+
+def check_rounds(claims: Claims, names: tuple[str, ...], spread: np.ndarray, first: int = 1,
+                 previous: float | None = None) -> None:
+    """Check every round of ``claims`` (see the module docstring); raise SolverError naming the
+    first that fails. Rounds are numbered from ``first``; ``previous`` is the value of the round
+    before them, if any. ``names`` [L] are the level names and ``spread`` [L] each level's
+    largest regret over all policies (real units), for the message and as the size of each
+    level's rounding.
+    """
+    value, n_rounds = claims.value, len(claims.value)
+    regret = claims.regret if claims.regret.ndim == 2 else np.broadcast_to(claims.regret, (n_rounds, len(names)))
+    top = _worst(claims)
+    worst = regret[np.arange(n_rounds), top]
+    # each covered level against its own round: regret, value, adversary
+    covered = np.flatnonzero((claims.round_of >= 0) & (claims.round_of < n_rounds))
+    rounds = claims.round_of[covered]
+    own = regret[rounds, covered]
+    off = np.zeros(len(names), dtype=bool)
+    off[covered] = np.abs(own - value[rounds]) > _tolerance(value[rounds], spread[covered], _ROUNDING)
+    culprit = _first_off_level(off, claims.round_of, n_rounds)
+    members = np.bincount(rounds, minlength=n_rounds)
+    mass = np.bincount(rounds, weights=claims.adversary[covered], minlength=n_rounds)
+    loose = np.bincount(rounds, weights=claims.adversary[covered] * claims.scale[covered], minlength=n_rounds)
+    before = np.r_[np.inf if previous is None else previous, value[:-1]]
+    failures = [  # (failed [R] bool, what failed in round k)
+        (~np.isfinite(value) | ~np.isfinite(worst) | ~np.isfinite(claims.bound) | ~np.isfinite(claims.guarantee),
+         lambda k: "a regret overflows float64"),
+        (np.abs(worst - value) > _tolerance(value, spread[top], _ROUNDING),
+         lambda k: f"the value {value[k]:.9g} is not the policy's worst-case regret {worst[k]:.9g}"),
+        (value - claims.bound > _tolerance(value, spread[top], _ROUNDING),
+         lambda k: f"the value {value[k]:.9g} is not certified to {CHECK_RTOL:g}: the best adversary "
+                   f"found guarantees only {claims.bound[k]:.9g}"),
+        (members == 0, lambda k: "the adversary's support is empty"),
+        (culprit >= 0,
+         lambda k: f"the adversary is not a best response: level {names[culprit[k]]!r} in its support "
+                   f"has regret {regret[k, culprit[k]]:.9g}, not the value {value[k]:.9g}"),
+        (np.abs(mass - 1.0) > 1e-9, lambda k: "the adversary is not a distribution over its support"),
+        (value - claims.guarantee > _tolerance(value, loose, _EQUILIBRIUM_TOL),
+         lambda k: f"the adversary is not an equilibrium one: it guarantees only "
+                   f"{claims.guarantee[k]:.9g}, not the value {value[k]:.9g}"),
+        (value > before + _tolerance(before, spread[top], _ROUNDING),
+         lambda k: f"its value {value[k]:.9g} exceeds the previous round's {before[k]:.9g}"),
+    ]
+    failed = [(int(np.flatnonzero(bad)[0]), i) for i, (bad, _) in enumerate(failures) if bad.any()]
+    if failed:
+        k, i = min(failed)
+        _refuse(first + k, failures[i][1](k), spread)
+
+
+def check_final(claims: Claims, regret: np.ndarray, names: tuple[str, ...], spread: np.ndarray) -> None:
+    """Check that every level is covered and that the final policy's regret [L] on each round's
+    support is that round's value (within ``T_eq``)."""
+    n_rounds = len(claims.value)
+    if not np.all(np.isfinite(regret)):
+        l = int(np.flatnonzero(~np.isfinite(regret))[0])
+        _refuse(n_rounds, f"the final regret of level {names[l]!r} overflows float64", spread)
+    if ((claims.round_of < 0) | (claims.round_of >= n_rounds)).any():
+        _refuse(n_rounds, "the rounds' supports do not cover every level", spread)
+    target = claims.value[claims.round_of]
+    off = np.abs(regret - target) > _tolerance(target, claims.scale, _EQUILIBRIUM_TOL)
+    if off.any():
+        l = int(np.flatnonzero(off)[0])
+        _refuse(int(claims.round_of[l]) + 1, f"the final policy's regret {regret[l]:.9g} on level "
+                f"{names[l]!r} is not the round's value {target[l]:.9g}", spread)

@@ -66,9 +66,11 @@ class SequenceForm:
     """Compiled game.
 
     infosets [I]: AOH of each information set (parents first); infoset_actions [I]: action names
-    available there, in ``game.actions`` order; poly: the plan polytope; payoff [L, S]; reach
-    [L, I]: chance probability of each information set per level; members [I]: the
-    (level index, chance probability, decision node) triples making up each information set.
+    available there, in ``game.actions`` order; poly: the plan polytope; payoff [L, S] (of the
+    rewards less ``centre``); reach [L, I]: chance probability of each information set per level;
+    members [I]: the (level index, chance probability, decision node) triples making up each
+    information set; centre [L]: the amount subtracted from every reward of each level (zeros
+    unless built ``centred``).
     """
 
     infosets: tuple[AOH, ...]
@@ -77,6 +79,7 @@ class SequenceForm:
     payoff: np.ndarray
     reach: np.ndarray
     members: tuple[tuple[tuple[int, float, Decision], ...], ...]
+    centre: np.ndarray
 
 
 def _describe(aoh: AOH) -> str:
@@ -84,21 +87,28 @@ def _describe(aoh: AOH) -> str:
     return " ".join(aoh)
 
 
-def build_sequence_form(game: TreeGame) -> SequenceForm:
-    """Compile a tree game; raises ValueError if an information set has inconsistent actions."""
+def build_sequence_form(game: TreeGame, centred: bool = False) -> SequenceForm:
+    """Compile a tree game; raises ValueError if an information set has inconsistent actions.
+
+    ``centred``: subtract from each level's rewards the midpoint of its smallest and largest
+    reward, which leaves every regret unchanged and keeps a level whose rewards are all near
+    1e12 from dwarfing the others in the LPs. A shift is exact only if the level's terminal
+    probability is 1 under every plan, so a level whose chance probabilities miss 1 by more
+    than a few roundings is left as it is.
+    """
     index: dict[AOH, int] = {}
     infosets: list[AOH] = []
     actions: list[tuple[str, ...]] = []
     parents: list[int] = []
     children: list[tuple[int, ...]] = []
     members: list[list[tuple[int, float, Decision]]] = []
-    payoff_terms: list[tuple[int, int, float]] = []
+    payoff_terms: list[tuple[int, int, float, float]] = []
     counter = [1]
     owner: dict[AOH, str] = {}
 
     def visit(level: int, node: Node, aoh: AOH, seq: int, prob: float) -> None:
         if isinstance(node, Terminal):
-            payoff_terms.append((level, seq, prob * node.reward))
+            payoff_terms.append((level, seq, prob, node.reward))
         elif isinstance(node, Chance):
             for p, child in node.outcomes:
                 visit(level, child, aoh, seq, prob * p)
@@ -127,15 +137,31 @@ def build_sequence_form(game: TreeGame) -> SequenceForm:
     for level, tree in enumerate(game.trees):
         visit(level, tree, (), 0, 1.0)
     poly = lp.Polytope(counter[0], tuple(parents), tuple(children))
+    centre = _centres(poly, len(game.trees), payoff_terms) if centred else np.zeros(len(game.trees))
     payoff = np.zeros((len(game.trees), poly.n_sequences))
-    for level, seq, value in payoff_terms:
-        payoff[level, seq] += value
+    with np.errstate(invalid="ignore"):  # a non-finite reward stays non-finite; the solvers refuse it
+        for level, seq, prob, reward in payoff_terms:
+            payoff[level, seq] += prob * (reward - centre[level])
     reach = np.zeros((len(game.trees), len(infosets)))
     for info, group in enumerate(members):
         for level, prob, _ in group:
             reach[level, info] += prob
     return SequenceForm(tuple(infosets), tuple(actions), poly, payoff, reach,
-                        tuple(tuple(m) for m in members))
+                        tuple(tuple(m) for m in members), centre)
+
+
+def _centres(poly: lp.Polytope, n_levels: int, terms: list[tuple[int, int, float, float]]) -> np.ndarray:
+    """Per level [L], the midpoint of its terminal rewards, or 0 where the terminal probability
+    (from ``terms``: level, sequence, chance probability, reward) is not 1 under every plan."""
+    low, high = np.full(n_levels, np.inf), np.full(n_levels, -np.inf)
+    mass = np.zeros((n_levels, poly.n_sequences))
+    for level, seq, prob, reward in terms:
+        if prob > 0:
+            low[level], high[level] = min(low[level], reward), max(high[level], reward)
+        mass[level, seq] += prob
+    most, least = lp.best_response_values(poly, mass), -lp.best_response_values(poly, -mass)
+    exact = np.maximum(np.abs(most - 1.0), np.abs(least - 1.0)) <= 4 * np.finfo(float).eps
+    return np.where(exact & np.isfinite(low), low / 2 + high / 2, 0.0)
 
 
 def _policy(form: SequenceForm, plan: np.ndarray, tol: float) -> TreePolicy:
@@ -184,12 +210,83 @@ def _support_names(game: TreeGame, support: np.ndarray) -> tuple[str, ...]:
     return tuple(n for n, s in zip(game.level_names, support) if s)
 
 
+class _Checker:
+    """Checks the rounds of a centred sequence form as they are solved (:func:`lp.check_rounds`).
+
+    Regrets, guarantees and bounds come from the regret gaps of the rewards
+    (:func:`lp.regret_gaps`), in the LPs' normalised units and then multiplied by their scale.
+    """
+
+    def __init__(self, game: TreeGame, form: SequenceForm):
+        finite = np.isfinite(form.payoff).all(axis=1)
+        if not finite.all():
+            raise lp.SolverError(f"exact solver: level {game.level_names[int(np.flatnonzero(~finite)[0])]!r}: "
+                                 "rewards must be finite")
+        self.names, self.form = game.level_names, form
+        optimal = lp.best_response_values(form.poly, form.payoff)
+        self.scale = lp.normalise(form.payoff, optimal)
+        payoff = form.payoff / self.scale
+        self.gaps = lp.regret_gaps(form.poly, payoff)
+        with np.errstate(over="ignore"):
+            self.spread = self.scale * (optimal / self.scale + lp.best_response_values(form.poly, -payoff))
+        self.regrets: list[np.ndarray] = []
+        self.bounds: list[float] = []
+        self.guarantees: list[float] = []
+
+    def regret(self, plan: np.ndarray) -> np.ndarray:
+        """Regret [L] of a plan [S] (inf where it overflows)."""
+        with np.errstate(over="ignore"):
+            return self.scale * (self.gaps @ plan)
+
+    def _claims(self, raws: list[lp.RawRound], first: int) -> lp.Claims:
+        """Claims of ``raws[first:]`` (levels covered before them: round -1)."""
+        n_rounds = len(raws) - first
+        round_of = np.full(len(self.names), n_rounds)
+        adversary = np.zeros(len(self.names))
+        for k, raw in enumerate(raws):
+            round_of[raw.support] = k - first if k >= first else -1
+            adversary[raw.support] = raw.adversary[raw.support]
+        return lp.Claims(np.array([r.value for r in raws[first:]]), np.array(self.bounds[first:]),
+                         np.array(self.guarantees[first:]), round_of, adversary,
+                         np.array(self.regrets[first:]), np.full(len(self.names), self.scale))
+
+    def __call__(self, raws: list[lp.RawRound]) -> None:
+        """Check the last of the rounds solved so far."""
+        raw, prev = raws[-1], (raws[-2].plan if len(raws) > 1 else None)
+
+        def least(adversary: np.ndarray) -> float:
+            with np.errstate(over="ignore"):
+                return self.scale * lp.least_regret(self.form.poly, adversary @ self.gaps, raw.fixed, prev)
+
+        self.regrets.append(self.regret(raw.plan))
+        self.bounds.append(least(raw.certificate))
+        self.guarantees.append(least(raw.adversary))
+        lp.check_rounds(self._claims(raws, len(raws) - 1), self.names, self.spread, first=len(raws),
+                        previous=raws[-2].value if len(raws) > 1 else None)
+
+    def final(self, raws: list[lp.RawRound]) -> np.ndarray:
+        """Check the final plan against every round; its regret [L]."""
+        regret = self.regret(raws[-1].plan)
+        lp.check_final(self._claims(raws, 0), regret, self.names, self.spread)
+        return regret
+
+    def optimal_return(self) -> np.ndarray:
+        """Best return U* [L] on each level alone, in the rewards' own units."""
+        return lp.best_response_values(self.form.poly, self.form.payoff) + self.form.centre
+
+
 def solve_mmr(game: TreeGame, tol: float = 1e-7) -> MMRResult[TreePolicy]:
-    """Minimax regret: value, behavioural policy, maximal-support adversary [L], regret [L]."""
-    form = build_sequence_form(game)
+    """Minimax regret: value, behavioural policy, maximal-support adversary [L], regret [L].
+
+    Solved on the centred rewards (:func:`build_sequence_form`) and checked
+    (:func:`remidi.solvers.lp.check_rounds`).
+    """
+    form = build_sequence_form(game, centred=True)
+    check = _Checker(game, form)
     raw = lp.solve_mmr_plan(form.poly, form.payoff, tol)
-    return MMRResult(raw.value, _policy(form, raw.plan, tol), raw.adversary, raw.regret,
-                     lp.best_response_values(form.poly, form.payoff))
+    check([raw])
+    return MMRResult(raw.value, _policy(form, raw.plan, tol), raw.adversary, check.regrets[0],
+                     check.optimal_return())
 
 
 def solve_blp(game: TreeGame, tol: float = 1e-7, progress=None) -> BLPResult[TreePolicy]:
@@ -199,17 +296,20 @@ def solve_blp(game: TreeGame, tol: float = 1e-7, progress=None) -> BLPResult[Tre
     sequence counts as never played. ``progress`` as in :func:`remidi.solvers.lp.solve_blp_plans`.
 
     Each round fixes the behaviour on every AOH realisable under the previous round's policy on
-    a level of an earlier support (see :func:`remidi.solvers.lp.solve_blp_plans`).
+    a level of an earlier support (see :func:`remidi.solvers.lp.solve_blp_plans`). Rewards are
+    centred per level (:func:`build_sequence_form`) and every round is checked as it is solved.
     """
-    form = build_sequence_form(game)
+    form = build_sequence_form(game, centred=True)
+    check = _Checker(game, form)
+    raws = lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol, progress, check)
+    final = check.final(raws)
     rounds = [
         Round(raw.value, _support_names(game, raw.support),
               {n: float(p) for n, p, s in zip(game.level_names, raw.adversary, raw.support) if s},
-              _policy(form, raw.plan, tol), raw.regret, raw.unique)
-        for raw in lp.solve_blp_plans(form.poly, form.payoff, form.reach, tol, progress)
+              _policy(form, raw.plan, tol), regret, raw.unique)
+        for raw, regret in zip(raws, check.regrets)
     ]
-    return BLPResult(rounds[0].value, rounds, rounds[-1].policy, rounds[-1].regret,
-                     lp.best_response_values(form.poly, form.payoff))
+    return BLPResult(rounds[0].value, rounds, rounds[-1].policy, final, check.optimal_return())
 
 
 def _local_game(

@@ -209,6 +209,7 @@ def test_an_environment_that_fails_is_reported_once_not_once_per_network():
         validate_ued_config(R(BASE, score="pvl"), "plr", raw)
 
 
+@pytest.mark.slow  # compiles jaxued's maze into a training program: 11 s of a cold quick tier
 def test_jaxued_maze_trains_through_our_interface():
     from jaxued.environments import Maze
     from jaxued.environments.maze import make_level_generator
@@ -328,6 +329,7 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
     assert EditingBuffers(buffer_sequence=True) != EditingBuffers()
 
 
+@pytest.mark.slow  # trains PAIRED (three agents) twice: 29 s of a cold quick tier
 def test_paired_needs_a_level_builder_and_resumes_exactly(tmp_path):
     """PAIRED's generator and antagonist live in the Runner: a run interrupted and resumed ends
     where an uninterrupted one does; a task without a level-building MDP is refused in one line."""

@@ -181,6 +181,7 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     return full["metrics"]
 
 
+@pytest.mark.slow  # trains, interrupts and resumes: 11 s of a cold quick tier
 @pytest.mark.usefixtures("no_png")
 def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, monkeypatch, capsys):
     assert_resumes_to_the_uninterrupted_result(
@@ -217,6 +218,7 @@ def test_lever_bad_config_is_one_line_and_writes_nothing(tmp_path, capsys, argv,
     assert not out.exists()
 
 
+@pytest.mark.slow  # trains several algorithms and resumes: 9 s of a cold quick tier
 def test_resume_a_several_algorithm_run_finishes_the_unfinished_ones(tmp_path, capsys, monkeypatch):
     from remidi.experiments import ued
 

@@ -189,6 +189,7 @@ def best_discounted_return_by_brute_force(env, levels, length: int, gamma: float
     return value.reshape(m, n).max(axis=1)
 
 
+@pytest.mark.slow  # 108 programs for a brute force over action sequences: 8 s of a cold quick tier
 def test_discounted_optimum_matches_brute_force_over_action_sequences():
     """optimal_discounted_return against the best of all action sequences, played step by step in
     the environment: T-mazes (the optimum is γ: a turn, then the move into the goal arm) and 5×5

@@ -234,6 +234,7 @@ def ued_run(corridor, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # trains, evaluates and resumes a run: 13 s of a cold quick tier
 def test_a_run_ued_run_is_evaluated_and_resumed_from_another_folder(corridor, ued_run, tmp_path, monkeypatch,
                                                                      capsys):
     saved = json.loads((ued_run / "config.json").read_text())

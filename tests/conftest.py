@@ -174,6 +174,25 @@ def no_png(monkeypatch):
     monkeypatch.setattr(plots, "_save", lambda fig, path: plt.close(fig))
 
 
+@pytest.fixture
+def figures(monkeypatch):
+    """``{file name: figure}`` of what the plot functions would save, kept instead of written
+    (laid out as when saved), for tests that walk the figures; closed at the end."""
+    import matplotlib.pyplot as plt
+
+    from remidi.experiments import plots
+
+    saved = {}
+
+    def keep(fig, path):
+        saved[path.name] = fig
+
+    monkeypatch.setattr(plots, "_save", keep)
+    yield saved
+    for fig in saved.values():
+        plt.close(fig)
+
+
 # the files that take longest on a cold cache (worker-seconds, 2-core CPU, measured with the
 # compile report below), heaviest first; the others follow in their usual order
 HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_brax_smoke", "test_examples", "test_belief", "test_simulated",

@@ -26,7 +26,7 @@ import pytest
 from matplotlib.path import Path as MplPath
 from matplotlib.transforms import Bbox
 
-from remidi.experiments import get_experiment, plots
+from remidi.experiments import get_experiment
 from remidi.experiments.base import RunResult
 from remidi.experiments.compare import compare, plot_comparison
 from remidi.experiments.lever import IGNORE_VISIBLE, MMR_HIDDEN
@@ -36,22 +36,6 @@ from remidi.experiments.lever import IGNORE_VISIBLE, MMR_HIDDEN
 MARGIN_X, MARGIN_Y = 0.04, 0.06
 STEPS = np.array([50, 100, 150, 200, 250, 300])
 SEEDS = (0, 1, 2)
-
-
-@pytest.fixture
-def figures(monkeypatch):
-    """``{file name: figure}`` of what the plot functions would save, laid out as when saved."""
-    import matplotlib.pyplot as plt
-
-    saved = {}
-
-    def keep(fig, path):
-        saved[path.name] = fig
-
-    monkeypatch.setattr(plots, "_save", keep)
-    yield saved
-    for fig in saved.values():
-        plt.close(fig)
 
 
 # ------------------------------------------------------------------------------ the check

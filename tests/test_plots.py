@@ -12,22 +12,6 @@ from remidi.experiments.base import RunResult, _run_order, write_run_config
 STEPS = np.array([10, 20, 30, 40])
 
 
-@pytest.fixture
-def figures(monkeypatch):
-    """The figures the plot functions would save, {file name: figure}, instead of PNGs."""
-    saved = {}
-
-    def keep(fig, path):
-        saved[path.name] = fig
-
-    monkeypatch.setattr(plots, "_save", keep)
-    yield saved
-    import matplotlib.pyplot as plt
-
-    for fig in saved.values():
-        plt.close(fig)
-
-
 def legend(ax):
     return [t.get_text() for t in ax.get_legend().get_texts()]
 

@@ -328,3 +328,33 @@ def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):
     # the random policy first; PLR⊥ on the T-maze task (no ReMiDi run, no blindfold run: no rows)
     assert rows[0].startswith("| uniform random actions | 0 | 0 |") and "| 0.0067 |" in rows[0]
     assert rows[1:] == ["| plr (tmaze) | " + " | ".join(["0.0050"] * len(metrics)) + " |"]
+
+
+def test_the_scale_curves_put_each_preset_on_the_environment_steps_it_trained(tmp_path):
+    """PLR⊥ at cpu and at cpu4x: x is update × num_envs × num_steps of each run's own config, the
+    band a bootstrap interval around the mean of the seeds' evaluations, the final point the
+    evaluate metric's mean; an algorithm without runs draws nothing."""
+    from remidi.experiments import outputs
+
+    for preset, label, updates, values in (("cpu", "plr", [150, 300], [[0.0, 0.1], [0.2, 0.3]]),
+                                           ("cpu4x", "plr", [150, 300, 450], [[0.1, 0.2, 0.4], [0.3, 0.4, 0.6]])):
+        folder = write_run(tmp_path / preset, "tmaze", label, [0, 1], evaluate={"solve_rate/mean": [0.5, 0.7]},
+                           update=updates[-1])
+        doc = json.loads((folder / "summary.json").read_text())
+        (folder / "summary.json").write_text(json.dumps({**doc, "preset": preset}))
+        (folder / "config.json").write_text(json.dumps({"code": {"commit": "abc1234def"}, "config": {
+            "num_updates": updates[-1], "num_envs": 32, "num_steps": 256}}))
+        outputs.write_metrics_csv(folder / "metrics.csv.gz", [(seed, step, "solve_rate/mean", v)
+                                                              for seed, row in enumerate(values)
+                                                              for step, v in zip(updates, row)])
+    runs = {**rp.load_runs(tmp_path / "cpu"), **rp.load_runs(tmp_path / "cpu4x")}
+    assert ("tmaze", "plr @cpu4x") in runs
+    cpu, cpu4x = rp.scale_curves(runs, "tmaze", "plr")
+    assert (cpu["preset"], cpu4x["preset"]) == ("cpu", "cpu4x")
+    np.testing.assert_array_equal(cpu4x["x"], np.array([150, 300, 450]) * 32 * 256)
+    np.testing.assert_allclose(cpu4x["mean"], [0.2, 0.3, 0.5])
+    assert all(lo <= m <= hi for (lo, hi), m in zip(cpu4x["band"], cpu4x["mean"]))
+    assert cpu["final"][0] == pytest.approx(0.6) and cpu["seeds"] == 2
+    assert rp.scale_curves(runs, "tmaze", "remidi") == []
+    rp.scale_figure(tmp_path / "scale.png", runs, "tmaze", "T-maze")
+    assert (tmp_path / "scale.png").stat().st_size > 10_000

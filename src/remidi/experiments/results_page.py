@@ -715,6 +715,10 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
         path = folder / f"{exp}-curves.png"
         plot_panels(path, panels, title=exp)  # the default caption says what lines and bands are
         written.append(path)
+    for exp, what in SCALE_TASKS:
+        path = folder / f"scale-{exp}.png"
+        scale_figure(path, runs, exp, what)
+        written.append(path)
     for r in results:
         path = folder / f"claim-{r['claim'].key}.png"
         if r["verdict"] != "pending":
@@ -723,6 +727,71 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
         else:  # a claim back to pending (e.g. its seed count raised) keeps no figure of an old verdict
             path.unlink(missing_ok=True)
     return written
+
+
+SCALE_ALGOS = ("plr", "minimax-return", "remidi")
+SCALE_LINES = {"cpu": "-", "cpu4x": "--"}  # the scale study's presets, each in its line style
+
+
+def scale_curves(runs: dict, experiment: str, algo: str) -> list[dict]:
+    """``algo``'s held-out solve rate at each scale of the study: per preset with runs, the
+    environment steps x [T] (update × num_envs × num_steps) of its training evaluations, their
+    mean over seeds [T] and its 95% bootstrap interval [T, 2], and its final checkpoint's
+    (``remidi evaluate``, 30 attempts) mean and interval at the last x."""
+    found = []
+    for preset in SCALE_LINES:
+        run = runs.get((experiment, algo if preset == "cpu" else f"{algo} @{preset}"))
+        if run is None or "solve_rate/mean" not in run.curves:
+            continue
+        steps, values = run.curves["solve_rate/mean"]
+        x = np.asarray(steps, float) * run.config["num_envs"] * run.config["num_steps"]
+        keep = np.isfinite(values).all(axis=0)
+        mean = values[:, keep].mean(axis=0)
+        band = np.array([stats.bootstrap_ci(values[:, t]) for t in np.flatnonzero(keep)])
+        final = list(metric_values(runs, experiment, run.algo, "evaluate:solve_rate/mean").values())
+        found.append({"preset": preset, "x": x[keep], "mean": mean, "band": band, "seeds": len(run.seeds),
+                      "final": (float(np.mean(final)), stats.bootstrap_ci(final)) if final else None})
+    return found
+
+
+def scale_figure(path: Path, runs: dict, experiment: str, what: str) -> None:
+    """Held-out solve rate against environment steps for PLR⊥, minimax return and ReMiDi at every
+    scale of the study (line style: the preset), means over seeds with their 95% bootstrap
+    bands; a diamond with its interval: the final checkpoint's evaluation (30 attempts)."""
+    import matplotlib.pyplot as plt
+
+    from remidi.experiments.plots import algorithm_style, padded
+
+    fig, ax = plt.subplots(figsize=(8.5, 5.2), layout="constrained")
+    low, high, right = [0.0], [0.0], [0.0]
+    for algo in SCALE_ALGOS:
+        color = algorithm_style(algo)["color"]
+        for c in scale_curves(runs, experiment, algo):
+            ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6,
+                    label=f"{algo} ({c['preset']}, {c['seeds']} seeds)")
+            ax.fill_between(c["x"], c["band"][:, 0], c["band"][:, 1], color=color, alpha=0.15, linewidth=0)
+            low.append(float(c["band"][:, 0].min()))
+            high.append(float(c["band"][:, 1].max()))
+            right.append(float(c["x"][-1]))
+            if c["final"] is not None:
+                mean, (lo, hi) = c["final"]
+                ax.errorbar([c["x"][-1]], [mean], yerr=[[mean - lo], [hi - mean]], color=color, marker="D",
+                            markerfacecolor="white", capsize=3, linestyle="none")
+                low.append(lo)
+                high.append(hi)
+    ax.set_ylim(*padded(min(low), max(high), (0.0, None)))
+    ax.set_xlim(*padded(0.0, max(right)))
+    ax.set_xlabel("environment steps (update × envs × steps per rollout)")
+    ax.set_ylabel("held-out solve rate (mean of the ten mazes)")
+    ax.set_title(f"scale study, {what}: held-out solve rate against training")
+    ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.supxlabel("line: mean over seeds of training's evaluations (10 attempts per maze); band: its 95% bootstrap "
+                  "interval; diamond: the final checkpoint's mean (30 attempts) with its 95% interval; solid: cpu "
+                  "preset, dashed: cpu4x", fontsize=8, wrap=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _style(name: str) -> dict:

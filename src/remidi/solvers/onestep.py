@@ -31,7 +31,7 @@ constant level is in a round's support if its upper bound reaches the round's la
 (less ``_TIE_RTOL`` of it), so values of observation games of very different scales are compared
 as numbers, not within a tolerance of the larger scale. A round's adversary gives each tied
 observation game (its own maximal-support adversary) and each tied constant level equal weight.
-Every round is then checked (:func:`remidi.solvers.lp.check_rounds`) against the regrets of the
+Every round is then checked (:func:`remidi.solvers.checks.check_rounds`) against the regrets of the
 policy computed from the rewards (:func:`policy_regret`).
 
 Cost: one MMR LP, one adversary LP per candidate level, one support LP per support level of
@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from remidi.solvers import lp
+from remidi.solvers import checks, lp
 from remidi.solvers.results import BLPResult, MMRResult, Round
 
 #: Observation games whose values agree to this relative accuracy are tied (merged into one round).
@@ -222,10 +222,10 @@ def _solve(game: OneStepGame, tol: float) -> _Solved:
 
 @dataclass(frozen=True)
 class _Rounds:
-    """The rounds of the refinement: claims (:class:`remidi.solvers.lp.Claims`, real units) and,
+    """The rounds of the refinement: claims (:class:`remidi.solvers.checks.Claims`, real units) and,
     per round, its tied observation games."""
 
-    claims: lp.Claims
+    claims: checks.Claims
     tied: list[list[_ObservationGame]]
 
 
@@ -272,7 +272,7 @@ def _rounds(solved: _Solved, obs_index: np.ndarray, limit: int | None = None) ->
         guarantees.append(weight * (sum(g.guarantee for g in games) + solved.regret[levels].sum()))
         tied_games.append(games)
     round_of[round_of < 0] = len(values)
-    claims = lp.Claims(np.array(values), np.array(bounds), np.array(guarantees), round_of, adversary,
+    claims = checks.Claims(np.array(values), np.array(bounds), np.array(guarantees), round_of, adversary,
                        solved.regret, solved.scale)
     return _Rounds(claims, tied_games)
 
@@ -284,7 +284,7 @@ def solve_mmr(game: OneStepGame, tol: float = 1e-7) -> MMRResult[np.ndarray]:
     """
     solved = _solve(game, tol)
     claims = _rounds(solved, game.observation_index(), limit=1).claims
-    lp.check_rounds(claims, game.level_names, solved.spread)
+    checks.check_rounds(claims, game.level_names, solved.spread)
     adversary = np.where(claims.round_of == 0, claims.adversary, 0.0)
     return MMRResult(float(claims.value[0]), solved.policy, adversary, solved.regret,
                      game.rewards.max(axis=1))
@@ -300,8 +300,8 @@ def solve_blp(game: OneStepGame, tol: float = 1e-7, progress=None) -> BLPResult[
     solved = _solve(game, tol)
     found = _rounds(solved, game.observation_index())
     claims = found.claims
-    lp.check_rounds(claims, game.level_names, solved.spread)
-    lp.check_final(claims, solved.regret, game.level_names, solved.spread)
+    checks.check_rounds(claims, game.level_names, solved.spread)
+    checks.check_final(claims, solved.regret, game.level_names, solved.spread)
     order = np.argsort(claims.round_of, kind="stable")
     starts = np.searchsorted(claims.round_of[order], np.arange(len(claims.value) + 1))
     rounds = []

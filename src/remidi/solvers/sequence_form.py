@@ -19,7 +19,7 @@ from typing import Mapping, Union
 
 import numpy as np
 
-from remidi.solvers import lp
+from remidi.solvers import checks, lp
 from remidi.solvers.onestep import OneStepGame, solve_mmr as solve_onestep_mmr
 from remidi.solvers.results import BLPResult, MMRResult, Round
 
@@ -211,7 +211,7 @@ def _support_names(game: TreeGame, support: np.ndarray) -> tuple[str, ...]:
 
 
 class _Checker:
-    """Checks the rounds of a centred sequence form as they are solved (:func:`lp.check_rounds`).
+    """Checks the rounds of a centred sequence form as they are solved (:func:`checks.check_rounds`).
 
     Regrets, guarantees and bounds come from the regret gaps of the rewards
     (:func:`lp.regret_gaps`), in the LPs' normalised units and then multiplied by their scale.
@@ -238,7 +238,7 @@ class _Checker:
         with np.errstate(over="ignore"):
             return self.scale * (self.gaps @ plan)
 
-    def _claims(self, raws: list[lp.RawRound], first: int) -> lp.Claims:
+    def _claims(self, raws: list[lp.RawRound], first: int) -> checks.Claims:
         """Claims of ``raws[first:]`` (levels covered before them: round -1)."""
         n_rounds = len(raws) - first
         round_of = np.full(len(self.names), n_rounds)
@@ -246,7 +246,7 @@ class _Checker:
         for k, raw in enumerate(raws):
             round_of[raw.support] = k - first if k >= first else -1
             adversary[raw.support] = raw.adversary[raw.support]
-        return lp.Claims(np.array([r.value for r in raws[first:]]), np.array(self.bounds[first:]),
+        return checks.Claims(np.array([r.value for r in raws[first:]]), np.array(self.bounds[first:]),
                          np.array(self.guarantees[first:]), round_of, adversary,
                          np.array(self.regrets[first:]), np.full(len(self.names), self.scale))
 
@@ -261,13 +261,13 @@ class _Checker:
         self.regrets.append(self.regret(raw.plan))
         self.bounds.append(least(raw.certificate))
         self.guarantees.append(least(raw.adversary))
-        lp.check_rounds(self._claims(raws, len(raws) - 1), self.names, self.spread, first=len(raws),
+        checks.check_rounds(self._claims(raws, len(raws) - 1), self.names, self.spread, first=len(raws),
                         previous=raws[-2].value if len(raws) > 1 else None)
 
     def final(self, raws: list[lp.RawRound]) -> np.ndarray:
         """Check the final plan against every round; its regret [L]."""
         regret = self.regret(raws[-1].plan)
-        lp.check_final(self._claims(raws, 0), regret, self.names, self.spread)
+        checks.check_final(self._claims(raws, 0), regret, self.names, self.spread)
         return regret
 
     def optimal_return(self) -> np.ndarray:
@@ -279,7 +279,7 @@ def solve_mmr(game: TreeGame, tol: float = 1e-7) -> MMRResult[TreePolicy]:
     """Minimax regret: value, behavioural policy, maximal-support adversary [L], regret [L].
 
     Solved on the centred rewards (:func:`build_sequence_form`) and checked
-    (:func:`remidi.solvers.lp.check_rounds`).
+    (:func:`remidi.solvers.checks.check_rounds`).
     """
     form = build_sequence_form(game, centred=True)
     check = _Checker(game, form)

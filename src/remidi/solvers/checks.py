@@ -16,6 +16,14 @@ import numpy as np
 
 from remidi.solvers.lp import _EQUILIBRIUM_TOL, _ROUNDING, CHECK_RTOL, SolverError
 
+def require_finite(names: tuple[str, ...], values: np.ndarray) -> None:
+    """Raise SolverError naming the first level whose row of ``values`` [L, ...] (its rewards, or
+    its payoffs) holds a number that is not finite."""
+    bad = ~np.isfinite(values.reshape(len(names), -1)).all(axis=1)
+    if bad.any():
+        raise SolverError(f"exact solver: level {names[int(np.flatnonzero(bad)[0])]!r}: rewards must be finite")
+
+
 @dataclass(frozen=True)
 class Claims:
     """Rounds 0..R-1 of an answer and the numbers, computed directly from the rewards, that vouch

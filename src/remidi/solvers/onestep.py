@@ -128,14 +128,6 @@ class _ObservationGame:
     scale: float
 
 
-def _finite_rewards(game: OneStepGame) -> None:
-    """Raise SolverError naming the first level with a reward that is not a finite number."""
-    bad = ~np.isfinite(game.rewards).all(axis=1)
-    if bad.any():
-        raise lp.SolverError(f"exact solver: level {game.level_names[int(np.flatnonzero(bad)[0])]!r}: "
-                             f"rewards must be finite, got {game.rewards[bad][0].tolist()}")
-
-
 def _action_regrets(game: OneStepGame) -> tuple[np.ndarray, np.ndarray]:
     """unit [L] and action regrets [L, A] in those units (real regret = unit * regret).
 
@@ -210,7 +202,7 @@ class _Solved:
 
 def _solve(game: OneStepGame, tol: float) -> _Solved:
     """Check the rewards, then solve every observation game."""
-    _finite_rewards(game)
+    checks.require_finite(game.level_names, game.rewards)
     observations = _solve_observations(game, tol)
     policy = np.array([g.row for g in observations])
     scale = np.array([g.scale for g in observations])[game.observation_index()]

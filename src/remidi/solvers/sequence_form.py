@@ -218,10 +218,7 @@ class _Checker:
     """
 
     def __init__(self, game: TreeGame, form: SequenceForm):
-        finite = np.isfinite(form.payoff).all(axis=1)
-        if not finite.all():
-            raise lp.SolverError(f"exact solver: level {game.level_names[int(np.flatnonzero(~finite)[0])]!r}: "
-                                 "rewards must be finite")
+        checks.require_finite(game.level_names, form.payoff)
         self.names, self.form = game.level_names, form
         optimal = lp.best_response_values(form.poly, form.payoff)
         self.scale = lp.normalise(form.payoff, optimal)

@@ -23,7 +23,7 @@
 # checkpoint, each part's device and rate, the time left, stalled seeds).
 #
 # ONLY="EXPERIMENT/NAME ..." limits the queue to those runs; RUNS_PYTHONPATH is appended to each
-# commit's PYTHONPATH (e.g. wheels carried to a lent GPU; docs/results/device.sh is that GPU's call).
+# commit's PYTHONPATH (device/runs_on_device.sh uses both on a lent GPU).
 set -u
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 R=${1:-/work/runs}

@@ -5,7 +5,7 @@
 # until DEADLINE seconds after the start; then SIGTERM (each run finishes its block under way,
 # checkpoints and exits 143), and the runs' histories and configs come back as $OUT/tmaze-paper.tgz.
 #
-#   device run: bash docs/results/device.sh        (carry: .whl, the wheels the image lacks)
+#   device run: bash docs/results/device/tmaze_paper.sh        (carry: .whl, the wheels the image lacks)
 #
 # A run folder left in RUNS (default /tmp/gpu-runs) on a still-warm machine is resumed by a second call.
 # The runs checkpoint after every evaluation block (250 updates, the paper's eval_every), so a

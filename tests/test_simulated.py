@@ -158,7 +158,7 @@ def test_candidates_are_the_most_likely_first_observations():
 
 
 def _judge_fresh_levels(task, tag, variants):
-    """The probe of docs/belief_probe_simulated.py through the tracker component in a rollout,
+    """The probe of docs/notes/belief_probe_simulated.py through the tracker component in a rollout,
     smaller: a frozen buffer of 32 levels, 90 % irreducible (as PLR⊥'s at the cpu preset), a
     random policy; the table from fresh levels' rollouts, the reference fit on one, thresholds
     calibrated on a rollout of the buffer's levels with fresh randomness, then fresh generator

@@ -1,4 +1,4 @@
-"""The learned belief model (issue #31, :mod:`remidi.engine.belief`): it learns a deterministic
+"""The learned belief model (:mod:`remidi.engine.belief`): it learns a deterministic
 sequence, its calibrated threshold gives the stated false-distinguishable rate on held-out
 trajectories, its tracker agrees with the exact tracker on the (deterministic) lever game, and on
 the noisy lever game it explains fresh hidden levels that the exact tracker cannot."""

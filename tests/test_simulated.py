@@ -1,4 +1,4 @@
-"""The simulated belief model's parts (remidi.engine.simulated, issue #31): replaying a level
+"""The simulated belief model's parts (remidi.engine.simulated): replaying a level
 reproduces a rollout of it, the noise table learns the identity where the environment is
 deterministic and the noise's distribution where it is not, and the mixture over a buffer's
 candidates is a mean of likelihoods."""

@@ -195,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  * look at {args.out / 'training.png'} and {args.out / 'remidi' / 'summary.json'}")
     print(f"  * evaluate the trained agents on more levels (CVaR over the generator): remidi evaluate {args.out}")
     print("  * train longer: python examples/bring_your_own_env.py OTHER_DIR --updates 2000 --seeds 5 "
-          "(a GPU helps: see the README's installation section)")
+          "(a GPU helps: see docs/devices.md)")
     print("  * make it yours: replace SignpostCorridor, sample_level, optimal_return and the eval_sets / "
           "level_tags in make_task(), then tune make_config() (keys as in `remidi list lever`); or run "
           "your task from the command line, in the folder holding yourmodule.py: "

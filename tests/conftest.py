@@ -5,10 +5,10 @@ program compiled once (in an earlier run of the suite, or by another xdist worke
 instead of compiled again. The cache lives outside the checkout (``REMIDI_TEST_JAX_CACHE``,
 default ``~/.cache/remidi/jax-test-cache``; set it to an empty string to disable), so a fresh
 clone on the same machine reuses it; results do not depend on it. Every program goes into it,
-however quickly it compiled (JAX's default keeps only those over a second; the suite kept those
-over 0.1 s until 2026-11-25): the thousands of tiny programs that eager operations compile cost
-more to compile again than to load (test_continuous, test_maze_env and test_buffer warm: 93 s
-with a 0.1 s threshold, 69 s with none).
+however quickly it compiled (JAX's default keeps only those over a second): the thousands of
+tiny programs that eager operations compile cost more to compile again than to load (measured:
+test_continuous, test_maze_env and test_buffer warm, 93 s with a 0.1 s threshold, 69 s with
+none).
 
 Scheduling (``pyproject.toml``: ``--dist loadfile --no-loadscope-reorder``): each test file runs
 on one pytest-xdist worker, so a file's tests share its compiled programs and module fixtures

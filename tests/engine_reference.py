@@ -1,47 +1,17 @@
 """The engine's results on the lever game's and the T-maze's tiny configs, for every algorithm:
 what ``tests/test_engine_reference.py`` and ``tests/test_engine_reference_maze.py`` compare the
-engine against.
+engine against, within a float32 tolerance. A refactor must reproduce them; that is how it proves
+it changed no result.
 
-``python tests/engine_reference.py`` rewrites ``tests/data/engine_reference.json``. Do that only
-for a change that is *meant* to change training results, and say so in its commit; a refactor
-must leave the file as it is. The engine that wrote today's values is the one of commit 8bb28df,
-before the algorithm seam of issue #19, for dr, plr, minimax-return, remidi and remidi-combine
-(and of the commit that added ACCEL for accel and remidi-accel): the file was written again,
-unoptimised, when the suite stopped optimising (the engine unchanged, the test passing against
-the optimised values before). The suite's XLA flags (``tests/conftest.py``: older fusion emitters)
-came later and were not used to write it; the test passes within its float32 tolerance with them.
-
-Written again for issue #28 (results meant to change): top-k replay became jaxued's softmax over
-the top k (every lever case but dr), and the maze cases were added after the T-maze's
-discounted optimum became γ. The maze cases were written again, with the
-suite's XLA flags, when the corridors' start direction became "facing right" (only the corridors'
-evaluation metrics moved; training did not). The ``accel`` case was written with the suite's XLA flags (without
-them its worst hidden regret drifted 3e-4 from what the suite computes). The runs of issue #28's results page use that engine.
-
-Written again (2026-11-26) for ``minimax-return``, ``accel`` and ``tmaze-minimax-return``, with the
-suite's XLA flags, when MaxMC's best-return record stopped taking the partial return of a rollout
-that ends no episode (``train.train_step``): the maze case's record moved (its 24-step rollouts
-end few 250-step episodes; its training did not move), the two lever cases drifted by float32
-rounding of the changed program (every lever episode ends, so their values are the same in exact
-arithmetic). Without the suite's XLA flags those two lever cases drift beyond the tolerance, as
-they did before this rewrite (measured with ``REMIDI_TEST_XLA_FLAGS=0``). Then again the same
-day for ``plr``, ``minimax-return`` and ``accel`` when PPO's diagnostics stopped averaging in the
-zeros of skipped (all-masked) minibatches (``ppo.ppo_update``): ``plr`` and ``minimax-return``
-moved only in ``ppo/policy_loss`` (float32 rounding of the changed program, at most 4e-4);
-``accel``'s training drifted by rounding as before (its policy head's parameters, its worst
-regrets by up to 4e-3).
-
-Written again (2026-11-26) for ``tmaze-accel`` and ``tmaze-remidi-accel``, with the suite's XLA
-flags, when the maze editor (``envs.maze.mutate_maze``) took minimax's and jaxued's no-op edit: each
-edit is a no-op, a wall flip or a goal move with equal odds (before, a flip or a goal move with
-1/2 each). Results meant to change; the lever cases (the lever's own editor) did not move.
-
-Written again (2026-11-28) for ``plr``, ``minimax-return``, ``accel`` and ``remidi-accel``, no
-code changed: on an AVX2 machine (no AVX-512) those four drifted beyond the tolerance, at the
-commit that wrote them too, in ``ppo/policy_loss`` (a sum that nearly cancels) and, through the
-sampled actions, a few evaluation episodes; every discrete outcome stayed the same. The suite
-now compiles for AVX2 on every x86-64 CPU (``tests/conftest.py``), and these values were written
-with its flags (``--xla_cpu_max_isa=AVX2`` added); the other cases pass as they were.
+``python tests/engine_reference.py [CASE ...]`` rewrites those cases (all without arguments) in
+``tests/data/engine_reference.json``. Do that only for a change that is *meant* to change
+training results, and say so in its commit. Write them as the suite computes them: without
+XLA's optimisations (the script sets that) and with the suite's XLA flags in ``XLA_FLAGS``
+(``tests/conftest.py``'s ``FAST_XLA_FLAGS``: older fusion emitters, LLVM level 1 and, on
+x86-64, ``--xla_cpu_max_isa=AVX2``). Without those flags
+some cases (``plr``, ``minimax-return``, ``accel``, ``remidi-accel``) drift beyond the tolerance
+in ``ppo/policy_loss`` (a sum that nearly cancels) and, through the sampled actions, in a few
+evaluation episodes.
 """
 
 import dataclasses

@@ -1,4 +1,4 @@
-"""The learned belief model (issue #31, :mod:`remidi.engine.belief`): it learns a deterministic
+"""The learned belief model (:mod:`remidi.engine.belief`): it learns a deterministic
 sequence, its calibrated threshold gives the stated false-distinguishable rate on held-out
 trajectories, its tracker agrees with the exact tracker on the (deterministic) lever game, and on
 the noisy lever game it explains fresh hidden levels that the exact tracker cannot."""
@@ -503,7 +503,7 @@ def test_remidi_with_the_belief_tracker_keeps_noisy_hidden_levels_out_of_its_lat
     model explains them and they are rejected (measured, 2 seeds, the full smoke preset: 0.00 and
     0.00, and after 150 updates, 50 of them on the second buffer: 0.00 and 0.00; margin 1: 0.00
     and 0.03; without a margin 0.62 at seed 0: the adversary picks exactly the hidden levels whose
-    noise code the model scores below the threshold, docs/belief-tracker-plan.md, finding 1).
+    noise code the model scores below the threshold, docs/notes/belief-tracker-plan.md, finding 1).
     The results page has the 10-seed paper-preset runs of this claim."""
     import json
 

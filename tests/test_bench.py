@@ -79,7 +79,7 @@ def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors
     assert out == "" and err.count("\n") == 1 and "maze-fast" in err and "maze-plr" in err
 
 
-def test_every_ratio_names_registered_workloads_and_each_issue_31_workload_has_its_ratio():
+def test_every_ratio_names_registered_workloads_and_each_remidi_variant_has_its_ratio():
     from remidi.bench import STEP_RATIOS
 
     for workload, baseline, _ in STEP_RATIOS:

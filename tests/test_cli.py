@@ -556,7 +556,7 @@ def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_p
     (["run", "--resume", ""], "--resume: must name a folder, got ''"),
 ])
 def test_an_empty_out_or_resume_folder_is_refused(tmp_path, capsys, monkeypatch, argv, needle):
-    monkeypatch.chdir(tmp_path)  # the run used to go to runs/<experiment>/<timestamp> here
+    monkeypatch.chdir(tmp_path)  # an empty --out must not fall back to runs/<experiment>/<timestamp> here
     code, _, err = run_cli(capsys, *argv, "--quiet", *FAST)
     assert code == 2 and err.startswith("remidi: error: ") and err.count("\n") == 1 and needle in err, err
     assert list(tmp_path.iterdir()) == []
@@ -645,7 +645,7 @@ def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, fi
 def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
     from remidi.cli import _print_summaries
 
-    long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than the old 32-character column
+    long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than 32 characters
     _print_summaries({"plr": {"experiment": "tmaze", "preset": "smoke", "seeds": [0, 1], "metrics": {
         "solve_rate/mean": {"mean": 0.5, "std": 0.1, "per_seed": [0.4, 0.6]},
         long: {"mean": 12.25, "std": 1.0, "per_seed": [11.25, 13.25]},

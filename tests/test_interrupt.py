@@ -27,7 +27,7 @@ def _started(path):
 
 
 @pytest.mark.parametrize("when", [
-    "start-up",  # 0.5 s in: Python imports JAX (a KeyboardInterrupt there used to be swallowed)
+    "start-up",  # 0.5 s in: Python imports JAX (a KeyboardInterrupt there must not be swallowed)
     "compiling",  # just after config.json is written: tracing and compiling the first programs
     pytest.param("training", marks=pytest.mark.slow),  # after the first checkpoint: blocks running
 ])

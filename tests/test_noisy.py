@@ -1,4 +1,4 @@
-"""The stochastic test domains of issue #31 (:mod:`remidi.envs.noisy`): the noise is the level's
+"""The stochastic test domains (:mod:`remidi.envs.noisy`): the noise is the level's
 (deterministic given the level, unrelated to the answer), visible levels stay solvable, and the
 exact tracker, exact as ever, finds no complete overlap between two irreducible levels that
 differ only in their seeds, where the plain domains' levels overlap completely."""
@@ -198,7 +198,7 @@ def test_noisy_experiments_are_registered_with_their_parents_presets():
     names = {e.name: e for e in L.EXPERIMENTS + M.EXPERIMENTS}
     for noisy, parent, presets in (("lever-noisy", "lever", {"smoke", "paper"}),
                                    ("blindfold-noisy", "blindfold", {"smoke", "cpu", "paper"})):
-        assert presets <= set(names[noisy].presets)  # the issue's presets
+        assert presets <= set(names[noisy].presets)  # the presets the results page runs
         assert names[noisy].presets == names[parent].presets  # the same run lengths and sizes as the parent's
         assert names[noisy].preset_seeds == names[parent].preset_seeds
         assert names[noisy].algorithms == names[parent].algorithms

@@ -1,4 +1,4 @@
-"""ReMiDi's rehearsal (``remidi.rehearsal``, issue #31): once a buffer is frozen, an update may
+"""ReMiDi's rehearsal (``remidi.rehearsal``): once a buffer is frozen, an update may
 train on a batch of a frozen buffer's levels, on every step, without changing any buffer.
 
 The lever game's tiny config (tests/test_ued_engine.py's TINY: 8 envs, one-step episodes, the

@@ -1,4 +1,4 @@
-"""The simulated belief model's parts (remidi.engine.simulated, issue #31): replaying a level
+"""The simulated belief model's parts (remidi.engine.simulated): replaying a level
 reproduces a rollout of it, the noise table learns the identity where the environment is
 deterministic and the noise's distribution where it is not, and the mixture over a buffer's
 candidates is a mean of likelihoods."""
@@ -158,7 +158,7 @@ def test_candidates_are_the_most_likely_first_observations():
 
 
 def _judge_fresh_levels(task, tag, variants):
-    """The probe of docs/belief_probe_simulated.py through the tracker component in a rollout,
+    """The probe of docs/notes/belief_probe_simulated.py through the tracker component in a rollout,
     smaller: a frozen buffer of 32 levels, 90 % irreducible (as PLR⊥'s at the cpu preset), a
     random policy; the table from fresh levels' rollouts, the reference fit on one, thresholds
     calibrated on a rollout of the buffer's levels with fresh randomness, then fresh generator

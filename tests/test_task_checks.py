@@ -1,4 +1,4 @@
-"""A user's UEDTask (#30): checked before anything is written (one line naming the field), the
+"""A user's UEDTask: checked before anything is written (one line naming the field), the
 short-rollout warning for every score that reads finished episodes, and runs of a user's task that
 the command line resumes and evaluates from any folder (the task rebuilt from its recorded import
 path), or, where they cannot, a one-line message saying what to pass."""

@@ -1,4 +1,4 @@
-"""Stochastic test domains (issue #31): observation noise that ReMiDi's exact tracker cannot see through.
+"""Stochastic test domains: observation noise that ReMiDi's exact tracker cannot see through.
 
 ReMiDi's tracker (:mod:`remidi.engine.tracker`) is exact for environments that are
 deterministic given the level. Randomness outside the level can be brought inside it, as a

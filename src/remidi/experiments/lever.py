@@ -69,10 +69,10 @@ def _experiment(name: str, description: str, task_factory):
 EXPERIMENTS = [
     _experiment("lever", "paper §6.4: 64-lever game, half the levels hide the answer (irreducible regret)",
                 lambda cfg: lever_task(NUM_LEVERS)),
-    # issue #31: the noise code is in the level (its seed), so the exact tracker stays exact, yet
+    # the noise code is in the level (its seed), so the exact tracker stays exact, yet
     # no two hidden levels show the same observation: nothing is a complete overlap, and ReMiDi's
     # later buffers take hidden levels again (ReMiDi falls back to PLR⊥)
-    _experiment("lever-noisy", f"issue #31: the lever game whose observations carry a {NOISE_BITS}-bit noise code "
+    _experiment("lever-noisy", f"beyond the paper: the lever game whose observations carry a {NOISE_BITS}-bit noise code "
                                "drawn per level (its seed), unrelated to the answer; no two hidden levels look alike",
                 lambda cfg: noisy_lever_task(NUM_LEVERS)),
 ]

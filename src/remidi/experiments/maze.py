@@ -137,9 +137,9 @@ EXPERIMENTS = [
                 "paper §6.3, Figs. 6a, 7a: random mazes mixed with T-mazes whose goal side is hidden"),
     _experiment("blindfold", "blind", "blind levels",
                 "paper §6.3, Figs. 6b, 7b: random mazes, half of them blindfolded (all-zero observations)"),
-    # issue #31: a blind level's noise comes from its seed (in the level), so the exact tracker
+    # a blind level's noise comes from its seed (in the level), so the exact tracker
     # stays exact, yet no two blind levels show the same observations: none is a complete overlap
     _experiment("blindfold-noisy", "blind", "blind levels",
-                "issue #31: the blindfold mazes whose blind levels show a noisy TV (every cell's channels "
+                "beyond the paper: the blindfold mazes whose blind levels show a noisy TV (every cell's channels "
                 "drawn at random each step from the level's seed) instead of zeros"),
 ]

@@ -1,4 +1,4 @@
-# Usage: python docs/belief_probe.py blindfold-noisy|tmaze [FIT_STEPS=300] [reseed|same] [FALSE_RATE=0.05]   (minutes on a 2-core CPU)
+# Usage: python docs/notes/belief_probe.py blindfold-noisy|tmaze [FIT_STEPS=300] [reseed|same] [FALSE_RATE=0.05]   (minutes on a 2-core CPU)
 """Constructed probe of the belief tracker on mazes, with and without the generator reference.
 
 A frozen buffer concentrated on irreducible levels (90 % blind / T-maze, as PLR⊥'s buffer is at

@@ -1,7 +1,7 @@
 """Seconds per update of a multi-seed block from a fresh run (no buffer switch inside), with whatever
 remidi is on PYTHONPATH, to compare commits (docs/performance.md, "Rare branches over several seeds"):
 
-    PYTHONPATH=WORKTREE/src python docs/perf_seed_branches.py blindfold-noisy cpu 5 2 \
+    PYTHONPATH=WORKTREE/src python docs/notes/perf_seed_branches.py blindfold-noisy cpu 5 2 \
         remidi.tracker=simulated remidi.belief_reference=true remidi.belief_false_rate=0 remidi.belief_margin=5
 """
 import sys, time

@@ -1,4 +1,4 @@
-# Usage: python docs/belief_probe_simulated.py blindfold-noisy|blindfold|tmaze|lever-noisy [FALSE_RATE=0.05]   (1.5-3 min each on a 2-core CPU)
+# Usage: python docs/notes/belief_probe_simulated.py blindfold-noisy|blindfold|tmaze|lever-noisy [FALSE_RATE=0.05]   (1.5-3 min each on a 2-core CPU)
 """Probe: the simulator as the level-conditioned model, with a learnt observation-noise table.
 
 P(h | θ) = Π_t Π_e q(o_e,t | d_t, ô¹_e,t, ô²_e,t), where ô¹, ô² are the frozen level θ simulated

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from remidi import render
+from remidi.runs import render
 from remidi.cli import main
 
 SEEDS = [0, 1]
@@ -107,7 +107,7 @@ def runs(tmp_path_factory):
 
 
 def sheet_size(rows: int, columns: int, tile: int, size: int = 13, row_header: bool = False):
-    """(width, height) of a render sheet (see remidi.render's module docstring): a buffer sheet
+    """(width, height) of a render sheet (see remidi.runs.render's module docstring): a buffer sheet
     (``row_header``) with the buffers' colour key, a maze sheet with the mazes'."""
     tile_px = (size + 2) * tile
     row_h = (render.ROW_HEADER if row_header else 0) + render.CAPTION + tile_px + render.PAD

@@ -253,7 +253,7 @@ def test_a_run_ued_run_is_evaluated_and_resumed_from_another_folder(corridor, ue
 
 def test_a_run_without_an_import_path_says_what_to_pass_and_evaluates_with_the_task(corridor, ued_run, tmp_path,
                                                                                     capsys):
-    from remidi.evaluate import evaluate_run
+    from remidi.runs.evaluate import evaluate_run
 
     run = tmp_path / "run"
     shutil.copytree(ued_run, run)

@@ -281,7 +281,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from remidi import render
+    from remidi.runs import render
 
     if args.what == "maze":
         print(f"wrote {render.render_maze(args.name, out=args.out, tile=args.tile)}")
@@ -298,7 +298,7 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_evaluate(args) -> int:
-    from remidi.evaluate import run_from_args
+    from remidi.runs.evaluate import run_from_args
 
     doc = run_from_args(args)
     for algo, entry in doc["algorithms"].items():
@@ -310,7 +310,7 @@ def _cmd_evaluate(args) -> int:
 
 
 def _cmd_table(args) -> int:
-    from remidi.experiments.table import markdown_table, summaries
+    from remidi.runs.table import markdown_table, summaries
 
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
     print(markdown_table(summaries(args.runs), metrics, args.last))
@@ -320,7 +320,7 @@ def _cmd_table(args) -> int:
 
 def _note_unfinished(runs) -> None:
     """A note per algorithm of a several-algorithm run left out for want of a summary.json."""
-    from remidi.experiments.table import unfinished
+    from remidi.runs.table import unfinished
 
     for folder, resume in unfinished(runs):
         print(f"remidi: note: {folder} is left out: unfinished (no summary.json; remidi run --resume "
@@ -328,7 +328,7 @@ def _note_unfinished(runs) -> None:
 
 
 def _cmd_status(args) -> int:
-    from remidi.experiments.status import run_folders, run_status
+    from remidi.runs.status import run_folders, run_status
 
     for folder in run_folders(args.runs):
         print("\n".join(run_status(folder)))
@@ -336,8 +336,8 @@ def _cmd_status(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    from remidi.experiments.compare import compare_runs, format_comparison, plot_comparison
-    from remidi.experiments.table import summaries
+    from remidi.runs.compare import compare_runs, format_comparison, plot_comparison
+    from remidi.runs.table import summaries
 
     if args.out is not None and Path(args.out).suffix.lower() != ".png":
         raise RemidiError(f"--out: must be a .png file, got {args.out!r}")
@@ -466,7 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                "generator, larger perfect mazes",
                               description="Reload every seed and algorithm of a UED run from its checkpoint and "
                                           "evaluate it; writes RUN_DIR/evaluate.json, evaluate.csv, evaluate.png.")
-    from remidi.evaluate import main_args
+    from remidi.runs.evaluate import main_args
 
     main_args(evaluate)
     evaluate.set_defaults(func=_cmd_evaluate)

@@ -50,10 +50,10 @@ from remidi.files import atomic_write
 from remidi.experiments import outputs
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.experiments.floors import OUT as FLOORS  # python -m remidi.experiments.floors writes it
-from remidi.experiments.compare import compare
-from remidi.experiments.table import _cells as table_cells
-from remidi.experiments.table import _digits as table_digits
-from remidi.experiments.table import label  # how the page names an algorithm's runs
+from remidi.runs.compare import compare
+from remidi.runs.table import _cells as table_cells
+from remidi.runs.table import _digits as table_digits
+from remidi.runs.table import label  # how the page names an algorithm's runs
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "docs" / "results" / "data"
@@ -372,7 +372,7 @@ def _evaluation(folder: Path, algo: str, config: dict) -> dict:
     :data:`EVAL_ATTEMPTS` attempts, and its CVaR and perfect-maze metrics as ``remidi
     evaluate``'s defaults give them: refuse (ConfigError naming the run) an ``evaluate.json`` of an
     unfinished run's checkpoint or with other arguments, rather than mix it in."""
-    from remidi.evaluate import DEFAULTS
+    from remidi.runs.evaluate import DEFAULTS
 
     where = folder / "evaluate.json"
     evaluated = outputs.read_json(where)
@@ -537,7 +537,7 @@ def metric_source(metric: str) -> str:
     """Where a claim's metric (``evaluate:NAME`` or ``summary:NAME``) comes from, as the verdict
     table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`EVAL_ATTEMPTS`
     attempts per level, its CVaR and generator metrics its default generated levels and attempts."""
-    from remidi.evaluate import DEFAULTS
+    from remidi.runs.evaluate import DEFAULTS
 
     kind, name = metric.split(":", 1)
     if kind != "evaluate":
@@ -807,7 +807,7 @@ def _interval_figure(path: Path, result: dict, runs: dict) -> None:
     """The claim's algorithms: mean and its 95% interval per experiment (rliable's style)."""
     import matplotlib.pyplot as plt
 
-    from remidi.experiments.compare import _interval
+    from remidi.runs.compare import _interval
     from remidi.experiments.plots import _save, algorithm_style
 
     claim = result["claim"]

@@ -74,95 +74,95 @@ CLAIMS = (
     Claim("tmaze-remidi-paired-heldout", "beyond the paper (T-maze, ReMiDi over PAIRED)", "ReMiDi over PAIRED "
           "solves more held-out mazes than PAIRED (perfect regret both)", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi-paired (perfect)", "paired (perfect)"),)),
-    Claim("lever-noisy-exact", "beyond the paper (lever-noisy, #31)", "with an uninformative noise code in every "
+    Claim("lever-noisy-exact", "beyond the paper (lever-noisy)", "with an uninformative noise code in every "
           "observation, ReMiDi's exact tracker stops rejecting: its last buffer holds mostly hidden-answer levels "
           "(bound: the hidden share of the active buffer at the end in [0.5, 1])", "summary:buffer_fraction/hidden",
           ("lever-noisy",), bounds=(("remidi", 0.5, 1.0),)),
-    Claim("blindfold-noisy-exact", "beyond the paper (blindfold-noisy, #31)", "with noise instead of a blank view "
+    Claim("blindfold-noisy-exact", "beyond the paper (blindfold-noisy)", "with noise instead of a blank view "
           "on blind levels, ReMiDi's exact tracker stops rejecting: its last buffer holds at least the generator's "
           "half of blind levels (bound: the blind share of the active buffer at the end in [0.5, 1])",
           "summary:buffer_fraction/blind", ("blindfold-noisy",), bounds=(("remidi", 0.5, 1.0),)),
-    Claim("lever-noisy-belief", "beyond the paper (lever-noisy, #31)", "ReMiDi with the learned belief tracker "
+    Claim("lever-noisy-belief", "beyond the paper (lever-noisy)", "ReMiDi with the learned belief tracker "
           "(remidi.tracker=belief, belief_margin 2 nats per step, chosen on the smoke preset's seeds 0–1) keeps "
           "hidden-answer levels out of its last buffer (bound: the hidden share of the active buffer at the end "
           "in [0, 0.1])", "summary:buffer_fraction/hidden", ("lever-noisy",),
           bounds=(("remidi (belief, margin 2)", 0.0, 0.1),)),
-    Claim("lever-noisy-belief-visible", "beyond the paper (lever-noisy, #31)", "ReMiDi with the learned belief "
+    Claim("lever-noisy-belief-visible", "beyond the paper (lever-noisy)", "ReMiDi with the learned belief "
           "tracker (margin 2) solves visible-answer levels more often than PLR⊥", "evaluate:solve_rate/visible",
           ("lever-noisy",), greater=(("remidi (belief, margin 2)", "plr"),)),
-    Claim("lever-noisy-remidi-paired-exact", "beyond the paper (lever-noisy, ReMiDi over PAIRED, #31)", "with "
+    Claim("lever-noisy-remidi-paired-exact", "beyond the paper (lever-noisy, ReMiDi over PAIRED)", "with "
           "the noise code, ReMiDi over PAIRED's exact tracker (a reservoir of each generator's levels) explains no "
           "fresh hidden level, so its last generator keeps building them (bound: the generated share of hidden "
           "levels in the last logged block in [0.5, 1]; smoke preset before this claim: 0.83 at both seeds)",
           "summary:generated/hidden", ("lever-noisy",), bounds=(("remidi-paired (perfect)", 0.5, 1.0),)),
-    Claim("lever-noisy-remidi-paired-belief", "beyond the paper (lever-noisy, ReMiDi over PAIRED, #31)", "with "
+    Claim("lever-noisy-remidi-paired-belief", "beyond the paper (lever-noisy, ReMiDi over PAIRED)", "with "
           "the learned belief tracker (defaults: a model of each generator's trajectories, the paper's appendix "
           "sketch) ReMiDi over PAIRED's last generator builds fewer hidden levels than with the exact tracker "
           "(smoke preset before this claim: 0.39 and 0.40)", "summary:generated/hidden", ("lever-noisy",),
           greater=(("remidi-paired (perfect)", "remidi-paired (perfect, belief)"),)),
-    Claim("lever-noisy-remidi-paired-belief-visible", "beyond the paper (lever-noisy, ReMiDi over PAIRED, #31)",
+    Claim("lever-noisy-remidi-paired-belief-visible", "beyond the paper (lever-noisy, ReMiDi over PAIRED)",
           "with the learned belief tracker ReMiDi over PAIRED's protagonist solves visible-answer levels more often "
           "than with the exact tracker (smoke preset before this claim: 0.02–0.03 for both)",
           "evaluate:solve_rate/visible", ("lever-noisy",),
           greater=(("remidi-paired (perfect, belief)", "remidi-paired (perfect)"),)),
-    Claim("lever-belief-agreement", "beyond the paper (lever, #31)", "on the deterministic lever game the learned "
+    Claim("lever-belief-agreement", "beyond the paper (lever)", "on the deterministic lever game the learned "
           "belief tracker (defaults) judges steps as the exact tracker does (bound: the share of steps of the last "
           "audit rollout both judge alike in [0.95, 1])", "summary:belief/agreement", ("lever",),
           bounds=(("remidi (belief)", 0.95, 1.0),)),
-    Claim("lever-belief-visible", "beyond the paper (lever, #31)", "on the deterministic lever game ReMiDi with the "
+    Claim("lever-belief-visible", "beyond the paper (lever)", "on the deterministic lever game ReMiDi with the "
           "learned belief tracker (defaults) solves visible-answer levels more often than PLR⊥",
           "evaluate:solve_rate/visible", ("lever",), greater=(("remidi (belief)", "plr"),)),
-    Claim("blindfold-noisy-belief", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the learned belief "
+    Claim("blindfold-noisy-belief", "beyond the paper (blindfold-noisy)", "ReMiDi with the learned belief "
           "tracker (defaults) keeps fewer blind levels in its last buffer than with the exact tracker",
           "summary:buffer_fraction/blind", ("blindfold-noisy",), greater=(("remidi", "remidi (belief)"),),
           min_seeds=5),
-    Claim("blindfold-noisy-belief-heldout", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the learned "
+    Claim("blindfold-noisy-belief-heldout", "beyond the paper (blindfold-noisy)", "ReMiDi with the learned "
           "belief tracker (defaults) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean",
           ("blindfold-noisy",), greater=(("remidi (belief)", "plr"),), min_seeds=5),
-    Claim("tmaze-belief-agreement", "beyond the paper (T-maze, #31)", "on the deterministic T-maze task the "
+    Claim("tmaze-belief-agreement", "beyond the paper (T-maze)", "on the deterministic T-maze task the "
           "learned belief tracker (defaults) judges steps as the exact tracker does (bound: the share of steps of "
           "the last audit rollout both judge alike in [0.9, 1]; the smoke preset measured 0.42–0.73 before this "
           "claim was stated)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (belief)", 0.9, 1.0),),
           min_seeds=5),
-    Claim("tmaze-belief-heldout", "beyond the paper (T-maze, #31)", "ReMiDi with the learned belief tracker "
+    Claim("tmaze-belief-heldout", "beyond the paper (T-maze)", "ReMiDi with the learned belief tracker "
           "(defaults) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (belief)", "plr"),), min_seeds=5),
-    Claim("blindfold-noisy-simulated", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the simulated "
+    Claim("blindfold-noisy-simulated", "beyond the paper (blindfold-noisy)", "ReMiDi with the simulated "
           "belief model (remidi.tracker=simulated judged by the ratio over the generator, belief_false_rate 0, "
           "belief_margin 5 nats per step: chosen on constructed adversaries and one smoke seed per domain, "
           "docs/belief-tracker-plan.md) keeps fewer blind levels in its last buffer than with the exact tracker "
           "(smoke preset, 1 seed, before this claim: 0.00 against the exact tracker's 0.53–0.59)", "summary:buffer_fraction/blind", ("blindfold-noisy",),
           greater=(("remidi", "remidi (simulated, ratio, false rate 0, margin 5)"),), min_seeds=5),
-    Claim("blindfold-noisy-simulated-heldout", "beyond the paper (blindfold-noisy, #31)", "ReMiDi with the "
+    Claim("blindfold-noisy-simulated-heldout", "beyond the paper (blindfold-noisy)", "ReMiDi with the "
           "simulated belief model solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean",
           ("blindfold-noisy",), greater=(("remidi (simulated, ratio, false rate 0, margin 5)", "plr"),), min_seeds=5),
-    Claim("tmaze-simulated-agreement", "beyond the paper (T-maze, #31)", "on the deterministic T-maze task the "
+    Claim("tmaze-simulated-agreement", "beyond the paper (T-maze)", "on the deterministic T-maze task the "
           "simulated belief model judges steps as the exact tracker does (bound: the share of steps of the last audit "
           "rollout both judge alike in [0.95, 1]; before this claim: 1.00 on the constructed adversary of "
           "docs/belief_probe_simulated.py, and 1.0 at every audit of one smoke seed)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (simulated, ratio, false rate 0, margin 5)", 0.95, 1.0),), min_seeds=5),
-    Claim("tmaze-simulated-heldout", "beyond the paper (T-maze, #31)", "ReMiDi with the simulated belief model "
+    Claim("tmaze-simulated-heldout", "beyond the paper (T-maze)", "ReMiDi with the simulated belief model "
           "solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (simulated, ratio, false rate 0, margin 5)", "plr"),), min_seeds=5),
-    Claim("blindfold-keep-combine", "beyond the paper (blindfold, #31)", "ReMiDi's exact multi-policy form "
+    Claim("blindfold-keep-combine", "beyond the paper (blindfold)", "ReMiDi's exact multi-policy form "
           "(remidi.policy=combine) solves more of the generator's blind levels than the masked single policy (both "
           "trained at one commit)",
           "evaluate:generator/solve_rate/blind", ("blindfold",), greater=(("remidi (combine)", "remidi (masked)"),),
           min_seeds=5),
-    Claim("blindfold-keep-rehearsal", "beyond the paper (blindfold, #31)", "rehearsal of the frozen buffers "
+    Claim("blindfold-keep-rehearsal", "beyond the paper (blindfold)", "rehearsal of the frozen buffers "
           "(remidi.rehearsal 0.1 and 0.3) makes the masked single policy solve more of the generator's blind levels",
           "evaluate:generator/solve_rate/blind", ("blindfold",),
           greater=(("remidi (rehearsal 0.1)", "remidi (masked)"), ("remidi (rehearsal 0.3)", "remidi (masked)")), min_seeds=5),
-    Claim("blindfold-keep-heldout", "beyond the paper (blindfold, #31)", "combine and rehearsal (0.1) keep "
+    Claim("blindfold-keep-heldout", "beyond the paper (blindfold)", "combine and rehearsal (0.1) keep "
           "ReMiDi's lead over PLR⊥ on the held-out mazes", "evaluate:solve_rate/mean", ("blindfold",),
           greater=(("remidi (combine)", "plr"), ("remidi (rehearsal 0.1)", "plr")), min_seeds=5),
-    Claim("tmaze-keep-combine", "beyond the paper (T-maze, #31)", "ReMiDi's exact multi-policy form "
+    Claim("tmaze-keep-combine", "beyond the paper (T-maze)", "ReMiDi's exact multi-policy form "
           "(remidi.policy=combine) solves more of the generator's T-mazes than the masked single policy",
           "evaluate:generator/solve_rate/tmaze", ("tmaze",), greater=(("remidi (combine)", "remidi (masked)"),), min_seeds=5),
-    Claim("tmaze-keep-rehearsal", "beyond the paper (T-maze, #31)", "rehearsal of the frozen buffers "
+    Claim("tmaze-keep-rehearsal", "beyond the paper (T-maze)", "rehearsal of the frozen buffers "
           "(remidi.rehearsal 0.1 and 0.3) makes the masked single policy solve more of the generator's T-mazes",
           "evaluate:generator/solve_rate/tmaze", ("tmaze",),
           greater=(("remidi (rehearsal 0.1)", "remidi (masked)"), ("remidi (rehearsal 0.3)", "remidi (masked)")), min_seeds=5),
-    Claim("tmaze-keep-heldout", "beyond the paper (T-maze, #31)", "combine and rehearsal (0.1) keep ReMiDi's lead "
+    Claim("tmaze-keep-heldout", "beyond the paper (T-maze)", "combine and rehearsal (0.1) keep ReMiDi's lead "
           "over PLR⊥ on the held-out mazes", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (combine)", "plr"), ("remidi (rehearsal 0.1)", "plr")), min_seeds=5),
     # the scale study: the maze claims again at cpu4x (4× the cpu preset's environment steps),

@@ -360,7 +360,7 @@ def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
     assert resolve_config(lever, "smoke", {"num_updates": "300"}, notes) == resolve_config(lever, "smoke", {})
     assert notes == []
     assert resolve_config(lever, "smoke", {"num_updates": "97"}).eval_every == 97  # a prime: one block
-    from remidi.experiments.config import nearest_divisor
+    from remidi.experiments.overrides import nearest_divisor
 
     assert nearest_divisor(1500, 50) == 50 and nearest_divisor(20, 10 / 3) == 4
     assert nearest_divisor(10**20, 5e15) == 5 * 10**15  # no search over a length validation refuses
@@ -429,7 +429,7 @@ def test_python_api_applies_the_same_validation(tmp_path):
 # ------------------------------------------------------------------------------- remidi list
 def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     from remidi.experiments import all_experiments
-    from remidi.experiments.config import field_names
+    from remidi.experiments.overrides import field_names
 
     code, out, _ = run_cli(capsys, "list", "lever")
     assert code == 0 and out.startswith(f"lever: {all_experiments()['lever'].description}\n")
@@ -458,7 +458,7 @@ def test_list_alone_is_one_line_per_experiment_with_its_presets(capsys):
 
 def test_every_settable_key_has_a_description():
     from remidi.experiments import all_experiments
-    from remidi.experiments.config import field_names, key_help
+    from remidi.experiments.overrides import field_names, key_help
 
     for exp in all_experiments().values():
         cfg = exp.config_factory()
@@ -470,7 +470,7 @@ def test_lever_tiny_is_the_engine_tests_tiny_configuration():
     # the suite's time depends on it: identical configurations compile to one shared program
     from remidi.experiments import get_experiment
     from remidi.experiments.base import resolve_config
-    from remidi.experiments.config import parse_set_items
+    from remidi.experiments.overrides import parse_set_items
     from test_ued_engine import TINY
 
     overrides = parse_set_items(LEVER_TINY[1::2])

@@ -102,7 +102,7 @@ def check_overrides(overrides: dict) -> None:
     from remidi.engine.config import UEDConfig
     from remidi.engine.validation import validate_section
     from remidi.errors import positive_int
-    from remidi.experiments.config import apply_overrides
+    from remidi.experiments.overrides import apply_overrides
 
     cfg = apply_overrides(UEDConfig(), overrides)
     for key in ("num_updates", "num_envs", "num_steps"):
@@ -186,7 +186,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     from remidi.engine import driver
     from remidi.engine import train as tr
-    from remidi.experiments.config import apply_overrides
+    from remidi.experiments.overrides import apply_overrides
 
     cfg = apply_overrides(_shrink(cfg), _overrides())
     setup = tr.make_setup(task, cfg, algo)

@@ -159,7 +159,7 @@ def _format_value(value) -> str:
 def _cmd_list(args) -> int:
     from remidi.experiments import all_experiments, get_experiment
     from remidi.experiments.base import default_preset, resolve_config
-    from remidi.experiments.config import field_names, get_value, key_help
+    from remidi.experiments.overrides import field_names, get_value, key_help
 
     if not args.experiment:  # an overview, one line per experiment; the details of one: remidi list NAME
         experiments = list(all_experiments().values())
@@ -232,8 +232,8 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 def _cmd_run(args) -> int:
     from remidi.experiments import get_experiment, saved_experiment
     from remidi.experiments.base import default_preset, parse_algos, resume_experiment, run_experiment
-    from remidi.experiments.config import parse_set_items
-    from remidi.experiments.tracking import parse_log
+    from remidi.experiments.overrides import parse_set_items
+    from remidi.loggers import parse_log
 
     for flag, value in (("--out", args.out), ("--resume", args.resume)):
         if value is not None and not value.strip():  # Path("") is the current folder: never what was meant
@@ -372,7 +372,7 @@ def _cmd_bench(args) -> int:
     if args.seeds < 1:
         raise RemidiError(f"--seeds: must be an integer ≥ 1, got {args.seeds}")
     from remidi.bench import check_overrides
-    from remidi.experiments.config import parse_set_items
+    from remidi.experiments.overrides import parse_set_items
 
     overrides = parse_set_items(args.sets)
     check_overrides(overrides)

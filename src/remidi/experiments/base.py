@@ -38,7 +38,7 @@ from remidi import __version__
 from remidi.errors import ConfigError, one_of
 from remidi.files import code_version, writable
 from remidi.experiments import outputs
-from remidi.experiments.config import apply_overrides, config_from_dict, config_to_dict, scale_dependents
+from remidi.experiments.overrides import apply_overrides, config_from_dict, config_to_dict, scale_dependents
 
 
 @dataclass
@@ -159,7 +159,7 @@ def run_experiment(exp: Experiment, *, algos: list[str], preset: str, seeds: lis
     """Validate, train every algorithm, write all outputs; return ``{algo: summary}``.
 
     ``devices``: shard the seeds over that many devices (:func:`_check_devices`). ``log``: the
-    experiment-tracking backends (:mod:`remidi.experiments.tracking`, checked by its ``parse_log``)."""
+    experiment-tracking backends (:mod:`remidi.loggers`, checked by its ``parse_log``)."""
     notes: list[str] = []
     config = resolve_config(exp, preset, overrides, notes)
     for algo in algos:
@@ -427,7 +427,7 @@ def _finished_summary(folder: Path) -> dict:
 def _saved_log(folder: Path) -> list[str]:
     """The tracking backends recorded in ``folder/config.json`` (checked again: a resume on a
     machine without the package says so before anything is written)."""
-    from remidi.experiments.tracking import parse_log
+    from remidi.loggers import parse_log
 
     saved = outputs.read_json(folder / "config.json").get("log") or []
     if not isinstance(saved, list) or not all(isinstance(name, str) for name in saved):
@@ -592,20 +592,20 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
     if compare is None and len(folders) > 1:
         compare = lambda finished: exp.plot(out, finished, config, preset=preset, seeds=seeds)  # noqa: E731
     for algo, folder in folders.items():
-        tracker = None
+        run_logger = None
         if log:
-            from remidi.experiments.tracking import Tracker
+            from remidi.loggers import RunLogger
 
-            tracker = Tracker(list(log), folder, f"{exp.name}/{algo}", outputs.read_json(folder / "config.json"),
+            run_logger = RunLogger(list(log), folder, f"{exp.name}/{algo}", outputs.read_json(folder / "config.json"),
                               seeds, group=str(Path(out).resolve()))
         ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress,
-                         devices=devices, on_block=tracker.log if tracker is not None else None)
+                         devices=devices, on_block=run_logger.log if run_logger is not None else None)
         started = time.perf_counter()
         try:
             result = exp.train(ctx)
-        except BaseException as err:  # Ctrl-C or an error: close the tracked runs, a resume continues them
-            if tracker is not None:
-                tracker.close()
+        except BaseException as err:  # Ctrl-C or an error: close the logged runs, a resume continues them
+            if run_logger is not None:
+                run_logger.close()
             message = too_large_message(err, config)
             if message is not None:  # a resumed run keeps its folder: it resumes on a larger device
                 kept = resume and (folder / "checkpoint.npz").exists()
@@ -621,7 +621,7 @@ def _train_and_write(exp, folders, preset, seeds, config, out, *, resume, progre
         summaries[algo] = outputs.write_summary(
             folder / "summary.json", experiment=exp.name, algo=algo, preset=preset, seeds=seeds,
             final=result.final_metrics(), **timing, **result.extra)
-        if tracker is not None:
-            tracker.log_history(result.steps, result.history)  # what was not streamed (the tabular games)
-            tracker.finish(summaries[algo], sorted(folder.glob("*.png")))
+        if run_logger is not None:
+            run_logger.log_history(result.steps, result.history)  # what was not streamed (the tabular games)
+            run_logger.finish(summaries[algo], sorted(folder.glob("*.png")))
     return summaries

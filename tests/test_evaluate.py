@@ -175,12 +175,13 @@ def test_a_folder_that_is_no_ued_run_is_one_line(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path)]) == 2
     assert "holds no run" in capsys.readouterr().err
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import resolve_config, write_run_config
+    from remidi.experiments.base import RunSpec, resolve_config
+    from remidi.experiments.running import write_run_config
 
     exp = get_experiment("tabular-shared")  # a run's folder as the CLI writes it (evaluate reads its config first)
     (tmp_path / "tab").mkdir()
-    write_run_config(tmp_path / "tab", exp, "mmr", "smoke", [0], resolve_config(exp, "smoke", {"iterations": 20}),
-                     argv=["run", "tabular-shared"])
+    write_run_config(tmp_path / "tab", RunSpec(exp, ["mmr"], "smoke", [0], argv=["run", "tabular-shared"]), "mmr",
+                     resolve_config(exp, "smoke", {"iterations": 20}))
     assert main(["evaluate", str(tmp_path / "tab")]) == 2
     assert "evaluate needs a UED run" in capsys.readouterr().err
 

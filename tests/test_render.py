@@ -62,7 +62,8 @@ def runs(tmp_path_factory):
     from remidi.engine import train as tr
     from remidi.engine.checkpoint import CHECKPOINT, save_checkpoint
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import resolve_config, write_run_config
+    from remidi.experiments.base import RunSpec, resolve_config
+    from remidi.experiments.running import write_run_config
     from remidi.experiments.maze import task_factory
 
     root = tmp_path_factory.mktemp("render")
@@ -71,7 +72,7 @@ def runs(tmp_path_factory):
     exp.validate(config, "remidi")
     folder = root / "tmaze_run"
     folder.mkdir()
-    write_run_config(folder, exp, "remidi", "smoke", SEEDS, config, argv=["run", "tmaze"])
+    write_run_config(folder, RunSpec(exp, ["remidi"], "smoke", SEEDS, argv=["run", "tmaze"]), "remidi", config)
     setup = tr.make_setup(task_factory("tmaze")(config), config, "remidi")
     runner = jax.device_get(driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.asarray(SEEDS, jnp.uint32))))
 
@@ -101,7 +102,8 @@ def runs(tmp_path_factory):
     lever = root / "lever_run"
     lever.mkdir()
     lexp = get_experiment("lever")
-    write_run_config(lever, lexp, "remidi", "smoke", [0], resolve_config(lexp, "smoke", {}), argv=["run", "lever"])
+    write_run_config(lever, RunSpec(lexp, ["remidi"], "smoke", [0], argv=["run", "lever"]), "remidi",
+                     resolve_config(lexp, "smoke", {}))
     (lever / CHECKPOINT).write_bytes(b"")
     return {"maze": folder, "lever": lever, "levels": levels, "scores": scores, "valid": valid}
 

@@ -231,7 +231,9 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 
 def _cmd_run(args) -> int:
     from remidi.experiments import get_experiment, saved_experiment
-    from remidi.experiments.base import default_preset, parse_algos, resume_experiment, run_experiment
+    from remidi.experiments.base import RunSpec, default_preset, parse_algos
+    from remidi.experiments.resuming import resume_experiment
+    from remidi.experiments.running import run_experiment
     from remidi.experiments.overrides import parse_set_items
     from remidi.loggers import parse_log
 
@@ -243,7 +245,7 @@ def _cmd_run(args) -> int:
                 or args.seed is not None or args.preset is not None or args.devices is not None or args.log):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
-        from remidi.experiments.base import finished_run
+        from remidi.experiments.resuming import finished_run
 
         finished = finished_run(Path(args.resume))
         summaries = resume_experiment(saved_experiment, Path(args.resume), progress=not args.quiet)  # checks it
@@ -273,9 +275,9 @@ def _cmd_run(args) -> int:
     out = Path(args.out) if args.out is not None else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)
     log = parse_log(args.log)  # a missing package: one line naming the extra, before anything is written
-    summaries = run_experiment(exp, algos=algos, preset=args.preset, seeds=seeds,
-                               overrides=parse_set_items(args.sets), out=out, progress=not args.quiet,
-                               argv=sys.argv[1:], devices=1 if args.devices is None else args.devices, log=log)
+    spec = RunSpec(exp, algos, args.preset, seeds, overrides=parse_set_items(args.sets),
+                   devices=1 if args.devices is None else args.devices, log=log, argv=sys.argv[1:])
+    summaries = run_experiment(spec, out, progress=not args.quiet)
     _print_summaries(summaries, out)
     return 0
 

@@ -41,7 +41,9 @@ from remidi.engine.config import UEDConfig
 from remidi.engine.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
-from remidi.experiments.base import Experiment, resume_experiment, run_experiment
+from remidi.experiments.base import Experiment, RunSpec
+from remidi.experiments.resuming import resume_experiment
+from remidi.experiments.running import run_experiment
 from remidi.experiments.ued import make_ued_experiment
 
 PRESET = "default"
@@ -95,8 +97,7 @@ def run_ued(task: UEDTask, config: UEDConfig, algos: list[str], seeds: list[int]
     exp = task_experiment(name, lambda: task, config, task_ref=record)
     if resume:
         return resume_experiment(lambda *_: exp, Path(out), progress=progress)
-    return run_experiment(exp, algos=list(algos), preset=PRESET, seeds=list(seeds), overrides={}, out=Path(out),
-                          progress=progress)
+    return run_experiment(RunSpec(exp, list(algos), PRESET, list(seeds)), Path(out), progress=progress)
 
 
 def _split(path: str) -> tuple[str, str]:

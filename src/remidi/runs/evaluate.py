@@ -158,7 +158,7 @@ def _load(folder: Path, task=None) -> _Loaded:
     from remidi.engine import train as tr
     from remidi.engine.checkpoint import CHECKPOINT
     from remidi.experiments import saved_experiment
-    from remidi.experiments.base import _saved_run
+    from remidi.experiments.resuming import saved_run
 
     if task is None:
         lookup = saved_experiment
@@ -168,7 +168,7 @@ def _load(folder: Path, task=None) -> _Loaded:
         def lookup(name, _record=None):
             return task_experiment(name, lambda: task)
 
-    exp, algo, _, seeds, config = _saved_run(lookup, folder, flag="RUN_DIR")
+    exp, algo, _, seeds, config = saved_run(lookup, folder, flag="RUN_DIR")
     if exp.make_task is None:
         raise ConfigError(f"RUN_DIR: {folder} is a {exp.name} run; evaluate needs a UED run (a trained agent)")
     path = folder / CHECKPOINT

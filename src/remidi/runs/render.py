@@ -267,7 +267,7 @@ class _Run:
 def _load_run(run_dir) -> _Run:
     """The run in ``run_dir`` (config.json), which must be a maze experiment's."""
     from remidi.experiments import saved_experiment
-    from remidi.experiments.base import _saved_run
+    from remidi.experiments.resuming import saved_run
 
     folder = Path(run_dir)
     if not folder.is_dir():
@@ -284,7 +284,7 @@ def _load_run(run_dir) -> _Run:
     if experiment not in MAZE_EXPERIMENTS:
         raise RemidiError(f"RUN_DIR: {folder} is a {experiment!r} run; render buffers/episode needs a maze run "
                           f"(experiments: {', '.join(MAZE_EXPERIMENTS)})")
-    _, algo, _, seeds, config = _saved_run(saved_experiment, folder, flag="RUN_DIR")
+    _, algo, _, seeds, config = saved_run(saved_experiment, folder, flag="RUN_DIR")
     return _Run(folder=folder, experiment=experiment, algo=algo, seeds=list(seeds), config=config)
 
 

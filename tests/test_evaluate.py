@@ -14,7 +14,8 @@ from test_maze_env import brute_force_steps
 
 from remidi.cli import main
 from remidi.envs import maze as M
-from remidi.runs.evaluate import cvar, perfect_maze_walls, perfect_mazes
+from remidi.envs.perfect_mazes import perfect_maze_walls, perfect_mazes
+from remidi.runs.evaluate import cvar
 
 
 def test_cvar_is_the_mean_of_the_worst_share():

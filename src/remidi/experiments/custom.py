@@ -44,7 +44,7 @@ from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, RunSpec
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 PRESET = "default"
 _IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, name) → its experiment
@@ -69,13 +69,13 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     titles = {"solve_rate": "solve rate", "regret": "mean regret", "replay_fraction": "share among replayed levels",
               "buffer_fraction": "share in the active buffer"}
     panels = tuple((m, f"{titles[m.split('/')[0]]}: {m.split('/')[1]}") for m in rates + regrets + shares)
-    exp = make_ued_experiment(
+    exp = make_ued_experiment(UEDSpec(
         name=name, description=description, task_factory=lambda cfg: task, config_factory=lambda: base,
         presets={PRESET: {}}, preset_seeds={PRESET: 2}, summary_metrics=rates + regrets + shares,
         plot_panels_spec=panels or (("mean_return", "mean training return"),),
         refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
         check_step=True,  # warn of a step with randomness of its own under ReMiDi's exact tracker
-    )
+    ))
     return dataclasses.replace(exp, task_ref=task_ref)
 
 

@@ -265,7 +265,7 @@ def test_resume_trains_an_algorithm_whose_config_was_never_written(tmp_path, cap
 
 
 def test_undefined_metrics_print_as_na(capsys):
-    from remidi.cli import _print_summaries
+    from remidi.cli.experiments import _print_summaries
 
     _print_summaries({"dr": {"experiment": "lever", "preset": "smoke", "seeds": [0], "metrics": {
         "replay_fraction/hidden": {"mean": None, "std": None, "per_seed": [None]},
@@ -644,7 +644,7 @@ def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, fi
 
 
 def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
-    from remidi.cli import _print_summaries
+    from remidi.cli.experiments import _print_summaries
 
     long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than the old 32-character column
     _print_summaries({"plr": {"experiment": "tmaze", "preset": "smoke", "seeds": [0, 1], "metrics": {

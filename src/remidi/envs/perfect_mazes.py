@@ -34,7 +34,7 @@ def perfect_mazes(size: int, count: int, seed: int):
     """``count`` perfect mazes of side ``size`` as one :class:`~remidi.envs.maze.MazeLevel` batch
     (leading dim ``count``), deterministic in ``seed``: walls by :func:`perfect_maze_walls`, the
     agent (random direction) and the goal on two different random open cells."""
-    from remidi.envs.maze import MazeLevel, _stack
+    from remidi.envs.maze_levels import MazeLevel, _stack
 
     rng = np.random.default_rng([seed, size])
     levels = []

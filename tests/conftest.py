@@ -199,7 +199,7 @@ HEAVY_FIRST = ("test_maze_smoke", "test_lever_smoke", "test_brax_env", "test_bra
                "test_cli", "test_engine_reference_maze", "test_engine_reference", "test_bench", "test_continuous", "test_sharding",
                "test_maze_env", "test_accel", "test_gymnax", "test_tracker_equivalence", "test_evaluate", "test_tabular_ued",
                "test_interrupt", "test_ued_engine", "test_render", "test_ppo", "test_buffer", "test_networks",
-               "test_tracking", "test_scores", "test_resume_damaged")
+               "test_loggers", "test_scores", "test_resume_damaged")
 
 
 # the files of the slow set (``pytest -m slow``) besides the tests marked slow where they stand:

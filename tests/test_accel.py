@@ -13,7 +13,8 @@ from remidi.engine import buffer as buf
 from remidi.engine import train as tr
 from remidi.engine.validation import validate_ued_config
 from remidi.envs.brax import BraxLevel, BraxUED, seed_data
-from remidi.envs.maze import _tmaze_layout, maze_task, mutate_maze
+from remidi.envs.maze import maze_task, mutate_maze
+from remidi.envs.maze_levels import _tmaze_layout
 from remidi.errors import ConfigError
 from test_ued_engine import TASK, TINY
 

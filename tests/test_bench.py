@@ -7,7 +7,8 @@ import sys
 import pytest
 from conftest import subprocess_env
 
-from remidi.bench import BENCHMARKS, DEFAULT, format_table, ratios
+from remidi.bench import BENCHMARKS, DEFAULT, format_table
+from remidi.bench.runner import ratios
 
 FIELDS = {"env_steps_per_s", "seconds_per_call", "env_steps_per_call", "gflops_per_s", "compile_s", "peak_rss_mb",
           "repeats", "times_s"}
@@ -31,7 +32,8 @@ def test_bench_json_has_only_the_document_on_stdout():
 
 def test_a_flop_rate_without_env_steps_and_plain_python_without_compiling(monkeypatch):
     # what each benchmark's own process measures (`run_one`, here in the test's process, at --tiny sizes)
-    from remidi.bench import TINY_ENV, run_one
+    from remidi.bench.registry import TINY_ENV
+    from remidi.bench.runner import run_one
 
     monkeypatch.setenv(TINY_ENV, "1")
     matmul = run_one("lstm-matmul", 1)  # a FLOP rate, no environment steps
@@ -44,7 +46,7 @@ def test_a_flop_rate_without_env_steps_and_plain_python_without_compiling(monkey
 def test_seeds_train_together_and_count_every_seeds_steps(monkeypatch):
     """``--seeds 2``: the train workload's runner carries two seeds (as a run of two seeds does)
     and a call's environment steps are both seeds'."""
-    from remidi.bench import SEEDS_ENV, TINY_ENV, _shrink
+    from remidi.bench.registry import SEEDS_ENV, TINY_ENV, _shrink
     from remidi.experiments.lever import paper_config
 
     monkeypatch.setenv(TINY_ENV, "1")
@@ -80,7 +82,7 @@ def test_default_benchmarks_are_registered_and_unknown_names_are_one_line_errors
 
 
 def test_every_ratio_names_registered_workloads_and_each_remidi_variant_has_its_ratio():
-    from remidi.bench import STEP_RATIOS
+    from remidi.bench.runner import STEP_RATIOS
 
     for workload, baseline, _ in STEP_RATIOS:
         assert workload in BENCHMARKS and baseline in BENCHMARKS
@@ -112,7 +114,7 @@ def test_network_flops_match_a_count_by_hand():
     import jax
     import jax.numpy as jnp
 
-    from remidi.bench import network_flops_per_step
+    from remidi.bench.workloads import network_flops_per_step
     from remidi.engine import train as tr
     from remidi.envs.maze import maze_task
     from remidi.experiments.maze import paper_config
@@ -134,7 +136,8 @@ def test_network_flops_match_a_count_by_hand():
 @pytest.mark.skipif(len(__import__("os").sched_getaffinity(0)) < 2, reason="needs two cores")
 def test_lanes_run_one_pinned_process_per_core_and_add_their_rates():
     """``--lanes 2``: two processes at once, each on a core of its own, their rates summed."""
-    from remidi.bench import SINGLE_THREAD_XLA, TINY_ENV, run_lanes
+    from remidi.bench.registry import SINGLE_THREAD_XLA, TINY_ENV
+    from remidi.bench.runner import run_lanes
 
     lane = run_lanes("maze-env", 1, 2, {**subprocess_env(__name__), TINY_ENV: "1"})
     assert lane["lanes"] == 2 and len(lane["lane_cores"]) == 2

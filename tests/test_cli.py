@@ -240,9 +240,9 @@ def test_resume_trains_an_algorithm_whose_config_was_never_written(tmp_path, cap
     """A several-algorithm run writes each algorithm's config.json, one after another, before it
     trains; stopped in between (Ctrl-C), its --resume writes the missing one from a written one
     and trains it (before: it trained the others only and then called the run finished)."""
-    from remidi.experiments import base
+    from remidi.experiments import running
 
-    real, calls = base.write_run_config, []
+    real, calls = running.write_run_config, []
 
     def stopped(*args, **kwargs):
         calls.append(args[0])
@@ -250,12 +250,12 @@ def test_resume_trains_an_algorithm_whose_config_was_never_written(tmp_path, cap
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(base, "write_run_config", stopped)
+    monkeypatch.setattr(running, "write_run_config", stopped)
     out = tmp_path / "both"
     code, _, _ = run_cli(capsys, "run", "lever", "--algo", "plr,remidi", "--seeds", "2", "--quiet", *LEVER_TINY,
                          "--out", str(out))
     assert code == 130 and (out / "plr" / "config.json").exists() and not (out / "remidi" / "config.json").exists()
-    monkeypatch.setattr(base, "write_run_config", real)
+    monkeypatch.setattr(running, "write_run_config", real)
     code, _, err = run_cli(capsys, "run", "--resume", str(out), "--quiet")
     assert code == 0, err
     assert (out / "plr" / "summary.json").exists() and (out / "remidi" / "summary.json").exists()
@@ -265,7 +265,7 @@ def test_resume_trains_an_algorithm_whose_config_was_never_written(tmp_path, cap
 
 
 def test_undefined_metrics_print_as_na(capsys):
-    from remidi.cli import _print_summaries
+    from remidi.cli.experiments import _print_summaries
 
     _print_summaries({"dr": {"experiment": "lever", "preset": "smoke", "seeds": [0], "metrics": {
         "replay_fraction/hidden": {"mean": None, "std": None, "per_seed": [None]},
@@ -360,7 +360,7 @@ def test_setting_only_num_updates_scales_the_keys_measured_in_updates():
     assert resolve_config(lever, "smoke", {"num_updates": "300"}, notes) == resolve_config(lever, "smoke", {})
     assert notes == []
     assert resolve_config(lever, "smoke", {"num_updates": "97"}).eval_every == 97  # a prime: one block
-    from remidi.experiments.config import nearest_divisor
+    from remidi.experiments.overrides import nearest_divisor
 
     assert nearest_divisor(1500, 50) == 50 and nearest_divisor(20, 10 / 3) == 4
     assert nearest_divisor(10**20, 5e15) == 5 * 10**15  # no search over a length validation refuses
@@ -407,12 +407,13 @@ def test_tabular_rule_names_the_fix(tmp_path, capsys):
 def test_python_api_applies_the_same_validation(tmp_path):
     from remidi.errors import ConfigError
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import RunContext, resolve_config, run_experiment
+    from remidi.experiments.base import RunContext, RunSpec, resolve_config
+    from remidi.experiments.running import run_experiment
 
     lever = get_experiment("lever")
     bad = {"num_updates": 6, "eval_every": 2, "remidi.steps_per_buffer": 1000}
     with pytest.raises(ConfigError, match="remidi.num_buffers: must be small enough"):
-        run_experiment(lever, algos=["remidi"], preset="smoke", seeds=[0], overrides=bad, out=tmp_path / "a")
+        run_experiment(RunSpec(lever, ["remidi"], "smoke", [0], overrides=bad), tmp_path / "a")
     assert not (tmp_path / "a").exists()
     # an experiment's train function, called directly, checks too (before any training)
     ctx = RunContext("lever", "remidi", "smoke", [0], resolve_config(lever, "smoke", bad), tmp_path / "b")
@@ -429,7 +430,7 @@ def test_python_api_applies_the_same_validation(tmp_path):
 # ------------------------------------------------------------------------------- remidi list
 def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     from remidi.experiments import all_experiments
-    from remidi.experiments.config import field_names
+    from remidi.experiments.overrides import field_names
 
     code, out, _ = run_cli(capsys, "list", "lever")
     assert code == 0 and out.startswith(f"lever: {all_experiments()['lever'].description}\n")
@@ -458,7 +459,7 @@ def test_list_alone_is_one_line_per_experiment_with_its_presets(capsys):
 
 def test_every_settable_key_has_a_description():
     from remidi.experiments import all_experiments
-    from remidi.experiments.config import field_names, key_help
+    from remidi.experiments.overrides import field_names, key_help
 
     for exp in all_experiments().values():
         cfg = exp.config_factory()
@@ -470,7 +471,7 @@ def test_lever_tiny_is_the_engine_tests_tiny_configuration():
     # the suite's time depends on it: identical configurations compile to one shared program
     from remidi.experiments import get_experiment
     from remidi.experiments.base import resolve_config
-    from remidi.experiments.config import parse_set_items
+    from remidi.experiments.overrides import parse_set_items
     from test_ued_engine import TINY
 
     overrides = parse_set_items(LEVER_TINY[1::2])
@@ -643,7 +644,7 @@ def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, fi
 
 
 def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
-    from remidi.cli import _print_summaries
+    from remidi.cli.experiments import _print_summaries
 
     long = "regret/LabyrinthFlipped_and_a_few_more_words/mean"  # longer than 32 characters
     _print_summaries({"plr": {"experiment": "tmaze", "preset": "smoke", "seeds": [0, 1], "metrics": {
@@ -659,9 +660,9 @@ def test_printed_metrics_keep_one_value_column_for_long_names(capsys):
 def test_a_run_whose_rollouts_cannot_fit_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
     """The rollouts' observations alone (seeds × num_steps × num_envs × one observation and three
     floats) against the device's memory: a lower bound, checked with the rest of the input."""
-    from remidi.experiments import base
+    from remidi.experiments import running
 
-    monkeypatch.setattr(base, "_device_memory", lambda: (64 * 2**20, "a 64 MiB test device"))
+    monkeypatch.setattr(running, "_device_memory", lambda: (64 * 2**20, "a 64 MiB test device"))
     argv = ["run", "lever", "--algo", "plr", "--seeds", "1", "--quiet", *LEVER_TINY, "--set", "num_envs=100000"]
     code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "run"))
     # lever: a 65-float observation (260 bytes) and 12 bytes: 4 steps × 100000 envs × 272 bytes = 104 MiB

@@ -14,7 +14,8 @@ from test_maze_env import brute_force_steps
 
 from remidi.cli import main
 from remidi.envs import maze as M
-from remidi.evaluate import cvar, perfect_maze_walls, perfect_mazes
+from remidi.envs.perfect_mazes import perfect_maze_walls, perfect_mazes
+from remidi.runs.evaluate import cvar
 
 
 def test_cvar_is_the_mean_of_the_worst_share():
@@ -120,7 +121,7 @@ def test_bad_evaluate_arguments_are_one_line(lever_run, capsys, argv, needle):
 
 
 def test_a_run_that_cannot_be_written_is_refused_before_evaluating(lever_run, tmp_path, capsys, monkeypatch):
-    import remidi.evaluate as ev
+    import remidi.runs.evaluate as ev
 
     run = tmp_path / "run"
     shutil.copytree(lever_run, run)
@@ -175,18 +176,19 @@ def test_a_folder_that_is_no_ued_run_is_one_line(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path)]) == 2
     assert "holds no run" in capsys.readouterr().err
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import resolve_config, write_run_config
+    from remidi.experiments.base import RunSpec, resolve_config
+    from remidi.experiments.running import write_run_config
 
     exp = get_experiment("tabular-shared")  # a run's folder as the CLI writes it (evaluate reads its config first)
     (tmp_path / "tab").mkdir()
-    write_run_config(tmp_path / "tab", exp, "mmr", "smoke", [0], resolve_config(exp, "smoke", {"iterations": 20}),
-                     argv=["run", "tabular-shared"])
+    write_run_config(tmp_path / "tab", RunSpec(exp, ["mmr"], "smoke", [0], argv=["run", "tabular-shared"]), "mmr",
+                     resolve_config(exp, "smoke", {"iterations": 20}))
     assert main(["evaluate", str(tmp_path / "tab")]) == 2
     assert "evaluate needs a UED run" in capsys.readouterr().err
 
 
 def test_cvar_levels_leave_out_levels_no_agent_can_solve():
-    from remidi.evaluate import _solvable_levels
+    from remidi.runs.evaluate import _solvable_levels
 
     task = M.maze_task("maze", 0.5, 60)  # 60 walls: many goals cut off
     drawn = jax.jit(jax.vmap(task.sample_level))(jax.random.split(jax.random.PRNGKey(0), 32))
@@ -197,7 +199,7 @@ def test_cvar_levels_leave_out_levels_no_agent_can_solve():
 
 
 def test_evaluate_png_is_titled_with_the_experiment_and_the_run(tmp_path, monkeypatch):
-    from remidi import evaluate
+    from remidi.runs import evaluate
     from remidi.experiments import plots
 
     titles = []
@@ -217,7 +219,7 @@ def test_generator_metrics_by_tag_are_the_scoring_rollouts_means_over_that_kind(
     """generator/<kind>/<tag>: by hand on fixed per-level values (2 seeds, 4 levels, two tagged)."""
     from types import SimpleNamespace
 
-    from remidi.evaluate import _summarise
+    from remidi.runs.evaluate import _summarise
 
     score = np.array([[1.0, 0.0, 1.0, 1.0], [0.0, 0.5, 0.25, 0.75]])
     rank = np.zeros_like(score)

@@ -28,7 +28,7 @@ from matplotlib.transforms import Bbox
 
 from remidi.experiments import get_experiment
 from remidi.experiments.base import RunResult
-from remidi.experiments.compare import compare, plot_comparison
+from remidi.runs.compare import compare, plot_comparison
 from remidi.experiments.lever import IGNORE_VISIBLE, MMR_HIDDEN
 
 # of the axes' width and height: less reads as lying on the frame (matplotlib's own x margins

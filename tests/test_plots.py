@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from remidi.experiments import get_experiment, plots
-from remidi.experiments.base import RunResult, _run_order, write_run_config
+from remidi.experiments.base import RunResult, RunSpec
+from remidi.experiments.resuming import _run_order
+from remidi.experiments.running import write_run_config
 
 STEPS = np.array([10, 20, 30, 40])
 
@@ -101,8 +103,8 @@ def test_several_algorithm_run_records_and_keeps_the_given_order(tmp_path):
     lever = get_experiment("lever")
     for algo in ("remidi", "dr", "plr"):
         (tmp_path / algo).mkdir()
-        write_run_config(tmp_path / algo, lever, algo, "smoke", [0], lever.config_factory(), ["run"],
-                         algos=["remidi", "dr", "plr"])
+        write_run_config(tmp_path / algo, RunSpec(lever, ["remidi", "dr", "plr"], "smoke", [0], argv=["run"]), algo,
+                         lever.config_factory())
     assert json.loads((tmp_path / "dr" / "config.json").read_text())["algos"] == ["remidi", "dr", "plr"]
     order = sorted(("dr", "plr", "remidi"), key=lambda a: _run_order(tmp_path / a, lever, a))
     assert order == ["remidi", "dr", "plr"]  # not alphabetical

@@ -38,7 +38,7 @@ def test_cpu_preset_lists_each_deviation_from_paper_with_its_reason(name, capsys
     assert main(["list", name]) == 0
     out = capsys.readouterr().out
     assert "cpu: deviates from paper in" in out
-    from remidi.experiments.config import field_names, get_value
+    from remidi.experiments.overrides import field_names, get_value
 
     differing = {key for key in field_names(paper) if get_value(paper, key) != get_value(cpu, key)}
     assert differing == set(exp.preset_reasons["cpu"])  # every deviation has a reason, and only those
@@ -52,7 +52,7 @@ def test_cpu_preset_lists_each_deviation_from_paper_with_its_reason(name, capsys
     (" 7 ", 7), ("-2", -2)])
 def test_integers_stay_exact_integers(text, value):
     from remidi.engine.config import UEDConfig
-    from remidi.experiments.config import apply_overrides
+    from remidi.experiments.overrides import apply_overrides
 
     got = apply_overrides(UEDConfig(), {"num_updates": text}).num_updates
     assert type(got) is int and got == value
@@ -62,7 +62,7 @@ def test_integers_stay_exact_integers(text, value):
 def test_a_non_integer_is_refused_in_one_line(text):
     from remidi.errors import ConfigError
     from remidi.engine.config import UEDConfig
-    from remidi.experiments.config import apply_overrides
+    from remidi.experiments.overrides import apply_overrides
 
     with pytest.raises(ConfigError, match=r"^num_updates: expected an integer"):
         apply_overrides(UEDConfig(), {"num_updates": text})

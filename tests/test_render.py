@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from remidi import render
+from remidi.runs import render, sheets
 from remidi.cli import main
 
 SEEDS = [0, 1]
@@ -62,7 +62,8 @@ def runs(tmp_path_factory):
     from remidi.engine import train as tr
     from remidi.engine.checkpoint import CHECKPOINT, save_checkpoint
     from remidi.experiments import get_experiment
-    from remidi.experiments.base import resolve_config, write_run_config
+    from remidi.experiments.base import RunSpec, resolve_config
+    from remidi.experiments.running import write_run_config
     from remidi.experiments.maze import task_factory
 
     root = tmp_path_factory.mktemp("render")
@@ -71,7 +72,7 @@ def runs(tmp_path_factory):
     exp.validate(config, "remidi")
     folder = root / "tmaze_run"
     folder.mkdir()
-    write_run_config(folder, exp, "remidi", "smoke", SEEDS, config, argv=["run", "tmaze"])
+    write_run_config(folder, RunSpec(exp, ["remidi"], "smoke", SEEDS, argv=["run", "tmaze"]), "remidi", config)
     setup = tr.make_setup(task_factory("tmaze")(config), config, "remidi")
     runner = jax.device_get(driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.asarray(SEEDS, jnp.uint32))))
 
@@ -101,25 +102,26 @@ def runs(tmp_path_factory):
     lever = root / "lever_run"
     lever.mkdir()
     lexp = get_experiment("lever")
-    write_run_config(lever, lexp, "remidi", "smoke", [0], resolve_config(lexp, "smoke", {}), argv=["run", "lever"])
+    write_run_config(lever, RunSpec(lexp, ["remidi"], "smoke", [0], argv=["run", "lever"]), "remidi",
+                     resolve_config(lexp, "smoke", {}))
     (lever / CHECKPOINT).write_bytes(b"")
     return {"maze": folder, "lever": lever, "levels": levels, "scores": scores, "valid": valid}
 
 
 def sheet_size(rows: int, columns: int, tile: int, size: int = 13, row_header: bool = False):
-    """(width, height) of a render sheet (see remidi.render's module docstring): a buffer sheet
+    """(width, height) of a render sheet (see remidi.runs.render's module docstring): a buffer sheet
     (``row_header``) with the buffers' colour key, a maze sheet with the mazes'."""
     tile_px = (size + 2) * tile
-    row_h = (render.ROW_HEADER if row_header else 0) + render.CAPTION + tile_px + render.PAD
-    width = render.PAD + columns * (tile_px + render.PAD)
-    key = render.key_height(width, render.KEY if row_header else render.MAZE_KEY)
-    return width, render.HEADER + key + rows * row_h + render.PAD
+    row_h = (sheets.ROW_HEADER if row_header else 0) + sheets.CAPTION + tile_px + sheets.PAD
+    width = sheets.PAD + columns * (tile_px + sheets.PAD)
+    key = sheets.key_height(width, sheets.KEY if row_header else sheets.MAZE_KEY)
+    return width, sheets.HEADER + key + rows * row_h + sheets.PAD
 
 
 def maze_tile(rows: int, columns: int, tile: int, size: int) -> int:
     """The pixels per cell of a maze sheet asked for ``tile``: the least from ``tile`` on whose
     sheet is at least MIN_SIDE pixels on its short side."""
-    while min(sheet_size(rows, columns, tile, size)) < render.MIN_SIDE:
+    while min(sheet_size(rows, columns, tile, size)) < sheets.MIN_SIDE:
         tile += 1
     return tile
 
@@ -140,7 +142,7 @@ def test_render_maze_writes_the_grid_of_goal_placements(tmp_path, capsys, monkey
     with Image.open(tmp_path / f"{name}.png") as img:
         assert img.format == "PNG"
         assert img.size == sheet_size(rows, columns, maze_tile(rows, columns, tile, size), size)
-        assert min(img.size) >= render.MIN_SIDE
+        assert min(img.size) >= sheets.MIN_SIDE
 
 
 def test_render_maze_tiles_are_the_renderers_under_one_title_and_a_key(tmp_path):
@@ -160,14 +162,14 @@ def test_render_maze_tiles_are_the_renderers_under_one_title_and_a_key(tmp_path)
     # goal placement #3 is the second row (bottom dead ends), second column
     want = np.asarray(MazeRenderer(env.maze, tile).render_level(jax.tree.map(lambda x: x[3], levels),
                                                                 env.default_params))
-    head = render.HEADER + render.key_height(img.shape[1], render.MAZE_KEY)
-    top = head + (render.CAPTION + tile_px + render.PAD) + render.CAPTION
-    left = render.PAD + (tile_px + render.PAD)
+    head = sheets.HEADER + sheets.key_height(img.shape[1], sheets.MAZE_KEY)
+    top = head + (sheets.CAPTION + tile_px + sheets.PAD) + sheets.CAPTION
+    left = sheets.PAD + (tile_px + sheets.PAD)
     np.testing.assert_array_equal(img[top:top + tile_px, left:left + tile_px], want)
-    key = img[render.HEADER:head].reshape(-1, 3)
-    for colour, _ in render.MAZE_KEY:
-        assert (key == colour).all(axis=1).sum() >= (render.SWATCH - 2) ** 2, colour
-    names = " ".join(label for _, label in render.MAZE_KEY)
+    key = img[sheets.HEADER:head].reshape(-1, 3)
+    for colour, _ in sheets.MAZE_KEY:
+        assert (key == colour).all(axis=1).sum() >= (sheets.SWATCH - 2) ** 2, colour
+    names = " ".join(label for _, label in sheets.MAZE_KEY)
     assert all(word in names for word in ("wall", "floor", "goal", "agent", "view"))
     assert "active buffer" not in names
 
@@ -193,27 +195,27 @@ def test_render_buffers_one_row_per_buffer_active_marked(runs, capsys):
     img = np.asarray(Image.open(path).convert("RGB"))
     assert (img.shape[1], img.shape[0]) == sheet_size(NUM_BUFFERS, 4, 4, row_header=True)
     tile_px = 15 * 4
-    row_h = render.ROW_HEADER + render.CAPTION + tile_px + render.PAD
-    head = render.HEADER + render.key_height(img.shape[1])
+    row_h = sheets.ROW_HEADER + sheets.CAPTION + tile_px + sheets.PAD
+    head = sheets.HEADER + sheets.key_height(img.shape[1])
     band = lambda k: img[head + k * row_h + 1, -3]  # noqa: E731 (right end of row k's header band)
-    assert tuple(band(1)) == render.ACTIVE_BAND  # buffer 1 is the active one
-    assert tuple(band(0)) == tuple(band(2)) == render.BACKGROUND
+    assert tuple(band(1)) == sheets.ACTIVE_BAND  # buffer 1 is the active one
+    assert tuple(band(0)) == tuple(band(2)) == sheets.BACKGROUND
 
     # the colour key under the title: a swatch of every colour the sheet uses, with its name
-    assert render.key_height(img.shape[1]) >= render.KEY_ROW
-    key = img[render.HEADER:head].reshape(-1, 3)
-    for colour, _ in render.KEY:
-        assert (key == colour).all(axis=1).sum() >= (render.SWATCH - 2) ** 2, colour
-    assert {label for _, label in render.KEY} >= {"wall", "floor", "goal", "active buffer"}
+    assert sheets.key_height(img.shape[1]) >= sheets.KEY_ROW
+    key = img[sheets.HEADER:head].reshape(-1, 3)
+    for colour, _ in sheets.KEY:
+        assert (key == colour).all(axis=1).sum() >= (sheets.SWATCH - 2) ** 2, colour
+    assert {label for _, label in sheets.KEY} >= {"wall", "floor", "goal", "active buffer"}
 
     def tile(k, c):
-        top = head + k * row_h + render.ROW_HEADER + render.CAPTION
-        left = render.PAD + c * (tile_px + render.PAD)
+        top = head + k * row_h + sheets.ROW_HEADER + sheets.CAPTION
+        left = sheets.PAD + c * (tile_px + sheets.PAD)
         return img[top:top + tile_px, left:left + tile_px]
 
     # buffer 0: the best level (the T-maze, score 5) first; buffer 1: 3 levels; buffer 2: empty
     best = jax.tree.map(lambda x: x[0, 0, 0], runs["levels"])
-    np.testing.assert_array_equal(tile(0, 0), render._render_levels(jax.tree.map(lambda x: x[None], best), 13, 4)[0])
+    np.testing.assert_array_equal(tile(0, 0), sheets._render_levels(jax.tree.map(lambda x: x[None], best), 13, 4)[0])
     assert (tile(1, 2) != 255).any() and (tile(1, 3) == 255).all()
     assert (tile(2, 0) == 255).all()
 

@@ -11,15 +11,17 @@ import numpy as np
 import pytest
 
 from remidi.errors import ConfigError
-from remidi.experiments import results_page as rp
+from remidi.reporting import claims, data, figures, tables, verdicts
+from remidi.reporting import results_page as rp
+from remidi.runs import table as run_table
 
 
 def test_the_page_and_the_readme_match_the_committed_data():
-    generated, _ = rp.blocks(rp.load_runs(rp.DATA))
+    generated, _ = rp.blocks(data.load_runs(data.DATA))
     for page in (rp.PAGE, rp.README):
         text = page.read_text()
         assert "<!-- generated:" in text, page
-        assert rp.stale_blocks(text, generated) == [], f"{page}: run python -m remidi.experiments.results_page"
+        assert rp.stale_blocks(text, generated) == [], f"{page}: run python -m remidi.reporting.results_page"
 
 
 def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attempts=30, update=100, cvar_levels=256):
@@ -39,14 +41,14 @@ def write_run(root, experiment, algo, seeds, summary=None, evaluate=None, attemp
     return folder
 
 
-CLAIM = rp.Claim("x", "Fig. X", "A beats B and C", "evaluate:solve_rate/mean", ("tmaze",),
+CLAIM = claims.Claim("x", "Fig. X", "A beats B and C", "evaluate:solve_rate/mean", ("tmaze",),
                  greater=(("remidi", "plr"), ("remidi", "minimax-return")))
 
 
 def verdict_of(tmp_path, remidi, plr, mr):
     for algo, values in (("remidi", remidi), ("plr", plr), ("minimax-return", mr)):
         write_run(tmp_path, "tmaze", algo, list(range(len(values))), evaluate={"solve_rate/mean": values})
-    return rp.evaluate_claim(CLAIM, rp.load_runs(tmp_path))
+    return verdicts.evaluate_claim(CLAIM, data.load_runs(tmp_path))
 
 
 @pytest.mark.parametrize("attempts, update, cvar_levels, needle", [
@@ -58,7 +60,7 @@ def test_an_evaluation_of_other_arguments_or_an_unfinished_run_is_refused(tmp_pa
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]}, attempts=attempts,
               update=update, cvar_levels=cvar_levels)
     with pytest.raises(ConfigError, match=needle):
-        rp.load_runs(tmp_path)
+        data.load_runs(tmp_path)
 
 
 def test_clear_separation_on_ten_seeds_is_reproduced(tmp_path):
@@ -80,8 +82,8 @@ def test_an_ordering_in_the_mean_only_says_that_no_test_passes(tmp_path):
     r = verdict_of(tmp_path, 0.35 + noise(), 0.3 + noise(), 0.3 + noise())
     assert all(t["in_mean"] for t in r["tests"]) and not any(t["passes"] for t in r["tests"])
     assert r["verdict"] == r["rule_verdict"] == "partly (no test passes)"
-    assert "| **partly (no test passes)** (`cpu` preset" in rp.verdict_table([r])
-    assert ": **partly (no test passes)** (`cpu` preset" in rp.summary_lines([r])
+    assert "| **partly (no test passes)** (`cpu` preset" in tables.verdict_table([r])
+    assert ": **partly (no test passes)** (`cpu` preset" in tables.summary_lines([r])
 
 
 def test_one_comparison_passing_and_one_holding_in_the_mean_only_is_plain_partly(tmp_path):
@@ -89,7 +91,7 @@ def test_one_comparison_passing_and_one_holding_in_the_mean_only_is_plain_partly
                    [0.49 + 0.01 * i for i in range(10)])
     assert [t["passes"] for t in r["tests"]] == [True, False] and all(t["in_mean"] for t in r["tests"])
     assert r["verdict"] == "partly"
-    assert "| **partly** (" in rp.verdict_table([r]) and "no test passes" not in rp.summary_lines([r])
+    assert "| **partly** (" in tables.verdict_table([r]) and "no test passes" not in tables.summary_lines([r])
 
 
 def test_one_comparison_passing_and_one_reversed_is_partly(tmp_path):
@@ -104,17 +106,17 @@ def test_each_verdict_names_the_scale_of_its_runs(tmp_path):
     what the runs' config.json records, else from the preset an algorithm's name gives."""
     r = verdict_of(tmp_path, [0.9] * 10, [0.1] * 10, [0.1] * 10)  # config.json: num_updates 100 only
     assert r["scale"] == "`cpu` preset: 5% of the paper's environment steps"  # the cpu preset's 1500 × 32 × 256
-    runs = rp.load_runs(tmp_path)
+    runs = data.load_runs(tmp_path)
     for algo in ("remidi", "plr"):
         runs["tmaze", algo].config.update(num_updates=6000, num_envs=32, num_steps=256)
-    assert rp.claim_scale(CLAIM, runs) == \
+    assert verdicts.claim_scale(CLAIM, runs) == \
         "`cpu` preset: 20% of the paper's environment steps; `cpu` preset: 5%"  # minimax-return still at cpu's
-    claim = rp.Claim("s", "x", "PLR⊥ learns with more steps", CLAIM.metric, ("tmaze",), greater=(("plr @cpu4x", "plr"),))
-    assert rp.claim_scale(claim, {}) == "`cpu4x` preset: 20% of the paper's environment steps"
-    brax = rp.Claim("b", "x", "walks", "evaluate:return/undisturbed", ("brax-ant",), greater=(("remidi @cpu", "plr"),))
-    assert rp.claim_scale(brax, {}) == "`cpu` preset: 15% of the paper's environment steps"  # 120 × 64 × 100
-    tab = rp.Claim("t", "x", "stagnates", "summary:regret/h1", ("tabular-shared",), greater=(("mmr @paper", "remidi"),))
-    assert rp.claim_scale(tab, {}) == "`paper` preset"
+    claim = claims.Claim("s", "x", "PLR⊥ learns with more steps", CLAIM.metric, ("tmaze",), greater=(("plr @cpu4x", "plr"),))
+    assert verdicts.claim_scale(claim, {}) == "`cpu4x` preset: 20% of the paper's environment steps"
+    brax = claims.Claim("b", "x", "walks", "evaluate:return/undisturbed", ("brax-ant",), greater=(("remidi @cpu", "plr"),))
+    assert verdicts.claim_scale(brax, {}) == "`cpu` preset: 15% of the paper's environment steps"  # 120 × 64 × 100
+    tab = claims.Claim("t", "x", "stagnates", "summary:regret/h1", ("tabular-shared",), greater=(("mmr @paper", "remidi"),))
+    assert verdicts.claim_scale(tab, {}) == "`paper` preset"
 
 
 def test_a_claim_on_runs_older_than_a_fix_it_needs_is_stale(tmp_path, monkeypatch):
@@ -122,29 +124,29 @@ def test_a_claim_on_runs_older_than_a_fix_it_needs_is_stale(tmp_path, monkeypatc
     commit and the change, not its verdict by the rule (kept apart); other claims are untouched."""
     verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(10)], [0.1 + 0.01 * i for i in range(10)],
                [0.2 + 0.01 * i for i in range(10)])  # every run at commit abc1234def
-    runs = rp.load_runs(tmp_path)
-    fix = rp.Fix("fff0000", "the reservoir keeps the highest key", runs=(("tmaze", "remidi"),), before=("abc1234",))
-    assert rp.stale_fix(CLAIM, runs, (fix,)) is fix
-    later = rp.Fix("fff0000", "later", runs=(("tmaze", "remidi"),), before=("9999999",))  # runs made after it
-    other = rp.Fix("fff0000", "other runs", runs=(("lever", "remidi"),), before=("abc1234",))
-    assert rp.stale_fix(CLAIM, runs, (later, other)) is None
-    monkeypatch.setattr(rp, "FIXES", (fix,))
-    r = rp.evaluate_claim(CLAIM, runs)
+    runs = data.load_runs(tmp_path)
+    fix = claims.Fix("fff0000", "the reservoir keeps the highest key", runs=(("tmaze", "remidi"),), before=("abc1234",))
+    assert claims.stale_fix(CLAIM, runs, (fix,)) is fix
+    later = claims.Fix("fff0000", "later", runs=(("tmaze", "remidi"),), before=("9999999",))  # runs made after it
+    other = claims.Fix("fff0000", "other runs", runs=(("lever", "remidi"),), before=("abc1234",))
+    assert claims.stale_fix(CLAIM, runs, (later, other)) is None
+    monkeypatch.setattr(claims, "FIXES", (fix,))
+    r = verdicts.evaluate_claim(CLAIM, runs)
     assert r["rule_verdict"] == "reproduced"
     assert r["verdict"] == "stale: its runs predate fff0000 (the reservoir keeps the highest key); rerun queued"
-    assert "**stale: its runs predate fff0000" in rp.verdict_table([r])
-    assert rp.stale_fix(rp.CLAIMS[0], runs, (fix,)) is None  # a claim that reads none of those runs
+    assert "**stale: its runs predate fff0000" in tables.verdict_table([r])
+    assert claims.stale_fix(claims.CLAIMS[0], runs, (fix,)) is None  # a claim that reads none of those runs
 
 
 def test_the_t_maze_remidi_over_paired_claims_wait_for_their_rerun():
     """Their committed runs (569c639) predate ab3ea79's reservoir fix; PAIRED's own claim does not
     read them."""
-    runs = rp.load_runs(rp.DATA)
-    by_key = {c.key: c for c in rp.CLAIMS}
+    runs = data.load_runs(data.DATA)
+    by_key = {c.key: c for c in claims.CLAIMS}
     for key in ("tmaze-remidi-paired-generated", "tmaze-remidi-paired-heldout"):
-        assert rp.stale_fix(by_key[key], runs).commit == "ab3ea79"
-    assert rp.stale_fix(by_key["tmaze-paired"], runs) is None
-    assert rp.stale_fix(by_key["lever-remidi-paired"], runs) is None  # remade at ab3ea79
+        assert claims.stale_fix(by_key[key], runs).commit == "ab3ea79"
+    assert claims.stale_fix(by_key["tmaze-paired"], runs) is None
+    assert claims.stale_fix(by_key["lever-remidi-paired"], runs) is None  # remade at ab3ea79
 
 
 def test_the_reverse_ordering_is_not_reproduced(tmp_path):
@@ -158,22 +160,22 @@ def test_fewer_seeds_than_the_claim_needs_is_pending(tmp_path):
 
 
 def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
-    claim = rp.Claim("b", "Fig. B", "near 0.175", "summary:regret/h1", ("tabular-shared",),
+    claim = claims.Claim("b", "Fig. B", "near 0.175", "summary:regret/h1", ("tabular-shared",),
                      bounds=(("remidi", 0.15, 0.20),), min_seeds=4)
     write_run(tmp_path / "in", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.18, 0.19, 0.18, 0.19]})
     write_run(tmp_path / "edge", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.17, 0.19]})
-    assert rp.evaluate_claim(claim, rp.load_runs(tmp_path / "in"))["verdict"] == "reproduced"
-    edge = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "edge"))
+    assert verdicts.evaluate_claim(claim, data.load_runs(tmp_path / "in"))["verdict"] == "reproduced"
+    edge = verdicts.evaluate_claim(claim, data.load_runs(tmp_path / "edge"))
     assert edge["tests"][0]["in_mean"] and edge["verdict"] == "partly (no test passes)"  # its one test fails
     write_run(tmp_path / "out", "tabular-shared", "remidi", [0, 1, 2, 3], summary={"regret/h1": [0.12, 0.22, 0.25, 0.23]})
-    out = rp.evaluate_claim(claim, rp.load_runs(tmp_path / "out"))  # a claim of bounds only: none holds in the mean
+    out = verdicts.evaluate_claim(claim, data.load_runs(tmp_path / "out"))  # a claim of bounds only: none holds in the mean
     assert not out["tests"][0]["in_mean"] and out["verdict"] == "not reproduced"
 
 
 def test_the_summary_names_the_smallest_and_largest_group(tmp_path):
     r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(12)], [0.1 + 0.01 * i for i in range(10)],
                    [0.2 + 0.01 * i for i in range(10)])
-    assert "(10–12 seeds)" in rp.summary_lines([r])
+    assert "(10–12 seeds)" in tables.summary_lines([r])
 
 
 def test_an_empty_active_buffer_has_no_share_of_anything(tmp_path):
@@ -181,23 +183,23 @@ def test_an_empty_active_buffer_has_no_share_of_anything(tmp_path):
     a bound like [0, 0.1] fails rather than passes on a run whose buffer holds nothing."""
     write_run(tmp_path, "lever-noisy", "remidi", [0, 1, 2],
               summary={"buffer_fraction/hidden": [0.0, 0.0, 0.0], "buffer_size": [32.0, 0.0, 32.0]})
-    runs = rp.load_runs(tmp_path)
-    values = rp.metric_values(runs, "lever-noisy", "remidi", "summary:buffer_fraction/hidden")
+    runs = data.load_runs(tmp_path)
+    values = data.metric_values(runs, "lever-noisy", "remidi", "summary:buffer_fraction/hidden")
     assert values[0] == 0.0 and math.isnan(values[1]) and values[2] == 0.0
-    claim = rp.Claim("b", "x", "keeps hidden out", "summary:buffer_fraction/hidden", ("lever-noisy",),
+    claim = claims.Claim("b", "x", "keeps hidden out", "summary:buffer_fraction/hidden", ("lever-noisy",),
                      bounds=(("remidi", 0.0, 0.1),), min_seeds=3)
-    assert rp.evaluate_claim(claim, runs)["verdict"] != "reproduced"
+    assert verdicts.evaluate_claim(claim, runs)["verdict"] != "reproduced"
 
 
 def test_parts_of_one_algorithm_are_merged_by_seed_and_a_seed_twice_is_an_error(tmp_path):
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={"solve_rate/mean": [0.1, 0.2]})
     write_run(tmp_path, "tmaze", "plr", [5, 6], evaluate={"solve_rate/mean": [0.3, 0.4]})
-    runs = rp.load_runs(tmp_path)
-    assert rp.metric_values(runs, "tmaze", "plr", "evaluate:solve_rate/mean") == {0: 0.1, 1: 0.2, 5: 0.3, 6: 0.4}
+    runs = data.load_runs(tmp_path)
+    assert data.metric_values(runs, "tmaze", "plr", "evaluate:solve_rate/mean") == {0: 0.1, 1: 0.2, 5: 0.3, 6: 0.4}
     assert runs["tmaze", "plr"].seeds == [0, 1, 5, 6]
     write_run(tmp_path, "tmaze", "plr", [1, 2], evaluate={"solve_rate/mean": [0.5, 0.6]})
     with pytest.raises(ConfigError, match="seed 1 of tmaze / plr is in two runs"):
-        rp.load_runs(tmp_path)
+        data.load_runs(tmp_path)
 
 
 def test_provenance_names_every_part_of_a_resumed_run(tmp_path):
@@ -216,7 +218,7 @@ def test_provenance_names_every_part_of_a_resumed_run(tmp_path):
     (old / "summary.json").write_text(json.dumps({**summary, "resumed": True}))
     (old / "config.json").write_text(json.dumps({"code": {"commit": "ccccccc3", "device": "cpu: cpu"},
                                                  "config": {"num_updates": 100}}))
-    table = rp.provenance_table(rp.load_runs(tmp_path))
+    table = tables.provenance_table(data.load_runs(tmp_path))
     row = next(line for line in table.splitlines() if "| remidi |" in line)
     assert "aaaaaaa, bbbbbbb" in row and "cpu: cpu, gpu: NVIDIA H200" in row and "30.0 min |" in row
     row = next(line for line in table.splitlines() if "| plr |" in line)
@@ -233,17 +235,17 @@ def test_collect_keeps_the_files_and_the_curves_the_page_draws(tmp_path):
             for seed in (3, 4):
                 w.writerow([seed, step, "solve_rate/mean", step / 3000])
                 w.writerow([seed, step, "regret/undrawn", 1.0])
-    [target] = rp.collect(run, tmp_path / "data")
+    [target] = data.collect(run, tmp_path / "data")
     assert target == tmp_path / "data" / "tmaze" / "plr-s3"
     assert {p.name for p in target.iterdir()} == {"config.json", "summary.json", "evaluate.json", "metrics.csv.gz"}
     with gzip.open(target / "metrics.csv.gz", "rt") as fh:
         rows = list(csv.DictReader(fh))
     assert {r["metric"] for r in rows} == {"solve_rate/mean"}
     steps = sorted({int(r["step"]) for r in rows})
-    assert len(steps) == rp.MAX_POINTS and steps[0] == 0 and steps[-1] == 2990
-    runs = rp.load_runs(tmp_path / "data")
+    assert len(steps) == data.MAX_POINTS and steps[0] == 0 and steps[-1] == 2990
+    runs = data.load_runs(tmp_path / "data")
     curve_steps, values = runs["tmaze", "plr"].curves["solve_rate/mean"]
-    assert values.shape == (2, rp.MAX_POINTS) and np.array_equal(curve_steps, steps)
+    assert values.shape == (2, data.MAX_POINTS) and np.array_equal(curve_steps, steps)
 
 
 def test_render_replaces_blocks_and_refuses_unknown_ones():
@@ -257,18 +259,18 @@ def test_render_replaces_blocks_and_refuses_unknown_ones():
 
 
 def test_labels_name_what_differs_from_the_exact_single_policy_form():
-    assert rp.label("remidi", {}) == "remidi"
-    assert rp.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 2.0}}) == "remidi (belief, margin 2)"
-    assert rp.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 1e-3}}) == "remidi (belief)"
-    assert rp.label("remidi", {"remidi": {"policy": "combine"}}) == "remidi (combine)"
-    assert rp.label("remidi-accel", {"remidi": {"rehearsal": 0.1}}) == "remidi-accel (rehearsal 0.1)"
-    assert rp.label("remidi", {"remidi": {"policy": "masked"}},
+    assert run_table.label("remidi", {}) == "remidi"
+    assert run_table.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 2.0}}) == "remidi (belief, margin 2)"
+    assert run_table.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 1e-3}}) == "remidi (belief)"
+    assert run_table.label("remidi", {"remidi": {"policy": "combine"}}) == "remidi (combine)"
+    assert run_table.label("remidi-accel", {"remidi": {"rehearsal": 0.1}}) == "remidi-accel (rehearsal 0.1)"
+    assert run_table.label("remidi", {"remidi": {"policy": "masked"}},
                     ["remidi", "run", "tmaze", "--set", "remidi.policy=masked"]) == "remidi (masked)"
-    assert rp.label("plr", {"remidi": {"policy": "combine"}}) == "plr"  # only a buffer sequence has these forms
-    assert rp.label("paired", {"paired": {"estimator": "perfect"}}) == "paired (perfect)"
-    assert rp.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "belief"}}) == \
+    assert run_table.label("plr", {"remidi": {"policy": "combine"}}) == "plr"  # only a buffer sequence has these forms
+    assert run_table.label("paired", {"paired": {"estimator": "perfect"}}) == "paired (perfect)"
+    assert run_table.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "belief"}}) == \
         "remidi-paired (perfect, belief)"
-    assert rp.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "prefix"}}) == \
+    assert run_table.label("remidi-paired", {"paired": {"estimator": "perfect"}, "remidi": {"tracker": "prefix"}}) == \
         "remidi-paired (perfect)"
 
 
@@ -277,12 +279,12 @@ def test_a_claim_figure_shows_its_whole_title_and_the_verdict(tmp_path, monkeypa
     the last one names the verdict (one long line once cut the verdict off at the right edge)."""
     from remidi.experiments import plots
 
-    claim = max(rp.CLAIMS, key=lambda c: len(c.title) + len(c.metric))
-    figures = []
-    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig))
+    claim = max(claims.CLAIMS, key=lambda c: len(c.title) + len(c.metric))
+    drawn = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: drawn.append(fig))
     result = {"claim": claim, "verdict": "not reproduced"}
-    rp._interval_figure(tmp_path / "claim.png", result, {})
-    (fig,) = figures
+    figures._interval_figure(tmp_path / "claim.png", result, {})
+    (fig,) = drawn
     fig.tight_layout()
     fig.canvas.draw()
     import matplotlib.text
@@ -299,11 +301,11 @@ def test_a_claim_figure_shows_its_whole_title_and_the_verdict(tmp_path, monkeypa
 def test_the_verdict_table_names_where_each_metric_comes_from():
     """The generator and CVaR metrics come from remidi evaluate's generated levels and their own
     attempts, not from the held-out sets' 30 attempts."""
-    assert rp.metric_source("evaluate:solve_rate/mean") == "final checkpoint, 30 attempts"
-    assert rp.metric_source("evaluate:generator/solve_rate/blind") == \
+    assert tables.metric_source("evaluate:solve_rate/mean") == "final checkpoint, 30 attempts"
+    assert tables.metric_source("evaluate:generator/solve_rate/blind") == \
         "final checkpoint, the tag's levels among 256 generated, 4 attempts each"
-    assert rp.metric_source("evaluate:cvar/solve_rate/10%").endswith("256 generated levels, 4 attempts each")
-    assert rp.metric_source("summary:buffer_fraction/blind") == "last logged point"
+    assert tables.metric_source("evaluate:cvar/solve_rate/10%").endswith("256 generated levels, 4 attempts each")
+    assert tables.metric_source("summary:buffer_fraction/blind") == "last logged point"
 
 
 def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_path):
@@ -311,11 +313,11 @@ def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_pat
         write_run(tmp_path, "brax-ant", algo, [0, 1], evaluate={"return/undisturbed": values})
     floors = {"brax-ant": {"zero_action": 83.2, "normal_actions": -74.7},
               "brax-hopper": {"zero_action": 97.6, "normal_actions": 16.9}}
-    rows = rp.floors_table(rp.load_runs(tmp_path), floors).splitlines()[2:]
+    rows = tables.floors_table(data.load_runs(tmp_path), floors).splitlines()[2:]
     # a row per morphology with floors, "—" where it has no run
     assert rows == ["| ant | 83.2 | -74.7 | -75.0 | — | 100.0 | remidi |", "| hopper | 97.6 | 16.9 | — | — | — | — |"]
     with pytest.raises(ConfigError, match="back end"):  # the runs' back end is not the floors'
-        rp.floors_table(rp.load_runs(tmp_path), {**floors, "config": {"backend": "spring"}})
+        tables.floors_table(data.load_runs(tmp_path), {**floors, "config": {"backend": "spring"}})
 
 
 def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):
@@ -324,7 +326,7 @@ def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):
     metrics = [f"solve_rate/{n}" for n in HELD_OUT_NAMES] + ["solve_rate/mean"]
     write_run(tmp_path, "tmaze", "plr", [0, 1], evaluate={m: [0.0, 0.01] for m in metrics})
     floors = {"mazes": {"uniform_actions": {m: (0.0067 if "Small" in m else 0.0) for m in metrics}}}
-    rows = rp.maze_floors_table(rp.load_runs(tmp_path), floors).splitlines()[2:]
+    rows = tables.maze_floors_table(data.load_runs(tmp_path), floors).splitlines()[2:]
     # the random policy first; PLR⊥ on the T-maze task (no ReMiDi run, no blindfold run: no rows)
     assert rows[0].startswith("| uniform random actions | 0 | 0 |") and "| 0.0067 |" in rows[0]
     assert rows[1:] == ["| plr (tmaze) | " + " | ".join(["0.0050"] * len(metrics)) + " |"]
@@ -347,14 +349,14 @@ def test_the_scale_curves_put_each_preset_on_the_environment_steps_it_trained(tm
         outputs.write_metrics_csv(folder / "metrics.csv.gz", [(seed, step, "solve_rate/mean", v)
                                                               for seed, row in enumerate(values)
                                                               for step, v in zip(updates, row)])
-    runs = {**rp.load_runs(tmp_path / "cpu"), **rp.load_runs(tmp_path / "cpu4x")}
+    runs = {**data.load_runs(tmp_path / "cpu"), **data.load_runs(tmp_path / "cpu4x")}
     assert ("tmaze", "plr @cpu4x") in runs
-    cpu, cpu4x = rp.scale_curves(runs, "tmaze", "plr")
+    cpu, cpu4x = figures.scale_curves(runs, "tmaze", "plr")
     assert (cpu["preset"], cpu4x["preset"]) == ("cpu", "cpu4x")
     np.testing.assert_array_equal(cpu4x["x"], np.array([150, 300, 450]) * 32 * 256)
     np.testing.assert_allclose(cpu4x["mean"], [0.2, 0.3, 0.5])
     assert all(lo <= m <= hi for (lo, hi), m in zip(cpu4x["band"], cpu4x["mean"]))
     assert cpu["final"][0] == pytest.approx(0.6) and cpu["seeds"] == 2
-    assert rp.scale_curves(runs, "tmaze", "remidi") == []
-    rp.scale_figure(tmp_path / "scale.png", runs, "tmaze", "T-maze")
+    assert figures.scale_curves(runs, "tmaze", "remidi") == []
+    figures.scale_figure(tmp_path / "scale.png", runs, "tmaze", "T-maze")
     assert (tmp_path / "scale.png").stat().st_size > 10_000

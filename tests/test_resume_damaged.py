@@ -131,11 +131,11 @@ def test_resume_of_a_folder_it_cannot_write_is_one_line_before_training(runs, tm
     """A read-only run folder (its probe made to fail: no permission stops root's writes;
     test_evaluate tests files.writable on a real read-only folder): refused at once, before
     compiling; a finished run there is still read."""
-    from remidi.experiments import base
+    from remidi.experiments import resuming
 
     folder = tmp_path / "run"
     shutil.copytree(runs / "remidi", folder)
-    monkeypatch.setattr(base, "writable", lambda path: Path(path) != folder)
+    monkeypatch.setattr(resuming, "writable", lambda path: Path(path) != folder)
     capsys.readouterr()
     assert main(["run", "--resume", str(folder), "--quiet"]) == 0  # finished: nothing to write
     (folder / "summary.json").unlink()

@@ -11,7 +11,7 @@ import scipy.stats
 
 from remidi import stats
 from remidi.cli import main
-from remidi.experiments.compare import compare
+from remidi.runs.compare import compare
 
 # ------------------------------------------------------------------------------ remidi.stats
 

@@ -12,7 +12,7 @@ import pytest
 from remidi.cli import main
 from remidi.engine.checkpoint import CHECKPOINT, save_run
 from remidi.errors import ConfigError
-from remidi.experiments.status import run_folders, run_status
+from remidi.runs.status import run_folders, run_status
 
 NAN = float("nan")
 

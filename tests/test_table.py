@@ -166,7 +166,7 @@ def test_a_folder_of_separate_runs_is_no_several_algorithm_run(tmp_path, capsys)
     """runs/lever/<time>/ of single-algorithm runs: the note names the unfinished run itself, the
     folder is finished when every run in it is, and --resume of the folder is refused (it would
     have written a config.json for each recorded algorithm named after it and trained new runs)."""
-    from remidi.experiments.base import finished_run
+    from remidi.experiments.resuming import finished_run
 
     write_run(tmp_path / "t1", "lever", "plr", {"solve_rate/visible": [1.0, 1.0]})
     write_run(tmp_path / "t2", "lever", "remidi", {"solve_rate/visible": [1.0, 1.0]})

@@ -253,7 +253,7 @@ def test_a_run_ued_run_is_evaluated_and_resumed_from_another_folder(corridor, ue
 
 def test_a_run_without_an_import_path_says_what_to_pass_and_evaluates_with_the_task(corridor, ued_run, tmp_path,
                                                                                     capsys):
-    from remidi.evaluate import evaluate_run
+    from remidi.runs.evaluate import EvalSettings, evaluate_run
 
     run = tmp_path / "run"
     shutil.copytree(ued_run, run)
@@ -266,7 +266,7 @@ def test_a_run_without_an_import_path_says_what_to_pass_and_evaluates_with_the_t
         assert err.count("\n") == 1 and "'corridor' is a task given to run_ued without task_ref" in err, err
         assert "evaluate_run(RUN_DIR, task=...)" in err and "run_ued(..., task_ref='module:function')" in err
     assert not (run / "evaluate.json").exists()
-    doc = evaluate_run(run, task=corridor.make_task(), attempts=1, cvar_levels=4, cvar_attempts=1)
+    doc = evaluate_run(run, EvalSettings(attempts=1, cvar_levels=4, cvar_attempts=1), task=corridor.make_task())
     assert doc["algorithms"]["plr"]["seeds"] == [0] and (run / "evaluate.json").exists()
 
 
@@ -311,9 +311,9 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
 
 
 def test_the_floor_of_uniform_actions_plays_a_discrete_tasks_evaluation_sets(corridor):
-    """remidi.experiments.floors on a discrete task: uniform random actions, one return per level
+    """remidi.reporting.floors on a discrete task: uniform random actions, one return per level
     and attempt (the corridor's returns lie in [-1, 1]); the continuous floors are refused."""
-    from remidi.experiments.floors import floor_returns
+    from remidi.reporting.floors import floor_returns
 
     task = corridor.make_task()
     name = sorted(task.eval_sets)[0]

@@ -14,6 +14,7 @@ import pytest
 from remidi.engine.rollout import Frozen, rollout
 from remidi.engine.tracker import make_tracker
 from remidi.envs import maze as M
+from remidi.envs import maze_levels
 from remidi.envs.lever import lever_task
 
 STEPS = 40
@@ -57,7 +58,7 @@ def perturbed(level, key):
 def near_goal(level):
     """The level with its goal moved to the cell in front of the agent (when free): episodes
     end (and the tracker restarts) within a few random actions."""
-    fwd = jnp.asarray(M.DIR_TO_VEC)[level.agent_dir].astype(jnp.int32)
+    fwd = jnp.asarray(maze_levels.DIR_TO_VEC)[level.agent_dir].astype(jnp.int32)
     cell = jnp.clip(level.agent_pos.astype(jnp.int32) + fwd, 0, level.wall_map.shape[0] - 1)
     free = ~level.wall_map[cell[1], cell[0]] & ~jnp.all(cell == level.agent_pos.astype(jnp.int32))
     return level.replace(goal_pos=jnp.where(free, cell.astype(jnp.uint32), level.goal_pos))
@@ -66,7 +67,7 @@ def near_goal(level):
 def wall_behind(level):
     """The level with the wall of the cell behind the agent toggled: the first observation is the
     same, the first turn shows the difference."""
-    back = jnp.asarray(M.DIR_TO_VEC)[(level.agent_dir + 2) % 4].astype(jnp.int32)
+    back = jnp.asarray(maze_levels.DIR_TO_VEC)[(level.agent_dir + 2) % 4].astype(jnp.int32)
     cell = jnp.clip(level.agent_pos.astype(jnp.int32) + back, 0, level.wall_map.shape[0] - 1)
     return level.replace(wall_map=level.wall_map.at[cell[1], cell[0]].set(~level.wall_map[cell[1], cell[0]]))
 
@@ -92,7 +93,7 @@ def maze_case():
     frozen = [frozen[i] for i in order]
     valid = np.ones(len(frozen), bool)
     valid[np.random.default_rng(1).choice(len(frozen), 8, replace=False)] = False
-    return M._stack(agents), M._stack(frozen), jnp.asarray(valid)
+    return maze_levels._stack(agents), maze_levels._stack(frozen), jnp.asarray(valid)
 
 
 @functools.lru_cache(maxsize=None)  # the masked one serves two tests

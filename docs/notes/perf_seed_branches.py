@@ -9,7 +9,7 @@ from functools import partial
 import jax
 from remidi.experiments import get_experiment
 from remidi.experiments.base import resolve_config
-from remidi.experiments.config import parse_set_items
+from remidi.experiments.overrides import parse_set_items
 from remidi.engine import driver, train as tr
 
 name, preset, seeds, updates = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])

@@ -10,7 +10,7 @@
 # stands) and resumes an interrupted one from its last checkpoint (`remidi run --resume`). When a
 # run has finished, copy its small outputs into the page's data and regenerate the page:
 #
-#   python -m remidi.experiments.results_page --collect RUNS_DIR/<experiment>/<run>
+#   python -m remidi.reporting.results_page --collect RUNS_DIR/<experiment>/<run>
 #
 # On a CPU, two lanes (one process per core, XLA on one thread) train 1.36× faster in total than
 # one process on both cores (`remidi bench maze-plr --lanes 2`, docs/performance.md). Each lane
@@ -94,7 +94,7 @@ for m in ant halfcheetah hopper walker2d; do
   for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
 done
 # (the floors of the Brax and maze sections, policies that learn nothing, are no run: `python -m
-# remidi.experiments.floors` writes docs/results/references/floors.json in minutes)
+# remidi.reporting.floors` writes docs/results/references/floors.json in minutes)
 
 # issue #29: PAIRED and ReMiDi over PAIRED on the lever game. Their claims were stated at 76e7226
 # and first run there; both rerun at ab3ea79, where a generator's reservoir keeps a repeated

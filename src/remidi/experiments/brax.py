@@ -26,7 +26,7 @@ from remidi.engine.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.brax import BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES
 from remidi.errors import ConfigError, choice, probability, require
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 REFERENCE_FILE = Path(__file__).with_name("brax_reference.json")
 
@@ -156,7 +156,7 @@ def task_factory(morphology: str):
 
 
 def _experiment(morphology: str):
-    return make_ued_experiment(
+    return make_ued_experiment(UEDSpec(
         name=f"brax-{morphology}",
         description=f"paper §6.5, Table 1: Brax {morphology}, action-scaled levels mixed with ±10000 guessing games",
         task_factory=task_factory(morphology),
@@ -169,7 +169,7 @@ def _experiment(morphology: str):
                           ("replay_fraction/type_b", "share of type B among replayed levels"),
                           ("buffer_fraction/type_b", "share of type B in the active buffer")),
         preset_reasons={"cpu": CPU_REASONS},
-    )
+    ))
 
 
 EXPERIMENTS = [_experiment(m) for m in MORPHOLOGIES]

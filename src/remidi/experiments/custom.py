@@ -41,8 +41,10 @@ from remidi.engine.config import UEDConfig
 from remidi.engine.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
-from remidi.experiments.base import Experiment, resume_experiment, run_experiment
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.base import Experiment, RunSpec
+from remidi.experiments.resuming import resume_experiment
+from remidi.experiments.running import run_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 PRESET = "default"
 _IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, name) → its experiment
@@ -67,13 +69,13 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     titles = {"solve_rate": "solve rate", "regret": "mean regret", "replay_fraction": "share among replayed levels",
               "buffer_fraction": "share in the active buffer"}
     panels = tuple((m, f"{titles[m.split('/')[0]]}: {m.split('/')[1]}") for m in rates + regrets + shares)
-    exp = make_ued_experiment(
+    exp = make_ued_experiment(UEDSpec(
         name=name, description=description, task_factory=lambda cfg: task, config_factory=lambda: base,
         presets={PRESET: {}}, preset_seeds={PRESET: 2}, summary_metrics=rates + regrets + shares,
         plot_panels_spec=panels or (("mean_return", "mean training return"),),
         refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
         check_step=True,  # warn of a step with randomness of its own under ReMiDi's exact tracker
-    )
+    ))
     return dataclasses.replace(exp, task_ref=task_ref)
 
 
@@ -95,8 +97,7 @@ def run_ued(task: UEDTask, config: UEDConfig, algos: list[str], seeds: list[int]
     exp = task_experiment(name, lambda: task, config, task_ref=record)
     if resume:
         return resume_experiment(lambda *_: exp, Path(out), progress=progress)
-    return run_experiment(exp, algos=list(algos), preset=PRESET, seeds=list(seeds), overrides={}, out=Path(out),
-                          progress=progress)
+    return run_experiment(RunSpec(exp, list(algos), PRESET, list(seeds)), Path(out), progress=progress)
 
 
 def _split(path: str) -> tuple[str, str]:

@@ -28,7 +28,7 @@ from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.engine.ppo import PPOConfig
 from remidi.envs.gymnax import gymnax_task, point_name
 from remidi.errors import require
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 
 @dataclass(frozen=True)
@@ -152,7 +152,7 @@ def task_factory(name: str):
 def _experiment(d: Domain):
     points = grid_points(d.name)
     tags = tuple(f"{n}_high" for n in d.level)
-    return make_ued_experiment(
+    return make_ued_experiment(UEDSpec(
         name=d.name,
         description=d.description + "; held-out grid of " + " × ".join(d.grid),
         task_factory=task_factory(d.name),
@@ -168,7 +168,7 @@ def _experiment(d: Domain):
         derive=make_derive(points),
         bar_chart=("final return per held-out grid point", tuple(f"return/{p}" for p in points) + ("return/mean",)),
         builds_levels=False,  # gymnax tasks have no level-building MDP: no PAIRED
-    )
+    ))
 
 
 EXPERIMENTS = [_experiment(d) for d in DOMAINS.values()]

@@ -13,7 +13,7 @@ from remidi.engine.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.lever import lever_task
 from remidi.envs.noisy import NOISE_BITS, noisy_lever_task
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 NUM_LEVERS = 64
 # minimax regret on hidden levels: the uniform lever choice, 20 × 63/64 (±10 rewards)
@@ -61,9 +61,10 @@ PLOT_PANELS = (("solve_rate/visible", "solve rate, visible answer"),
 
 
 def _experiment(name: str, description: str, task_factory):
-    return make_ued_experiment(name=name, description=description, task_factory=task_factory,
-                               config_factory=paper_config, presets=PRESETS, preset_seeds={"paper": 10, "smoke": 2},
-                               summary_metrics=SUMMARY_METRICS, plot_panels_spec=PLOT_PANELS)
+    return make_ued_experiment(UEDSpec(name=name, description=description, task_factory=task_factory,
+                                       config_factory=paper_config, presets=PRESETS,
+                                       preset_seeds={"paper": 10, "smoke": 2}, summary_metrics=SUMMARY_METRICS,
+                                       plot_panels_spec=PLOT_PANELS))
 
 
 EXPERIMENTS = [

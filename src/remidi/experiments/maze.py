@@ -18,7 +18,7 @@ from remidi.engine.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.maze_names import HELD_OUT_NAMES, TRAIN_SIZE  # not remidi.envs.maze: see maze_names
 from remidi.errors import probability, require
-from remidi.experiments.ued import make_ued_experiment
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 
 @dataclass(frozen=True)
@@ -114,7 +114,7 @@ def task_factory(kind: str):
 
 
 def _experiment(name: str, tag: str, what: str, description: str):
-    return make_ued_experiment(
+    return make_ued_experiment(UEDSpec(
         name=name,
         description=description,
         task_factory=task_factory(name),
@@ -129,7 +129,7 @@ def _experiment(name: str, tag: str, what: str, description: str):
         derive=derive,
         bar_chart=("final solve rate per held-out maze", SOLVE_RATES + ("solve_rate/mean",)),
         preset_reasons={"cpu": CPU_REASONS, "cpu4x": CPU4X_REASONS},
-    )
+    ))
 
 
 EXPERIMENTS = [

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import jax
 import numpy as np
@@ -176,16 +177,42 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
     return plot
 
 
-def make_ued_experiment(*, name: str, description: str, task_factory, config_factory, presets, preset_seeds,
-                        summary_metrics, plot_panels_spec, derive=None, bar_chart=None,
-                        preset_reasons=None, builds_levels: bool = True, refusal=None,
-                        check_step: bool = False) -> Experiment:
-    """A UED experiment over the task ``task_factory(cfg)`` builds. ``builds_levels``: whether
+@dataclass(frozen=True)
+class UEDSpec:
+    """A UED experiment's definition: its name and description, the task ``task_factory(cfg)``
+    builds, the configuration (``config_factory``, ``presets``, ``preset_seeds``,
+    ``preset_reasons``), what it logs and draws (``summary_metrics``, ``plot_panels_spec``,
+    ``derive``, ``bar_chart``: :func:`make_train`, :func:`make_plot`). ``builds_levels``: whether
     its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
     (None: it can; :func:`remidi.engine.validation.task_refusal` of one task). ``check_step``: warn
     of a step that draws from its key (a user's task, :func:`make_train`)."""
+
+    name: str
+    description: str
+    task_factory: Callable[[UEDConfig], UEDTask]
+    config_factory: Callable[[], UEDConfig]
+    presets: dict[str, dict[str, Any]]
+    preset_seeds: dict[str, int]
+    summary_metrics: Any
+    plot_panels_spec: Any
+    derive: Any = None
+    bar_chart: Any = None
+    preset_reasons: dict[str, dict[str, str]] | None = None
+    builds_levels: bool = True
+    refusal: Callable[[Any], str | None] | None = None
+    check_step: bool = False
+
+
+def make_ued_experiment(spec: UEDSpec) -> Experiment:
+    """The :class:`~remidi.experiments.base.Experiment` of ``spec``: a UED experiment over the task
+    ``spec.task_factory(cfg)`` builds."""
+    name, description, task_factory, config_factory = spec.name, spec.description, spec.task_factory, spec.config_factory
+    presets, preset_seeds, preset_reasons = spec.presets, spec.preset_seeds, spec.preset_reasons
+    summary_metrics, plot_panels_spec, derive, bar_chart = spec.summary_metrics, spec.plot_panels_spec, spec.derive, \
+        spec.bar_chart
+    builds_levels, refusal, check_step = spec.builds_levels, spec.refusal, spec.check_step
     if refusal is None and not builds_levels:
         def refusal(algo):
             return (f"{name}'s task has no level-building MDP (UEDTask.level_builder), which a learned level "

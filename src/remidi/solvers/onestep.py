@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from remidi.solvers import checks, lp
+from remidi.solvers import checks, lp, polytope
 from remidi.solvers.results import BLPResult, MMRResult, Round
 
 #: Observation games whose values agree to this relative accuracy are tied (merged into one round).
@@ -153,7 +153,7 @@ def _solve_observations(game: OneStepGame, tol: float) -> list[_ObservationGame]
     """Every observation's game [O], each solved in its own units (see the module docstring)."""
     n_act = game.num_actions
     actions = np.arange(1, n_act + 1)
-    poly = lp.Polytope(1 + n_act, (0,), (tuple(actions),))
+    poly = polytope.Polytope(1 + n_act, (0,), (tuple(actions),))
     eq = poly.equalities()
     obs_index = game.observation_index()
     units, regrets = _action_regrets(game)

@@ -19,7 +19,7 @@ from typing import Mapping, Union
 
 import numpy as np
 
-from remidi.solvers import checks, lp
+from remidi.solvers import checks, lp, polytope
 from remidi.solvers.onestep import OneStepGame, solve_mmr as solve_onestep_mmr
 from remidi.solvers.results import BLPResult, MMRResult, Round
 
@@ -75,7 +75,7 @@ class SequenceForm:
 
     infosets: tuple[AOH, ...]
     infoset_actions: tuple[tuple[str, ...], ...]
-    poly: lp.Polytope
+    poly: polytope.Polytope
     payoff: np.ndarray
     reach: np.ndarray
     members: tuple[tuple[tuple[int, float, Decision], ...], ...]
@@ -136,7 +136,7 @@ def build_sequence_form(game: TreeGame, centred: bool = False) -> SequenceForm:
 
     for level, tree in enumerate(game.trees):
         visit(level, tree, (), 0, 1.0)
-    poly = lp.Polytope(counter[0], tuple(parents), tuple(children))
+    poly = polytope.Polytope(counter[0], tuple(parents), tuple(children))
     centre = _centres(poly, len(game.trees), payoff_terms) if centred else np.zeros(len(game.trees))
     payoff = np.zeros((len(game.trees), poly.n_sequences))
     with np.errstate(invalid="ignore"):  # a non-finite reward stays non-finite; the solvers refuse it
@@ -150,7 +150,7 @@ def build_sequence_form(game: TreeGame, centred: bool = False) -> SequenceForm:
                         tuple(tuple(m) for m in members), centre)
 
 
-def _centres(poly: lp.Polytope, n_levels: int, terms: list[tuple[int, int, float, float]]) -> np.ndarray:
+def _centres(poly: polytope.Polytope, n_levels: int, terms: list[tuple[int, int, float, float]]) -> np.ndarray:
     """Per level [L], the midpoint of its terminal rewards, or 0 where the terminal probability
     (from ``terms``: level, sequence, chance probability, reward) is not 1 under every plan."""
     low, high = np.full(n_levels, np.inf), np.full(n_levels, -np.inf)
@@ -214,7 +214,7 @@ class _Checker:
     """Checks the rounds of a centred sequence form as they are solved (:func:`checks.check_rounds`).
 
     Regrets, guarantees and bounds come from the regret gaps of the rewards
-    (:func:`lp.regret_gaps`), in the LPs' normalised units and then multiplied by their scale.
+    (:func:`polytope.regret_gaps`), in the LPs' normalised units and then multiplied by their scale.
     """
 
     def __init__(self, game: TreeGame, form: SequenceForm):
@@ -223,7 +223,7 @@ class _Checker:
         optimal = lp.best_response_values(form.poly, form.payoff)
         self.scale = lp.normalise(form.payoff, optimal)
         payoff = form.payoff / self.scale
-        self.gaps = lp.regret_gaps(form.poly, payoff)
+        self.gaps = polytope.regret_gaps(form.poly, payoff)
         with np.errstate(over="ignore"):
             self.spread = self.scale * (optimal / self.scale + lp.best_response_values(form.poly, -payoff))
         self.regrets: list[np.ndarray] = []
@@ -253,7 +253,7 @@ class _Checker:
 
         def least(adversary: np.ndarray) -> float:
             with np.errstate(over="ignore"):
-                return self.scale * lp.least_regret(self.form.poly, adversary @ self.gaps, raw.fixed, prev)
+                return self.scale * polytope.least_regret(self.form.poly, adversary @ self.gaps, raw.fixed, prev)
 
         self.regrets.append(self.regret(raw.plan))
         self.bounds.append(least(raw.certificate))

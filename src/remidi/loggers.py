@@ -1,4 +1,4 @@
-"""Experiment tracking: ``remidi run ... --log wandb,tensorboard``.
+"""Logging a run to Weights & Biases and TensorBoard: ``remidi run ... --log wandb,tensorboard``.
 
 Each algorithm's run folder becomes one tracked run per backend:
 
@@ -68,7 +68,7 @@ def _wandb_can_log() -> bool:
     return any("wandb" in host for host in hosts)
 
 
-class Tracker:
+class RunLogger:
     """The tracked runs of one algorithm's run folder (every backend in ``backends``)."""
 
     def __init__(self, backends: list[str], folder: Path, name: str, config_doc: dict, seeds: list[int],

@@ -12,7 +12,7 @@ import pytest
 from test_cli import LEVER_TINY
 
 from remidi.cli import main
-from remidi.experiments import tracking
+from remidi import loggers
 
 
 def tensorboard_steps(logdir) -> dict[str, list[int]]:
@@ -87,13 +87,13 @@ def test_both_loggers_offline_and_a_resume_continues_the_same_runs(tmp_path, cap
 
 def test_missing_package_or_login_is_one_line_before_writing(tmp_path, capsys, monkeypatch):
     find = importlib.util.find_spec
-    monkeypatch.setattr(tracking.importlib.util, "find_spec", lambda name: None if name == "wandb" else find(name))
+    monkeypatch.setattr(loggers.importlib.util, "find_spec", lambda name: None if name == "wandb" else find(name))
     out = tmp_path / "never"
     assert main(["run", "lever", "--log", "wandb", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and 'wandb needs the wandb package: pip install "remidi[wandb]"' in err
     assert not out.exists()
-    monkeypatch.setattr(tracking.importlib.util, "find_spec", find)
+    monkeypatch.setattr(loggers.importlib.util, "find_spec", find)
     monkeypatch.delenv("WANDB_MODE", raising=False)
     monkeypatch.delenv("WANDB_API_KEY", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path))  # no ~/.netrc
@@ -108,11 +108,11 @@ def test_missing_package_or_login_is_one_line_before_writing(tmp_path, capsys, m
 def test_a_part_resumed_within_the_same_second_keeps_the_parts_before(tmp_path):
     """tensorboardX names event files by the second: without a suffix of its own, a resume opened
     in the same second as the part before overwrote that part's file (steps 10, 20 lost)."""
-    from remidi.experiments.tracking import Tracker
+    from remidi.loggers import RunLogger
 
     for steps in ((10, 20), (30, 40)):  # two parts, well within one second
-        tracker = Tracker(["tensorboard"], tmp_path, "run", {"config": {}}, [0])
+        run_logger = RunLogger(["tensorboard"], tmp_path, "run", {"config": {}}, [0])
         for step in steps:
-            tracker.log(step, {"loss": np.array([1.0])})
-        tracker.close()
+            run_logger.log(step, {"loss": np.array([1.0])})
+        run_logger.close()
     assert tensorboard_steps(tmp_path / "tensorboard" / "seed_0")["loss"] == [10, 20, 30, 40]

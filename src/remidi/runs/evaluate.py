@@ -47,12 +47,27 @@ from typing import Any, Callable
 import numpy as np
 
 from remidi.errors import ConfigError, RemidiError
+from remidi.envs.perfect_mazes import perfect_mazes
 from remidi.files import writable
 
 ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
 DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
             "seed": 0}
 MAX_PERFECT_SIZE = 101
+
+
+@dataclass(frozen=True)
+class EvalSettings:
+    """What ``remidi evaluate`` evaluates on (module docstring; the command's flags of the same
+    names): episodes per evaluation-set level, CVaR levels and their episodes, the perfect mazes'
+    sides and count per side, and the seed that draws the levels and the episodes."""
+
+    attempts: int = DEFAULTS["attempts"]
+    cvar_levels: int = DEFAULTS["cvar_levels"]
+    cvar_attempts: int = DEFAULTS["cvar_attempts"]
+    perfect_sizes: tuple[int, ...] = DEFAULTS["perfect_sizes"]
+    perfect_count: int = DEFAULTS["perfect_count"]
+    seed: int = DEFAULTS["seed"]
 
 
 # ------------------------------------------------------------------------------ pure pieces
@@ -65,45 +80,6 @@ def cvar(values: np.ndarray, alpha: float, rank_by: np.ndarray | None = None) ->
     order = np.argsort(values if rank_by is None else np.asarray(rank_by, dtype=float), kind="stable")
     k = max(1, math.ceil(alpha * len(values) - 1e-9))
     return float(values[order[:k]].mean())
-
-
-def perfect_maze_walls(rng: np.random.Generator, size: int) -> np.ndarray:
-    """bool[size, size] walls of a perfect maze: the cells at odd coordinates are rooms, a
-    randomised depth-first search from a random room opens the wall between a room and an unvisited
-    neighbour, so the open cells form a tree (one path between any two). ``size`` odd ≥ 5."""
-    walls = np.ones((size, size), bool)
-    rooms = [(x, y) for y in range(1, size - 1, 2) for x in range(1, size - 1, 2)]
-    start = rooms[rng.integers(len(rooms))]
-    walls[start[1], start[0]] = False
-    stack = [start]
-    while stack:
-        x, y = stack[-1]
-        options = [(x + dx, y + dy) for dx, dy in ((2, 0), (-2, 0), (0, 2), (0, -2))
-                   if 0 < x + dx < size - 1 and 0 < y + dy < size - 1 and walls[y + dy, x + dx]]
-        if not options:
-            stack.pop()
-            continue
-        nx, ny = options[rng.integers(len(options))]
-        walls[(y + ny) // 2, (x + nx) // 2] = False
-        walls[ny, nx] = False
-        stack.append((nx, ny))
-    return walls
-
-
-def perfect_mazes(size: int, count: int, seed: int):
-    """``count`` perfect mazes of side ``size`` as one :class:`~remidi.envs.maze.MazeLevel` batch
-    (leading dim ``count``), deterministic in ``seed``: walls by :func:`perfect_maze_walls`, the
-    agent (random direction) and the goal on two different random open cells."""
-    from remidi.envs.maze import MazeLevel, _stack
-
-    rng = np.random.default_rng([seed, size])
-    levels = []
-    for _ in range(count):
-        walls = perfect_maze_walls(rng, size)
-        ys, xs = np.nonzero(~walls)
-        agent, goal = rng.choice(len(xs), size=2, replace=False)
-        levels.append(MazeLevel.make(walls, (xs[goal], ys[goal]), (xs[agent], ys[agent]), rng.integers(4)))
-    return _stack(levels)
 
 
 # ------------------------------------------------------------------------------ the command
@@ -158,7 +134,7 @@ def _load(folder: Path, task=None) -> _Loaded:
     from remidi.engine import train as tr
     from remidi.engine.checkpoint import CHECKPOINT
     from remidi.experiments import saved_experiment
-    from remidi.experiments.base import _saved_run
+    from remidi.experiments.resuming import saved_run
 
     if task is None:
         lookup = saved_experiment
@@ -168,7 +144,7 @@ def _load(folder: Path, task=None) -> _Loaded:
         def lookup(name, _record=None):
             return task_experiment(name, lambda: task)
 
-    exp, algo, _, seeds, config = _saved_run(lookup, folder, flag="RUN_DIR")
+    exp, algo, _, seeds, config = saved_run(lookup, folder, flag="RUN_DIR")
     if exp.make_task is None:
         raise ConfigError(f"RUN_DIR: {folder} is a {exp.name} run; evaluate needs a UED run (a trained agent)")
     path = folder / CHECKPOINT
@@ -268,11 +244,9 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
     return out
 
 
-def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: int = DEFAULTS["cvar_levels"],
-                 cvar_attempts: int = DEFAULTS["cvar_attempts"], perfect_sizes=DEFAULTS["perfect_sizes"],
-                 perfect_count: int = DEFAULTS["perfect_count"], seed: int = DEFAULTS["seed"],
-                 log: Callable[[str], None] | None = None, task=None) -> dict:
-    """Evaluate every algorithm and seed in ``run_dir`` (module docstring) and write
+def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Callable[[str], None] | None = None,
+                 task=None) -> dict:
+    """Evaluate every algorithm and seed in ``run_dir`` (module docstring) on ``settings`` and write
     ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there. Returns the JSON document.
 
     ``task``: the :class:`~remidi.envs.interface.UEDTask` the run trained on, for a run of a user's
@@ -283,6 +257,8 @@ def evaluate_run(run_dir, *, attempts: int = DEFAULTS["attempts"], cvar_levels: 
     from remidi.envs.maze import MazeEnv, optimal_return
     from remidi.experiments import outputs
 
+    attempts, cvar_levels, cvar_attempts = settings.attempts, settings.cvar_levels, settings.cvar_attempts
+    perfect_sizes, perfect_count, seed = settings.perfect_sizes, settings.perfect_count, settings.seed
     _check_args(attempts, cvar_levels, cvar_attempts, tuple(perfect_sizes), perfect_count, seed)
     run_dir = Path(run_dir)
     folders = _run_folders(run_dir)
@@ -383,6 +359,6 @@ def run_from_args(args) -> dict:
         raise RemidiError(f"--perfect-sizes: must be comma-separated odd integers, got {args.perfect_sizes!r}") from None
     import sys
 
-    return evaluate_run(args.run_dir, attempts=args.attempts, cvar_levels=args.cvar_levels,
-                        cvar_attempts=args.cvar_attempts, perfect_sizes=sizes, perfect_count=args.perfect_count,
-                        seed=args.seed, log=lambda line: print(line, file=sys.stderr, flush=True))
+    settings = EvalSettings(attempts=args.attempts, cvar_levels=args.cvar_levels, cvar_attempts=args.cvar_attempts,
+                            perfect_sizes=sizes, perfect_count=args.perfect_count, seed=args.seed)
+    return evaluate_run(args.run_dir, settings, log=lambda line: print(line, file=sys.stderr, flush=True))

@@ -27,7 +27,7 @@ import numpy as np
 
 from remidi import stats
 from remidi.errors import ConfigError
-from remidi.experiments.table import CI_SEED, _digits, per_seed, windowed
+from remidi.runs.table import CI_SEED, _digits, per_seed, windowed
 
 CONFIDENCE = 0.95
 
@@ -109,7 +109,7 @@ def _values(docs: list[dict], metric: str, algo: str, last: int | None) -> dict[
 
 def compare_runs(docs: list[dict], metric: str, algo: str, baseline: str, *, paired: bool = False,
                  last: int | None = None) -> dict:
-    """:func:`compare` on the runs ``docs`` (:func:`remidi.experiments.table.summaries`), with
+    """:func:`compare` on the runs ``docs`` (:func:`remidi.runs.table.summaries`), with
     ``"metric"``, ``"algo"`` and ``"baseline"`` added. Every experiment where either algorithm
     ran must have both. ConfigError (one line) for an unknown metric or algorithm."""
     if not docs:

@@ -1,0 +1,195 @@
+"""The results page's data: the runs committed under ``docs/results/data`` (:func:`load_runs`:
+one :class:`Run` per experiment and algorithm, its parts merged by seed), a claim's metric per
+seed (:func:`metric_values`), and :func:`collect`, which copies a finished run's small outputs
+there.
+
+``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its seeds):
+``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``) and
+``metrics.csv.gz``. Parts of one experiment × algorithm are merged by seed (a seed twice is an
+error), so seeds can be run in parts."""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from remidi.errors import ConfigError
+from remidi.experiments import outputs
+from remidi.files import atomic_write
+from remidi.reporting.claims import EXTRA_TABLES, SCALE_PRESETS, SECTIONS
+from remidi.runs.table import label  # how the page names an algorithm's runs
+
+ROOT = Path(__file__).resolve().parents[3]
+DATA = ROOT / "docs" / "results" / "data"
+
+
+def run_label(summary: dict, config: dict) -> str:
+    """How the page names a run's algorithm: :func:`label`, and ``@PRESET`` for a scale-study
+    preset (``plr @cpu4x``), so that runs of one algorithm at two scales stay apart."""
+    name = label(summary["algo"], config.get("config", {}), config.get("command"))
+    return f"{name} @{summary['preset']}" if summary.get("preset") in SCALE_PRESETS else name
+
+
+@dataclass
+class Run:
+    """One experiment × algorithm, its parts merged: per source (``summary``, ``evaluate``) and
+    metric ``{seed: value}``; ``curves``: metric → (steps i[T], values f[S, T]) in ``seeds`` order."""
+
+    experiment: str
+    algo: str
+    seeds: list[int] = field(default_factory=list)
+    values: dict[str, dict[str, dict[int, float]]] = field(default_factory=dict)
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    folders: list[str] = field(default_factory=list)
+    commits: set = field(default_factory=set)
+    wall_s: float = 0.0
+    resumed: bool = False  # some part was resumed: its summary's wall time is its last part's alone
+    config: dict = field(default_factory=dict)  # the first part's config.json "config"
+    devices: set = field(default_factory=set)
+    preset: str = ""
+
+
+def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder: Path) -> None:
+    for name, entry in metrics.items():
+        per = run.values.setdefault(source, {}).setdefault(name, {})
+        for seed, value in zip(seeds, entry["per_seed"]):
+            if seed in per:
+                raise ConfigError(f"data: seed {seed} of {run.experiment} / {run.algo} is in two runs ({folder})")
+            per[seed] = math.nan if value is None else float(value)
+
+
+EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final checkpoint" metrics are
+
+
+def _evaluation(folder: Path, algo: str, config: dict) -> dict:
+    """``algo``'s entry of the run's ``evaluate.json``, checked. The page states its ``evaluate:`` metrics as the final checkpoint's with
+    :data:`EVAL_ATTEMPTS` attempts, and its CVaR and perfect-maze metrics as ``remidi
+    evaluate``'s defaults give them: refuse (ConfigError naming the run) an ``evaluate.json`` of an
+    unfinished run's checkpoint or with other arguments, rather than mix it in."""
+    from remidi.runs.evaluate import DEFAULTS
+
+    where = folder / "evaluate.json"
+    evaluated = outputs.read_json(where)
+    entry, args = evaluated["algorithms"][algo], evaluated.get("args", {})
+    if args.get("attempts") != EVAL_ATTEMPTS:
+        raise ConfigError(f"{where}: evaluated with --attempts {args.get('attempts')}; the page's metrics are "
+                          f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
+    for key, default in DEFAULTS.items():  # the CVaR and perfect-maze tables compare runs on the same levels
+        want = list(default) if isinstance(default, tuple) else default
+        if key != "attempts" and key in args and args[key] != want:
+            raise ConfigError(f"{where}: evaluated with {key} {args[key]!r}; the page compares runs evaluated with "
+                              f"remidi evaluate's default {want!r}")
+    updates = config.get("config", {}).get("num_updates")
+    if entry.get("update") != updates:
+        raise ConfigError(f"{where}: evaluated at update {entry.get('update')} of {updates}; the page reads the final "
+                          f"checkpoint (finish the run, then evaluate it again)")
+    return entry
+
+
+def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
+    """``{(experiment, algo): Run}`` of every run folder under ``data``."""
+    runs: dict[tuple[str, str], Run] = {}
+    for folder in sorted(p.parent for p in Path(data).glob("*/*/summary.json")):
+        summary = outputs.read_json(folder / "summary.json")
+        config = outputs.read_json(folder / "config.json")
+        key = (summary["experiment"], run_label(summary, config))
+        run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
+        seeds = list(summary["seeds"])
+        _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
+        if (folder / "evaluate.json").is_file():
+            entry = _evaluation(folder, summary["algo"], config)
+            _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
+        if (folder / "metrics.csv.gz").is_file():
+            rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
+            steps = np.array(sorted({step for _, step, _, _ in rows}))
+            index = {s: i for i, s in enumerate(steps)}
+            part: dict[str, np.ndarray] = {}
+            for seed, step, name, value in rows:
+                part.setdefault(name, np.full((len(seeds), len(steps)), np.nan))[seeds.index(seed), index[step]] = value
+            for name, values in part.items():
+                if name in run.curves and not np.array_equal(run.curves[name][0], steps):
+                    raise ConfigError(f"data: {folder} logs {name} at other steps than the other parts")
+                old = run.curves.get(name, (steps, np.zeros((0, len(steps)))))[1]
+                run.curves[name] = (steps, np.concatenate([old, values]))
+        run.seeds += seeds
+        run.config = run.config or config.get("config", {})
+        page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
+        run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
+                           else str(folder))
+        started = config.get("code") or {}  # what the run recorded when it started
+        parts = summary.get("parts")  # each invocation that trained it
+        if parts is None:  # a run before parts were recorded: the start's record, the last part's time
+            parts = [{"code": started, "wall_s": summary.get("wall_s", 0.0)}]
+            run.resumed |= bool(summary.get("resumed"))
+        for part in parts:
+            code = part.get("code") or started  # None: a part before parts were recorded
+            run.commits.add(code.get("commit") or started.get("commit"))
+            run.devices.add(code.get("device") or "not recorded")
+            run.wall_s += float(part.get("wall_s") or 0.0)
+            run.resumed |= part.get("code") is None  # that part's time is unknown
+    for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
+        for name, (_, values) in run.curves.items():
+            if values.shape[0] != len(run.seeds):  # logged by some parts only: no per-seed alignment
+                continue
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a seed that never logged it: NaN
+                means = np.nanmean(values, axis=1)
+            run.values.setdefault("run", {})[name] = dict(zip(run.seeds, map(float, means)))
+    return runs
+
+
+def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:
+    """``{seed: value}`` of ``metric`` (``"source:name"``) for one experiment × algorithm ({} if none).
+    A tag's share of the active buffer (``buffer_fraction/<tag>``) is NaN for a seed whose active
+    buffer is empty (``buffer_size`` 0): the run logs 0 there, which a bound like [0, 0.1] would pass."""
+    source, name = metric.split(":", 1)
+    run = runs.get((experiment, algo))
+    if not run:
+        return {}
+    values = dict(sorted(run.values.get(source, {}).get(name, {}).items()))
+    if name.startswith("buffer_fraction/") and not re.search(r"/b\d+$", name):  # the active buffer's
+        sizes = run.values.get(source, {}).get("buffer_size", {})
+        values = {seed: (math.nan if sizes.get(seed, 1.0) == 0 else v) for seed, v in values.items()}
+    return values
+
+
+
+MAX_POINTS = 100  # log points kept per curve in the committed metrics.csv.gz
+
+
+def collect(run: Path, data: Path = DATA) -> list[Path]:
+    """Copy a finished run (one algorithm's folder, or a folder of them) into
+    ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
+    ``evaluate.json`` and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~remidi.reporting.claims.SECTIONS`'
+    curves, at most :data:`MAX_POINTS` evenly spaced log points). Returns the folders written."""
+    run = Path(run)
+    folders = [run] if (run / "summary.json").is_file() else sorted(p.parent for p in run.glob("*/summary.json"))
+    if not folders:
+        raise ConfigError(f"collect: no finished run (summary.json) in {run}")
+    written = []
+    for folder in folders:
+        summary = outputs.read_json(folder / "summary.json")
+        exp, algo = summary["experiment"], summary["algo"]
+        doc = outputs.read_json(folder / "config.json")
+        if (folder / "evaluate.json").is_file():  # refused before anything is copied
+            _evaluation(folder, algo, doc)
+        name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
+        target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
+        target.mkdir(parents=True, exist_ok=True)
+        for name in ("config.json", "summary.json", "evaluate.json"):  # each whole or not at all
+            if (folder / name).is_file():
+                atomic_write(target / name, lambda f, src=folder / name: f.write(src.read_bytes()), binary=True)
+        keep = set(SECTIONS.get(exp, ([], [], []))[2]) | {m.split(":", 1)[1] for e, _, metrics in EXTRA_TABLES.values()
+                                                           if e == exp for m in metrics if m.startswith("run:")}
+        rows = [r for r in outputs.read_metrics_csv(folder / "metrics.csv") if r[2] in keep]
+        steps = sorted({r[1] for r in rows})
+        kept = {steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(len(steps), MAX_POINTS)).round()
+                                            .astype(int))} if steps else set()
+        outputs.write_metrics_csv(target / "metrics.csv.gz", (r for r in rows if r[1] in kept))
+        written.append(target)
+    return written

@@ -1,0 +1,129 @@
+"""The results page (``docs/results.md``): every table and figure generated from committed data.
+
+``python -m remidi.reporting.results_page`` reads the runs under ``docs/results/data`` and
+rewrites, in ``docs/results.md``, every block between ``<!-- generated:NAME -->`` and
+``<!-- /generated:NAME -->``, and the figures under ``docs/results/``; ``--check`` only says
+which blocks differ from what the data give (exit 1), as ``tests/test_results_page.py`` does.
+
+**Data.** ``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its
+seeds): ``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``)
+and ``metrics.csv.gz``. Parts of one experiment × algorithm are merged by seed (a seed twice is
+an error), so seeds can be run in parts.
+
+**Claims and the verdict rule** (:data:`~remidi.reporting.claims.CLAIMS`,
+:func:`~remidi.reporting.verdicts.verdict`), stated before the runs: each
+claim of the paper has one primary metric, read from the final checkpoint (``evaluate.json``)
+or the final logged point (``summary.json``), and its comparisons "A's mean > B's" or bounds
+"A's mean lies in [lo, hi]". A comparison *passes* when the ordering holds in the mean and the
+probability of improvement's 95% interval lies above 0.5 or the one-sided permutation p-value
+(exact up to :data:`remidi.stats.MAX_EXACT` arrangements, every design of at most 10 seeds per
+group; beyond, a Monte Carlo estimate), Holm-adjusted over the claim's comparisons, is below 0.05 (independent groups: the
+seeds of two algorithms share their initial network but not their curricula, so they are not
+paired). A bound passes when the 95% bootstrap interval of the mean lies inside it. A claim is
+**reproduced** when all of its tests pass, **partly** when some pass and others do not (and
+**partly (no test passes)** when all hold in the mean but none passes), **not reproduced**
+otherwise, and **pending** while an algorithm has fewer seeds than the claim requires. Everything
+else on the page is secondary and exploratory.
+
+Each verdict names the scale its runs trained at (:func:`~remidi.reporting.verdicts.run_scale`:
+the preset, and its
+environment steps as a share of the paper preset's). A claim that reads runs made before a
+correction they need (:data:`~remidi.reporting.claims.FIXES`) shows "stale: ..." instead of its verdict until they are
+made again.
+
+The page's parts, one module each in :mod:`remidi.reporting`: ``claims`` (what the page states,
+and its sections), ``data`` (the committed runs, ``--collect``), ``verdicts`` (the rule applied),
+``tables``, ``figures``, and ``floors`` (policies that learn nothing, measured once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+from remidi.errors import ConfigError
+from remidi.experiments import outputs
+from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
+from remidi.reporting.data import DATA, ROOT, collect, load_runs
+from remidi.reporting.figures import draw_figures
+from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
+from remidi.reporting.tables import (floors_table, maze_floors_table, metrics_table, per_seed_table,
+                                     provenance_table, summary_lines, verdict_table)
+from remidi.reporting.verdicts import evaluate_claim
+
+PAGE = ROOT / "docs" / "results.md"
+README = ROOT / "README.md"
+
+
+def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
+    """``{block name: Markdown}`` of every generated block, and the claims' results."""
+    results = [evaluate_claim(c, runs) for c in CLAIMS]
+    out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
+           "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
+                                       for r in results if r["verdict"] != "pending") or "_No verdict yet._"}
+    for exp, (algos, metrics, _) in SECTIONS.items():
+        present = any((exp, a) in runs for a in algos)
+        out[f"table:{exp}"] = metrics_table(runs, exp, metrics, algos) if present else "_No committed data yet._"
+        out[f"seeds:{exp}"] = per_seed_table(runs, exp, metrics[0], algos) if present else "_No committed data yet._"
+    for name, (exp, algos, metrics) in EXTRA_TABLES.items():
+        present = [a for a in algos if (exp, a) in runs
+                   and any(m.split(":", 1)[1] in runs[exp, a].values.get(m.split(":", 1)[0], {}) for m in metrics)]
+        out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
+    floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
+    out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
+    out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
+    return out, results
+
+
+#: a block: its opening line, its body (whole lines, possibly none), its closing marker
+_BLOCK = re.compile(r"(<!-- generated:(?P<name>[^ ]+) -->\n)(?P<body>.*?)(<!-- /generated:(?P=name) -->)", re.S)
+
+
+def render(page: str, generated: dict[str, str]) -> str:
+    """``page`` with every generated block's body replaced (unknown block names: ConfigError)."""
+    def sub(m):
+        name = m.group("name")
+        if name not in generated:
+            raise ConfigError(f"page: unknown generated block {name!r}; known: {', '.join(generated)}")
+        return m.group(1) + generated[name] + "\n" + m.group(4)
+
+    return _BLOCK.sub(sub, page)
+
+
+def stale_blocks(page: str, generated: dict[str, str]) -> list[str]:
+    """Names of the page's generated blocks whose body differs from the data's."""
+    return [m.group("name") for m in _BLOCK.finditer(page) if generated.get(m.group("name"), "") + "\n" != m.group("body")]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m remidi.reporting.results_page", description=__doc__.split("\n")[0])
+    parser.add_argument("--data", type=Path, default=DATA)
+    parser.add_argument("--page", type=Path, default=PAGE)
+    parser.add_argument("--check", action="store_true", help="only report blocks that differ from the data (exit 1)")
+    parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--collect", nargs="+", type=Path, metavar="RUN",
+                        help="first copy these finished runs' small outputs into --data")
+    args = parser.parse_args(argv)
+    for run in args.collect or []:
+        for target in collect(run, args.data):
+            print(f"collected {target}", file=sys.stderr)
+    runs = load_runs(args.data)
+    generated, results = blocks(runs)
+    pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's summary
+    if args.check:
+        stale = [f"{p.name}:{name}" for p in pages for name in stale_blocks(p.read_text(), generated)]
+        print("the page matches the data" if not stale else "stale blocks: " + ", ".join(stale))
+        return 1 if stale else 0
+    for page in pages:
+        page.write_text(render(page.read_text(), generated))
+    figures = [] if args.no_figures else draw_figures(runs, results, args.page.parent / "results")
+    for r in results:
+        print(f"{r['claim'].key:28s} {r['verdict']}")
+    print(f"wrote {args.page}" + (f" and {len(figures)} figures" if figures else ""), file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""The results page's tables, as Markdown: the verdicts, each experiment's metrics and seeds, the
+README's summary, the runs' provenance, and the floors (policies that learn nothing) beside the
+algorithms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from remidi.envs.maze_names import HELD_OUT_NAMES
+from remidi.errors import ConfigError
+from remidi.reporting.claims import BRAX
+from remidi.reporting.data import EVAL_ATTEMPTS, metric_values
+from remidi.reporting.verdicts import verdict_words
+from remidi.runs.table import _cells as table_cells
+from remidi.runs.table import _digits as table_digits
+
+
+def _f(x: float, digits: int = 2) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _digits(metric: str) -> int:
+    """Decimals of ``"source:name"`` (as ``remidi table`` shows ``name``)."""
+    return table_digits(metric.split(":", 1)[1])
+
+
+def _p(p: float) -> str:
+    return "n/a" if not math.isfinite(p) else f"{p:.2g}" if p >= 0.001 else "< 0.001"
+
+
+def metric_source(metric: str) -> str:
+    """Where a claim's metric (``evaluate:NAME`` or ``summary:NAME``) comes from, as the verdict
+    table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`~remidi.reporting.data.EVAL_ATTEMPTS`
+    attempts per level, its CVaR and generator metrics its default generated levels and attempts."""
+    from remidi.runs.evaluate import DEFAULTS
+
+    kind, name = metric.split(":", 1)
+    if kind != "evaluate":
+        return "last logged point"
+    levels, attempts = DEFAULTS["cvar_levels"], DEFAULTS["cvar_attempts"]
+    if name.startswith("generator/"):
+        return f"final checkpoint, the tag's levels among {levels} generated, {attempts} attempts each"
+    if name.startswith("cvar/"):
+        return f"final checkpoint, {levels} generated levels, {attempts} attempts each"
+    return f"final checkpoint, {EVAL_ATTEMPTS} attempts"
+
+
+def verdict_table(results: list[dict]) -> str:
+    lines = ["| claim | primary metric | test | A | B | P(A > B) [95% CI] | p (Holm) | seeds | verdict |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for r in results:
+        claim = r["claim"]
+        d = _digits(claim.metric)
+        for i, t in enumerate(r["tests"]):
+            head = (f"{claim.title}: {claim.statement}", f"`{claim.metric.split(':', 1)[1]}` ({metric_source(claim.metric)})"
+                    ) if i == 0 else ("", "")
+            where = f" on {t['experiment']}" if len(claim.experiments) > 1 else ""
+            if t["kind"] == "greater":
+                test = f"{t['algo']} > {t['baseline']}{where}"
+                a = f"{_f(t['mean'][0], d)} [{_f(t['ci'][0][0], d)}, {_f(t['ci'][0][1], d)}]" if "mean" in t else "—"
+                b = f"{_f(t['mean'][1], d)} [{_f(t['ci'][1][0], d)}, {_f(t['ci'][1][1], d)}]" if "mean" in t else "—"
+                poi = f"{_f(t['poi'])} [{_f(t['poi_ci'][0])}, {_f(t['poi_ci'][1])}]" if "poi" in t else "—"
+                p = f"{_p(t['p'])} ({_p(t['p_holm'])})" if "p" in t else "—"
+                seeds = f"{t['n'][0]} / {t['n'][1]}"
+            else:
+                lo, hi = t["bound"]
+                test = f"{t['algo']} in [{lo:g}, {hi:g}]{where}"
+                a = f"{_f(t['mean'][0], d)} [{_f(t['ci'][0][0], d)}, {_f(t['ci'][0][1], d)}]" if "mean" in t else "—"
+                b, poi, p, seeds = "", "", "", f"{t['n'][0]}"
+            verdict_cell = verdict_words(r) if i == 0 else ""
+            lines.append(f"| {head[0]} | {head[1]} | {test} | {a} | {b} | {poi} | {p} | {seeds} | {verdict_cell} |")
+    return "\n".join(lines)
+
+
+def metrics_table(runs: dict, experiment: str, metrics: list[str], algos: list[str]) -> str:
+    """Per algorithm of ``experiment``: each metric's mean ± sample std [95% CI] (IQM)."""
+    head = "| algorithm | seeds | " + " | ".join(f"`{m.split(':', 1)[1]}`" for m in metrics) + " |"
+    lines = [head, "| --- | --- |" + " --- |" * len(metrics)]
+    for algo in algos:
+        if (experiment, algo) not in runs:
+            continue
+        cells = []
+        for m in metrics:
+            x = list(metric_values(runs, experiment, algo, m).values())
+            if not x or all(math.isnan(v) for v in x):  # not logged, or undefined (DR's replay share)
+                cells.append("—")
+                continue
+            spread, iqm, ci = table_cells({"per_seed": x}, _digits(m))  # as remidi table shows them
+            cells.append(f"{spread} {ci} ({iqm})")
+        lines.append(f"| {algo} | {len(runs[experiment, algo].seeds)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def per_seed_table(runs: dict, experiment: str, metric: str, algos: list[str]) -> str:
+    seeds = sorted({s for a in algos for s in metric_values(runs, experiment, a, metric)})
+    lines = ["| algorithm | " + " | ".join(f"seed {s}" for s in seeds) + " |", "| --- |" + " --- |" * len(seeds)]
+    d = _digits(metric)
+    for algo in algos:
+        v = metric_values(runs, experiment, algo, metric)
+        if v:
+            lines.append(f"| {algo} | " + " | ".join(_f(v[s], d) if s in v else "" for s in seeds) + " |")
+    return "\n".join(lines)
+
+
+def summary_lines(results: list[dict]) -> str:
+    """The README's summary: per claim its verdict and, where there are data, each algorithm's mean
+    of the primary metric."""
+    lines = []
+    for r in results:
+        claim = r["claim"]
+        d = _digits(claim.metric)
+        means = {}
+        for t in r["tests"]:
+            if "mean" in t:
+                names = (t["algo"], t["baseline"]) if t["kind"] == "greater" else (t["algo"],)
+                where = f" ({t['experiment'].removeprefix('brax-')})" if len(claim.experiments) > 1 else ""
+                for name, mean in zip(names, t["mean"]):
+                    means[f"{name}{where}"] = mean
+        numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
+        counts = [n for t in r["tests"] if "mean" in t for n in t["n"]]  # of the settings with data
+        seeds = "" if not counts else f"{min(counts)}" + (f"–{max(counts)}" if max(counts) > min(counts) else "")
+        detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({seeds} seeds)" if numbers else ""
+        lines.append(f"- {claim.title}: {claim.statement}: {verdict_words(r)}{detail}")
+    return "\n".join(lines)
+
+
+def provenance_table(runs: dict) -> str:
+    """One row per experiment and algorithm: preset, seeds, commits and devices (of every part
+    that trained it, where its summary records ``parts``), the training wall time summed over its
+    parts (marked † where some part's time is unknown: a run resumed before parts were recorded
+    holds the time of its last part alone) and its data folders."""
+    lines = ["| experiment | algorithm | preset | seeds | commit | device | training wall time (all parts) | data |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for (exp, algo), run in sorted(runs.items()):
+        commits = ", ".join(sorted(str(c)[:7] for c in run.commits))
+        devices = ", ".join(sorted(run.devices))
+        wall = f"{run.wall_s / 60:.1f} min" + (" †" if run.resumed else "")
+        lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {devices} | {wall} | "
+                     + ", ".join(f"`{f}`" for f in run.folders) + " |")
+    if any(run.resumed for run in runs.values()):
+        lines.append("\n† a part of these runs was resumed from a checkpoint before runs recorded their parts; its "
+                     "wall time counts the last part alone.")
+    return "\n".join(lines)
+
+
+
+def floors_table(runs: dict, floors: dict) -> str:
+    """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
+    policy (``floors``: :mod:`remidi.reporting.floors`' document) beside each algorithm's
+    mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's
+    ("—" without runs). ConfigError for a run on another Brax back end than the floors'."""
+    algos = ("plr", "minimax-return", "remidi")
+    backend = floors.get("config", {}).get("backend")
+    metric = "evaluate:return/undisturbed"
+    lines = ["| morphology | zero action | N(0, 1) actions | " + " | ".join(algos) + " | above zero action |",
+             "| --- |" + " --- |" * (len(algos) + 3)]
+    for exp in BRAX:
+        floor = floors.get(exp)
+        if floor is None:
+            continue
+        means = {a: float(np.mean(list(v.values()))) for a in algos if (v := metric_values(runs, exp, a, metric))}
+        for a in means:
+            ran = runs[exp, a].config.get("brax", {}).get("backend")
+            if backend is not None and ran != backend:
+                raise ConfigError(f"data: {exp} {a} ran on the Brax back end {ran!r}, the floors on {backend!r}: "
+                                  f"python -m remidi.reporting.floors measures them again")
+        above = ", ".join(a for a, m in means.items() if m > floor["zero_action"]) or ("none" if means else "—")
+        lines.append(f"| {exp.removeprefix('brax-')} | {_f(floor['zero_action'], 1)} | {_f(floor['normal_actions'], 1)} | "
+                     + " | ".join(_f(means[a], 1) if a in means else "—" for a in algos)
+                     + f" | {above} |")
+    return "\n".join(lines)
+
+
+def maze_floors_table(runs: dict, floors: dict) -> str:
+    """The held-out mazes' solve rate of uniform random actions (``floors["mazes"]``:
+    :mod:`remidi.reporting.floors`) beside the T-maze and blindfold algorithms' means over seeds
+    (Fig. 6's metric), per maze and their mean."""
+    metrics = [f"solve_rate/{name}" for name in HELD_OUT_NAMES] + ["solve_rate/mean"]
+    rows = [("uniform random actions", floors["mazes"]["uniform_actions"])]
+    for exp in ("tmaze", "blindfold"):
+        for algo in ("plr", "remidi"):
+            values = {m: metric_values(runs, exp, algo, f"evaluate:{m}") for m in metrics}
+            if all(values.values()):
+                rows.append((f"{algo} ({exp})", {m: float(np.mean(list(v.values()))) for m, v in values.items()}))
+    lines = ["| policy | " + " | ".join(m.split("/", 1)[1] for m in metrics) + " |",
+             "| --- |" + " --- |" * len(metrics)]
+    cell = lambda v: "0" if v == 0 else f"{v:.4f}" if v < 0.01 else _f(v)  # noqa: E731 (the floor is near 0)
+    lines += [f"| {name} | " + " | ".join(cell(means[m]) for m in metrics) + " |" for name, means in rows]
+    return "\n".join(lines)
+

@@ -10,7 +10,7 @@ import jax
 from remidi.experiments import get_experiment
 from remidi.experiments.base import resolve_config
 from remidi.experiments.config import parse_set_items
-from remidi.engine import driver, train as tr
+from remidi.engine.run import driver, train as tr
 
 name, preset, seeds, updates = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 exp = get_experiment(name)

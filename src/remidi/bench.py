@@ -27,13 +27,13 @@ compiled block, ``driver.run_steps``):
   a batch of a frozen buffer's levels instead of a replay of the active one (one rollout and one
   PPO update either way); ``remidi_rehearsal_step_over_remidi_step`` (not run by default).
 * ``maze-remidi-belief``: ``maze-remidi`` with the learned belief tracker
-  (``remidi.tracker=belief``, engine/belief.py): each step every env's prefix is scored by the
+  (``remidi.tracker=belief``, engine/trackers/belief.py): each step every env's prefix is scored by the
   three frozen buffers' GRU models instead of stepping frozen levels, and the active buffer's
   model fits on every replay (``remidi.belief_epochs`` updates);
   ``remidi_belief_step_over_remidi_step`` is its cost per environment step against the exact
   candidate tracker's (not run by default).
 * ``maze-remidi-simulated``: ``maze-remidi`` with the simulated belief model
-  (``remidi.tracker=simulated`` judged by the ratio, engine/simulated.py): each step every env's
+  (``remidi.tracker=simulated`` judged by the ratio, engine/trackers/simulated.py): each step every env's
   ``tracker_budget`` candidates are stepped in two copies, and every update replays its levels
   twice for the noise table (and a fresh update fits the GRU reference);
   ``remidi_simulated_step_over_remidi_step`` (not run by default).
@@ -97,10 +97,10 @@ def check_overrides(overrides: dict) -> None:
     """Raise ConfigError for a ``--set`` key that is no UED config key, a value of the wrong type,
     or a value no workload can run with (sizes below 1, PPO and buffer settings out of range), before
     any benchmark starts."""
-    from remidi.engine.buffer import validate_buffer_config
-    from remidi.engine.ppo import validate_ppo_config
+    from remidi.engine.config import validate_buffer_config
+    from remidi.engine.core.ppo import validate_ppo_config
     from remidi.engine.config import UEDConfig
-    from remidi.engine.validation import validate_section
+    from remidi.engine.run.validation import validate_section
     from remidi.errors import positive_int
     from remidi.experiments.config import apply_overrides
 
@@ -165,10 +165,10 @@ def _filled_runner(setup, active: int, seeds: int = 1):
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine import driver
+    from remidi.engine.run import driver
 
     runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.arange(seeds, dtype=jnp.uint32)))
-    bufs = runner.buffers  # leaves [S, K, C, ...]
+    bufs = runner.adversary.buffers  # leaves [S, K, C, ...]
     k, c = bufs.valid.shape[1:]
     keys = jax.random.split(jax.random.PRNGKey(1), k * c)
     levels = jax.jit(jax.vmap(setup.task.sample_level))(keys)
@@ -176,7 +176,8 @@ def _filled_runner(setup, active: int, seeds: int = 1):
                           levels)
     scores = jnp.broadcast_to(jax.random.uniform(jax.random.PRNGKey(2), (1, k, c)), (seeds, k, c))
     bufs = bufs.replace(levels=levels, valid=jnp.ones_like(bufs.valid), scores=scores)
-    return runner.replace(buffers=bufs, active=jnp.full_like(runner.active, active))
+    return runner.replace(adversary=runner.adversary.replace(buffers=bufs,
+                                                            active=jnp.full_like(runner.adversary.active, active)))
 
 
 def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2):
@@ -184,7 +185,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     import jax
 
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
     from remidi.experiments.config import apply_overrides
 
@@ -206,11 +207,11 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
     # the network's operation count assumes every update trains one network; an editing algorithm's
     # edit updates do not, a learned generator's updates train three, a belief tracker adds its models'
     # work and Combine the frozen policies' (no figure rather than a wrong one)
-    from remidi.engine.paired import LevelGenerator
+    from remidi.engine.adversaries.paired import LevelGenerator
 
     flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
-        setup.algo.buffer_sequence and (cfg.remidi.tracker in ("belief", "simulated") or cfg.remidi.policy == "combine") else \
-        steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
+        setup.algo.buffer_sequence and (setup.tracker.learns or cfg.remidi.policy == "combine") else \
+        steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.learner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
 
@@ -224,7 +225,7 @@ def network_flops_per_step(setup, params) -> float:
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine.train import example_observation
+    from remidi.engine.setup import example_observation
 
     cfg, net = setup.cfg, setup.net
     n = cfg.num_envs

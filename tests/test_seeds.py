@@ -85,10 +85,11 @@ def test_the_belief_models_calibration_is_a_branch_over_several_seeds():
     """The learned belief tracker's freeze (its calibration at a switch) over two seeds stays a
     branch, and calibrates only the seed that switches."""
     from remidi.engine.trackers import belief
+    from remidi.engine.trackers import belief_model as bm
 
-    model = belief.BeliefModel(belief.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
-    opt = belief.make_optimizer()
-    one = belief.init_memory(model, opt, 2, 2, 4, 3, jax.random.PRNGKey(0)).replace(written=jnp.ones((), jnp.int32))
+    model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bm.make_optimizer()
+    one = belief.init_memory(model, opt, 2, 2, (4, 3), jax.random.PRNGKey(0)).replace(written=jnp.ones((), jnp.int32))
     memory = jax.tree.map(lambda x: jnp.stack([x, x]), one)  # two seeds, each with one recorded rollout
     freeze = over_seeds(lambda m, s: belief.freeze(opt, m, 0, s, 0.05).threshold)
     switch = jnp.array([True, False])

@@ -54,7 +54,7 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
         # every frozen level stepped at the first observation: the tracker's reference (the exact
         # trackers' reference tracker; a learned tracker judges the first observation itself)
         frozen = setup.tracker.frozen(setup, runner)
-        frozen = frozen.replace(tracker=frozen.tracker.reference())
+        frozen = frozen.replace(tracker=frozen.tracker.at_first_observation())
         tstate = frozen.tracker.start(task.env, task.params, frozen, keys, obs)
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)

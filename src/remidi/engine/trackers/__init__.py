@@ -29,7 +29,7 @@ TRACKERS = MODES + ("belief", "simulated")
 
 
 @functools.lru_cache(maxsize=None)
-def belief_model(task, hidden: int) -> BeliefModel:
+def model_for(task, hidden: int) -> BeliefModel:
     """The belief model of ``task`` (its observations' coding, its actions) with ``hidden`` GRU units."""
     obs = jax.eval_shape(lambda: example_observation(task)[0])
     return BeliefModel(coding_for(obs), num_actions=task.num_actions, hidden=hidden)
@@ -49,7 +49,7 @@ def tracker_for(task, cfg, algo) -> Tracker:
         return make_tracker(mode, budget)
     settings = dict(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate, margin=r.belief_margin,
                     calibration=r.belief_calibration, reference=r.belief_reference)
-    model = belief_model(task, r.belief_hidden)
+    model = model_for(task, r.belief_hidden)
     if r.tracker == "simulated":
         return Simulated(model, budget=r.tracker_budget, capacity=r.buffer_capacity, reseed=task.reseed_level,
                          **settings)
@@ -95,4 +95,4 @@ def validate_tracker(cfg, algo, task) -> None:
                 r.tracker)
 
 
-__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "belief_model"]
+__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "model_for"]

@@ -97,7 +97,7 @@ class Tracker:
         """Its judgement against the exact tracker's on one rollout (learned trackers)."""
         return {}
 
-    def reference(self) -> Tracker:
+    def at_first_observation(self) -> Tracker:
         """The component that judges first observations for the combined policy at evaluation."""
         return self
 

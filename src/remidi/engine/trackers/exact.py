@@ -189,7 +189,7 @@ class ExactTracker(Tracker):
         """bool[N, B]: some level of frozen buffer b produced env n's whole prefix (Combine)."""
         return jax.vmap(buffer_match, in_axes=(0, None, None))(state, num_buffers, capacity)
 
-    def reference(self) -> ExactTracker:
+    def at_first_observation(self) -> ExactTracker:
         """The reference tracker of this mode (every frozen level stepped)."""
         return ExactTracker(mode=self.mode)
 

@@ -411,9 +411,9 @@ def test_a_belief_run_keeps_its_models_in_the_checkpoint_and_calibrates_at_the_s
     assert main(["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", "--out", str(out), *TINY]) == 0
     ckpt = next(out.rglob("checkpoint.npz"))
     with np.load(ckpt) as data:
-        names = [n for n in data.files if ".belief." in n]
-        threshold = data[next(n for n in names if n.endswith(".belief.threshold"))]
-    assert any(n.endswith(".belief.params['wx']") for n in names)
+        names = [n for n in data.files if ".tracker." in n]
+        threshold = data[next(n for n in names if n.endswith(".tracker.threshold"))]
+    assert any(n.endswith(".tracker.params['wx']") for n in names)
     import json
 
     metrics = json.loads((out / "summary.json").read_text())["metrics"]

@@ -126,6 +126,7 @@ def generator_sequence():
 
     import jax
 
+    from remidi.engine import learner as lrn
     from remidi.engine import train as tr
     from test_ued_engine import TASK, TINY
 
@@ -134,7 +135,7 @@ def generator_sequence():
     def record(name, x):
         jax.debug.callback(lambda v: records[name].append(np.asarray(v)), x, ordered=True)
 
-    real_estimate, real_rewards, real_ppo = paired.regret_estimate, paired.generator_rewards, tr.ppo_update
+    real_estimate, real_rewards, real_ppo = paired.regret_estimate, paired.generator_rewards, lrn.ppo_update
 
     def estimate(*args, **kwargs):
         regret = real_estimate(*args, **kwargs)
@@ -152,7 +153,7 @@ def generator_sequence():
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(paired, "regret_estimate", estimate)
         mp.setattr(paired, "generator_rewards", rewards)
-        mp.setattr(tr, "ppo_update", ppo_update)
+        mp.setattr(lrn, "ppo_update", ppo_update)
         cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=3, steps_per_buffer=2))
         setup = tr.make_setup(TASK, cfg, "remidi-paired")
         runners = [tr.init_runner(setup, jax.random.PRNGKey(0))]
@@ -175,7 +176,7 @@ def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist(generator
     for runner, k in ((r2, 0), (r4, 1)):
         assert int(runner.adversary.active) == k + 1 and int(runner.adversary.count) == 0 and int(runner.adversary.generator.step) == 0
         assert same(runner.adversary.generator.params, fresh[k])
-    assert int(r3.active) == 1 and not same(r3.generator.params, fresh[0])  # the first fresh one learnt
+    assert int(r3.adversary.active) == 1 and not same(r3.adversary.generator.params, fresh[0])  # the first fresh one learnt
     # the antagonist is one for all generators: it kept learning across both switches
     for before, after in ((r1, r2), (r3, r4)):
         assert not same(after.adversary.antagonist.params, before.adversary.antagonist.params)
@@ -341,8 +342,8 @@ def _reservoir(batches):
     def keep(runner, level_ids, rng):
         levels = LeverLevel(correct=(level_ids % 64).astype(jnp.int32), visible=level_ids < 64)
         proposal = Proposal(replay=jnp.asarray(False), levels=levels, buffer=None, slots=None, train=jnp.asarray(True))
-        changed, _ = seq._keep(setup, runner, proposal, rng)
-        return runner.replace(**changed)
+        state, _ = seq._keep(setup, runner.adversary, proposal, rng)
+        return runner.replace(adversary=state)
 
     runner, keys = tr.init_runner(setup, jax.random.PRNGKey(0)), []
     for u, ids in enumerate(batches):

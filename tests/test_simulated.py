@@ -274,8 +274,8 @@ def test_a_simulated_run_calibrates_at_each_switch_and_resumes_to_the_uninterrup
     full = assert_resumes_to_the_uninterrupted_result(
         monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path, at=12)
     with np.load(next((tmp_path / "full").rglob("checkpoint.npz"))) as data:
-        threshold = data[next(n for n in data.files if n.endswith(".belief.threshold"))]  # [seed, buffer, bucket]
-        counts = data[next(n for n in data.files if n.endswith(".belief.counts"))]
+        threshold = data[next(n for n in data.files if n.endswith(".tracker.threshold"))]  # [seed, buffer, bucket]
+        counts = data[next(n for n in data.files if n.endswith(".tracker.counts"))]
     assert np.isfinite(threshold[:, :-1]).all() and np.isinf(threshold[:, -1]).all()
     assert counts.sum() == 24 * 8 * 4 * counts.shape[1]  # every update's triples: T·N·(E + 1) each
     for name in ("belief/explained", "belief/exact_explained", "belief/agreement"):

@@ -39,8 +39,8 @@ import jax.numpy as jnp
 from flax import struct
 
 from remidi import run_ued
-from remidi.engine.buffer import BufferConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.config import BufferConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.errors import RemidiError

@@ -3,8 +3,8 @@
     python examples/my_algorithm.py OUT_DIR [--updates 20]
 
 ``remidi.register_algorithm(name, adversary, score=..., description=...)`` names a combination
-of the engine's adversaries (``remidi.engine.adversary``: ``RandomLevels``, ``LevelBuffers``,
-``EditingBuffers``; ``remidi.engine.paired``: ``LevelGenerator``, ``GeneratorSequence``) and
+of the engine's adversaries (``remidi.engine.adversaries.base``: ``RandomLevels``, ``LevelBuffers``,
+``EditingBuffers``; ``remidi.engine.adversaries.paired``: ``LevelGenerator``, ``GeneratorSequence``) and
 optionally the score it always ranks levels by. Every UED experiment then accepts it: ``remidi
 run lever --algo plr-classic``, ``remidi list`` shows it, ``remidi.run_ued`` takes its name.
 Two here:
@@ -30,7 +30,7 @@ import sys
 from pathlib import Path
 
 import remidi
-from remidi.engine.adversary import LevelBuffers
+from remidi.engine.adversaries.plr import LevelBuffers
 
 # at import: the command line imports the module named by REMIDI_PLUGINS before it reads its arguments
 remidi.register_algorithm("plr-classic", LevelBuffers(trains_on_fresh=True),

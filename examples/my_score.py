@@ -31,7 +31,7 @@ from pathlib import Path
 import jax.numpy as jnp
 
 import remidi
-from remidi.engine.scores import ScoreInputs, episode_mean
+from remidi.engine.adversaries.scores import ScoreInputs, episode_mean
 
 
 def abs_gae(x: ScoreInputs):

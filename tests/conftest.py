@@ -287,7 +287,7 @@ def restore_registries():
     """Algorithms and scores registered by a test (remidi.register_algorithm / register_score, an
     example loaded in-process) are removed again when it ends, so other tests see the library's."""
     from remidi.engine.algorithms import ALGORITHMS
-    from remidi.engine.scores import SCORES
+    from remidi.engine.adversaries.scores import SCORES
 
     saved = dict(ALGORITHMS), dict(SCORES)
     yield

@@ -25,7 +25,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 from test_ued_engine import TASK, TINY  # noqa: E402
 
-from remidi.engine import driver  # noqa: E402
+from remidi.engine.run import driver  # noqa: E402
 from remidi.envs.maze import maze_task  # noqa: E402
 from remidi.experiments.maze import paper_config as maze_paper_config  # noqa: E402
 

@@ -9,9 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine import buffer as buf
+from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine import train as tr
-from remidi.engine.validation import validate_ued_config
+from remidi.engine.run.validation import validate_ued_config
 from remidi.envs.brax import BraxLevel, BraxUED, seed_data
 from remidi.envs.maze import maze_task, mutate_maze
 from remidi.envs.maze_levels import _tmaze_layout
@@ -133,12 +133,12 @@ def test_the_update_after_a_replay_edits_its_levels_and_inserts_them_without_tra
         seen.append((float(metrics["replay"]), float(metrics["edit"])))
         if metrics["edit"]:
             # edited, not trained: the parameters are those of the update before
-            for a, b in zip(jax.tree.leaves(before.train_state.params), jax.tree.leaves(runner.train_state.params)):
+            for a, b in zip(jax.tree.leaves(before.learner.train_state.params), jax.tree.leaves(runner.learner.train_state.params)):
                 np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
             assert float(metrics["trained_fraction_masked"]) == 0
             inserted_by_edits += float(metrics["inserted"])
         if metrics["replay"]:
-            assert bool(runner.edit_next)
+            assert bool(runner.adversary.edit_next)
     # fresh levels until the buffer can replay, then replay and edit alternate
     assert (1.0, 0.0) in seen and (0.0, 1.0) in seen and inserted_by_edits > 0
     for (r0, _), (_, e1) in zip(seen, seen[1:]):
@@ -154,15 +154,16 @@ def test_remidi_over_accel_rejects_edits_a_frozen_buffer_explains():
     n, cap = cfg.num_envs, cfg.remidi.buffer_capacity
     hidden = TASK.env.all_levels(False)
     frozen = jax.tree.map(lambda x: x[:cap], hidden)
-    bufs = runner.buffers
+    bufs = runner.adversary.buffers
     levels = jax.tree.map(lambda b, f: b.at[0].set(f), bufs.levels, frozen)
     bufs = bufs.replace(levels=levels, valid=bufs.valid.at[0].set(True))
-    runner = runner.replace(buffers=bufs, active=jnp.asarray(1, jnp.int32), edit_next=jnp.asarray(True),
-                            last_replayed=jax.tree.map(lambda x: x[cap:cap + n], hidden))
+    runner = runner.replace(adversary=runner.adversary.replace(
+        buffers=bufs, active=jnp.asarray(1, jnp.int32), edit_next=jnp.asarray(True),
+        last_replayed=jax.tree.map(lambda x: x[cap:cap + n], hidden)))
     runner, metrics = _jitted_step(setup)(runner)
     assert float(metrics["edit"]) == 1 and float(metrics["replay"]) == 0
     assert float(metrics["rejected"]) == n and float(metrics["inserted"]) == 0
-    assert not bool(buf.select_buffer(runner.buffers, 1).valid.any())
+    assert not bool(buf.select_buffer(runner.adversary.buffers, 1).valid.any())
 
 
 def test_accel_needs_a_mutator_and_easy_start_an_easy_generator():

@@ -1,4 +1,4 @@
-"""The learned belief model (:mod:`remidi.engine.belief`): it learns a deterministic
+"""The learned belief model (:mod:`remidi.engine.trackers.belief`): it learns a deterministic
 sequence, its calibrated threshold gives the stated false-distinguishable rate on held-out
 trajectories, its tracker agrees with the exact tracker on the (deterministic) lever game, and on
 the noisy lever game it explains fresh hidden levels that the exact tracker cannot."""
@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 
 from conftest import optimizing
-from remidi.engine import belief as bl
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import ExactTracker
+from remidi.engine.trackers import belief as bl
+from remidi.engine.trackers import belief_model as bm
+from remidi.engine.trackers import calibration as cal
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.lever import LeverLevel, lever_task
 from remidi.envs.noisy import SeededLevel, draw_seed, noisy_lever_task
 
@@ -26,9 +29,9 @@ FALSE_RATE = 0.05
 def fit(model, params, obs, action, reset, steps, lr=1e-2):
     """``steps`` full-batch updates (one jitted scan, compiled with XLA's optimisations: it runs
     long enough to pay for them); returns ``(params, losses f32[steps])``."""
-    opt = bl.make_optimizer(lr)
+    opt = bm.make_optimizer(lr)
     with optimizing():
-        params, _, losses = jax.jit(lambda p: bl.fit_steps(model, opt, p, opt.init(p), obs, action, reset, steps))(params)
+        params, _, losses = jax.jit(lambda p: bm.fit_steps(model, opt, p, opt.init(p), obs, action, reset, steps))(params)
     return params, losses
 
 
@@ -36,7 +39,7 @@ def fit(model, params, obs, action, reset, steps, lr=1e-2):
 def test_coding_reads_the_lever_and_the_maze():
     task = lever_task(LEVERS)
     obs = task.env.observation(LeverLevel(correct=jnp.asarray(3), visible=jnp.asarray(True)))
-    coding = bl.coding_for(obs)
+    coding = bm.coding_for(obs)
     assert (coding.num_entries, coding.num_categories) == (LEVERS + 1, 2)
     np.testing.assert_array_equal(coding.encode(obs), np.eye(LEVERS + 1, dtype=int)[4])
     np.testing.assert_array_equal(coding.encode(jnp.stack([obs, obs])).shape, (2, LEVERS + 1))
@@ -45,7 +48,7 @@ def test_coding_reads_the_lever_and_the_maze():
     maze = maze_task("maze")
     level = maze.sample_level(jax.random.PRNGKey(0))
     mobs, _ = maze.env.reset_to_level(jax.random.PRNGKey(0), level, maze.params)
-    mcoding = bl.coding_for(mobs)
+    mcoding = bm.coding_for(mobs)
     assert (mcoding.num_entries, mcoding.num_categories) == (5 * 5 * 3 + 1, 11)
     cats = np.asarray(mcoding.encode(mobs))
     np.testing.assert_array_equal(cats[:-1], np.round(np.asarray(mobs.image).reshape(-1) * 10))
@@ -59,14 +62,14 @@ def test_the_model_learns_a_deterministic_sequence():
     obs = jnp.broadcast_to(jnp.concatenate([pattern, pattern])[:, None], (t, n, 6))
     action = jnp.zeros((t, n), jnp.int32)
     reset = jnp.broadcast_to((jnp.arange(t) % 4 == 0)[:, None], (t, n))
-    model = bl.BeliefModel(bl.coding_for(obs[0, 0]), num_actions=2, hidden=16)
+    model = bm.BeliefModel(bm.coding_for(obs[0, 0]), num_actions=2, hidden=16)
     params, losses = fit(model, model.init(jax.random.PRNGKey(0)), obs, action, reset, steps=300, lr=3e-2)
-    ll = bl.step_logliks(model, params, obs, action, reset)
+    ll = bm.step_logliks(model, params, obs, action, reset)
     assert float(losses[0]) > 3.0  # 6 bits at chance: 6·log 2 ≈ 4.2 nats per step
     assert float(jnp.exp(jnp.min(ll))) > 0.95  # every step's observation is near-certain
     # a different second observation is surprising under the learnt model
     odd = obs.at[1].set(pattern[2])
-    assert float(bl.step_logliks(model, params, odd, action, reset)[1, 0]) < -5.0
+    assert float(bm.step_logliks(model, params, odd, action, reset)[1, 0]) < -5.0
 
 
 def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
@@ -74,18 +77,18 @@ def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
     on. The model's continues output does the same: every observation the same, the adversary's episodes
     3 steps long; an episode that goes on to a 4th step is unlikely at that step (and the tracker
     stops explaining it there), its first 3 steps as likely as the adversary's."""
-    coding = bl.coding_for(jnp.array([1.0, 0.0]))
-    model = bl.BeliefModel(coding, num_actions=2, hidden=16)
+    coding = bm.coding_for(jnp.array([1.0, 0.0]))
+    model = bm.BeliefModel(coding, num_actions=2, hidden=16)
     t, n = 12, 8
     obs = jnp.broadcast_to(jnp.array([1.0, 0.0]), (t, n, 2))
     action = jnp.zeros((t, n), jnp.int32)
     reset = jnp.broadcast_to((jnp.arange(t) % 3 == 0)[:, None], (t, n))
     params, _ = fit(model, model.init(jax.random.PRNGKey(0)), obs, action, reset, steps=300, lr=3e-2)
     longer = jnp.zeros((6, 1), bool).at[0].set(True)  # one episode of 6 steps
-    ll = np.asarray(bl.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer)[:, 0])
+    ll = np.asarray(bm.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer)[:, 0])
     assert ll[:3].min() > -0.1 and ll[3] < -4.0
     # a rollout's first step starts what it holds of an episode, marked as a start or not
-    carried = bl.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer.at[0].set(False))[:, 0]
+    carried = bm.step_logliks(model, params, obs[:6, :1], action[:6, :1], longer.at[0].set(False))[:, 0]
     np.testing.assert_allclose(np.asarray(carried), ll, rtol=1e-6)
     beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=jnp.asarray([-1.0]),
                                valid=jnp.ones((1,), bool))
@@ -102,10 +105,10 @@ def test_an_all_masked_batch_gives_no_update():
     obs = jnp.ones((3, 2, 4))
     action = jnp.zeros((3, 2), jnp.int32)
     reset = jnp.zeros((3, 2), bool).at[0].set(True)
-    model = bl.BeliefModel(bl.coding_for(obs[0, 0]), num_actions=2, hidden=8)
+    model = bm.BeliefModel(bm.coding_for(obs[0, 0]), num_actions=2, hidden=8)
     params = model.init(jax.random.PRNGKey(1))
-    opt = bl.make_optimizer()
-    new, _, loss = bl.fit_step(model, opt, params, opt.init(params), obs, action, reset, jnp.zeros((3, 2), bool))
+    opt = bm.make_optimizer()
+    new, _, loss = bm.fit_step(model, opt, params, opt.init(params), obs, action, reset, jnp.zeros((3, 2), bool))
     assert float(loss) == 0.0
     jax.tree.map(lambda a, b: np.testing.assert_array_equal(a, b), new, params)
 
@@ -113,7 +116,7 @@ def test_an_all_masked_batch_gives_no_update():
 def test_prefix_scores_restart_with_each_episode():
     ll = jnp.asarray([[-1.0], [-3.0], [-2.0], [-4.0]])
     reset = jnp.asarray([[True], [False], [True], [False]])
-    np.testing.assert_allclose(bl.prefix_scores(ll, reset)[:, 0], [-1.0, -2.0, -2.0, -3.0])
+    np.testing.assert_allclose(bm.prefix_scores(ll, reset)[:, 0], [-1.0, -2.0, -2.0, -3.0])
 
 
 # ------------------------------------------------------------------------------ calibration
@@ -121,16 +124,16 @@ def test_the_calibration_record_skips_the_untrained_models_first_replay():
     """learn(): the first replay after a switch is fitted on but its (untrained) scores are not
     recorded; from the second on each replay's pre-fit scores are; a replay-less update changes
     nothing; freeze() with fewer than two replays gives +inf (explain nothing)."""
-    from remidi.engine.rollout import Trajectory
+    from remidi.engine.core.rollout import Trajectory
 
-    model = bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
-    opt = bl.make_optimizer()
+    model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bm.make_optimizer()
     t, n = 2, 3
     zeros = jnp.zeros((t, n))
     traj = Trajectory(obs=jnp.ones((t, n, 3)), reset=jnp.ones((t, n), bool), action=jnp.zeros((t, n), jnp.int32),
                       log_prob=zeros, value=zeros, reward=zeros, done=jnp.ones((t, n), bool),
                       indist=jnp.zeros((t, n), bool), overflow=jnp.zeros((t, n), jnp.int32))
-    memory = bl.init_memory(model, opt, 2, 4, t, n, jax.random.PRNGKey(0))
+    memory = bl.init_memory(model, opt, 2, 4, (t, n), jax.random.PRNGKey(0))
     same, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(False))
     assert int(same.fits) == 0 and int(same.written) == 0
     once, _ = bl.learn(model, opt, memory, 0, traj, jnp.asarray(True))
@@ -146,10 +149,10 @@ def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_froze
     """The recorded rollouts' ratios are computed at the freeze by the reference as it is then (the
     one frozen with the model, that will judge), not by the reference of each replay's time; the
     reference learns from fresh rollouts only."""
-    from remidi.engine.rollout import Trajectory
+    from remidi.engine.core.rollout import Trajectory
 
-    model = bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
-    opt = bl.make_optimizer()
+    model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bm.make_optimizer()
     t, n = 2, 3
     zeros = jnp.zeros((t, n))
     obs = jax.random.bernoulli(jax.random.PRNGKey(5), 0.3, (t, n, 3)).astype(jnp.float32)
@@ -157,7 +160,7 @@ def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_froze
                       log_prob=zeros, value=zeros, reward=zeros, done=jnp.ones((t, n), bool),
                       indist=jnp.zeros((t, n), bool), overflow=jnp.zeros((t, n), jnp.int32))
     no, yes = jnp.asarray(False), jnp.asarray(True)
-    memory = bl.init_memory(model, opt, 2, 4, t, n, jax.random.PRNGKey(0), reference=True)
+    memory = bl.init_memory(model, opt, 2, 4, (t, n), jax.random.PRNGKey(0), reference=True)
     ref0 = memory.ref
     memory, _ = bl.learn(model, opt, memory, 0, traj, yes, fresh=no)  # a replay: the model fits, the reference not
     assert all(bool(jnp.array_equal(a, b)) for a, b in zip(jax.tree.leaves(ref0), jax.tree.leaves(memory.ref)))
@@ -165,9 +168,9 @@ def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_froze
     memory, _ = bl.learn(model, opt, memory, 0, traj, no, fresh=yes)  # a fresh update: the reference fits
     assert not all(bool(jnp.array_equal(a, b)) for a, b in zip(jax.tree.leaves(ref0), jax.tree.leaves(memory.ref)))
     frozen = bl.freeze(opt, memory, 0, yes, 0.05, model=model)
-    ref_scores = bl.prefix_scores(bl.step_logliks(model, memory.ref, traj.obs, traj.action, traj.reset), traj.reset)
+    ref_scores = bm.prefix_scores(bm.step_logliks(model, memory.ref, traj.obs, traj.action, traj.reset), traj.reset)
     valid = jnp.broadcast_to((jnp.arange(4) < 1)[:, None, None], memory.scores.shape)
-    expected = bl.calibrate_monotone(memory.scores - ref_scores[None], memory.lengths, 0.05,
+    expected = cal.calibrate_monotone(memory.scores - ref_scores[None], memory.lengths, 0.05,
                                      memory.threshold.shape[1], valid)
     np.testing.assert_allclose(frozen.threshold[0], expected, rtol=1e-6)
     assert all(bool(jnp.array_equal(a[0], b)) for a, b in zip(jax.tree.leaves(frozen.ref_frozen),
@@ -176,10 +179,10 @@ def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_froze
 
 def test_calibrate_is_the_lower_quantile():
     scores = jnp.arange(100.0)
-    assert float(bl.calibrate(scores, 0.05, slack=0.0)) == 5.0  # 5 of 100 lie strictly below
+    assert float(cal.calibrate(scores, 0.05, slack=0.0)) == 5.0  # 5 of 100 lie strictly below
     valid = jnp.arange(100) >= 50
-    assert float(bl.calibrate(scores, 0.1, valid, slack=0.0)) == 55.0
-    assert float(bl.calibrate(scores, 0.1, jnp.zeros(100, bool))) == np.inf
+    assert float(cal.calibrate(scores, 0.1, valid, slack=0.0)) == 55.0
+    assert float(cal.calibrate(scores, 0.1, jnp.zeros(100, bool))) == np.inf
 
 
 def bits(key, n, t, probs):
@@ -191,23 +194,23 @@ def test_thresholds_per_prefix_length_bucket():
     """Short prefixes spread wider than long ones: each length bucket (1, 2–3, 4–7, ...) gets its
     own lower quantile; an empty bucket takes the pooled one; the tracker reads the bucket of each
     env's prefix length; prefix_lengths counts within episodes."""
-    np.testing.assert_array_equal(bl.prefix_lengths(jnp.array([[1], [0], [0], [1], [0]], bool))[:, 0], [1, 2, 3, 1, 2])
-    assert bl.num_length_buckets(1) == 1 and bl.num_length_buckets(256) == 9
-    np.testing.assert_array_equal(bl.length_bucket(jnp.array([1, 2, 3, 4, 7, 8, 300]), 4), [0, 1, 1, 2, 2, 3, 3])
+    np.testing.assert_array_equal(bm.prefix_lengths(jnp.array([[1], [0], [0], [1], [0]], bool))[:, 0], [1, 2, 3, 1, 2])
+    assert cal.num_length_buckets(1) == 1 and cal.num_length_buckets(256) == 9
+    np.testing.assert_array_equal(cal.length_bucket(jnp.array([1, 2, 3, 4, 7, 8, 300]), 4), [0, 1, 1, 2, 2, 3, 3])
     rng = np.random.default_rng(0)
     lengths = np.repeat([1, 2, 5], 1000)
     scores = np.concatenate([rng.normal(-20, 5, 1000), rng.normal(-10, 2, 1000), rng.normal(-5, 0.5, 1000)])
-    tau = np.asarray(bl.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
+    tau = np.asarray(cal.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
     for b, (lo, hi) in enumerate([(0, 1000), (1000, 2000), (2000, 3000)]):
         assert np.mean(scores[lo:hi] < tau[b]) == pytest.approx(0.05, abs=0.002)
     assert tau[3] == tau[2]  # no prefix of 8+ steps: the bucket below's threshold
     assert tau[0] < tau[1] < tau[2]
     # a bucket with fewer prefixes than 1/α takes the one below; the first one the pooled threshold
-    few = np.asarray(bl.calibrate_by_length(jnp.asarray([-1.0, -2.0, -3.0] + [-9.0] * 40),
+    few = np.asarray(cal.calibrate_by_length(jnp.asarray([-1.0, -2.0, -3.0] + [-9.0] * 40),
                                             jnp.asarray([1, 1, 1] + [2] * 40), 0.05, 2, slack=0.0))
     assert few[0] == pytest.approx(-9.0) and few[1] == pytest.approx(-9.0)
     # the tracker: one frozen model, a prefix score of -8 passes at length 2 (τ ≈ -13) but not at length 5 (τ ≈ -6)
-    tracker = bl.BeliefTracker(bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
+    tracker = bl.BeliefTracker(bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
     frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(params=None, threshold=jnp.asarray(tau)[None],
                                                                       valid=jnp.array([True])))
     count = jnp.array([2, 5])
@@ -219,7 +222,7 @@ def test_the_judgement_is_monotone_and_calibrated_for_it():
     """A prefix stays distinguishable for the rest of its episode (as realisability does), and
     calibrate_monotone lowers the per-length thresholds until at most α of held-out prefixes
     have a shorter prefix below its threshold."""
-    tracker = bl.BeliefTracker(bl.BeliefModel(bl.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
+    tracker = bl.BeliefTracker(bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (1,)), num_actions=1, hidden=2))
     state = bl.BeliefState(hidden=jnp.zeros((1, 1, 2)), total=jnp.zeros((1, 1)), count=jnp.ones((1,), jnp.int32),
                            last=jnp.zeros((1, 1), jnp.int32), match=jnp.array([[False]]))
     frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(
@@ -236,11 +239,11 @@ def test_the_judgement_is_monotone_and_calibrated_for_it():
     steps = rng.normal(-5, 2, (1, 8, 400))
     scores = np.cumsum(steps, axis=1) / np.arange(1, 9)[None, :, None]
     lengths = np.broadcast_to(np.arange(1, 9)[None, :, None], scores.shape)
-    tau = np.asarray(bl.calibrate_monotone(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4))  # 1e-3: rounding
-    below = scores < tau[np.asarray(bl.length_bucket(jnp.asarray(lengths), 4))]
+    tau = np.asarray(cal.calibrate_monotone(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4))  # 1e-3: rounding
+    below = scores < tau[np.asarray(cal.length_bucket(jnp.asarray(lengths), 4))]
     flagged = np.maximum.accumulate(below, axis=1)  # some prefix so far below its threshold
     assert np.mean(flagged) <= 0.05 + 1e-9 and np.mean(flagged) > 0.03
-    per_bucket = np.asarray(bl.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
+    per_bucket = np.asarray(cal.calibrate_by_length(jnp.asarray(scores), jnp.asarray(lengths), 0.05, 4, slack=0.0))
     assert (tau <= per_bucket + 1e-6).all() and (tau < per_bucket).any()  # lowered for the monotone rule
 
 
@@ -252,14 +255,14 @@ def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
     action = jnp.zeros((t, n), jnp.int32)
     reset = jnp.broadcast_to((jnp.arange(t) % 3 == 0)[:, None], (t, n))
     train, held, test = (bits(jax.random.PRNGKey(i), n, t, probs) for i in range(3))
-    model = bl.BeliefModel(bl.coding_for(train[0, 0]), num_actions=2, hidden=16)
+    model = bm.BeliefModel(bm.coding_for(train[0, 0]), num_actions=2, hidden=16)
     params, _ = fit(model, model.init(jax.random.PRNGKey(0)), train, action, reset, steps=150)
 
     @jax.jit  # one program (eager, its scan is traced again on every call)
     def scores(obs):
-        return bl.prefix_scores(bl.step_logliks(model, params, obs, action, reset), reset)
+        return bm.prefix_scores(bm.step_logliks(model, params, obs, action, reset), reset)
 
-    tau = bl.calibrate(scores(held), FALSE_RATE)
+    tau = cal.calibrate(scores(held), FALSE_RATE)
     rate = float(jnp.mean(scores(test) < tau))
     # 3072 prefixes (512 independent episodes of 3): a few standard errors around the stated rate
     assert abs(rate - FALSE_RATE) < 0.025, rate
@@ -267,14 +270,14 @@ def test_calibration_gives_the_stated_false_rate_on_held_out_trajectories():
     assert float(jnp.mean(scores(other) < tau)) > 0.9
     # the rule training uses (freeze): thresholds per prefix length, lowered for the episode-long
     # judgement (a prefix is distinguishable once it or a shorter one fell below its threshold)
-    lengths = bl.prefix_lengths(reset)
-    buckets = bl.num_length_buckets(3)
-    tau_m = bl.calibrate_monotone(scores(held)[None], lengths[None], FALSE_RATE, buckets)
+    lengths = bm.prefix_lengths(reset)
+    buckets = cal.num_length_buckets(3)
+    tau_m = cal.calibrate_monotone(scores(held)[None], lengths[None], FALSE_RATE, buckets)
     assert tau_m.shape == (buckets,)
 
     @jax.jit
     def flagged(obs):
-        return bl.episode_minimum(scores(obs) - tau_m[bl.length_bucket(lengths, buckets)], lengths) < 0
+        return cal.episode_minimum(scores(obs) - tau_m[cal.length_bucket(lengths, buckets)], lengths) < 0
 
     rate = float(jnp.mean(flagged(test)))
     assert abs(rate - FALSE_RATE) < 0.025, rate
@@ -290,9 +293,9 @@ def uniform_policy(variables, carry, obs, reset):
 def _rollout_program(task, steps):
     """One jitted rollout per (task, steps): called eagerly, its scan would be traced, lowered and
     loaded again on every call."""
-    return jax.jit(lambda levels, key, frozen: rollout(key, task.env, task.params, uniform_policy, {}, jnp.zeros(1),
-                                                       levels, steps, frozen,
-                                                       deterministic_reset=task.deterministic_reset)[0])
+    return jax.jit(lambda levels, key, frozen: rollout(
+        key, Stepping(task.env, task.params, task.deterministic_reset), Policy(uniform_policy, {}, jnp.zeros(1)),
+        levels, steps, frozen)[0])
 
 
 def roll(task, levels, steps, key, frozen=None):
@@ -310,15 +313,15 @@ def learn_adversary(task, buffer, hidden=16, steps=200, n=256, t=4):
     rollout sample and calibrated on another as training does (thresholds per prefix length for the
     episode-long judgement): ``(tracker, FrozenBeliefs with one model)``."""
     example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)
-    model = bl.BeliefModel(bl.coding_for(example), num_actions=task.num_actions, hidden=hidden)
+    model = bm.BeliefModel(bm.coding_for(example), num_actions=task.num_actions, hidden=hidden)
     data = roll(task, from_buffer(buffer, jax.random.PRNGKey(1), n), t, jax.random.PRNGKey(2))
     params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=steps)
     held = roll(task, from_buffer(buffer, jax.random.PRNGKey(4), n), t, jax.random.PRNGKey(5))
-    ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
+    ll = bm.step_logliks(model, params, held.obs, held.action, held.reset)
     # as training calibrates (freeze): per prefix length, for the episode-long judgement
-    lengths = bl.prefix_lengths(held.reset)
-    tau = bl.calibrate_monotone(bl.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE,
-                                bl.num_length_buckets(task.max_episode_steps))
+    lengths = bm.prefix_lengths(held.reset)
+    tau = cal.calibrate_monotone(bm.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE,
+                                cal.num_length_buckets(task.max_episode_steps))
     frozen = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                               valid=jnp.ones((1,), bool))
     return bl.BeliefTracker(model), frozen
@@ -377,8 +380,8 @@ def test_on_the_noisy_lever_game_the_belief_tracker_explains_fresh_hidden_levels
 @pytest.mark.parametrize("done", [False, True])
 def test_the_tracker_restarts_the_episode_when_it_ends(done):
     # one model, one env: the per-step advance equals the batch computation on the same steps
-    coding = bl.ObsCoding(scales=(1.0,), categories=(2,), sizes=(3,))
-    model = bl.BeliefModel(coding, num_actions=2, hidden=4)
+    coding = bm.ObsCoding(scales=(1.0,), categories=(2,), sizes=(3,))
+    model = bm.BeliefModel(coding, num_actions=2, hidden=4)
     params = model.init(jax.random.PRNGKey(0))
     beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=jnp.asarray([-1e9]),
                                valid=jnp.ones((1,), bool))
@@ -389,7 +392,7 @@ def test_the_tracker_restarts_the_episode_when_it_ends(done):
     reset = jnp.asarray([[True], [done]])
     state = tracker.start(None, None, frozen, jnp.zeros((1, 2), jnp.uint32), obs[0])
     state = tracker.advance(None, None, frozen, None, state, action[0], obs[1], reset[1])
-    batch = bl.prefix_scores(bl.step_logliks(model, params, obs, action, reset), reset)
+    batch = bm.prefix_scores(bm.step_logliks(model, params, obs, action, reset), reset)
     np.testing.assert_allclose(state.total[0, 0] / state.count[0], batch[1, 0], rtol=1e-5)
     assert bool(tracker.explained(state)[0])
 
@@ -408,9 +411,9 @@ def test_a_belief_run_keeps_its_models_in_the_checkpoint_and_calibrates_at_the_s
     assert main(["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", "--out", str(out), *TINY]) == 0
     ckpt = next(out.rglob("checkpoint.npz"))
     with np.load(ckpt) as data:
-        names = [n for n in data.files if ".belief." in n]
-        threshold = data[next(n for n in names if n.endswith(".belief.threshold"))]
-    assert any(n.endswith(".belief.params['wx']") for n in names)
+        names = [n for n in data.files if ".tracker." in n]
+        threshold = data[next(n for n in names if n.endswith(".tracker.threshold"))]
+    assert any(n.endswith(".tracker.params['wx']") for n in names)
     import json
 
     metrics = json.loads((out / "summary.json").read_text())["metrics"]
@@ -442,22 +445,22 @@ def test_remidi_over_paired_learns_a_model_of_each_generator_and_freezes_it_at_t
     setup = tr.make_setup(noisy_lever_task(LEVERS), cfg, "remidi-paired")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     step = jax.jit(lambda r: tr.train_step(setup, r))
-    params0 = runner.belief.params
+    params0 = runner.tracker.params
     for update in (1, 2):
         runner, metrics = step(runner)
-        assert int(runner.belief.fits) == update and np.isfinite(float(metrics["belief/loss"]))
-        assert not bool(jnp.any(runner.belief.threshold[0] < jnp.inf))  # not frozen yet: explains nothing
-    assert int(runner.belief.written) == 1  # the first update's scores were the untrained model's: not recorded
+        assert int(runner.tracker.fits) == update and np.isfinite(float(metrics["belief/loss"]))
+        assert not bool(jnp.any(runner.tracker.threshold[0] < jnp.inf))  # not frozen yet: explains nothing
+    assert int(runner.tracker.written) == 1  # the first update's scores were the untrained model's: not recorded
     changed = lambda a, b: not all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))  # noqa: E731
-    assert changed(jax.tree.map(lambda x: x[0], runner.belief.params), jax.tree.map(lambda x: x[0], params0))
-    assert not changed(jax.tree.map(lambda x: x[1], runner.belief.params), jax.tree.map(lambda x: x[1], params0))
+    assert changed(jax.tree.map(lambda x: x[0], runner.tracker.params), jax.tree.map(lambda x: x[0], params0))
+    assert not changed(jax.tree.map(lambda x: x[1], runner.tracker.params), jax.tree.map(lambda x: x[1], params0))
     runner, _ = step(runner)  # the third update: the switch
-    assert int(runner.active) == 1 and int(runner.belief.fits) == 0 and int(runner.belief.written) == 0
-    assert bool(jnp.all(jnp.isfinite(runner.belief.threshold[0]))) and bool(jnp.all(jnp.isinf(runner.belief.threshold[1])))
-    frozen0 = jax.tree.map(lambda x: x[0], runner.belief.params)
+    assert int(runner.adversary.active) == 1 and int(runner.tracker.fits) == 0 and int(runner.tracker.written) == 0
+    assert bool(jnp.all(jnp.isfinite(runner.tracker.threshold[0]))) and bool(jnp.all(jnp.isinf(runner.tracker.threshold[1])))
+    frozen0 = jax.tree.map(lambda x: x[0], runner.tracker.params)
     runner, metrics = step(runner)  # the next generator's model learns; the frozen one stays as it was
-    assert int(runner.belief.fits) == 1 and not changed(jax.tree.map(lambda x: x[0], runner.belief.params), frozen0)
-    assert setup.algo.adversary.frozen(setup, runner).belief is not None
+    assert int(runner.tracker.fits) == 1 and not changed(jax.tree.map(lambda x: x[0], runner.tracker.params), frozen0)
+    assert setup.tracker.frozen(setup, runner).belief is not None
 
 
 @pytest.mark.parametrize("extra, needle", [
@@ -492,7 +495,7 @@ def test_a_task_whose_observations_the_model_cannot_read_is_refused(tmp_path, ca
 
     for task in (lever_task(LEVERS), maze_task("tmaze")):
         obs, _ = task.env.reset_to_level(jax.random.PRNGKey(0), task.sample_level(jax.random.PRNGKey(0)), task.params)
-        assert bl.coding_problem(bl.coding_for(obs), obs) is None
+        assert bm.coding_problem(bm.coding_for(obs), obs) is None
 
 
 @pytest.mark.slow  # one end-to-end smoke run, shortened to 150 updates (≈ 15 s on a 2-core CPU)
@@ -534,16 +537,16 @@ def test_an_interrupted_belief_run_resumes_to_the_uninterrupted_result(tmp_path,
 
 # ------------------------------------------------------------------------------ the audit
 def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_same_rollout():
-    """``belief/*`` evaluation metrics (engine/evaluation.py ``tracker_audit``): a frozen model
+    """``belief/*`` evaluation metrics (engine/run/evaluation.py ``tracker_audit``): a frozen model
     with threshold −inf explains every step (agreement = the exact tracker's explained share),
     one with +inf none (agreement = 1 − that share); NaN while nothing is frozen; the exact
     tracker's share is the one a plain ReMiDi run's tracker gives on the same levels and key.
     (Both thresholds in one test: the second runs the first's jitted programs.)"""
     import dataclasses
 
-    from remidi.engine import evaluation
+    from remidi.engine.run import evaluation
     from remidi.engine import train as tr
-    from remidi.engine.adversary import earlier_buffers
+    from remidi.engine.learner import collect as collect_
 
     from test_ued_engine import TASK, TINY
 
@@ -552,12 +555,12 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     setup = tr.make_setup(TASK, cfg, "remidi")
     plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")
     audit = jax.jit(evaluation.tracker_audit, static_argnums=0)
-    collect = jax.jit(lambda setup_, runner, key, levels, frozen: tr.collect(setup_, runner, key, levels, frozen)[0],
+    collect = jax.jit(lambda setup_, runner, key, levels, frozen: collect_(setup_, runner.learner, key, levels, frozen)[0],
                       static_argnums=0)
     runner0 = tr.init_runner(setup, jax.random.PRNGKey(0))
     assert all(np.isnan(float(v)) for v in audit(setup, runner0, jax.random.PRNGKey(1)).values())
     # buffer 0 frozen full of the task's levels (the lever game: many fresh levels repeat one of them)
-    bufs = runner0.buffers
+    bufs = runner0.adversary.buffers
     c = bufs.valid.shape[1]
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(2), c))
     bufs = bufs.replace(levels=jax.tree.map(lambda all_, x: all_.at[0].set(x), bufs.levels, levels),
@@ -567,14 +570,15 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     hidden = np.asarray(jax.vmap(TASK.level_tags)(fresh)["hidden"])
     assert 0 < hidden.sum() < hidden.size
     for threshold in (-jnp.inf, jnp.inf):
-        belief = runner0.belief.replace(threshold=runner0.belief.threshold.at[0].set(threshold))  # every length
-        runner = runner0.replace(buffers=bufs, active=jnp.asarray(1, runner0.active.dtype), belief=belief)
+        belief = runner0.tracker.replace(threshold=runner0.tracker.threshold.at[0].set(threshold))  # every length
+        runner = runner0.replace(adversary=runner0.adversary.replace(
+            buffers=bufs, active=jnp.asarray(1, runner0.adversary.active.dtype)), tracker=belief)
         out = {k: float(v) for k, v in audit(setup, runner, jax.random.PRNGKey(1)).items()}
-        exact = collect(plain, runner.replace(belief=None), k_roll, fresh,
-                        earlier_buffers(plain, runner.replace(belief=None))).indist
+        exact = collect(plain, runner.replace(tracker=None), k_roll, fresh,
+                        plain.tracker.frozen(plain, runner.replace(tracker=None))).indist
         share = float(np.mean(np.asarray(exact)))
         # the audit's two rollouts (belief-judged and exact-judged) are the same steps
-        frozen = earlier_buffers(setup, runner).replace(params=None)
+        frozen = setup.tracker.frozen(setup, runner).replace(params=None)
         one = collect(setup, runner, k_roll, fresh, frozen)
         two = collect(setup, runner, k_roll, fresh, frozen.replace(belief=None, tracker=ExactTracker()))
         for a, b in ((one.action, two.action), (one.done, two.done), (one.obs, two.obs)):
@@ -593,7 +597,7 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
 def test_the_coding_keeps_each_leafs_own_dims():
     """A leaf whose observation has a unit dim (shape (1, 5)) reads as 5 entries whatever the batch."""
     obs = {"a": jnp.zeros((1, 5)), "b": jnp.ones((3,))}
-    coding = bl.coding_for(obs)
+    coding = bm.coding_for(obs)
     assert coding.num_entries == 8
     batch = jax.tree.map(lambda x: jnp.stack([x] * 4), obs)
     np.testing.assert_array_equal(np.asarray(coding.encode(batch)), np.array([[0] * 5 + [1] * 3] * 4))
@@ -604,7 +608,7 @@ def test_a_learned_generator_refuses_counting_replays():
     sequence (nor freeze a model), so it is refused in one line; buffers may count replays."""
     import dataclasses
 
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.run.validation import validate_ued_config
     from remidi.errors import ConfigError
     from test_ued_engine import TASK, TINY as CFG
 
@@ -620,7 +624,9 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
     every view equally likely under a blind level, an ordinary maze's included, so the likelihood
     alone explains ordinary mazes (and, with the noise drawn afresh, everything); the ratio over a
     model of the generator's levels explains fresh blind levels and not fresh ordinary mazes."""
-    from remidi.engine import belief as bl
+    from remidi.engine.trackers import belief as bl
+    from remidi.engine.trackers import belief_model as bm
+    from remidi.engine.trackers import calibration as cal
     from remidi.envs.noisy import noisy_blindfold_task
 
     task, t, n, c = noisy_blindfold_task(0.5, 25), 12, 64, 20
@@ -631,8 +637,8 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
 
     @jax.jit  # one program per rollout (three: without frozen beliefs, with the likelihood's, the ratio's)
     def play(levels, key, frozen=None):
-        return rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels, t, frozen,
-                       deterministic_reset=task.deterministic_reset)[0]
+        return rollout(key, Stepping(task.env, task.params, task.deterministic_reset),
+                       Policy(policy, {}, jnp.zeros(1)), levels, t, frozen)[0]
 
     sample = jax.jit(jax.vmap(task.sample_level))  # one program, not the generator's operations one by one
     pool = sample(jax.random.split(jax.random.PRNGKey(0), 400))
@@ -647,7 +653,7 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
         return jax.vmap(task.reseed_level)(jax.random.split(k2, n), levels)
 
     example = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)[0]
-    model = bl.BeliefModel(bl.coding_for(example), num_actions=actions, hidden=32)
+    model = bm.BeliefModel(bm.coding_for(example), num_actions=actions, hidden=32)
     data = play(replays(jax.random.PRNGKey(1)), jax.random.PRNGKey(2))
     gen = play(sample(jax.random.split(jax.random.PRNGKey(4), n)), jax.random.PRNGKey(5))
     params, _ = fit(model, model.init(jax.random.PRNGKey(3)), data.obs, data.action, data.reset, steps=100)
@@ -655,13 +661,13 @@ def test_with_fresh_noise_the_ratio_over_the_generator_explains_blind_levels_and
     held = play(replays(jax.random.PRNGKey(7)), jax.random.PRNGKey(8))
     fresh = sample(jax.random.split(jax.random.PRNGKey(9), n))
     fresh_blind = np.asarray(jax.vmap(lambda level: task.level_tags(level)["blind"])(fresh))
-    lengths, buckets = bl.prefix_lengths(held.reset), bl.num_length_buckets(t)
-    logliks = jax.jit(functools.partial(bl.step_logliks, model))  # one program for both models
+    lengths, buckets = bm.prefix_lengths(held.reset), cal.num_length_buckets(t)
+    logliks = jax.jit(functools.partial(bm.step_logliks, model))  # one program for both models
     ll_model = logliks(params, held.obs, held.action, held.reset)
     explained = {}
     for reference in (None, ref):
         ll = ll_model if reference is None else ll_model - logliks(reference, held.obs, held.action, held.reset)
-        tau = bl.calibrate_monotone(bl.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE, buckets)
+        tau = cal.calibrate_monotone(bm.prefix_scores(ll, held.reset)[None], lengths[None], FALSE_RATE, buckets)
         beliefs = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                                    valid=jnp.ones((1,), bool),
                                    ref=None if reference is None else jax.tree.map(lambda x: x[None], reference))

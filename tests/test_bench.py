@@ -116,6 +116,7 @@ def test_network_flops_match_a_count_by_hand():
 
     from remidi.bench.workloads import network_flops_per_step
     from remidi.engine import train as tr
+    from remidi.engine.setup import example_observation
     from remidi.envs.maze import maze_task
     from remidi.experiments.maze import paper_config
 
@@ -123,7 +124,7 @@ def test_network_flops_match_a_count_by_hand():
     cfg = dataclasses.replace(cfg, num_envs=4, ppo=dataclasses.replace(cfg.ppo, epochs=2))
     task = maze_task("tmaze")
     setup = tr.make_setup(task, cfg, "plr")
-    obs = jax.tree.map(lambda x: x[None, None], tr.example_observation(task)[0])
+    obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
     shapes = jax.eval_shape(setup.net.init, jax.random.PRNGKey(0), setup.net.initialize_carry(1), obs,
                             jnp.zeros((1, 1), bool))
     params = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes["params"])

@@ -1,4 +1,4 @@
-"""Tests for the PLR⊥ level buffer (remidi.engine.buffer)."""
+"""Tests for the PLR⊥ level buffer (remidi.engine.adversaries.level_buffer)."""
 
 import dataclasses
 
@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine import buffer as B
+from remidi.engine.adversaries import level_buffer as B
 from remidi.errors import ConfigError
 
 

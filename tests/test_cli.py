@@ -154,7 +154,7 @@ def assert_resumes_to_the_uninterrupted_result(monkeypatch, base: list, folder, 
     import json
 
     from remidi.cli import main
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.experiments import ued
 
     assert main([*base, "--out", str(folder / "full")]) == 0

@@ -8,10 +8,10 @@ import jax
 import numpy as np
 import pytest
 
-from remidi.engine import driver
-from remidi.engine import evaluation
+from remidi.engine.run import driver
+from remidi.engine.run import evaluation
 from remidi.engine import train as tr
-from remidi.engine.validation import validate_ued_config
+from remidi.engine.run.validation import validate_ued_config
 from remidi.errors import ConfigError
 from test_ued_engine import TASK, TINY  # the task object too: programs are cached per task object
 
@@ -38,18 +38,18 @@ def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
     # 20 updates (the switch happens after 8) in blocks of TINY's eval_every: the programs of
     # tests/test_engine_reference.py's remidi and remidi-combine runs, compiled once for both files
     runner = run(setup, runner, 20)
-    assert np.asarray(runner.active).tolist() == [1, 1]
+    assert np.asarray(runner.adversary.active).tolist() == [1, 1]
     # the first buffer (plain PLR⊥) holds hidden levels: the hidden observation is realisable under it
-    assert (~np.asarray(runner.buffers.levels.visible[:, 0]) & np.asarray(runner.buffers.valid[:, 0])).any(axis=1).all()
-    before, params_before = hidden_policy(setup, runner), runner.train_state.params
+    assert (~np.asarray(runner.adversary.buffers.levels.visible[:, 0]) & np.asarray(runner.adversary.buffers.valid[:, 0])).any(axis=1).all()
+    before, params_before = hidden_policy(setup, runner), runner.learner.train_state.params
     runner = run(setup, runner, 20)
     after = hidden_policy(setup, runner)
     moved = max(float(np.abs(a - b).max()) for a, b in zip(jax.tree.leaves(params_before),
-                                                           jax.tree.leaves(runner.train_state.params)))
+                                                           jax.tree.leaves(runner.learner.train_state.params)))
     assert moved > 0  # the current policy trained on
     if policy == "combine":
         np.testing.assert_array_equal(after, before)  # bit-identical where the earlier buffer acts
-        frozen = jax.tree.map(lambda x: x[:, 0], runner.frozen_params)
+        frozen = jax.tree.map(lambda x: x[:, 0], runner.learner.frozen_params)
         np.testing.assert_array_equal(np.asarray(jax.tree.leaves(frozen)[0]).shape[0], 2)
     else:
         assert np.abs(after - before).max() > 1e-6  # masking alone does not freeze the shared weights
@@ -74,15 +74,15 @@ def test_with_the_belief_tracker_a_frozen_policy_acts_where_its_buffers_model_ex
     setup = tr.make_setup(TASK, cfg, "remidi")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     # a different policy, frozen: another initialisation, scaled so that it is far from uniform
-    other = jax.tree.map(lambda x: 10 * x, tr.init_runner(setup, jax.random.PRNGKey(1)).train_state.params)
-    belief = runner.belief.replace(threshold=runner.belief.threshold.at[0].set(threshold))
-    runner = runner.replace(active=jax.numpy.asarray(1), belief=belief,
-                            frozen_params=jax.tree.map(lambda x: x[None], other))
+    other = jax.tree.map(lambda x: 10 * x, tr.init_runner(setup, jax.random.PRNGKey(1)).learner.train_state.params)
+    belief = runner.tracker.replace(threshold=runner.tracker.threshold.at[0].set(threshold))
+    runner = runner.replace(adversary=runner.adversary.replace(active=jax.numpy.asarray(1)), tracker=belief,
+                            learner=runner.learner.replace(frozen_params=jax.tree.map(lambda x: x[None], other)))
     levels = TASK.eval_sets["hidden"]
     acting = np.asarray(evaluation.first_step_policy(setup, runner, TASK.env, levels))
     single = tr.make_setup(TASK, R(cfg, remidi=R(cfg.remidi, policy="masked")), "remidi")  # one policy acts
     frozen = np.asarray(evaluation.first_step_policy(
-        single, runner.replace(train_state=runner.train_state.replace(params=other)), TASK.env, levels))
+        single, runner.replace(learner=runner.learner.replace(train_state=runner.learner.train_state.replace(params=other))), TASK.env, levels))
     current = np.asarray(evaluation.first_step_policy(single, runner, TASK.env, levels))
     assert np.abs(frozen - current).max() > 1e-3  # the two policies differ on these levels
     np.testing.assert_allclose(acting, frozen if threshold < 0 else current, rtol=1e-6)

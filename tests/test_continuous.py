@@ -11,13 +11,14 @@ import pytest
 from flax import struct
 from scipy import stats
 
-from remidi.engine import normalize as nrm
+from remidi.engine.core import normalize as nrm
+from remidi.engine import learner as lrn
 from remidi.engine import train as tr
 from remidi.engine.config import ReMiDiConfig, UEDConfig
-from remidi.engine.validation import validate_ued_config
-from remidi.engine.distributions import CATEGORICAL, GAUSSIAN, for_task
-from remidi.engine.networks import make_network
-from remidi.engine.ppo import Batch, PPOConfig, create_train_state, ppo_update
+from remidi.engine.run.validation import validate_ued_config
+from remidi.engine.core.distributions import CATEGORICAL, GAUSSIAN, for_task
+from remidi.engine.core.networks import make_network
+from remidi.engine.core.ppo import Batch, PPOConfig, create_train_state, ppo_update
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
 
 
@@ -164,21 +165,21 @@ TINY = UEDConfig(num_updates=6, num_envs=8, num_steps=4, network="mlp", hidden_s
 # Through the driver, as a run trains: ReMiDi's programs are then the resume test's (one compile).
 @pytest.mark.parametrize("algo", ["dr", "remidi"])
 def test_algorithms_train_on_continuous_actions(algo):
-    from remidi.engine import driver
+    from remidi.engine.run import driver
 
     assert TASK.sample_level(jax.random.PRNGKey(0)).target.shape == (2,)
     result = driver.train_seeds(TASK, TINY, algo, [0], progress=False)
     hist, runner = result.history, result.runner
     runner = jax.tree.map(lambda x: x[0], runner)  # the one seed
-    assert runner.obs_stats.mean.shape == (3,)
+    assert runner.learner.obs_stats.mean.shape == (3,)
     assert all(np.all(np.isfinite(v)) for name, v in hist.items() if not name.startswith("replay_fraction"))
-    assert float(runner.obs_stats.count) == TINY.num_updates * TINY.num_envs * TINY.num_steps
+    assert float(runner.learner.obs_stats.count) == TINY.num_updates * TINY.num_envs * TINY.num_steps
     assert -10 < float(hist["return/shown"][0, -1]) <= 1.0 and np.isfinite(hist["regret/shown/worst"][0, -1])
     rejected = float(hist["rejected"].sum())
     if algo == "remidi":  # the second buffer rejects hidden levels: one frozen hidden level plays them all
-        assert int(runner.active) == 1 and rejected > 0
-        hidden = runner.buffers.valid & runner.buffers.levels.hidden  # [K, C]
-        assert bool(jnp.any(hidden[0])) and not bool(jnp.any(hidden[1])) and bool(jnp.any(runner.buffers.valid[1]))
+        assert int(runner.adversary.active) == 1 and rejected > 0
+        hidden = runner.adversary.buffers.valid & runner.adversary.buffers.levels.hidden  # [K, C]
+        assert bool(jnp.any(hidden[0])) and not bool(jnp.any(hidden[1])) and bool(jnp.any(runner.adversary.buffers.valid[1]))
     else:
         assert rejected == 0
 
@@ -202,16 +203,16 @@ def test_scores_are_in_the_environments_units_whatever_the_reward_scale(score):
     setup = tr.make_setup(TASK, plain, "plr")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(1), TINY.num_envs))
-    traj, adv, _, mean_ret, best_ret = tr.collect(setup, runner, jax.random.PRNGKey(2), levels, None)
+    traj, adv, _, mean_ret, best_ret = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)
     scaled = tr.make_setup(TASK, dataclasses.replace(plain, reward_scale=0.1), "plr")
-    expected = tr.score_rollout(setup, levels, traj, adv, mean_ret, best_ret)
-    got = tr.score_rollout(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
+    expected = lrn.score_rollout(setup, levels, traj, adv, mean_ret, best_ret)
+    got = lrn.score_rollout(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
     np.testing.assert_allclose(got, expected, rtol=1e-5)
     assert np.all(np.isfinite(np.asarray(expected)))
 
 
 def test_observation_statistics_survive_a_resume(tmp_path):
-    from remidi.engine import driver
+    from remidi.engine.run import driver
 
     class Crash(Exception):
         pass
@@ -224,9 +225,10 @@ def test_observation_statistics_survive_a_resume(tmp_path):
     full, runner = result.history, result.runner
     with pytest.raises(Crash):
         driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, progress=False, on_block=crash)
-    second = driver.train_seeds(TASK, TINY, "remidi", [0], out=tmp_path, resume=True, progress=False)
+    second = driver.train_seeds(TASK, TINY, "remidi", [0], out=driver.RunFolder(tmp_path, resume=True),
+                                progress=False)
     resumed, runner_b = second.history, second.runner
-    assert float(runner.obs_stats.count[0]) == TINY.num_updates * TINY.num_envs * TINY.num_steps
+    assert float(runner.learner.obs_stats.count[0]) == TINY.num_updates * TINY.num_envs * TINY.num_steps
     for a, b in zip(jax.tree.leaves(runner), jax.tree.leaves(runner_b)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     for name in full:

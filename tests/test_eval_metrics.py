@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine import evaluation
+from remidi.engine.run import evaluation
 from remidi.engine import train as tr
 from remidi.envs.lever import lever_task
 from remidi.experiments.lever import paper_config
@@ -26,10 +26,11 @@ def evaluate_with():
 
     def run(bias):
         """Evaluate the policy whose logits are ``bias`` f32[64] whatever it observes."""
-        params = jax.tree.map(lambda x: x, runner.train_state.params)
+        params = jax.tree.map(lambda x: x, runner.learner.train_state.params)
         out = params["heads"]["policy_out"]
         params["heads"]["policy_out"] = {"kernel": jnp.zeros_like(out["kernel"]), "bias": jnp.asarray(bias)}
-        metrics = evaluate(runner.replace(train_state=runner.train_state.replace(params=params)))
+        metrics = evaluate(runner.replace(learner=runner.learner.replace(
+            train_state=runner.learner.train_state.replace(params=params))))
         return {k: float(v) for k, v in metrics.items()}
 
     return run
@@ -62,11 +63,11 @@ def test_sampled_regret_where_no_expected_return_is_known(evaluate_with):
     task = dataclasses.replace(TASK, expected_return=None)
     setup = tr.make_setup(task, CFG, "plr")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    params = runner.train_state.params
+    params = runner.learner.train_state.params
     out = params["heads"]["policy_out"]
     params["heads"]["policy_out"] = {"kernel": jnp.zeros_like(out["kernel"]), "bias": jnp.zeros(64).at[0].set(50.0)}
     m = jax.jit(lambda r: evaluation.evaluate(setup, r, jax.random.PRNGKey(1)))(
-        runner.replace(train_state=runner.train_state.replace(params=params)))
+        runner.replace(learner=runner.learner.replace(train_state=runner.learner.train_state.replace(params=params))))
     assert float(m["regret/visible/worst"]) == pytest.approx(2.0)
     assert float(m["regret/visible/mean"]) == pytest.approx(2.0 * 63 / 64)
     assert float(m["regret/hidden/mean"]) == pytest.approx(20.0 * 63 / 64)

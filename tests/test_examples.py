@@ -105,7 +105,7 @@ def test_an_import_path_that_is_no_task_is_one_line(tmp_path, capsys, monkeypatc
 @pytest.mark.usefixtures("no_png")
 def test_my_score_example_registers_a_score_and_trains_with_it(tmp_path, capsys, restore_registries):
     """examples/my_score.py: abs_gae is registered at import and a tiny PLR⊥ run ranks its buffer by it."""
-    from remidi.engine.scores import SCORES
+    from remidi.engine.adversaries.scores import SCORES
 
     example = load_example(EXAMPLE.parent / "my_score.py")
     assert SCORES["abs_gae"].fn is example.abs_gae and SCORES["abs_gae"].needs_finished_episodes

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from remidi.cli import main
-from remidi.engine.evaluation import first_episode_return
-from remidi.engine.rollout import rollout
-from remidi.engine.validation import validate_ued_config
+from remidi.engine.run.evaluation import first_episode_return
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.run.validation import validate_ued_config
 from remidi.envs.gymnax import SEED, gymnax_task
 from remidi.errors import ConfigError
 from remidi.experiments.gymnax import DOMAINS, domain_task, grid_points, paper_config
@@ -122,8 +122,8 @@ def test_the_grid_return_tells_a_balancing_policy_from_a_random_one():
     n = len(levels["gravity"])
     means = {}
     for gain in (100.0, 0.0):
-        traj, _ = rollout(jax.random.PRNGKey(0), task.env, task.params, hand_policy(gain), {}, jnp.zeros(n), levels,
-                          task.max_episode_steps, deterministic_reset=True)
+        traj, _ = rollout(jax.random.PRNGKey(0), Stepping(task.env, task.params, True),
+                          Policy(hand_policy(gain), {}, jnp.zeros(n)), levels, task.max_episode_steps)
         means[gain] = np.asarray(first_episode_return(traj.reward, traj.done)).reshape(9, 4).mean(axis=1)
     np.testing.assert_array_equal(means[100.0], 200.0)  # balances every level for the whole episode
     assert means[0.0].max() < 80 and means[0.0].mean() < 40  # random actions drop the pole within steps

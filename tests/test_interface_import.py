@@ -19,7 +19,7 @@ from conftest import subprocess_env
 SCRIPT = """
 import sys
 from remidi.cli import main
-from remidi.engine import driver  # noqa: F401
+from remidi.engine.run import driver  # noqa: F401
 from remidi.experiments import get_experiment
 from remidi.experiments.base import resolve_config
 main(["list", "lever"])
@@ -40,7 +40,7 @@ from remidi.experiments.lever import paper_config
 setup = tr.make_setup(lever_task(64), paper_config(), "dr")
 runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.arange(8, dtype=jnp.uint32)))
 jax.block_until_ready(runner)
-print("initialised", runner.train_state.step.shape)
+print("initialised", runner.learner.train_state.step.shape)
 """
 
 

@@ -131,7 +131,7 @@ def test_sigterm_while_the_first_block_runs_keeps_that_block(tmp_path, capsys, m
     maze run lost ten minutes of training)."""
     from remidi import preemption
     from remidi.cli import main
-    from remidi.engine import driver
+    from remidi.engine.run import driver
 
     real, answers = driver._to_host, []
 

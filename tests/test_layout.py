@@ -10,31 +10,14 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "remidi"
 MAX_LINES = 400
 MAX_PARAMETERS = 8
 
-ENGINE = "engine restructuring (refactor-engine)"
 PUBLIC = "a documented Python entry point (README, docs/extending.md, examples): its keyword options are the user's call"
 
 #: module (relative to src/remidi) → why it may be longer
 LONG_MODULES = {
-    "engine/adversary.py": ENGINE,
-    "engine/belief.py": ENGINE,
-    "engine/buffer.py": ENGINE,
-    "engine/simulated.py": ENGINE,
-    "engine/validation.py": ENGINE,
 }
 
 #: "module:qualified.function" → why it may take more parameters
 MANY_PARAMETERS = {
-    "engine/belief.py:init_memory": ENGINE,
-    "engine/driver.py:train_seeds": ENGINE,
-    "engine/driver.py:drive": ENGINE,
-    "engine/rollout.py:rollout": ENGINE,
-    "engine/scores.py:score_levels": ENGINE,
-    "engine/simulated.py:count_rollout": ENGINE,
-    "engine/simulated.py:init_memory": ENGINE,
-    "engine/simulated.py:learn": ENGINE,
-    "engine/simulated.py:freeze": ENGINE,
-    "engine/tracker.py:tracker_step": ENGINE,
-    "engine/train.py:step_metrics": ENGINE,
     "experiments/custom.py:run_ued": PUBLIC,
     "envs/gymnax.py:gymnax_task": PUBLIC,
 }

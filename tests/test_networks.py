@@ -1,4 +1,4 @@
-"""Tests for remidi.engine.networks: shapes, carry semantics, registry errors."""
+"""Tests for remidi.engine.core.networks: shapes, carry semantics, registry errors."""
 
 import dataclasses
 import functools
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from flax import struct
 
-from remidi.engine.networks import MazeLSTMActorCritic, make_network
+from remidi.engine.core.networks import MazeLSTMActorCritic, make_network
 from remidi.errors import ConfigError
 
 T, N = 6, 3
@@ -140,7 +140,7 @@ def test_reset_lstm_is_flax_optimized_lstm_cell():
     """Our LSTM (one joined kernel, one product per step) against flax's ``OptimizedLSTMCell``
     applied step by step with the same parameters: same parameter tree and initial values, same
     outputs and carries, same gradients (to float rounding)."""
-    from remidi.engine.networks import ResetLSTM, zero_lstm_carry
+    from remidi.engine.core.networks import ResetLSTM, zero_lstm_carry
 
     t, n, d, h = 5, 3, 7, 8
     rng = np.random.default_rng(0)
@@ -185,7 +185,7 @@ def test_reset_lstm_is_flax_optimized_lstm_cell():
 
 
 def test_patch_conv_is_flax_conv():
-    from remidi.engine.networks import PatchConv
+    from remidi.engine.core.networks import PatchConv
 
     x = jnp.asarray(np.random.default_rng(0).normal(size=(2, 3, 5, 6, 4)), jnp.float32)
     ours, theirs = PatchConv(8, (3, 2)), flax.linen.Conv(8, (3, 2), padding="VALID",
@@ -230,7 +230,7 @@ class _DenseHeads(flax.linen.Module):
 @pytest.mark.parametrize("continuous", [False, True])
 def test_heads_are_flax_dense_layers(continuous):
     """The heads' joined hidden product: same parameters, initial values and outputs as Dense layers."""
-    from remidi.engine.networks import ActorCriticHeads
+    from remidi.engine.core.networks import ActorCriticHeads
 
     x = jax.random.normal(jax.random.key(3), (7, 5, 48))
     ours, ref = ActorCriticHeads(6, 32, "tanh", continuous), _DenseHeads(6, continuous)
@@ -246,7 +246,7 @@ def test_heads_are_flax_dense_layers(continuous):
 def test_brax_agent_has_two_trunk_layers_before_its_lstm():
     """The paper's Brax agent (appendix): two fully-connected layers, then the recurrent cell;
     ``hidden_size`` sets the width of both."""
-    from remidi.engine.train import network_for
+    from remidi.engine.setup import network_for
     from remidi.experiments.brax import paper_config
 
     obs = jnp.zeros((1, 2, 13), jnp.float32)

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.networks import make_network
+from remidi.engine.core.networks import make_network
 
 
 @pytest.mark.parametrize("activation,fn", [(None, np.tanh), ("relu", lambda x: np.maximum(x, 0.0))])

@@ -13,8 +13,9 @@ import pytest
 
 from conftest import optimizing
 from remidi.cli import main
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import ExactTracker
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.lever import LeverLevel, lever_task
 from remidi.envs.maze import maze_task
 from remidi.envs.noisy import NOISE_BITS, SeededLevel, noisy_blindfold_task, noisy_lever_task
@@ -71,9 +72,9 @@ def indistinguishable(task, agents, frozen_levels, steps, action=0):
         return carry, (jnp.zeros((1, n, task.num_actions)).at[..., action].set(10.0), jnp.zeros((1, n)))
 
     f = jax.tree.leaves(frozen_levels)[0].shape[0]
-    traj, _ = rollout(jax.random.PRNGKey(0), task.env, task.params, apply, {}, jnp.zeros(n), agents, steps,
-                      Frozen(levels=frozen_levels, valid=jnp.ones(f, bool), tracker=ExactTracker("prefix")),
-                      deterministic_reset=task.deterministic_reset)
+    traj, _ = rollout(jax.random.PRNGKey(0), Stepping(task.env, task.params, task.deterministic_reset),
+                      Policy(apply, {}, jnp.zeros(n)), agents, steps,
+                      Frozen(levels=frozen_levels, valid=jnp.ones(f, bool), tracker=ExactTracker("prefix")))
     return np.asarray(traj.indist)
 
 
@@ -231,7 +232,8 @@ def test_reseed_plays_each_rollout_with_the_levels_randomness_drawn_afresh():
     is not the stored level's; without it the rollout shows the stored seed's code."""
     import dataclasses
 
-    from remidi.engine import driver
+    from remidi.engine.run import driver
+    from remidi.engine import learner as lrn
     from remidi.engine import train as tr
     from remidi.engine.config import UEDConfig
 
@@ -245,7 +247,7 @@ def test_reseed_plays_each_rollout_with_the_levels_randomness_drawn_afresh():
         setup = tr.make_setup(NOISY, cfg, "dr")
         runner = driver._init(setup, jax.random.PRNGKey(1)[None])
         runner = jax.tree.map(lambda x: x[0], runner)
-        traj = tr.collect(setup, runner, jax.random.PRNGKey(2), levels, None)[0]
+        traj = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)[0]
         same = [bool(jnp.array_equal(traj.obs[0, n], stored)) for n in range(4)]
         assert same == [not reseed] * 4, (reseed, same)
 

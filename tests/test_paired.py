@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine import paired
-from remidi.engine import scores as sc
-from remidi.engine.ppo import compute_gae
+from remidi.engine.adversaries import paired
+from remidi.engine.adversaries import scores as sc
+from remidi.engine.core.ppo import compute_gae
 
 # two levels, 6 steps each; episodes end where done is True
 PRO_REWARD = jnp.array([[0, 0], [1, 0], [0, 0], [3, 2], [0, 0], [0, 0]], jnp.float32)
@@ -102,7 +102,7 @@ def test_the_generator_is_paid_on_its_last_step_and_never_bootstraps_past_it():
 def test_a_complete_overlap_pays_the_configured_regret():
     import dataclasses
 
-    from remidi.engine.paired import GeneratorSequence
+    from remidi.engine.adversaries.paired import GeneratorSequence
     from test_ued_engine import TINY
 
     class Setup:  # what _pay reads
@@ -126,6 +126,7 @@ def generator_sequence():
 
     import jax
 
+    from remidi.engine import learner as lrn
     from remidi.engine import train as tr
     from test_ued_engine import TASK, TINY
 
@@ -134,7 +135,7 @@ def generator_sequence():
     def record(name, x):
         jax.debug.callback(lambda v: records[name].append(np.asarray(v)), x, ordered=True)
 
-    real_estimate, real_rewards, real_ppo = paired.regret_estimate, paired.generator_rewards, tr.ppo_update
+    real_estimate, real_rewards, real_ppo = paired.regret_estimate, paired.generator_rewards, lrn.ppo_update
 
     def estimate(*args, **kwargs):
         regret = real_estimate(*args, **kwargs)
@@ -152,7 +153,7 @@ def generator_sequence():
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(paired, "regret_estimate", estimate)
         mp.setattr(paired, "generator_rewards", rewards)
-        mp.setattr(tr, "ppo_update", ppo_update)
+        mp.setattr(lrn, "ppo_update", ppo_update)
         cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=3, steps_per_buffer=2))
         setup = tr.make_setup(TASK, cfg, "remidi-paired")
         runners = [tr.init_runner(setup, jax.random.PRNGKey(0))]
@@ -167,19 +168,19 @@ def test_each_switch_starts_a_fresh_generator_and_keeps_the_antagonist(generator
     import jax
 
     _, (r0, r1, r2, r3, r4), _ = generator_sequence
-    fresh = [jax.tree.map(lambda x: x[k], r0.next_generators.params) for k in (0, 1)]
+    fresh = [jax.tree.map(lambda x: x[k], r0.adversary.next_generators.params) for k in (0, 1)]
     same = lambda a, b: all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))  # noqa: E731
-    assert int(r1.active) == 0 and not same(r1.generator.params, r0.generator.params)  # it learns, no switch
+    assert int(r1.adversary.active) == 0 and not same(r1.adversary.generator.params, r0.adversary.generator.params)  # it learns, no switch
     # update 2 switches to buffer 1 with the first fresh generator, optimiser restarted; update 4
     # to buffer 2 with the second
     for runner, k in ((r2, 0), (r4, 1)):
-        assert int(runner.active) == k + 1 and int(runner.count) == 0 and int(runner.generator.step) == 0
-        assert same(runner.generator.params, fresh[k])
-    assert int(r3.active) == 1 and not same(r3.generator.params, fresh[0])  # the first fresh one learnt
+        assert int(runner.adversary.active) == k + 1 and int(runner.adversary.count) == 0 and int(runner.adversary.generator.step) == 0
+        assert same(runner.adversary.generator.params, fresh[k])
+    assert int(r3.adversary.active) == 1 and not same(r3.adversary.generator.params, fresh[0])  # the first fresh one learnt
     # the antagonist is one for all generators: it kept learning across both switches
     for before, after in ((r1, r2), (r3, r4)):
-        assert not same(after.antagonist.params, before.antagonist.params)
-        assert int(after.antagonist.step) > int(before.antagonist.step)
+        assert not same(after.adversary.antagonist.params, before.adversary.antagonist.params)
+        assert int(after.adversary.antagonist.step) > int(before.adversary.antagonist.step)
 
 
 def test_one_generator_is_paired_with_a_reservoir():
@@ -191,16 +192,16 @@ def test_one_generator_is_paired_with_a_reservoir():
     import jax
 
     from remidi.engine import train as tr
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.run.validation import validate_ued_config
     from test_ued_engine import TASK, TINY
 
     cfg = dataclasses.replace(TINY, remidi=dataclasses.replace(TINY.remidi, num_buffers=1))
     validate_ued_config(cfg, "remidi-paired", TASK)
     setup = tr.make_setup(TASK, cfg, "remidi-paired")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    assert runner.next_generators is None
+    assert runner.adversary.next_generators is None
     after, _ = jax.eval_shape(lambda r: tr.train_step(setup, r), runner)
-    assert after.active.shape == () and after.generator.step.shape == ()
+    assert after.adversary.active.shape == () and after.adversary.generator.step.shape == ()
 
 
 def test_a_complete_overlap_trains_the_protagonist_nothing_and_pays_the_lowest_regret(generator_sequence):
@@ -229,7 +230,7 @@ def test_the_reference_generator_reads_a_maze_design_by_conv_and_carries_its_lst
     design and the noise, and its carry restarts where an episode does."""
     import jax
 
-    from remidi.engine.networks import GeneratorLSTMActorCritic
+    from remidi.engine.core.networks import GeneratorLSTMActorCritic
     from remidi.envs.maze import maze_task
 
     builder = maze_task("tmaze").level_builder
@@ -263,12 +264,12 @@ def test_paired_runs_with_the_reference_generator_and_refuses_an_unknown_one():
     cfg = dataclasses.replace(TINY, paired=dataclasses.replace(TINY.paired, generator_network="reference"))
     setup = tr.make_setup(TASK, cfg, "paired")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    assert "lstm" in runner.generator.params
+    assert "lstm" in runner.adversary.generator.params
     new, metrics = jax.jit(lambda r: tr.train_step(setup, r))(runner)
     assert np.isfinite(float(metrics["paired/generator_entropy"]))
-    assert int(new.generator.step) > int(runner.generator.step)
+    assert int(new.adversary.generator.step) > int(runner.adversary.generator.step)
     bad = dataclasses.replace(TINY, paired=dataclasses.replace(TINY.paired, generator_network="big"))
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.run.validation import validate_ued_config
 
     with pytest.raises(ConfigError, match="paired.generator_network.*mlp, reference"):
         validate_ued_config(bad, "paired", TASK)
@@ -286,8 +287,9 @@ def test_paired_pays_in_the_agents_reward_units_and_normalises_both_agents_with_
 
     import jax
 
+    from remidi.engine import learner as lrn
     from remidi.engine import train as tr
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.run.validation import validate_ued_config
     from test_ued_engine import TASK, TINY
 
     cfg = dataclasses.replace(TINY, normalize_obs=True, network="mlp", reward_scale=0.25)
@@ -295,26 +297,26 @@ def test_paired_pays_in_the_agents_reward_units_and_normalises_both_agents_with_
     setup = tr.make_setup(TASK, cfg, "paired")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     seen, paid = [], []  # the statistics' count each rollout normalised with; the generator's pay
-    real_collect, real_rewards = tr.collect, paired.generator_rewards
+    real_collect, real_rewards = lrn.collect, paired.generator_rewards
 
-    def spy(setup_, r, rng, levels, frozen):
-        jax.debug.callback(lambda c: seen.append(float(c)), r.obs_stats.count)
-        return real_collect(setup_, r, rng, levels, frozen)
+    def spy(setup_, learner, rng, levels, frozen):
+        jax.debug.callback(lambda c: seen.append(float(c)), learner.obs_stats.count)
+        return real_collect(setup_, learner, rng, levels, frozen)
 
     def recording(regret, n):
         jax.debug.callback(lambda r: paid.append(np.asarray(r)), regret)
         return real_rewards(regret, n)
 
-    monkeypatch.setattr(tr, "collect", spy)
+    monkeypatch.setattr(lrn, "collect", spy)
     monkeypatch.setattr(paired, "generator_rewards", recording)
     step = jax.jit(lambda r: tr.train_step(setup, r))
     r1, m1 = step(runner)
     r2, _ = step(r1)
     jax.effects_barrier()
     per_update = cfg.num_envs * cfg.num_steps
-    assert float(r2.obs_stats.count) == 2 * per_update  # the antagonist's rollouts add nothing
+    assert float(r2.learner.obs_stats.count) == 2 * per_update  # the antagonist's rollouts add nothing
     assert sorted(seen) == [0, 0, per_update, per_update]  # both agents of an update read the same statistics
-    assert int(r2.antagonist.step) > int(runner.antagonist.step)
+    assert int(r2.adversary.antagonist.step) > int(runner.adversary.antagonist.step)
     np.testing.assert_allclose(float(np.mean(paid[0])), 0.25 * float(m1["paired/regret"]), rtol=1e-5)
     assert abs(float(m1["paired/regret"])) > 0.1  # a regret of 0 would not tell the scales apart
 
@@ -325,9 +327,9 @@ def _reservoir(batches):
     PRNGKey(100 + u) as the step would hand it: (held ids, held scores, the keys drawn)."""
     import jax
 
-    from remidi.engine import buffer as buf
+    from remidi.engine.adversaries import level_buffer as buf
     from remidi.engine import train as tr
-    from remidi.engine.adversary import Proposal
+    from remidi.engine.adversaries.base import Proposal
     from remidi.envs.lever import LeverLevel
     from test_ued_engine import TASK, TINY
 
@@ -340,15 +342,15 @@ def _reservoir(batches):
     def keep(runner, level_ids, rng):
         levels = LeverLevel(correct=(level_ids % 64).astype(jnp.int32), visible=level_ids < 64)
         proposal = Proposal(replay=jnp.asarray(False), levels=levels, buffer=None, slots=None, train=jnp.asarray(True))
-        changed, _ = seq._keep(setup, runner, proposal, rng)
-        return runner.replace(**changed)
+        state, _ = seq._keep(setup, runner.adversary, proposal, rng)
+        return runner.replace(adversary=state)
 
     runner, keys = tr.init_runner(setup, jax.random.PRNGKey(0)), []
     for u, ids in enumerate(batches):
         rng = jax.random.PRNGKey(100 + u)
         runner = keep(runner, jnp.asarray(ids, jnp.int32), rng)
         keys.append(np.asarray(jax.random.uniform(rng, (8,))))  # the keys _keep draws from that rng
-    held = buf.select_buffer(runner.buffers, runner.active)
+    held = buf.select_buffer(runner.adversary.buffers, runner.adversary.active)
     assert np.asarray(held.valid).all()
     held_ids = np.asarray(held.levels.correct) + 64 * ~np.asarray(held.levels.visible)
     return held_ids, np.asarray(held.scores), np.concatenate(keys)

@@ -10,10 +10,11 @@ import pytest
 from test_ued_engine import TASK, TINY
 
 import remidi
-from remidi.engine import scores as sc
+from remidi.engine.adversaries import scores as sc
+from remidi.engine import learner as lrn
 from remidi.engine import train as tr
-from remidi.engine.adversary import LevelBuffers
-from remidi.engine.buffer import select_buffer
+from remidi.engine.adversaries.plr import LevelBuffers
+from remidi.engine.adversaries.level_buffer import select_buffer
 from remidi.errors import ConfigError
 
 pytestmark = pytest.mark.usefixtures("restore_registries")
@@ -34,7 +35,7 @@ def test_a_registered_score_ranks_the_buffers_levels():
     _, k_branch, k_roll, k_levels, _, k_sample = jax.random.split(runner.rng, 6)
     proposal = setup.algo.adversary.propose(setup, runner, k_branch, k_levels, k_sample)
     assert not bool(proposal.replay)  # an empty buffer: fresh levels, scored and inserted
-    traj, adv, _, mean_ret, best_ret = tr.collect(setup, runner, k_roll, proposal.levels, None)
+    traj, adv, _, mean_ret, best_ret = lrn.collect(setup, runner.learner, k_roll, proposal.levels, None)
     inputs = sc.ScoreInputs(mean_return=mean_ret, values=traj.value, advantages=adv, max_return=best_ret,
                             done=traj.done, reward=traj.reward)
     expected = np.sort(np.asarray(abs_gae(inputs)))
@@ -42,7 +43,7 @@ def test_a_registered_score_ranks_the_buffers_levels():
     assert np.all(np.isfinite(expected)) and not np.allclose(expected, pvl)  # the test tells the scores apart
 
     after, _ = jax.jit(lambda r: tr.train_step(setup, r))(runner)
-    buffer = select_buffer(after.buffers, after.active)
+    buffer = select_buffer(after.adversary.buffers, after.adversary.active)
     held = np.sort(np.asarray(buffer.scores)[np.asarray(buffer.valid)])
     assert len(held) == cfg.num_envs  # every fresh level inserted (capacity 16)
     np.testing.assert_allclose(held, expected, rtol=1e-6)
@@ -62,7 +63,7 @@ def test_a_registered_algorithm_is_its_adversary_and_score():
 
 
 def test_validation_checks_what_a_registered_score_needs():
-    from remidi.engine.validation import run_warnings, validate_ued_config
+    from remidi.engine.run.validation import run_warnings, validate_ued_config
 
     remidi.register_score("needs-both", lambda x: x.optimal_return - x.mean_return, needs_optimum=True,
                           needs_solved=True, needs_finished_episodes=True)
@@ -93,7 +94,7 @@ def test_validation_checks_what_a_registered_score_needs():
      "register_algorithm: an algorithm named 'plr' is already registered"),
     (lambda: remidi.register_algorithm("all", LevelBuffers()), "register_algorithm: name must be"),
     (lambda: remidi.register_algorithm("x", LevelBuffers), "adversary must be an instance, e.g. LevelBuffers()"),
-    (lambda: remidi.register_algorithm("x", "plr"), "algorithm x: adversary must be a remidi.engine.adversary"),
+    (lambda: remidi.register_algorithm("x", "plr"), "algorithm x: adversary must be a remidi.engine.adversaries.base"),
     (lambda: remidi.register_algorithm("x", LevelBuffers(), score="nope"),
      "register_algorithm: x: score must be a registered score or None, got 'nope'; allowed: perfect_regret"),
 ])
@@ -112,7 +113,7 @@ def test_the_command_line_imports_plugins_first(tmp_path, capsys, monkeypatch):
     from remidi.plugins import ENV
 
     (tmp_path / "my_plugin_mod.py").write_text(
-        "import remidi\nfrom remidi.engine.adversary import LevelBuffers\n"
+        "import remidi\nfrom remidi.engine.adversaries.plr import LevelBuffers\n"
         "remidi.register_algorithm('plr-fresh', LevelBuffers(trains_on_fresh=True), description='PLR, fresh too')\n"
         "remidi.register_score('zero', lambda x: 0.0 * x.mean_return, help='all alike')\n")
     (tmp_path / "bad_plugin_mod.py").write_text("import remidi\nremidi.register_score('pvl', lambda x: x.mean_return)\n")

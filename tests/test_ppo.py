@@ -1,4 +1,4 @@
-"""Tests for remidi.engine.ppo: GAE, masking semantics, reference loss, a learning sanity check."""
+"""Tests for remidi.engine.core.ppo: GAE, masking semantics, reference loss, a learning sanity check."""
 
 import dataclasses
 import functools
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from flax.training.train_state import TrainState
 
-from remidi.engine.networks import FeedForwardActorCritic, MazeLSTMActorCritic
-from remidi.engine.ppo import (
+from remidi.engine.core.networks import FeedForwardActorCritic, MazeLSTMActorCritic
+from remidi.engine.core.ppo import (
     Batch,
     PPOConfig,
     compute_gae,
@@ -210,7 +210,7 @@ def test_partially_masked_update_equals_update_on_unmasked_entries():
 
 
 def reference_ppo_loss(params, batch, cfg):
-    """Textbook unmasked PPO loss, written independently of remidi.engine.ppo."""
+    """Textbook unmasked PPO loss, written independently of remidi.engine.core.ppo."""
     _, (logits, value) = NET.apply({"params": params}, None, batch.obs, batch.reset)
     log_pi = jax.nn.log_softmax(logits)
     new_logp = jnp.take_along_axis(log_pi, batch.actions[..., None], axis=-1)[..., 0]

@@ -69,13 +69,11 @@ def test_no_issue_numbers_in_the_readme_docs_and_tests():
     assert not found, "issue numbers:\n" + "\n".join(found)
 
 
-@pytest.mark.xfail(strict=False, reason="src sweep at merge")
 def test_no_issue_numbers_in_the_source():
     found = _issue_refs(sorted((ROOT / "src").rglob("*.py")))
     assert not found, "issue numbers:\n" + "\n".join(found)
 
 
-@pytest.mark.xfail(strict=False, reason="src sweep at merge")
 def test_no_issue_numbers_in_the_generated_summary():
     """The README's results summary is written by the results-page generator (``src/``)."""
     summary = SUMMARY.search(README.read_text(encoding="utf-8")).group(0)

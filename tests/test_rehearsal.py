@@ -10,9 +10,10 @@ import jax
 import numpy as np
 import pytest
 
-from remidi.engine import driver as drv
+from remidi.engine.run import driver as drv
+from remidi.engine import learner as lrn
 from remidi.engine import train as tr
-from remidi.engine.validation import validate_ued_config
+from remidi.engine.run.validation import validate_ued_config
 from remidi.errors import ConfigError
 
 from test_ued_engine import TASK, TINY
@@ -46,20 +47,22 @@ def test_with_p1_every_update_after_the_switch_trains_unmasked_on_frozen_levels_
     setup = rehearsing(1.0)
     seen, masks = {}, {}  # update -> the rollout's levels and the tracker's indist; the loss mask
 
-    real_collect, real_learn = tr.collect, tr.learn
+    real_collect, real_learn = lrn.collect, lrn.learn
+    # the learner's functions see no update count: ordered callbacks number the updates (one
+    # rollout each, its training after it)
 
-    def spy_collect(setup_, runner, rng, levels, frozen):
-        out = real_collect(setup_, runner, rng, levels, frozen)
-        jax.debug.callback(lambda u, c, v, i: seen.__setitem__(int(u), (np.asarray(c), np.asarray(v), np.asarray(i))),
-                           runner.update, levels.correct, levels.visible, out[0].indist)
+    def spy_collect(setup_, learner, rng, levels, frozen):
+        out = real_collect(setup_, learner, rng, levels, frozen)
+        jax.debug.callback(lambda c, v, i: seen.__setitem__(len(seen), (np.asarray(c), np.asarray(v), np.asarray(i))),
+                           levels.correct, levels.visible, out[0].indist, ordered=True)
         return out
 
-    def spy_learn(setup_, runner, rng, traj, adv, targets):
-        jax.debug.callback(lambda u, m: masks.__setitem__(int(u), np.asarray(m)), runner.update, ~traj.indist)
-        return real_learn(setup_, runner, rng, traj, adv, targets)
+    def spy_learn(setup_, learner, rng, traj, adv, targets):
+        jax.debug.callback(lambda m: masks.__setitem__(len(seen) - 1, np.asarray(m)), ~traj.indist, ordered=True)
+        return real_learn(setup_, learner, rng, traj, adv, targets)
 
-    monkeypatch.setattr(tr, "collect", spy_collect)
-    monkeypatch.setattr(tr, "learn", spy_learn)
+    monkeypatch.setattr(lrn, "collect", spy_collect)
+    monkeypatch.setattr(lrn, "learn", spy_learn)
     runner = start(setup, 1)
     # one program of SWITCH steps, run three times (its callbacks keep it out of the persistent
     # cache: each program compiles in every run of the suite)
@@ -71,15 +74,15 @@ def test_with_p1_every_update_after_the_switch_trains_unmasked_on_frozen_levels_
     jax.effects_barrier()
 
     assert np.asarray(before["rehearsal"]).sum() == 0  # nothing frozen yet: no rehearsal
-    assert int(at_switch.active[0]) == 1 and int(after.active[0]) == 1
+    assert int(at_switch.adversary.active[0]) == 1 and int(after.adversary.active[0]) == 1
     np.testing.assert_array_equal(np.asarray(metrics["rehearsal"][0]), np.ones(16))
     np.testing.assert_array_equal(np.asarray(metrics["replay"][0]), np.zeros(16))  # no replay of the active buffer
     np.testing.assert_array_equal(np.asarray(metrics["rejected"][0]), np.zeros(16))
     np.testing.assert_array_equal(np.asarray(metrics["inserted"][0]), np.zeros(16))
     # frozen and active buffers bit-identical before and after: nothing inserted, rescored or sampled
-    for a, b in zip(jax.tree.leaves(at_switch.buffers), jax.tree.leaves(after.buffers)):
+    for a, b in zip(jax.tree.leaves(at_switch.adversary.buffers), jax.tree.leaves(after.adversary.buffers)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    first = jax.tree.map(lambda x: x[0, 0], after.buffers)
+    first = jax.tree.map(lambda x: x[0, 0], after.adversary.buffers)
     frozen = levels_of(first.levels, first.valid)
     assert frozen and len(seen) == SWITCH + 16
     for u in range(SWITCH, SWITCH + 16):
@@ -139,8 +142,8 @@ def test_the_switch_counter_counts_a_rehearsal_as_an_update_but_not_as_a_replay(
     setup = tr.make_setup(TASK, cfg, "remidi")
     runner = start(setup, 1)
     runner, _ = steps(setup, runner, 30 if count == "replays" else SWITCH)  # count=replays: 8 replays take longer
-    assert int(runner.active[0]) == 1
+    assert int(runner.adversary.active[0]) == 1
     after, metrics = steps(setup, runner, 2 * SWITCH)
     assert np.asarray(metrics["rehearsal"]).all()  # P = 1: every update rehearses buffer 0 ...
     # ... and counts towards the switch as an update, not as a replay of the active buffer
-    assert int(after.active[0]) == (2 if count == "updates" else 1)
+    assert int(after.adversary.active[0]) == (2 if count == "updates" else 1)

@@ -58,9 +58,9 @@ def runs(tmp_path_factory):
     Buffers of seed s: buffer 0 full (CAPACITY levels), buffer 1 with 3 levels in scattered slots,
     buffer 2 empty; buffer 1 is the active one. Scores are distinct; seed 0's buffer 0 holds a
     T-maze at its best score."""
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
-    from remidi.engine.checkpoint import CHECKPOINT, save_checkpoint
+    from remidi.engine.run.checkpoint import CHECKPOINT, save_checkpoint
     from remidi.experiments import get_experiment
     from remidi.experiments.base import RunSpec, resolve_config
     from remidi.experiments.running import write_run_config
@@ -94,9 +94,10 @@ def runs(tmp_path_factory):
         scores[s, 1] = rng.uniform(0, 1, CAPACITY)
     levels = jax.tree.map(
         lambda x: np.where(valid.reshape(valid.shape + (1,) * (x.ndim - 1)), x[pick], 0).astype(x.dtype), pool)
-    runner = runner.replace(buffers=runner.buffers.replace(levels=levels, valid=valid,
-                                                           scores=np.where(valid, scores, 0.0).astype(np.float32)),
-                            active=np.ones(len(SEEDS), np.int32))
+    runner = runner.replace(adversary=runner.adversary.replace(
+        buffers=runner.adversary.buffers.replace(levels=levels, valid=valid,
+                                                 scores=np.where(valid, scores, 0.0).astype(np.float32)),
+        active=np.ones(len(SEEDS), np.int32)))
     save_checkpoint(folder / CHECKPOINT, runner, {"done": 20, "steps": [10, 20], "num_blocks": 2})
 
     lever = root / "lever_run"

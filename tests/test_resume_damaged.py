@@ -79,7 +79,7 @@ DAMAGE = {
     "missing history": (lambda f: (f / "checkpoint.history.npz").unlink(), "checkpoint.history.npz is missing"),
     "another run's checkpoint": (None, "checkpoint.npz does not match the run's config.json"),
     "hidden_size edited": (_edit_config("config.hidden_size", 32),
-                           "does not match the run's config.json (.train_state."),
+                           "does not match the run's config.json (.learner.train_state."),
     "an older remidi's checkpoint": (_positional, "was written by an older remidi, which stored the state's arrays "
                                                   "by position"),
     "seeds edited": (_edit_config("seeds", [0, 1, 2]), "does not match the run's config.json"),
@@ -191,7 +191,7 @@ def test_one_algorithm_of_a_several_algorithm_run_is_locked_with_the_whole_run(r
 def test_history_blocks_may_log_more_metrics_than_the_first(tmp_path):
     """Blocks trained by a version of remidi that added a metric log more than the earlier ones:
     read as they are; a block without one of block 0's metrics is a damaged file."""
-    from remidi.engine.checkpoint import load_history
+    from remidi.engine.run.checkpoint import load_history
     from remidi.errors import ConfigError
 
     path = tmp_path / "checkpoint.history.npz"
@@ -209,7 +209,7 @@ def test_history_blocks_may_log_more_metrics_than_the_first(tmp_path):
 def test_a_checkpoint_records_a_config_given_with_numpy_values(tmp_path):
     """Through the Python API a config may hold NumPy scalars: the checkpoint's record of the run
     takes them (before, json.dumps raised a TypeError at the first checkpoint)."""
-    from remidi.engine.checkpoint import check_run, load_checkpoint, save_run
+    from remidi.engine.run.checkpoint import check_run, load_checkpoint, save_run
 
     run = {"algo": "plr", "seeds": [0], "config": {"ppo": {"lr": np.float32(3e-4)}, "shape": np.arange(2)}}
     save_run(tmp_path / "checkpoint.npz", {"w": np.zeros(2)}, 10, [10], [{"m": np.zeros(1)}], [{"r": np.zeros(1)}],

@@ -4,8 +4,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.engine import scores as sc
-from remidi.engine.evaluation import first_episode_return
+from remidi.engine.adversaries import scores as sc
+from remidi.engine.run.evaluation import first_episode_return
 
 REWARD = jnp.array([[0.0, 1.0], [2.0, 0.0], [0.0, 3.0], [5.0, 0.0]])  # [T=4, N=2]
 DONE = jnp.array([[False, True], [True, False], [False, False], [False, True]])
@@ -76,8 +76,9 @@ def test_score_levels_dispatches_by_name():
                 "learnability": [0.0, 0.0, -np.inf]}  # X's returns are all positive: p = 1 where an episode ended
     assert set(expected) == set(sc.SCORES)
     for name, want in expected.items():
-        got = sc.score_levels(name, mean_return=mean, values=X, advantages=X, max_return=MAX_RETURN,
-                              done=EPISODE_DONE, optimal_return=optimal, reward=X, solved=lambda ret: ret > 0)
+        got = sc.score_levels(name, sc.ScoreInputs(mean_return=mean, values=X, advantages=X, max_return=MAX_RETURN,
+                                                   done=EPISODE_DONE, optimal_return=optimal, reward=X,
+                                                   solved=lambda ret: ret > 0))
         np.testing.assert_allclose(got, want, rtol=1e-6, err_msg=name)
 
 
@@ -103,7 +104,8 @@ def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
     import dataclasses
     from types import SimpleNamespace
 
-    from remidi.engine.train import make_setup, score_rollout
+    from remidi.engine.learner import score_rollout
+    from remidi.engine.train import make_setup
     from remidi.envs import maze as M
     from remidi.experiments.maze import paper_config
 
@@ -154,7 +156,8 @@ def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion
     import dataclasses
     from types import SimpleNamespace
 
-    from remidi.engine.train import make_setup, score_rollout
+    from remidi.engine.learner import score_rollout
+    from remidi.engine.train import make_setup
     from remidi.envs.lever import lever_task
     from remidi.experiments.lever import paper_config
 
@@ -207,9 +210,10 @@ def test_a_replay_that_ends_no_episode_leaves_the_maxmc_record_as_it_was():
                     buffer=dataclasses.replace(base.buffer, capacity=4, min_fill=0.25, replay_prob=1.0))
     setup = tr.make_setup(task, cfg, "plr")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    bufs = runner.buffers  # [K=1, C=4]: four levels whose record is a whole episode's −5
-    runner = runner.replace(buffers=bufs.replace(valid=jnp.ones_like(bufs.valid), scores=jnp.ones_like(bufs.scores),
-                                                 extras={"max_return": jnp.full_like(bufs.extras["max_return"], -5.0)}))
+    bufs = runner.adversary.buffers  # [K=1, C=4]: four levels whose record is a whole episode's −5
+    runner = runner.replace(adversary=runner.adversary.replace(buffers=bufs.replace(
+        valid=jnp.ones_like(bufs.valid), scores=jnp.ones_like(bufs.scores),
+        extras={"max_return": jnp.full_like(bufs.extras["max_return"], -5.0)})))
     after, metrics = jax.jit(lambda r: tr.train_step(setup, r))(runner)
     assert float(metrics["replay"]) == 1.0  # a replay of the four levels
-    np.testing.assert_array_equal(np.asarray(after.buffers.extras["max_return"]), -5.0)
+    np.testing.assert_array_equal(np.asarray(after.adversary.buffers.extras["max_return"]), -5.0)

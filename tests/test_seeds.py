@@ -5,8 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.driver import over_seeds
-from remidi.engine.seeds import any_seed, cond_per_seed
+from remidi.engine.run.driver import over_seeds
+from remidi.engine.core.seeds import any_seed, cond_per_seed
 
 
 def _counting_branch(calls):
@@ -66,7 +66,7 @@ def test_a_multi_seed_run_keeps_the_simulated_models_rare_work_in_branches():
     step keeps the calibration at a switch and the reference's fit on fresh levels as branches (a
     vmapped ``lax.cond`` leaves none, running them at every update: 8× the cost per update at the
     cpu preset's 5 seeds, docs/performance.md)."""
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
     from remidi.experiments import get_experiment
     from remidi.experiments.base import resolve_config
@@ -84,11 +84,12 @@ def test_a_multi_seed_run_keeps_the_simulated_models_rare_work_in_branches():
 def test_the_belief_models_calibration_is_a_branch_over_several_seeds():
     """The learned belief tracker's freeze (its calibration at a switch) over two seeds stays a
     branch, and calibrates only the seed that switches."""
-    from remidi.engine import belief
+    from remidi.engine.trackers import belief
+    from remidi.engine.trackers import belief_model as bm
 
-    model = belief.BeliefModel(belief.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
-    opt = belief.make_optimizer()
-    one = belief.init_memory(model, opt, 2, 2, 4, 3, jax.random.PRNGKey(0)).replace(written=jnp.ones((), jnp.int32))
+    model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
+    opt = bm.make_optimizer()
+    one = belief.init_memory(model, opt, 2, 2, (4, 3), jax.random.PRNGKey(0)).replace(written=jnp.ones((), jnp.int32))
     memory = jax.tree.map(lambda x: jnp.stack([x, x]), one)  # two seeds, each with one recorded rollout
     freeze = over_seeds(lambda m, s: belief.freeze(opt, m, 0, s, 0.05).threshold)
     switch = jnp.array([True, False])

@@ -99,7 +99,7 @@ from jax.experimental import multihost_utils
 
 from remidi import preemption
 from remidi.cli import main
-from remidi.engine import driver
+from remidi.engine.run import driver
 
 real, fired = driver._to_host, []
 
@@ -176,7 +176,7 @@ def test_seeds_sharded_over_four_devices(tmp_path, capsys):
     # one device and for 1 seed per device, and the rounding of some reductions depends on that
     # batch size, so bitwise equality cannot be promised (today these 4 updates happen to be
     # bitwise equal); a few updates later, training turns such a difference into a different
-    # sampled action (engine/driver.py, docs/devices.md)
+    # sampled action (engine/run/driver.py, docs/devices.md)
     np.testing.assert_allclose(values4, values1, rtol=1e-5, atol=1e-5, equal_nan=True)
     assert json.loads((out / "d4" / "summary.json").read_text())["seeds"] == [0, 1, 2, 3]
 
@@ -238,7 +238,7 @@ def test_resume_takes_no_devices(tmp_path, capsys):
 def test_python_api_checks_devices_before_compiling():
     from test_ued_engine import TASK, TINY
 
-    from remidi.engine.driver import train_seeds
+    from remidi.engine.run.driver import train_seeds
     from remidi.errors import ConfigError
 
     with pytest.raises(ConfigError, match=r"--devices: must be an integer ≥ 1, got 0; allowed: 1"):

@@ -1,4 +1,4 @@
-"""The simulated belief model's parts (remidi.engine.simulated): replaying a level
+"""The simulated belief model's parts (remidi.engine.trackers.simulated): replaying a level
 reproduces a rollout of it, the noise table learns the identity where the environment is
 deterministic and the noise's distribution where it is not, and the mixture over a buffer's
 candidates is a mean of likelihoods."""
@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 from conftest import optimizing
-from remidi.engine import belief as bl
-from remidi.engine import simulated as sm
-from remidi.engine.rollout import rollout
+from remidi.engine.trackers import belief_model as bm
+from remidi.engine.trackers import calibration as cal
+from remidi.engine.trackers import noise
+from remidi.engine.trackers import simulated as sm
+from remidi.engine.core.rollout import Policy, Stepping, rollout
 
 pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
 
@@ -25,14 +27,14 @@ def _random_rollout(task, key, params=None):
         return carry, (jnp.zeros(reset.shape + (a,)), jnp.zeros(reset.shape))
 
     levels = jax.vmap(task.sample_level)(jax.random.split(key, N))
-    traj, _ = rollout(jax.random.fold_in(key, 1), task.env, params, policy, {}, jnp.zeros(1), levels, T,
-                      deterministic_reset=task.deterministic_reset)
+    traj, _ = rollout(jax.random.fold_in(key, 1), Stepping(task.env, params, task.deterministic_reset),
+                      Policy(policy, {}, jnp.zeros(1)), levels, T)
     return levels, traj
 
 
 def _coding(task, levels):
     example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], levels), task.params)
-    return bl.coding_for(example)
+    return bm.coding_for(example)
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +65,7 @@ def _replayed(task, coding, levels, traj, reseed=None):
         def one(level, acts, rs, k):
             k1, k2 = jax.random.split(k)
             level = level if reseed is None else reseed(k1, level)
-            return sm.replay_level(task.env, task.params, coding, level, acts, rs, k2)
+            return noise.replay_level(task.env, task.params, coding, level, acts, rs, k2)
         return jax.vmap(one, in_axes=(0, 1, 1, 0), out_axes=1)(levels, actions, resets, jax.random.split(key, N))
     return go(levels, traj.action, traj.reset, jax.random.PRNGKey(9))
 
@@ -72,7 +74,7 @@ def test_replaying_a_level_with_the_rollouts_actions_gives_its_observations_and_
     """The lever game ends every episode after one step: each step's replay restarts, and the
     end entry records every end. Replayed codes equal the rollout's, end entries included."""
     task, levels, traj, coding = lever
-    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    agent = noise.recorded_codes(coding, traj.obs, traj.reset)
     assert bool(jnp.all(agent[1:, :, -1] == 1)) and bool(jnp.all(agent[0, :, -1] == 0))
     np.testing.assert_array_equal(np.asarray(_replayed(task, coding, levels, traj)), np.asarray(agent))
 
@@ -81,27 +83,27 @@ def test_replaying_a_noisy_level_with_its_own_seed_gives_its_observations_throug
     """blindfold-noisy with 7-step episodes: the replay restarts where the rollout did (the
     noise, a function of the seed and the episode's step, restarts with it)."""
     task, levels, traj, coding = noisy_maze
-    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    agent = noise.recorded_codes(coding, traj.obs, traj.reset)
     assert int(agent[:, :, -1].sum()) >= 3 * N  # ends at steps 7, 14, 21 (and at the goal)
     np.testing.assert_array_equal(np.asarray(_replayed(task, coding, levels, traj)), np.asarray(agent))
 
 
 def test_the_table_learns_the_identity_where_the_game_is_deterministic(lever):
     task, levels, traj, coding = lever
-    counts = sm.count_rollout(sm.init_counts(coding), task.env, task.params, coding, None, levels, traj.obs,
-                              traj.action, traj.reset, jax.random.PRNGKey(5))
+    counts = noise.count_rollout(noise.init_counts(coding), task.env, task.params, coding, None, levels, traj,
+                                 jax.random.PRNGKey(5))
     assert float(counts.sum()) == T * N * (coding.num_entries + 1)
     assert float(counts[:, 0].sum()) == 0.0  # the copies always agree: d = 1
-    logq = sm.log_q(counts)
+    logq = noise.log_q(counts)
     seen = np.asarray(counts[:, 1].sum(-1) > 0)  # [E+1, K, K] rows that were seen
     k = counts.shape[-1]
     diag = np.asarray(logq[:, 1][..., np.arange(k), np.arange(k), np.arange(k)])  # log q(o = a | a, a)
     rows = np.nonzero(seen[:, np.arange(k), np.arange(k)])
     assert np.all(diag[rows] > np.log(0.99))
     # the agent's own observation is likely, any other one is not
-    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
-    own = sm.step_logq(logq, agent, agent, agent)
-    other = sm.step_logq(logq, agent, jnp.roll(agent, 1, axis=1), jnp.roll(agent, 1, axis=1))
+    agent = noise.recorded_codes(coding, traj.obs, traj.reset)
+    own = noise.step_logq(logq, agent, agent, agent)
+    other = noise.step_logq(logq, agent, jnp.roll(agent, 1, axis=1), jnp.roll(agent, 1, axis=1))
     differs = np.asarray(jnp.any(agent != jnp.roll(agent, 1, axis=1), axis=-1))
     assert np.all(np.asarray(own) > -0.1)
     assert np.all(np.asarray(other)[differs] < -5.0)
@@ -111,8 +113,8 @@ def test_on_a_noisy_tv_the_table_learns_uniform_noise_and_keeps_the_walls(noisy_
     """blindfold-noisy: a blind level's copies under fresh seeds disagree (d = 0) and show the
     noise, drawn uniformly in each channel's range; an ordinary maze's copies agree (d = 1)."""
     task, levels, traj, coding = noisy_maze
-    counts = sm.count_rollout(sm.init_counts(coding), task.env, task.params, coding, task.reseed_level, levels,
-                              traj.obs, traj.action, traj.reset, jax.random.PRNGKey(5))
+    counts = noise.count_rollout(noise.init_counts(coding), task.env, task.params, coding, task.reseed_level, levels,
+                                 traj, jax.random.PRNGKey(5))
     blind = np.asarray(jax.vmap(lambda l: task.level_tags(l)["blind"])(levels))
     assert 0 < blind.sum() < N
     noisy_share = float(counts[:, 0].sum() / counts.sum())
@@ -127,13 +129,13 @@ def test_on_a_noisy_tv_the_table_learns_uniform_noise_and_keeps_the_walls(noisy_
     freq = obj / obj.sum(-1, keepdims=True)  # ≈ 870 draws per row
     assert np.abs(freq - 1 / 11).max() < 0.05
     # ordinary mazes: the agent's view is one of the copies' (identity)
-    logq = sm.log_q(counts)
-    agent = sm.recorded_codes(coding, traj.obs, traj.reset)
+    logq = noise.log_q(counts)
+    agent = noise.recorded_codes(coding, traj.obs, traj.reset)
     plain = _replayed(task, coding, levels, traj)
-    own = np.asarray(sm.step_logq(logq, agent, plain, plain))
+    own = np.asarray(noise.step_logq(logq, agent, plain, plain))
     assert np.all(own[:, ~blind] > -2.0)  # what the smoothing of rarely seen rows costs
     shifted = jnp.roll(plain, 1, axis=1)  # another env's level
-    other = np.asarray(sm.step_logq(logq, agent, shifted, shifted))
+    other = np.asarray(noise.step_logq(logq, agent, shifted, shifted))
     both = ~blind & np.roll(~blind, 1)
     differs = np.asarray(jnp.any(agent != shifted, axis=-1))[:, both]
     assert np.all(other[:, both][differs] < own[:, both][differs] - 5.0)
@@ -143,16 +145,16 @@ def test_the_mixture_is_the_log_mean_likelihood_over_each_buffers_valid_levels()
     valid = jnp.array([True, True, True, False, True, True, False, False])  # 2 buffers of 4
     index = jnp.array([0, 2, 4, -1])
     totals = jnp.array([-1.0, -2.0, -3.0, 0.0])
-    mix = sm.mixture(totals, index, valid, 2, 4)
+    mix = noise.mixture(totals, index, valid, 2, 4)
     np.testing.assert_allclose(np.asarray(mix), [np.log((np.exp(-1) + np.exp(-2)) / 3), np.log(np.exp(-3) / 2)],
                                rtol=1e-6)
-    assert float(sm.mixture(totals, index, jnp.zeros(8, bool), 2, 4)[0]) == -np.inf
+    assert float(noise.mixture(totals, index, jnp.zeros(8, bool), 2, 4)[0]) == -np.inf
 
 
 def test_candidates_are_the_most_likely_first_observations():
     logq = jnp.log(jnp.full((2, 2, 2, 2, 2), 0.5)).at[0, 1, 1, 1, 1].set(np.log(0.9)).at[0, 1, 1, 1, 0].set(np.log(0.1))
     first = jnp.array([[1, 0], [0, 0], [1, 0], [1, 0]])  # entry 0 (category), end entry
-    index, lq = sm.candidates(logq, jnp.array([1, 0]), first, first, jnp.array([True, True, False, True]), 3)
+    index, lq = noise.candidates(logq, jnp.array([1, 0]), first, first, jnp.array([True, True, False, True]), 3)
     assert list(np.asarray(index)) == [0, 3, 1]
     assert np.asarray(lq)[0] > np.asarray(lq)[2]
 
@@ -164,8 +166,8 @@ def _judge_fresh_levels(task, tag, variants):
     calibrated on a rollout of the buffer's levels with fresh randomness, then fresh generator
     levels judged beside the exact tracker, for each of ``variants`` ((judge by the ratio over
     the reference, false rate), ...). Returns ([explained per variant], exact, irreducible)."""
-    from remidi.engine.rollout import Frozen
-    from remidi.engine.tracker import ExactTracker
+    from remidi.engine.trackers.base import Frozen
+    from remidi.engine.trackers.exact import ExactTracker
 
     t, n, c = 16, 32, 32
     a = task.num_actions
@@ -174,36 +176,37 @@ def _judge_fresh_levels(task, tag, variants):
         return carry, (jnp.zeros(reset.shape + (a,)), jnp.zeros(reset.shape))
 
     # each piece one jitted program (eager operations cost ~3 ms each here), indexing on the host
-    roll = jax.jit(lambda levels, key, frozen=None: rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels,
-                                                            t, frozen, deterministic_reset=task.deterministic_reset)[0])
+    roll = jax.jit(lambda levels, key, frozen=None: rollout(
+        key, Stepping(task.env, task.params, task.deterministic_reset), Policy(policy, {}, jnp.zeros(1)), levels, t,
+        frozen)[0])
     sample = jax.jit(lambda key, k: jax.vmap(task.sample_level)(jax.random.split(key, k)), static_argnums=1)
     tags = lambda levels: np.asarray(jax.jit(jax.vmap(lambda l: task.level_tags(l)[tag]))(levels))  # noqa: E731
     take = lambda tree, i: jax.tree.map(lambda x: jnp.asarray(np.asarray(x)[i]), tree)  # noqa: E731
-    count = jax.jit(lambda counts, levels, traj, key: sm.count_rollout(
-        counts, task.env, task.params, coding, task.reseed_level, levels, traj.obs, traj.action, traj.reset, key))
+    count = jax.jit(lambda counts, levels, traj, key: noise.count_rollout(
+        counts, task.env, task.params, coding, task.reseed_level, levels, traj, key))
     pool = sample(jax.random.PRNGKey(0), 1000)
     irr = tags(pool)
     idx = np.concatenate([np.nonzero(irr)[0][:29], np.nonzero(~irr)[0][:3]])
     buffer = take(pool, idx)
     coding = _coding(task, buffer)
-    counts = sm.init_counts(coding)
+    counts = noise.init_counts(coding)
     for i in range(2):
         levels = sample(jax.random.PRNGKey(10 + i), n)
         counts = count(counts, levels, roll(levels, jax.random.PRNGKey(20 + i)), jax.random.PRNGKey(30 + i))
-    model = bl.BeliefModel(coding, num_actions=a, hidden=32)
+    model = bm.BeliefModel(coding, num_actions=a, hidden=32)
     ref = None
     if any(reference for reference, _ in variants):
-        opt = bl.make_optimizer(1e-2)
+        opt = bm.make_optimizer(1e-2)
         gen = roll(sample(jax.random.PRNGKey(40), n), jax.random.PRNGKey(41))
         params = model.init(jax.random.PRNGKey(42))
-        ref = jax.jit(lambda p: jax.tree.map(lambda x: x[None], bl.fit_steps(model, opt, p, opt.init(p), gen.obs,
+        ref = jax.jit(lambda p: jax.tree.map(lambda x: x[None], bm.fit_steps(model, opt, p, opt.init(p), gen.obs,
                                                                                gen.action, gen.reset, 150)[0]))(params)
     tracker = sm.SimulatedTracker(coding, model, num_buffers=1, budget=c, reseed=task.reseed_level)
-    buckets = bl.num_length_buckets(t)
+    buckets = cal.num_length_buckets(t)
 
     def frozen(threshold, reference):
         return Frozen(levels=buffer, valid=jnp.ones((c,), bool), tracker=tracker,
-                      belief=sm.FrozenSims(logq=sm.log_q(counts), threshold=threshold, valid=jnp.ones((1,), bool),
+                      belief=sm.FrozenSims(logq=noise.log_q(counts), threshold=threshold, valid=jnp.ones((1,), bool),
                                            key=jax.random.PRNGKey(50), ref=ref if reference else None))
 
     held_levels = take(buffer, np.asarray(jax.random.randint(jax.random.PRNGKey(60), (n,), 0, c)))
@@ -215,9 +218,9 @@ def _judge_fresh_levels(task, tag, variants):
     for reference, false_rate in variants:
         scores = jax.jit(lambda f, codes, act, rs: sm.score_recorded(tracker, task.env, task.params, f, codes, act, rs,
                                                                      jax.random.PRNGKey(63)))(
-            frozen(jnp.zeros((1, buckets)), reference), sm.recorded_codes(coding, held.obs, held.reset), held.action,
+            frozen(jnp.zeros((1, buckets)), reference), noise.recorded_codes(coding, held.obs, held.reset), held.action,
             held.reset)[..., 0]
-        tau = bl.calibrate_monotone(scores[None], bl.prefix_lengths(held.reset)[None], false_rate, buckets)
+        tau = cal.calibrate_monotone(scores[None], bm.prefix_lengths(held.reset)[None], false_rate, buckets)
         judged.append(np.asarray(roll(fresh, jax.random.PRNGKey(71), frozen(tau[None], reference)).indist))
     exact = roll(fresh, jax.random.PRNGKey(71), Frozen(levels=buffer, valid=jnp.ones((c,), bool), tracker=ExactTracker()))
     return judged, np.asarray(exact.indist), tags(fresh)
@@ -271,8 +274,8 @@ def test_a_simulated_run_calibrates_at_each_switch_and_resumes_to_the_uninterrup
     full = assert_resumes_to_the_uninterrupted_result(
         monkeypatch, ["run", "lever-noisy", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path, at=12)
     with np.load(next((tmp_path / "full").rglob("checkpoint.npz"))) as data:
-        threshold = data[next(n for n in data.files if n.endswith(".belief.threshold"))]  # [seed, buffer, bucket]
-        counts = data[next(n for n in data.files if n.endswith(".belief.counts"))]
+        threshold = data[next(n for n in data.files if n.endswith(".tracker.threshold"))]  # [seed, buffer, bucket]
+        counts = data[next(n for n in data.files if n.endswith(".tracker.counts"))]
     assert np.isfinite(threshold[:, :-1]).all() and np.isinf(threshold[:, -1]).all()
     assert counts.sum() == 24 * 8 * 4 * counts.shape[1]  # every update's triples: T·N·(E + 1) each
     for name in ("belief/explained", "belief/exact_explained", "belief/agreement"):
@@ -300,7 +303,6 @@ def test_each_seed_draws_its_own_simulation_noise():
     import dataclasses
 
     from remidi.engine import train as tr
-    from remidi.engine.adversary import earlier_buffers
     from remidi.envs.noisy import noisy_lever_task
     from test_ued_engine import TINY as CFG
 
@@ -308,10 +310,11 @@ def test_each_seed_draws_its_own_simulation_noise():
     cfg = r(CFG, remidi=r(CFG.remidi, num_buffers=3, tracker="simulated", belief_hidden=8))
     setup = tr.make_setup(noisy_lever_task(8), cfg, "remidi")
     shapes = jax.eval_shape(lambda k: tr.init_runner(setup, k), jax.random.PRNGKey(0))
-    runner = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes).replace(active=jnp.asarray(1, jnp.int32))
+    runner = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    runner = runner.replace(adversary=runner.adversary.replace(active=jnp.asarray(1, jnp.int32)))
 
     def key(seed):
-        return np.asarray(jax.random.key_data(earlier_buffers(setup, runner.replace(rng=jax.random.PRNGKey(seed))).belief.key))
+        return np.asarray(jax.random.key_data(setup.tracker.frozen(setup, runner.replace(rng=jax.random.PRNGKey(seed))).belief.key))
 
     assert not np.array_equal(key(0), key(1))
     np.testing.assert_array_equal(key(0), key(0))

@@ -64,7 +64,7 @@ def test_training_prints_it_in_the_first_process(monkeypatch, capsys, process):
     """make_train's block callback prints the warning whatever the experiment tracking, once
     across processes (each gets every seed's metrics), and the run's summary lists the stalled
     updates."""
-    from remidi.engine.driver import TrainResult
+    from remidi.engine.run.driver import TrainResult
 
     def fake_train_seeds(task, cfg, algo, seeds, *, on_block=None, **kwargs):
         metrics = {k: v[:1] for k, v in BLOCK_METRICS.items()}

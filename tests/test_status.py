@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from remidi.cli import main
-from remidi.engine.checkpoint import CHECKPOINT, save_run
+from remidi.engine.run.checkpoint import CHECKPOINT, save_run
 from remidi.errors import ConfigError
 from remidi.runs.status import run_folders, run_status
 

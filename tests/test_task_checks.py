@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from remidi.cli import main
-from remidi.engine.buffer import BufferConfig
+from remidi.engine.config import BufferConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "bring_your_own_env.py"
@@ -169,8 +169,8 @@ def test_the_command_line_reports_a_broken_task_in_one_line(tmp_path, monkeypatc
 def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corridor):
     """perfect_regret scores an unfinished episode by its partial return, pvl by -inf: both are
     warned of when num_steps is shorter than an episode can last (the registry says which)."""
-    from remidi.engine.scores import SCORES
-    from remidi.engine.validation import run_warnings
+    from remidi.engine.adversaries.scores import SCORES
+    from remidi.engine.run.validation import run_warnings
 
     task = corridor.make_task()  # episodes of at most 14 steps
     short = dataclasses.replace(TINY, num_steps=4)
@@ -187,7 +187,7 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
 def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(corridor):
     """ReMiDi's exact tracker steps frozen levels with the agent's draws: a step with randomness of
     its own is warned of (not for PLR⊥, nor with a belief tracker, nor for the example's step)."""
-    from remidi.engine.validation import run_warnings
+    from remidi.engine.run.validation import run_warnings
 
     task = corridor.make_task()
     slipping = dataclasses.replace(task, env=type("Slip", (_Slip, type(task.env)), {})())
@@ -282,8 +282,8 @@ def test_run_ued_refuses_a_task_ref_that_does_not_import_before_writing(corridor
 def test_the_discounted_utility_error_names_the_score_in_use(corridor, monkeypatch):
     """A score of a plugin that needs the optimum, on a task without a discounted one: the error
     names that score (it named perfect_regret whatever the score)."""
-    from remidi.engine import scores as sc
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.adversaries import scores as sc
+    from remidi.engine.run.validation import validate_ued_config
 
     monkeypatch.setitem(sc.SCORES, "gap", dataclasses.replace(sc.SCORES["perfect_regret"], name="gap"))
     task = dataclasses.replace(corridor.make_task(), optimal_discounted_return=None)
@@ -295,7 +295,7 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
     """`--algo all` on a user's task without a level mutator or builder trains what it can run;
     naming another says why, and every refusal lists the same algorithms (each listed the
     algorithms the other refused)."""
-    from remidi.engine.validation import validate_ued_config
+    from remidi.engine.run.validation import validate_ued_config
     from remidi.experiments.base import parse_algos
     from remidi.experiments.custom import task_experiment
 

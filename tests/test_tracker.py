@@ -5,8 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import ExactTracker
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.interface import AutoReplay
 from seq_env import SeqEnv, level, stack
 
@@ -23,7 +24,7 @@ def run_tracker(agent_level, frozen_levels, valid=None, mode="prefix", steps=Non
 
     levels = stack(agent_level)
     steps = steps or int(agent_level.length)
-    traj, _ = rollout(jax.random.PRNGKey(0), ENV, None, apply, {}, jnp.zeros(1), levels, steps,
+    traj, _ = rollout(jax.random.PRNGKey(0), Stepping(ENV, None), Policy(apply, {}, jnp.zeros(1)), levels, steps,
                       Frozen(levels=frozen_batch, valid=valid, tracker=ExactTracker(mode)))
     return np.asarray(traj.indist[:, 0])
 
@@ -86,7 +87,7 @@ def test_autoreplay_restarts_the_same_level(deterministic_reset):
 
 
 def test_the_tracker_is_a_component_chosen_from_the_config():
-    from remidi.engine.tracker import CandidateTracker, make_tracker
+    from remidi.engine.trackers.exact import CandidateTracker, make_tracker
 
     assert make_tracker("prefix", 0) == ExactTracker("prefix")
     assert make_tracker("per_step", 0) == ExactTracker("per_step")

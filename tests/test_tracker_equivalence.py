@@ -11,8 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import make_tracker
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import make_tracker
 from remidi.envs import maze as M
 from remidi.envs import maze_levels
 from remidi.envs.lever import lever_task
@@ -40,9 +41,8 @@ def run(env, params, agents, frozen_levels, valid, budget, num_actions, combine,
     frozen = Frozen(levels=frozen_levels, valid=valid, params=frozen_params, tracker=make_tracker("prefix", budget))
     # the candidate tracker as the engine runs it (these environments reset deterministically):
     # its slots share the envs' reset and environment step; the reference as plainly as it gets
-    traj, _ = rollout(jax.random.PRNGKey(seed), env, params, policy(num_actions),
-                      {"bias": jnp.zeros(num_actions)}, jnp.zeros(n), agents, STEPS, frozen,
-                      deterministic_reset=budget > 0)
+    traj, _ = rollout(jax.random.PRNGKey(seed), Stepping(env, params, budget > 0),
+                      Policy(policy(num_actions), {"bias": jnp.zeros(num_actions)}, jnp.zeros(n)), agents, STEPS, frozen)
     return jax.device_get(traj)
 
 

@@ -8,9 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine import driver
-from remidi.engine.checkpoint import load_checkpoint, save_checkpoint
-from remidi.engine.validation import validate_ued_config
+from remidi.engine.run import driver
+from remidi.engine.run.checkpoint import load_checkpoint, save_checkpoint
+from remidi.engine.run.validation import validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.envs.lever import lever_task
 from remidi.errors import ConfigError
@@ -45,7 +45,8 @@ def test_same_seed_same_result_and_resume_matches_uninterrupted(tmp_path):
 
     with pytest.raises(Crash):
         driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "b", progress=False, on_block=crash)
-    second = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=tmp_path / "b", resume=True, progress=False)
+    second = driver.train_seeds(TASK, TINY, "remidi", [0, 1], out=driver.RunFolder(tmp_path / "b", resume=True),
+                                progress=False)
     steps_b, resumed, raw_b, runner_b = second.steps, second.history, second.per_step, second.runner
     np.testing.assert_array_equal(steps, steps_b)
     for name in full:
@@ -63,12 +64,12 @@ def test_a_fresh_runner_is_typed_as_a_restored_one(monkeypatch):
     from remidi.engine import train as tr
 
     real = tr.init_runner
-    monkeypatch.setattr(tr, "init_runner", lambda setup, key: real(setup, key).replace(
-        frozen_params=jnp.full((3,), jnp.inf)))  # a weak-typed leaf
+    monkeypatch.setattr(tr, "init_runner", lambda setup, key: (lambda r: r.replace(learner=r.learner.replace(
+        frozen_params=jnp.full((3,), jnp.inf))))(real(setup, key)))  # a weak-typed leaf
     setup = tr.make_setup(TASK, TINY, "dr")
     keys = jax.vmap(jax.random.PRNGKey)(jnp.arange(2, dtype=jnp.uint32))
     shapes = jax.eval_shape(lambda k: driver._init.__wrapped__(setup, k), keys)  # traced afresh (jit's cache holds the real one)
-    assert shapes.frozen_params.shape == (2, 3)
+    assert shapes.learner.frozen_params.shape == (2, 3)
     assert not any(leaf.weak_type for leaf in jax.tree.leaves(shapes))
 
 
@@ -82,8 +83,9 @@ def test_a_diverged_network_never_replaces_the_last_good_checkpoint(tmp_path, mo
     def diverging(setup, runner, length):
         runner, metrics = real(setup, runner, length)
         if int(np.asarray(runner.update).max()) > 20:
-            params = jax.tree.map(lambda x: x * jnp.nan, runner.train_state.params)
-            runner = runner.replace(train_state=runner.train_state.replace(params=params))
+            params = jax.tree.map(lambda x: x * jnp.nan, runner.learner.train_state.params)
+            runner = runner.replace(learner=runner.learner.replace(
+                train_state=runner.learner.train_state.replace(params=params)))
         return runner, metrics
 
     monkeypatch.setattr(driver, "_run_block", diverging)
@@ -92,7 +94,7 @@ def test_a_diverged_network_never_replaces_the_last_good_checkpoint(tmp_path, mo
     from remidi.engine import train as tr
 
     runner, meta = driver.load_run_state(tr.make_setup(TASK, TINY, "remidi"), [0, 1], tmp_path / "checkpoint.npz")
-    assert meta["done"] == 20 and all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(runner.train_state.params))
+    assert meta["done"] == 20 and all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(runner.learner.train_state.params))
 
 
 def test_killed_checkpoint_write_leaves_previous_checkpoint_intact(tmp_path, monkeypatch):
@@ -120,9 +122,9 @@ def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
     # seeds 0 and 1: the program compiled for the determinism test (shared through the cache)
     result = driver.train_seeds(TASK, TINY, "remidi", [0, 1], progress=False)
     hist, runner = result.history, result.runner
-    levels, valid = runner.buffers.levels, np.asarray(runner.buffers.valid)  # [S, K, C]
+    levels, valid = runner.adversary.buffers.levels, np.asarray(runner.adversary.buffers.valid)  # [S, K, C]
     correct, visible = np.asarray(levels.correct), np.asarray(levels.visible)
-    assert np.asarray(runner.active).tolist() == [1, 1]
+    assert np.asarray(runner.adversary.active).tolist() == [1, 1]
     for s in range(2):
         first = {(int(c), bool(v)) for c, v, ok in zip(correct[s, 0], visible[s, 0], valid[s, 0]) if ok}
         second = {(int(c), bool(v)) for c, v, ok in zip(correct[s, 1], visible[s, 1], valid[s, 1]) if ok}
@@ -162,9 +164,9 @@ def test_unknown_algorithm_and_missing_optimal_return():
 
 
 def test_a_scores_declared_needs_are_what_validation_checks():
-    """Each score declares what it needs (engine/scores.py's SCORES); validation refuses a task
+    """Each score declares what it needs (engine/adversaries/scores.py's SCORES); validation refuses a task
     without it and lists the scores that fit the task."""
-    from remidi.engine.scores import SCORES
+    from remidi.engine.adversaries.scores import SCORES
 
     needs = {name: (s.needs_optimum, s.needs_solved, s.needs_finished_episodes) for name, s in SCORES.items()}
     assert needs == {"perfect_regret": (True, False, True), "pvl": (False, False, True),
@@ -223,7 +225,7 @@ def test_jaxued_maze_trains_through_our_interface():
     validate_ued_config(cfg, "remidi", task)
     result = driver.train_seeds(task, cfg, "remidi", [0], progress=False)
     hist, runner = result.history, result.runner
-    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(runner.train_state.params))
+    assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(runner.learner.train_state.params))
     assert np.isfinite(hist["mean_return"]).all()
 
 
@@ -231,8 +233,9 @@ def test_jaxued_maze_trains_through_our_interface():
 def test_one_update_rolls_out_once(algo, monkeypatch):
     """Replay or fresh levels, an update performs a single rollout (chosen levels first, then one
     rollout), and so traces the environment's step once for the agent's envs."""
-    from remidi.engine import rollout as ro
+    from remidi.engine import learner as lrn
     from remidi.engine import train as tr
+    from remidi.engine.core import rollout as ro
 
     calls = []
 
@@ -240,7 +243,7 @@ def test_one_update_rolls_out_once(algo, monkeypatch):
         calls.append(1)
         return ro.rollout(*args, **kwargs)
 
-    monkeypatch.setattr(tr, "rollout", counting_rollout)
+    monkeypatch.setattr(lrn, "rollout", counting_rollout)
     setup = tr.make_setup(TASK, TINY, algo)
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     jax.make_jaxpr(lambda r: tr.train_step(setup, r))(runner)
@@ -248,7 +251,7 @@ def test_one_update_rolls_out_once(algo, monkeypatch):
 
 
 def test_degenerate_but_valid_runs_are_warned_about():
-    from remidi.engine.validation import run_warnings
+    from remidi.engine.run.validation import run_warnings
     from remidi.envs.maze import maze_task
     from remidi.experiments.maze import paper_config as maze_paper
 
@@ -280,8 +283,9 @@ def test_degenerate_but_valid_runs_are_warned_about():
 def test_ppo_diagnostics_are_logged_for_the_updates_that_train():
     """``ppo/<name>`` per update: defined where the update trained (PLR⊥: a replay; DR: always),
     NaN where it did not; a logged point is the mean over the block's training updates only."""
-    from remidi.engine import driver as drv
     from remidi.engine import train as tr
+    from remidi.engine.learner import PPO_METRICS
+    from remidi.engine.run import driver as drv
 
     for algo in ("plr", "dr"):
         setup = tr.make_setup(TASK, TINY, algo)
@@ -289,7 +293,7 @@ def test_ppo_diagnostics_are_logged_for_the_updates_that_train():
         _, steps = jax.jit(lambda r: drv.run_steps(setup, r, 12))(runner)
         trained = np.asarray(steps["replay"][0]) > 0 if algo == "plr" else np.ones(12, bool)
         assert trained.any() and (algo == "dr" or not trained.all())  # both kinds of update occur for PLR⊥
-        for name in tr.PPO_METRICS:
+        for name in PPO_METRICS:
             values = np.asarray(steps[f"ppo/{name}"][0])
             assert np.isfinite(values[trained]).all() and np.isnan(values[~trained]).all(), (algo, name)
         block = drv._block_metrics({k: np.asarray(v) for k, v in steps.items()}, TINY.num_envs)
@@ -299,7 +303,9 @@ def test_ppo_diagnostics_are_logged_for_the_updates_that_train():
 
 
 def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
-    from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
+    from remidi.engine.adversaries.accel import EditingBuffers
+    from remidi.engine.adversaries.base import RandomLevels
+    from remidi.engine.adversaries.plr import LevelBuffers
     from remidi.engine.algorithms import ALGORITHMS, Algorithm
 
     kinds = {name: (type(a.adversary).__name__, a.replays, a.buffer_sequence, a.edits, a.trains_on_fresh)
@@ -314,7 +320,7 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
                      "remidi-paired": ("GeneratorSequence", False, True, False, True)}
     with pytest.raises(ConfigError, match="would never train the agent"):
         RandomLevels(trains_on_fresh=False)
-    from remidi.engine.paired import GeneratorSequence, LevelGenerator
+    from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
 
     with pytest.raises(ConfigError, match="^adversary: LevelGenerator without trains_on_fresh would never train the agent"):
         LevelGenerator(trains_on_fresh=False)
@@ -322,7 +328,7 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
         GeneratorSequence(trains_on_fresh=False)
     with pytest.raises(ConfigError, match="^adversary: GeneratorSequence is a sequence of generators"):
         GeneratorSequence(buffer_sequence=False)
-    with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversary adversary"):
+    with pytest.raises(ConfigError, match="adversary must be a remidi.engine.adversaries.base adversary"):
         Algorithm("bad", "plr")
     # non-robust PLR (trains on fresh levels too) is a valid adversary
     assert Algorithm("plr-nonrobust", LevelBuffers(trains_on_fresh=True)).trains_on_fresh
@@ -352,12 +358,13 @@ def test_paired_needs_a_level_builder_and_resumes_exactly(tmp_path):
         full = driver.train_seeds(TASK, cfg, algo, [0, 1], progress=False)
         with pytest.raises(Crash):
             driver.train_seeds(TASK, cfg, algo, [0, 1], out=tmp_path / algo, progress=False, on_block=crash)
-        resumed = driver.train_seeds(TASK, cfg, algo, [0, 1], out=tmp_path / algo, resume=True, progress=False)
+        resumed = driver.train_seeds(TASK, cfg, algo, [0, 1], out=driver.RunFolder(tmp_path / algo, resume=True),
+                                             progress=False)
         for name in full.history:
             np.testing.assert_array_equal(full.history[name], resumed.history[name], err_msg=f"{algo}: {name}")
         for a, b in zip(jax.tree.leaves(full.runner), jax.tree.leaves(resumed.runner)):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
         assert {"paired/regret", "paired/antagonist_return", "paired/generator_entropy",
                 "generated/hidden"} <= set(full.history)
-        assert full.runner.generator is not None and full.runner.antagonist is not None
-    assert (np.asarray(full.runner.active) == 1).all()  # remidi-paired switched before the crash
+        assert full.runner.adversary.generator is not None and full.runner.adversary.antagonist is not None
+    assert (np.asarray(full.runner.adversary.active) == 1).all()  # remidi-paired switched before the crash

@@ -9,9 +9,12 @@ of steps explained and of episodes explained at every step (complete overlap: re
 the exact tracker's (for the deterministic T-maze)."""
 import sys
 import jax, jax.numpy as jnp, numpy as np
-from remidi.engine import belief as bl
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import ExactTracker
+from remidi.engine.trackers import belief as bl
+from remidi.engine.trackers import belief_model as bm
+from remidi.engine.trackers import calibration as cal
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.maze import maze_task
 from remidi.envs.noisy import noisy_blindfold_task
 
@@ -26,8 +29,8 @@ def policy(variables, carry, obs, reset):
     return carry, (jnp.zeros(reset.shape + (A,)), jnp.zeros(reset.shape))
 
 def roll(levels, key, frozen=None):
-    traj, _ = rollout(key, task.env, task.params, policy, {}, jnp.zeros(1), levels, T, frozen,
-                      deterministic_reset=task.deterministic_reset)
+    traj, _ = rollout(key, Stepping(task.env, task.params, task.deterministic_reset), Policy(policy, {}, jnp.zeros(1)),
+                      levels, T, frozen)
     return traj
 
 pool = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), 4000))
@@ -46,12 +49,12 @@ def from_buffer(key, n):
 fresh = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(7), N))
 
 example, _ = task.env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), task.params)
-model = bl.BeliefModel(bl.coding_for(example), num_actions=A, hidden=HIDDEN)
-opt = bl.make_optimizer(1e-2)
+model = bm.BeliefModel(bm.coding_for(example), num_actions=A, hidden=HIDDEN)
+opt = bm.make_optimizer(1e-2)
 
 @jax.jit
 def fit(params, obs, action, reset):
-    params, _, losses = bl.fit_steps(model, opt, params, opt.init(params), obs, action, reset, STEPS)
+    params, _, losses = bm.fit_steps(model, opt, params, opt.init(params), obs, action, reset, STEPS)
     return params, losses
 
 data = roll(from_buffer(jax.random.PRNGKey(1), N), jax.random.PRNGKey(2))
@@ -62,8 +65,8 @@ print(f"model loss {float(losses[0]):.1f} -> {float(losses[-1]):.1f}; reference 
       f"{float(rlosses[-1]):.1f}; uniform {-bl.uniform_score(model):.1f} nats per step")
 
 held = roll(from_buffer(jax.random.PRNGKey(4), N), jax.random.PRNGKey(5))
-lengths = bl.prefix_lengths(held.reset)
-L = bl.num_length_buckets(T)
+lengths = bm.prefix_lengths(held.reset)
+L = cal.num_length_buckets(T)
 exact = Frozen(levels=buffer, valid=jnp.ones((C,), bool), tracker=ExactTracker())
 ex = roll(fresh, jax.random.PRNGKey(8), exact)
 fresh_irr = np.asarray(jax.vmap(lambda l: task.level_tags(l)[tag])(fresh))
@@ -79,11 +82,11 @@ def report(name, traj):
 
 report("exact", ex)
 for use_ref in (False, True):
-    ll = bl.step_logliks(model, params, held.obs, held.action, held.reset)
+    ll = bm.step_logliks(model, params, held.obs, held.action, held.reset)
     if use_ref:
-        ll = ll - bl.step_logliks(model, ref, held.obs, held.action, held.reset)
-    scores = bl.prefix_scores(ll, held.reset)
-    tau = bl.calibrate_monotone(scores[None], lengths[None], ALPHA, L)
+        ll = ll - bm.step_logliks(model, ref, held.obs, held.action, held.reset)
+    scores = bm.prefix_scores(ll, held.reset)
+    tau = cal.calibrate_monotone(scores[None], lengths[None], ALPHA, L)
     fb = bl.FrozenBeliefs(params=jax.tree.map(lambda x: x[None], params), threshold=tau[None],
                           valid=jnp.ones((1,), bool), ref=jax.tree.map(lambda x: x[None], ref) if use_ref else None)
     tr = roll(fresh, jax.random.PRNGKey(8), Frozen(levels=None, valid=None, tracker=bl.BeliefTracker(model), belief=fb))

@@ -9,9 +9,12 @@ P(h | Λ) = mean over θ in the frozen buffer. Judged by the ratio over the gene
 (or by the mixture alone), calibrated on held-out replays of the buffer's levels (fresh noise)."""
 import sys
 import jax, jax.numpy as jnp, numpy as np
-from remidi.engine import belief as bl
-from remidi.engine.rollout import Frozen, rollout
-from remidi.engine.tracker import ExactTracker
+from remidi.engine.trackers import belief as bl
+from remidi.engine.trackers import belief_model as bm
+from remidi.engine.trackers import calibration as cal
+from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.trackers.base import Frozen
+from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.maze import maze_task
 from remidi.envs.noisy import noisy_blindfold_task
 
@@ -34,8 +37,8 @@ def policy(variables, carry, obs, reset):
     return carry, (jnp.zeros(reset.shape + (A,)), jnp.zeros(reset.shape))
 
 def roll(levels, key, frozen=None):
-    traj, _ = rollout(key, env, P, policy, {}, jnp.zeros(1), levels, T, frozen,
-                      deterministic_reset=task.deterministic_reset)
+    traj, _ = rollout(key, Stepping(env, P, task.deterministic_reset), Policy(policy, {}, jnp.zeros(1)), levels, T,
+                      frozen)
     return traj
 
 pool = jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(0), 4000))
@@ -43,7 +46,7 @@ irr = np.asarray(jax.vmap(lambda l: task.level_tags(l)[tag])(pool))
 idx = np.concatenate([np.nonzero(irr)[0][:int(0.9 * C)], np.nonzero(~irr)[0][:C - int(0.9 * C)]])
 buffer = jax.tree.map(lambda x: x[idx], pool)
 example, _ = env.reset_to_level(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], buffer), P)
-coding = bl.coding_for(example)
+coding = bm.coding_for(example)
 E, K = coding.num_entries, coding.num_categories
 
 def simulate(level, actions, key):
@@ -88,11 +91,11 @@ print(f"noise table: {int(counts.sum())} entries counted; deterministic steps "
       f"{float(counts[:, 1].sum() / counts.sum()):.2f}")
 
 # ---- the generator's reference model (GRU), as the probe of belief_probe.py
-model = bl.BeliefModel(coding, num_actions=A, hidden=64)
-opt = bl.make_optimizer(1e-2)
+model = bm.BeliefModel(coding, num_actions=A, hidden=64)
+opt = bm.make_optimizer(1e-2)
 @jax.jit
 def fit(params, obs, action, reset):
-    params, _, losses = bl.fit_steps(model, opt, params, opt.init(params), obs, action, reset, 300)
+    params, _, losses = bm.fit_steps(model, opt, params, opt.init(params), obs, action, reset, 300)
     return params, losses
 gen = roll(jax.vmap(task.sample_level)(jax.random.split(jax.random.PRNGKey(11), N)), jax.random.PRNGKey(12))
 ref, rl = fit(model.init(jax.random.PRNGKey(13)), gen.obs, gen.action, gen.reset)
@@ -117,12 +120,12 @@ def scores(traj, frozen_levels, key):
     lq = logq[e, d, s1, s2, o[None]].sum(-1)  # [F, T, N]
     cum = jnp.cumsum(lq, axis=1)
     mix = jax.nn.logsumexp(cum, axis=0) - jnp.log(F)  # [T, N]
-    ref_ll = jnp.cumsum(bl.step_logliks(model, ref, traj.obs, traj.action, traj.reset), axis=0)
+    ref_ll = jnp.cumsum(bm.step_logliks(model, ref, traj.obs, traj.action, traj.reset), axis=0)
     t = jnp.arange(1, T + 1)[:, None]
     exact = jnp.any(jnp.cumprod(jnp.all(s1 == o[None], -1), axis=1) > 0, axis=0)  # deterministic: exact
     return mix / t, (mix - ref_ll) / t, exact
 
-L = bl.num_length_buckets(T)
+L = cal.num_length_buckets(T)
 def from_buffer(key, n):
     k1, k2 = jax.random.split(key)
     lv = jax.tree.map(lambda x: x[jax.random.randint(k1, (n,), 0, C)], buffer)
@@ -135,13 +138,13 @@ ft = roll(fresh, jax.random.PRNGKey(8))
 fm, fr, fex = scores(ft, buffer, jax.random.PRNGKey(9))
 fresh_irr = np.asarray(jax.vmap(lambda l: task.level_tags(l)[tag])(fresh))
 first_h, first_f = first_episode(held.reset), np.asarray(first_episode(ft.reset))
-lengths_h, lengths_f = bl.prefix_lengths(held.reset), bl.prefix_lengths(ft.reset)
+lengths_h, lengths_f = bm.prefix_lengths(held.reset), bm.prefix_lengths(ft.reset)
 # the exact tracker on the same rollout (seeded levels: exact for the deterministic domains)
 ex = np.asarray(roll(fresh, jax.random.PRNGKey(8), Frozen(levels=buffer, valid=jnp.ones((C,), bool), tracker=ExactTracker())).indist)
 for name, h, f in (("mixture", hm, fm), ("ratio", hr, fr)):
-    tau = bl.calibrate_monotone(h[None], lengths_h[None], ALPHA, L, first_h[None])
-    z = f - tau[bl.length_bucket(lengths_f, L)]
-    expl = np.asarray(bl.episode_minimum(z, lengths_f) >= 0)
+    tau = cal.calibrate_monotone(h[None], lengths_h[None], ALPHA, L, first_h[None])
+    z = f - tau[cal.length_bucket(lengths_f, L)]
+    expl = np.asarray(cal.episode_minimum(z, lengths_f) >= 0)
     print(f"{name}: thresholds {np.round(np.asarray(tau), 1)}; held-out mean {float(jnp.mean(h)):.1f}")
     for lab, m in ((tag, fresh_irr), ("ordinary", ~fresh_irr)):
         sel = first_f & m[None]

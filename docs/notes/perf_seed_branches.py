@@ -1,7 +1,7 @@
 """Seconds per update of a multi-seed block from a fresh run (no buffer switch inside), with whatever
 remidi is on PYTHONPATH, to compare commits (docs/performance.md, "Rare branches over several seeds"):
 
-    PYTHONPATH=WORKTREE/src python docs/notes/perf_seed_branches.py blindfold-noisy cpu 5 2 \
+    PYTHONPATH=WORKTREE/src python docs/perf_seed_branches.py blindfold-noisy cpu 5 2 \
         remidi.tracker=simulated remidi.belief_reference=true remidi.belief_false_rate=0 remidi.belief_margin=5
 """
 import sys, time
@@ -9,8 +9,8 @@ from functools import partial
 import jax
 from remidi.experiments import get_experiment
 from remidi.experiments.base import resolve_config
-from remidi.experiments.overrides import parse_set_items
-from remidi.engine import driver, train as tr
+from remidi.experiments.config import parse_set_items
+from remidi.engine.run import driver, train as tr
 
 name, preset, seeds, updates = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 exp = get_experiment(name)

@@ -11,7 +11,7 @@ __version__ = "0.1.0"
 _LAZY = {
     "run_ued": ("remidi.experiments.custom", "run_ued"),
     "register_algorithm": ("remidi.engine.algorithms", "register_algorithm"),
-    "register_score": ("remidi.engine.scores", "register_score"),
+    "register_score": ("remidi.engine.adversaries.scores", "register_score"),
 }
 
 __all__ = ["__version__", "register_algorithm", "register_score", "run_ued"]

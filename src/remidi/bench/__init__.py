@@ -31,13 +31,13 @@ compiled block, ``driver.run_steps``):
   a batch of a frozen buffer's levels instead of a replay of the active one (one rollout and one
   PPO update either way); ``remidi_rehearsal_step_over_remidi_step`` (not run by default).
 * ``maze-remidi-belief``: ``maze-remidi`` with the learned belief tracker
-  (``remidi.tracker=belief``, engine/belief.py): each step every env's prefix is scored by the
+  (``remidi.tracker=belief``, engine/trackers/belief.py): each step every env's prefix is scored by the
   three frozen buffers' GRU models instead of stepping frozen levels, and the active buffer's
   model fits on every replay (``remidi.belief_epochs`` updates);
   ``remidi_belief_step_over_remidi_step`` is its cost per environment step against the exact
   candidate tracker's (not run by default).
 * ``maze-remidi-simulated``: ``maze-remidi`` with the simulated belief model
-  (``remidi.tracker=simulated`` judged by the ratio, engine/simulated.py): each step every env's
+  (``remidi.tracker=simulated`` judged by the ratio, engine/trackers/simulated.py): each step every env's
   ``tracker_budget`` candidates are stepped in two copies, and every update replays its levels
   twice for the noise table (and a fresh update fits the GRU reference);
   ``remidi_simulated_step_over_remidi_step`` (not run by default).

@@ -15,10 +15,10 @@ def _filled_runner(setup, active: int, seeds: int = 1):
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine import driver
+    from remidi.engine.run import driver
 
     runner = driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.arange(seeds, dtype=jnp.uint32)))
-    bufs = runner.buffers  # leaves [S, K, C, ...]
+    bufs = runner.adversary.buffers  # leaves [S, K, C, ...]
     k, c = bufs.valid.shape[1:]
     keys = jax.random.split(jax.random.PRNGKey(1), k * c)
     levels = jax.jit(jax.vmap(setup.task.sample_level))(keys)
@@ -26,7 +26,8 @@ def _filled_runner(setup, active: int, seeds: int = 1):
                           levels)
     scores = jnp.broadcast_to(jax.random.uniform(jax.random.PRNGKey(2), (1, k, c)), (seeds, k, c))
     bufs = bufs.replace(levels=levels, valid=jnp.ones_like(bufs.valid), scores=scores)
-    return runner.replace(buffers=bufs, active=jnp.full_like(runner.active, active))
+    return runner.replace(adversary=runner.adversary.replace(buffers=bufs,
+                                                            active=jnp.full_like(runner.adversary.active, active)))
 
 
 def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2):
@@ -34,7 +35,7 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
 
     import jax
 
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
     from remidi.experiments.overrides import apply_overrides
 
@@ -56,11 +57,11 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
     # the network's operation count assumes every update trains one network; an editing algorithm's
     # edit updates do not, a learned generator's updates train three, a belief tracker adds its models'
     # work and Combine the frozen policies' (no figure rather than a wrong one)
-    from remidi.engine.paired import LevelGenerator
+    from remidi.engine.adversaries.paired import LevelGenerator
 
     flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
-        setup.algo.buffer_sequence and (cfg.remidi.tracker in ("belief", "simulated") or cfg.remidi.policy == "combine") else \
-        steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.train_state.params))
+        setup.algo.buffer_sequence and (setup.tracker.learns or cfg.remidi.policy == "combine") else \
+        steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.learner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
 
 
@@ -74,7 +75,7 @@ def network_flops_per_step(setup, params) -> float:
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine.train import example_observation
+    from remidi.engine.setup import example_observation
 
     cfg, net = setup.cfg, setup.net
     n = cfg.num_envs

@@ -73,7 +73,7 @@ def _cmd_list(args) -> int:
     print(f"  algorithms: {', '.join(exp.algorithms)}"
           + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
     if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
-        from remidi.engine.scores import SCORES
+        from remidi.engine.adversaries.scores import SCORES
 
         print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
     presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"

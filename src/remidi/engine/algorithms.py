@@ -1,7 +1,7 @@
 """UED algorithms as data: what each one does in the shared train step (:mod:`remidi.engine.train`).
 
-The train step calls an :class:`Algorithm`'s adversary (:mod:`remidi.engine.adversary`), never
-its name or a flag, so an algorithm is an adversary (and a score) described here; a new kind of
+The train step calls an :class:`Algorithm`'s adversary (the protocol:
+:mod:`remidi.engine.adversaries.base`), never its name or a flag, so an algorithm is an adversary (and a score) described here; a new kind of
 adversary is a new implementation of that interface, once for every domain.
 ``docs/extending.md`` walks through one.
 """
@@ -11,8 +11,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from remidi.engine.adversary import EditingBuffers, LevelBuffers, RandomLevels
-from remidi.engine.paired import GeneratorSequence, LevelGenerator
+from remidi.engine.adversaries.accel import EditingBuffers
+from remidi.engine.adversaries.base import Adversary, RandomLevels
+from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
+from remidi.engine.adversaries.plr import LevelBuffers
+from remidi.engine.adversaries.scores import SCORES, check_name
 from remidi.errors import ConfigError, one_of
 
 
@@ -21,13 +24,14 @@ class Algorithm:
     """One UED algorithm (hashable: part of the static set-up of a compiled train step).
 
     name: what ``--algo`` calls it.
-    adversary: where its levels come from and what becomes of them (:mod:`remidi.engine.adversary`):
-        :class:`~remidi.engine.adversary.RandomLevels` (DR), :class:`~remidi.engine.adversary.LevelBuffers`
+    adversary: where its levels come from and what becomes of them (an
+        :class:`~remidi.engine.adversaries.base.Adversary`):
+        :class:`~remidi.engine.adversaries.base.RandomLevels` (DR), :class:`~remidi.engine.adversaries.plr.LevelBuffers`
         (the PLR family; ``buffer_sequence=True``: ReMiDi's refinement, a sequence of
         ``remidi.num_buffers`` buffers, levels a frozen one explains rejected and PPO's loss masked on
-        the steps a frozen level explains), :class:`~remidi.engine.adversary.EditingBuffers` (ACCEL),
-        :class:`~remidi.engine.paired.LevelGenerator` (PAIRED) and
-        :class:`~remidi.engine.paired.GeneratorSequence` (ReMiDi over PAIRED).
+        the steps a frozen level explains), :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL),
+        :class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
+        :class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED).
         Its ``trains_on_fresh``: PPO learns from rollouts on fresh levels too (robust PLR⊥ and its
         relatives learn only from replays).
     score: the level score it always uses (``minimax-return``: ``neg_return``); None: the config's
@@ -36,14 +40,15 @@ class Algorithm:
     """
 
     name: str
-    adversary: RandomLevels
+    adversary: Adversary
     score: str | None = None
     description: str = ""
 
     def __post_init__(self):
-        if not isinstance(self.adversary, RandomLevels):
-            raise ConfigError(f"algorithm {self.name}: adversary must be a remidi.engine.adversary adversary "
-                              f"(RandomLevels, LevelBuffers, EditingBuffers, LevelGenerator or GeneratorSequence), got {type(self.adversary).__name__}")
+        if not isinstance(self.adversary, Adversary):
+            raise ConfigError(f"algorithm {self.name}: adversary must be a remidi.engine.adversaries.base adversary "
+                              f"(an Adversary: RandomLevels, LevelBuffers, EditingBuffers, LevelGenerator or GeneratorSequence), "
+                              f"got {type(self.adversary).__name__}")
 
     def score_name(self, configured: str) -> str:
         """The score this algorithm ranks levels by, given the config's ``score``."""
@@ -140,21 +145,19 @@ class RegisteredNames(Sequence):
         return repr(tuple(self))
 
 
-def register_algorithm(name: str, adversary: RandomLevels, *, score: str | None = None,
+def register_algorithm(name: str, adversary: Adversary, *, score: str | None = None,
                        description: str = "") -> Algorithm:
     """Add an algorithm made of existing components to :data:`ALGORITHMS`: every UED experiment
     then accepts ``--algo NAME`` (``remidi run``, ``remidi list``, ``remidi evaluate``), and
     :func:`remidi.run_ued` and the driver accept the name.
 
-    ``adversary``: an adversary of :mod:`remidi.engine.adversary` or :mod:`remidi.engine.paired`
+    ``adversary``: an adversary of :mod:`remidi.engine.adversaries` (``plr``, ``accel``, ``paired``)
     (e.g. ``LevelBuffers(trains_on_fresh=True)``, ``LevelBuffers(buffer_sequence=True)``);
-    ``score``: a registered score (:data:`remidi.engine.scores.SCORES`, :func:`register_score`)
+    ``score``: a registered score (:data:`remidi.engine.adversaries.scores.SCORES`, :func:`register_score`)
     the algorithm always ranks levels by, or None for the config's ``score``; ``description``:
     one line for ``remidi list``. Raises ConfigError (one line) for a name already taken or a
     malformed entry. Returns the registered :class:`Algorithm`.
     """
-    from remidi.engine.scores import SCORES, check_name
-
     check_name("algorithm", name)
     if name in ALGORITHMS:
         raise ConfigError(f"register_algorithm: an algorithm named {name!r} is already registered; "

@@ -1,20 +1,76 @@
-"""A UED run's configuration: :class:`UEDConfig` (with the ReMiDi and ACCEL sections) and what it
-derives for an algorithm (its score, number of buffers, buffer settings). Each key's help text
+"""A UED run's configuration: :class:`UEDConfig` (with the buffer, ReMiDi, ACCEL and PAIRED
+sections) and what it derives for an algorithm (its score, number of buffers, buffer settings). Each key's help text
 lives next to its field (``remidi list`` prints them)."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
-from remidi.engine import buffer as buf
-from remidi.engine.ppo import PPOConfig
-
-if TYPE_CHECKING:  # algorithms.py imports the adversaries, which import this module
-    from remidi.engine.algorithms import Algorithm
+from remidi.engine.core.ppo import PPOConfig
+from remidi.errors import ConfigError, one_of
 
 POLICIES = ("masked", "combine")
+PRIORITIZATIONS = ("rank", "topk")
+
+
+@dataclass(frozen=True)
+class BufferConfig:
+    """Static (hashable) buffer hyperparameters.
+
+    Attributes:
+        capacity: number of slots.
+        prioritization: ``"rank"`` (weight ∝ (1/rank)^(1/temperature)) or ``"topk"`` (a softmax
+            of score/temperature over the ``topk_k`` highest-scored valid entries, zero elsewhere;
+            ``jaxued``'s ``topk`` at temperature 1).
+        temperature: β of rank prioritisation and of the top-k softmax, > 0.
+        topk_k: k of top-k prioritisation, ≥ 1 (clipped to the number of valid entries).
+        staleness_coef: ρ; replay weights = (1-ρ)·score weights + ρ·staleness weights.
+        replay_prob: probability of a replay step; used by the train loop, stored here.
+        min_fill: fraction of the capacity that must be valid before replay is allowed.
+        duplicate_check: if true, inserting a level equal to a valid entry updates that entry.
+    """
+
+    capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
+    prioritization: str = field(default="rank", metadata={"help": "replay sampling: rank or topk"})
+    temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation and of the top-k softmax"})
+    topk_k: int = field(default=32, metadata={"help": "k of top-k prioritisation"})
+    staleness_coef: float = field(default=0.3, metadata={"help": "ρ: weight of staleness in the replay distribution"})
+    replay_prob: float = field(default=0.8, metadata={"help": "probability that a train step replays buffer levels"})
+    min_fill: float = field(default=0.0, metadata={"help": "fraction of the buffer that must be filled before replay"})
+    duplicate_check: bool = field(default=False, metadata={
+        "help": "re-inserting a level already in the buffer updates it"})
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _check_unit_interval(name: str, value) -> None:
+    if not (_is_real(value) and 0.0 <= value <= 1.0):
+        raise ConfigError(f"{name}: must be a number in [0, 1], got {value!r}")
+
+
+def validate_buffer_config(config: BufferConfig) -> None:
+    """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
+    if not (_is_int(config.capacity) and config.capacity >= 1):
+        raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
+    if config.prioritization not in PRIORITIZATIONS:
+        raise one_of("prioritization", config.prioritization, PRIORITIZATIONS)
+    if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
+        raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
+    if not (_is_int(config.topk_k) and config.topk_k >= 1):
+        raise ConfigError(f"topk_k: must be an integer ≥ 1, got {config.topk_k!r}")
+    _check_unit_interval("staleness_coef", config.staleness_coef)
+    _check_unit_interval("replay_prob", config.replay_prob)
+    _check_unit_interval("min_fill", config.min_fill)
+    if not isinstance(config.duplicate_check, bool):
+        raise ConfigError(f"duplicate_check: must be true or false, got {config.duplicate_check!r}")
 
 
 @dataclass(frozen=True)
@@ -35,14 +91,14 @@ class ReMiDiConfig:
     tracker: str = field(default="prefix", metadata={
         "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule), belief "
                 "(a learned model per buffer judges the prefix: for environments whose observations are random "
-                "given the level; engine/belief.py) or simulated (the frozen levels simulated under fresh randomness "
-                "with a learnt noise model, the belief_* keys as for belief; engine/simulated.py)"})
-    # slots per env of the candidate tracker (engine/tracker.py): only frozen levels sharing the
+                "given the level; engine/trackers/belief.py) or simulated (the frozen levels simulated under fresh randomness "
+                "with a learnt noise model, the belief_* keys as for belief; engine/trackers/simulated.py)"})
+    # slots per env of the candidate tracker (engine/trackers/exact.py): only frozen levels sharing the
     # env's first observation are stepped, at most this many; 0 steps every frozen level (the
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
     tracker_budget: int = field(default=64, metadata={
         "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
-    # remidi.tracker=belief (engine/belief.py): each adversary (buffer or generator) has a learned
+    # remidi.tracker=belief (engine/trackers/belief.py): each adversary (buffer or generator) has a learned
     # model of its trajectories, trained on the rollouts of its own levels (a buffer's replays, a
     # generator's every update) and frozen with it; its threshold is the belief_false_rate quantile
     # of the prefix scores of its last belief_calibration such rollouts
@@ -68,7 +124,7 @@ class ReMiDiConfig:
     # buffer acts on the trajectories realisable under that buffer's levels
     policy: str = field(default="masked", metadata={
         "help": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)"})
-    # rehearsal (issue #31; the paper's §7 limitation): once a buffer is frozen, an update trains
+    # rehearsal (the paper's §7 limitation): once a buffer is frozen, an update trains
     # with this probability on N levels of a uniformly chosen earlier buffer, drawn uniformly from
     # its levels, on every step (no mask); no buffer changes (adversary.py, rehearse_frozen)
     rehearsal: float = field(default=0.0, metadata={
@@ -145,7 +201,7 @@ class UEDConfig:
     checkpoint_every: int = field(default=500, metadata={
         "help": "updates between checkpoints (checkpoint.npz in the run folder)"})
     ppo: PPOConfig = field(default_factory=PPOConfig)
-    buffer: buf.BufferConfig = field(default_factory=buf.BufferConfig)
+    buffer: BufferConfig = field(default_factory=BufferConfig)
     remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
     accel: AccelConfig = field(default_factory=AccelConfig)
     paired: PairedConfig = field(default_factory=PairedConfig)
@@ -158,17 +214,17 @@ class UEDConfig:
 DERIVED_KEYS = ("ppo.total_updates",)  # not settable: follows num_updates
 
 
-def score_name(cfg: UEDConfig, algo: Algorithm) -> str:
+def score_name(cfg: UEDConfig, algo) -> str:
     """The score ``algo`` ranks levels by under ``cfg``."""
     return algo.score_name(cfg.score)
 
 
-def num_buffers(cfg: UEDConfig, algo: Algorithm) -> int:
+def num_buffers(cfg: UEDConfig, algo) -> int:
     """K, the number of level buffers: ``remidi.num_buffers`` for a buffer sequence, else 1."""
     return cfg.remidi.num_buffers if algo.buffer_sequence else 1
 
 
-def buffer_config(cfg: UEDConfig, algo: Algorithm) -> buf.BufferConfig:
+def buffer_config(cfg: UEDConfig, algo) -> BufferConfig:
     """Each buffer's settings (a buffer sequence's buffers hold ``remidi.buffer_capacity``)."""
     if algo.buffer_sequence:
         return dataclasses.replace(cfg.buffer, capacity=cfg.remidi.buffer_capacity)

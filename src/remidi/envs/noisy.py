@@ -1,6 +1,6 @@
 """Stochastic test domains: observation noise that ReMiDi's exact tracker cannot see through.
 
-ReMiDi's tracker (:mod:`remidi.engine.tracker`) is exact for environments that are
+ReMiDi's tracker (:mod:`remidi.engine.trackers.exact`) is exact for environments that are
 deterministic given the level. Randomness outside the level can be brought inside it, as a
 *seed* the level carries ("seed in the level"): the environment stays deterministic given the
 level and the tracker stays exact. Where the randomness is in what the agent *sees*, that is

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from remidi.engine.buffer import BufferConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.config import BufferConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.brax import BACKENDS, DEFAULT_BACKEND, MORPHOLOGIES
 from remidi.errors import ConfigError, choice, probability, require

@@ -38,7 +38,7 @@ from typing import Any, Callable
 import jax
 
 from remidi.engine.config import UEDConfig
-from remidi.engine.validation import task_refusal, validate_task
+from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 from remidi.experiments.base import Experiment, RunSpec
@@ -55,7 +55,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     """An :class:`Experiment` named ``name`` that trains the task ``make_task()`` returns, with
     ``config`` (default: ``UEDConfig()``) as its only preset, ``default``. ``task_ref``: where the
     task comes from (:func:`task_source`), recorded in ``config.json``. The task is validated first
-    (:func:`~remidi.engine.validation.validate_task`)."""
+    (:func:`~remidi.engine.run.validation.validate_task`)."""
     task = make_task()
     if not isinstance(task, UEDTask):
         raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")

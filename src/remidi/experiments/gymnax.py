@@ -23,9 +23,9 @@ from functools import cache
 
 import numpy as np
 
-from remidi.engine.buffer import BufferConfig
+from remidi.engine.config import BufferConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.envs.gymnax import gymnax_task, point_name
 from remidi.errors import require
 from remidi.experiments.ued import UEDSpec, make_ued_experiment

@@ -8,8 +8,8 @@ learns to pull the shown lever.
 
 from __future__ import annotations
 
-from remidi.engine.buffer import BufferConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.config import BufferConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.lever import lever_task
 from remidi.envs.noisy import NOISE_BITS, noisy_lever_task

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from remidi.engine.buffer import BufferConfig
-from remidi.engine.ppo import PPOConfig
+from remidi.engine.config import BufferConfig
+from remidi.engine.core.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.envs.maze_names import HELD_OUT_NAMES, TRAIN_SIZE  # not remidi.envs.maze: see maze_names
 from remidi.errors import probability, require

@@ -116,7 +116,7 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
 def _note_fresh_start(exp: Experiment, folder: Path) -> None:
     """Say so when the UED run to resume in ``folder`` has no checkpoint yet (it stopped before
     its first): --resume then trains it from its start. (The tabular games keep no checkpoint.)"""
-    from remidi.engine.checkpoint import CHECKPOINT
+    from remidi.engine.run.checkpoint import CHECKPOINT
 
     if exp.make_task is not None and not (folder / CHECKPOINT).exists():
         print(f"remidi: note: {folder} has no checkpoint yet (the run stopped before its first); "
@@ -180,7 +180,7 @@ def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
                           f"allowed: {', '.join(exp.algorithms)}")
     score = getattr(config, "score", None)
     if exp.make_task is not None and isinstance(score, str):
-        from remidi.engine.scores import SCORES
+        from remidi.engine.adversaries.scores import SCORES
 
         if score not in SCORES:
             raise ConfigError(f"{where}: the run's score {score!r} is unknown here ({hint}); "

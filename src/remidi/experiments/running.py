@@ -194,7 +194,7 @@ def _check_devices(exp: Experiment, devices, num_seeds: int) -> None:
         return  # today's path, without asking JAX anything
     if not exp.shards_seeds:
         raise ConfigError(f"--devices: {exp.name} trains on one device; allowed: 1")
-    from remidi.engine.driver import check_devices
+    from remidi.engine.run.driver import check_devices
 
     check_devices(devices, num_seeds)
 

@@ -15,11 +15,11 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
-from remidi.engine.driver import replay_fractions, train_seeds
+from remidi.engine.run.driver import RunFolder, replay_fractions, train_seeds
 from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames
 from remidi.engine.config import UEDConfig
-from remidi.engine.paired import LevelGenerator
-from remidi.engine.validation import run_warnings, validate_ued_config
+from remidi.engine.adversaries.paired import LevelGenerator
+from remidi.engine.run.validation import run_warnings, validate_ued_config
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels, run_title
@@ -100,7 +100,7 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
                check_step: bool = False):
     """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
     over evaluation sets), f[S, T] each. ``check_step``: warn of a step that draws from its key
-    (:func:`~remidi.engine.validation.run_warnings`; a user's task)."""
+    (:func:`~remidi.engine.run.validation.run_warnings`; a user's task)."""
 
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
@@ -118,7 +118,8 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
                 more = derive({k: np.asarray(v)[:, None] for k, v in metrics.items()}) if derive is not None else {}
                 ctx.on_block(done, {**metrics, **{k: np.asarray(v)[:, 0] for k, v in more.items()}})
 
-        result = train_seeds(task, cfg, ctx.algo, ctx.seeds, out=ctx.out, resume=ctx.resume,
+        result = train_seeds(task, cfg, ctx.algo, ctx.seeds,
+                             out=None if ctx.out is None else RunFolder(ctx.out, resume=ctx.resume),
                              progress=ctx.progress, devices=ctx.devices, on_block=on_block)
         history = dict(result.history)
         if derive is not None:
@@ -186,7 +187,7 @@ class UEDSpec:
     its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
-    (None: it can; :func:`remidi.engine.validation.task_refusal` of one task). ``check_step``: warn
+    (None: it can; :func:`remidi.engine.run.validation.task_refusal` of one task). ``check_step``: warn
     of a step that draws from its key (a user's task, :func:`make_train`)."""
 
     name: str

@@ -16,7 +16,7 @@ a bad one).
 
 Each plays the levels ``remidi evaluate`` scores (``task.eval_sets``, in the environment of each
 set, ``task.eval_envs``), scored by the same first-episode return over the task's episode limit
-(:func:`remidi.engine.evaluation.first_episode_return`) and, for the mazes, the task's solve
+(:func:`remidi.engine.run.evaluation.first_episode_return`) and, for the mazes, the task's solve
 criterion; independent attempts per level (zero action one: its episode is determined by the
 level). Brax's physics is the experiments' default back end.
 """
@@ -37,7 +37,7 @@ def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine.evaluation import first_episode_return
+    from remidi.engine.run.evaluation import first_episode_return
 
     fits = ("zero", "normal") if task.continuous else ("uniform",)
     if policy not in fits:

@@ -130,9 +130,9 @@ def _load(folder: Path, task=None) -> _Loaded:
     """The run in ``folder``, its agent restored from the checkpoint (leaves with the seed axis
     first); its task rebuilt from config.json (``saved_experiment``), or ``task`` where given.
     ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
-    from remidi.engine.checkpoint import CHECKPOINT
+    from remidi.engine.run.checkpoint import CHECKPOINT
     from remidi.experiments import saved_experiment
     from remidi.experiments.resuming import saved_run
 
@@ -185,14 +185,14 @@ def _solvable_levels(task, count: int, seed: int):
 def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
     """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
     evaluation of one run: the task's evaluation sets as training evaluates them
-    (:func:`remidi.engine.evaluation.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
+    (:func:`remidi.engine.run.evaluation.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
     the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
     import dataclasses
 
     import jax
     import jax.numpy as jnp
 
-    from remidi.engine import evaluation
+    from remidi.engine.run import evaluation
     from remidi.engine import train as tr
 
     task = setup.task

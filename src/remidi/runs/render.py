@@ -128,7 +128,7 @@ def _check_seed(run: _Run, seed) -> int:
 
 
 def _check_checkpoint(run: _Run) -> Path:
-    from remidi.engine.driver import CHECKPOINT
+    from remidi.engine.run.driver import CHECKPOINT
 
     path = run.folder / CHECKPOINT
     if not path.is_file():
@@ -138,7 +138,7 @@ def _check_checkpoint(run: _Run) -> Path:
 
 def _load_runner(run: _Run, path: Path):
     """``(runner, meta)`` from the checkpoint; the runner's leaves have the seeds axis first."""
-    from remidi.engine import driver
+    from remidi.engine.run import driver
     from remidi.engine import train as tr
     from remidi.experiments.maze import task_factory
 
@@ -172,9 +172,9 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
         raise RemidiError(f"--top: must be an integer ≥ 1, got {top}")
     run, s, seed, path, runner, meta = _open_run(run_dir, seed, out, "buffers_seed{seed}.png", ".png")
 
-    buffers = jax.tree.map(lambda x: np.asarray(x[s]), runner.buffers)  # leaves [K, C, ...]
+    buffers = jax.tree.map(lambda x: np.asarray(x[s]), runner.adversary.buffers)  # leaves [K, C, ...]
     levels = getattr(buffers.levels, "level", buffers.levels)  # blindfold-noisy: the maze of a SeededLevel
-    active = int(np.asarray(runner.active)[s])
+    active = int(np.asarray(runner.adversary.active)[s])
     valid, scores = buffers.valid, buffers.scores.astype(float)
     num_buffers, capacity = valid.shape
     columns = min(top, capacity)
@@ -305,7 +305,7 @@ def render_episode(run_dir, maze: str, seed: int | None = None, attempt_seed: in
 
     index = goal_index or 0
     level = jax.tree.map(lambda x: x[index], levels)
-    params = jax.tree.map(lambda x: x[s], runner.train_state.params)
+    params = jax.tree.map(lambda x: x[s], runner.learner.train_state.params)
     env, renderer = _renderer(size, tile)
     inner, observations, actions, rewards, dones = _play(env, run.setup.net, params, level,
                                                          jax.random.PRNGKey(attempt_seed), EPISODE_STEPS)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from remidi.engine.checkpoint import CHECKPOINT, HISTORY, load_history, read_meta, unreadable
+from remidi.engine.run.checkpoint import CHECKPOINT, HISTORY, load_history, read_meta, unreadable
 from remidi.errors import ConfigError
 from remidi.experiments.outputs import read_json_object
 

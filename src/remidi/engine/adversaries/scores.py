@@ -43,6 +43,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.errors import ConfigError
+
 
 def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
     """Per env, over the episodes that ended: the sum and the max of each episode's total of ``x``
@@ -161,15 +163,15 @@ class ScoreInputs:
 @dataclass(frozen=True)
 class Score:
     """A level score: ``fn(ScoreInputs) -> f32[N]`` (higher = replayed more) and what it needs,
-    which the engine checks before a run (``engine/validation.py``) and provides in the step
-    (``engine/train.py``'s ``score_rollout``).
+    which the engine checks before a run (``engine/run/validation.py``) and provides in the step
+    (``engine/learner.py``'s ``score_rollout``).
 
     needs_optimum: the task's optimal return (``UEDTask.optimal_return``; with
         ``discounted_regret``, ``optimal_discounted_return`` too).
     needs_solved: the task's solve criterion (``UEDTask.solved``).
     needs_finished_episodes: it reads the episodes that end inside a rollout, so a rollout shorter
         than an episode (``num_steps`` < the episode limit) scores some levels without one:
-        warned before the run (``engine/validation.py``'s ``run_warnings``).
+        warned before the run (``engine/run/validation.py``'s ``run_warnings``).
     unfinished: what becomes of a level whose episode does not end inside the rollout, completing
         the warning's "levels whose episode does not end ...".
     help: one line for ``remidi list``.
@@ -212,8 +214,6 @@ def check_name(kind: str, name) -> None:
     in comma-separated lists and in file names)."""
     import re
 
-    from remidi.errors import ConfigError
-
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name) or name == "all":
         raise ConfigError(f"register_{kind}: name must be a non-empty string of letters, digits, _, - and . "
                           f"(not 'all'), got {name!r}")
@@ -233,8 +233,6 @@ def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_o
     not in the middle of a run. Raises ConfigError (one line) for a name already taken or a
     malformed entry. Returns the registered :class:`Score`.
     """
-    from remidi.errors import ConfigError
-
     check_name("score", name)
     if name in SCORES:
         raise ConfigError(f"register_score: a score named {name!r} is already registered; "
@@ -269,11 +267,8 @@ def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_o
     return score
 
 
-def score_levels(name: str, *, mean_return, values, advantages, max_return, done, optimal_return=None, reward=None,
-                 solved=None) -> jax.Array:
-    """f32[N]: the score ``name`` (static; one of :data:`SCORES`) of one rollout."""
+def score_levels(name: str, inputs: ScoreInputs) -> jax.Array:
+    """f32[N]: the score ``name`` (static; one of :data:`SCORES`) of one rollout's ``inputs``."""
     if name not in SCORES:
         raise ValueError(f"score must be one of {tuple(SCORES)}, got {name!r}")
-    return SCORES[name].fn(ScoreInputs(mean_return=mean_return, values=values, advantages=advantages,
-                                       max_return=max_return, done=done, reward=reward,
-                                       optimal_return=optimal_return, solved=solved))
+    return SCORES[name].fn(inputs)

@@ -1,4 +1,4 @@
-"""The distinguishability tracker ("parallel step") of ReMiDi.
+"""The exact distinguishability tracker ("parallel step") of ReMiDi: the default tracker.
 
 While the agent acts on its own level, the tracker steps the agent's *same actions* on frozen
 levels in lock-step and remembers, per frozen level, whether it has produced exactly the agent's
@@ -27,12 +27,12 @@ Mode ``"per_step"`` reproduces the authors' looser rule, one boolean AND-ed with
 level matches *this* step" — a prefix can pass that test although no single frozen level
 produced it. It needs every frozen level stepped: the reference tracker only.
 
-The functions act on ONE rollout environment. The rollout uses them through a *tracker
-component* (:class:`ExactTracker`, :class:`CandidateTracker`; :func:`make_tracker` picks one from
-the config), which vmaps them over its N envs: ``start`` at the rollout's first step,
-``explained`` (bool[N]: the prefix so far is indistinguishable from a frozen level) before each
-action, ``advance`` after each environment step. Another way of judging distinguishability (a
-learned belief model) is one more class with these methods.
+The functions act on ONE rollout environment. The rollout uses them through the tracker
+components (:class:`ExactTracker`, :class:`CandidateTracker`; :func:`make_tracker` picks one),
+which vmap them over its N envs (the protocol: :mod:`remidi.engine.trackers.base`): ``start`` at
+the rollout's first step, ``explained`` (bool[N]: the prefix so far is indistinguishable from a
+frozen level) before each action, ``advance`` after each environment step. They keep no state
+across updates: the frozen levels are the adversary's.
 Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``), S = slots.
 """
 
@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.engine.trackers.base import Tracker
 from remidi.envs.interface import tree_equal, tree_select
 
 MODES = ("prefix", "per_step")
@@ -79,8 +80,9 @@ def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs) -> TrackerS
                         every_step=jnp.any(match))
 
 
-def tracker_step(env, params, rng, state: TrackerState, frozen_levels, valid, action, agent_obs, agent_done) -> TrackerState:
-    """Advance after the agent took ``action`` and saw ``agent_obs`` (``agent_done``: its episode ended).
+def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_obs, agent_done) -> TrackerState:
+    """Advance after the agent took ``action`` and saw ``agent_obs`` (``agent_done``: its episode
+    ended); ``frozen``: the frozen levels (``levels`` leaves [F, ...], ``valid`` bool[F]).
 
     ``rng`` is the key given to the agent's :class:`~remidi.envs.interface.AutoReplay` step
     (split the same way). When the agent's episode ended, ``agent_obs`` is the first
@@ -91,8 +93,8 @@ def tracker_step(env, params, rng, state: TrackerState, frozen_levels, valid, ac
         rng_step, state.env_states, action, params)
     same = _compare(obs_f, agent_obs) & (done_f == agent_done)
     stepped = state.replace(env_states=states, match=state.match & same,
-                            every_step=state.every_step & jnp.any(valid & same))
-    restarted = tracker_reset(env, params, rng_reset, frozen_levels, valid, agent_obs)
+                            every_step=state.every_step & jnp.any(frozen.valid & same))
+    restarted = tracker_reset(env, params, rng_reset, frozen.levels, frozen.valid, agent_obs)
     return tree_select(agent_done, restarted, stepped)
 
 
@@ -153,10 +155,11 @@ def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Ar
 
 # ---------------------------------------------------------------------- the components
 @dataclass(frozen=True)
-class ExactTracker:
+class ExactTracker(Tracker):
     """The reference tracker over N rollout envs: every frozen level stepped beside each env.
     ``mode``: ``"prefix"`` (the definition) or ``"per_step"`` (the authors' rule). Its methods
-    take the rollout's ``frozen`` (:class:`~remidi.engine.rollout.Frozen`) and act on leaves [N, ...]."""
+    take the rollout's ``frozen`` (:class:`~remidi.engine.trackers.base.Frozen`) and act on leaves
+    [N, ...]."""
 
     mode: str = "prefix"
 
@@ -175,8 +178,8 @@ class ExactTracker:
 
     def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
         """After the envs took ``action`` with ``env_keys`` [N] and saw ``next_obs``, ``done``."""
-        return jax.vmap(tracker_step, in_axes=(None, None, 0, 0, None, None, 0, 0, 0))(
-            env, params, env_keys, state, frozen.levels, frozen.valid, action, next_obs, done)
+        return jax.vmap(tracker_step, in_axes=(None, None, 0, 0, None, 0, 0, 0))(
+            env, params, env_keys, state, frozen, action, next_obs, done)
 
     def overflow(self, state: TrackerState) -> jax.Array:
         """i32[N]: frozen levels the tracker could not follow (none: it follows all)."""
@@ -185,6 +188,10 @@ class ExactTracker:
     def buffer_match(self, state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
         """bool[N, B]: some level of frozen buffer b produced env n's whole prefix (Combine)."""
         return jax.vmap(buffer_match, in_axes=(0, None, None))(state, num_buffers, capacity)
+
+    def at_first_observation(self) -> ExactTracker:
+        """The reference tracker of this mode (every frozen level stepped)."""
+        return ExactTracker(mode=self.mode)
 
 
 @dataclass(frozen=True)
@@ -200,6 +207,31 @@ class CandidateTracker(ExactTracker):
         if self.mode != "prefix" or self.budget < 1:
             raise ValueError("the candidate tracker computes the prefix mode only, with budget ≥ 1")
 
+    def _shares(self, envs) -> bool:
+        """The slots and the envs share one reset and one environment step per rollout step (each
+        further copy of the environment's reset or step in the program costs compile time:
+        seconds for Brax): the reset ignores its keys and the frozen levels play in the envs' own
+        environment."""
+        return envs.deterministic_reset and envs.tracker_env is envs.raw
+
+    def reset(self, envs, frozen, reset_keys, levels):
+        if not self._shares(envs):
+            return super().reset(envs, frozen, reset_keys, levels)
+        num_envs = reset_keys.shape[0]
+        both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
+        frozen_keys = jnp.broadcast_to(reset_keys[:1], (frozen.valid.shape[0],) + reset_keys.shape[1:])
+        keys = jnp.concatenate([reset_keys, frozen_keys])
+        obs_all, states_all = jax.vmap(envs.raw.reset_to_level, in_axes=(0, 0, None))(keys, both, envs.params)
+        obs, raw_state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
+        state = jax.vmap(envs.auto.start_state)(obs, raw_state, levels)
+        starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
+        return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs, starts)
+
+    def step(self, envs, frozen, env_keys, state, tstate, action):
+        if not self._shares(envs):
+            return super().step(envs, frozen, env_keys, state, tstate, action)
+        return step_with_slots(envs, env_keys, state, tstate, action, self)
+
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
         starts = frozen_starts(env, params, frozen.levels) if starts is None else starts
         return jax.vmap(candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, self.budget)
@@ -210,7 +242,7 @@ class CandidateTracker(ExactTracker):
 
     def advance_stepped(self, state: TrackerState, stepped, next_obs, done) -> TrackerState:
         """:meth:`advance` given the slots' environment step, taken together with the envs'
-        (leaves [N, S, ...]: :func:`~remidi.engine.rollout.step_with_slots`)."""
+        (leaves [N, S, ...]: :func:`step_with_slots`)."""
         return jax.vmap(candidates_advance)(state, stepped, next_obs, done)
 
     def overflow(self, state: TrackerState) -> jax.Array:
@@ -221,3 +253,32 @@ def make_tracker(mode: str = "prefix", budget: int = 0) -> ExactTracker:
     """The tracker of ``remidi.tracker`` (``mode``) with ``budget`` slots per env: the candidate
     tracker for a budget > 0, else the reference tracker."""
     return CandidateTracker(mode=mode, budget=budget) if budget > 0 else ExactTracker(mode=mode)
+
+
+def step_with_slots(envs, env_keys, state, tstate, action, tracker: CandidateTracker):
+    """One environment step of the N envs and of their candidate tracker slots together, as one
+    batch [N, 1 + S]: each env's slots take its action and the key its own step takes (the first
+    half of ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env` and
+    :func:`candidates_step`), so the results are theirs. Returns ``(next_obs, state, reward, done,
+    tstate)``, leaves [N, ...]."""
+    step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
+    both = jax.tree.map(lambda e, s: jnp.concatenate([e[:, None], s], axis=1), state.env_state, tstate.env_states)
+    slots = tstate.index.shape[1]
+    actions = jnp.broadcast_to(action[:, None], (action.shape[0], 1 + slots) + action.shape[1:])
+    stepped = jax.vmap(jax.vmap(envs.raw.step, in_axes=(None, 0, 0, None)), in_axes=(0, 0, 0, None))(
+        step_keys, both, actions, envs.params)
+    own = jax.tree.map(lambda x: x[:, 0], stepped)
+    next_obs, state, reward, done, _ = jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(
+        state, own, envs.params)
+    tstate = tracker.advance_stepped(tstate, jax.tree.map(lambda x: x[:, 1:], stepped), next_obs, done)
+    return next_obs, state, reward, done, tstate
+
+
+def exact_budget(setup, mode: str | None = None) -> int:
+    """Slots per env of the candidate tracker, or 0 for the reference tracker, for the exact
+    tracker of ``mode`` (default: ``remidi.tracker``): ``remidi.tracker_budget``, at most the
+    number of frozen levels, for the prefix mode on a task whose reset ignores its key."""
+    r = setup.cfg.remidi
+    if (mode or r.tracker) != "prefix" or not setup.task.deterministic_reset:
+        return 0
+    return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)

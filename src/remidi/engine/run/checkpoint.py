@@ -5,11 +5,16 @@ a file can be damaged or belong to another run.
 The runner's arrays are stored by their tree path (``leaf:.train_state.params['params']...``,
 ``jax.tree_util.keystr``), so a checkpoint names what it holds and a mismatch names the part of
 the state that differs. Checkpoints of remidi before this format stored arrays by position
-(``leaf_0``, ``leaf_1``, ...); they are refused with a one-line error saying so."""
+(``leaf_0``, ``leaf_1``, ...); they are refused with a one-line error saying so.
+
+The runner holds one state per component (``.learner``, ``.adversary``, ``.tracker``). A
+checkpoint of the earlier layout, one runner field per feature (``.train_state``, ``.buffers``,
+``.belief``, ...), loads through one rename, :data:`RENAMES` (:func:`current_name`)."""
 
 from __future__ import annotations
 
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -23,6 +28,24 @@ from remidi.files import atomic_write, remove_temporaries
 CHECKPOINT = "checkpoint.npz"
 PREFIX = "leaf:"  # a runner array's name in checkpoint.npz: PREFIX + its tree path
 HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
+
+#: the runner's earlier layout (one field per feature) → this one (one state per component): a
+#: stored leaf path starting with a key here is read as the value's path (``.rng`` and ``.update`` kept)
+RENAMES = {".train_state": ".learner.train_state", ".obs_stats": ".learner.obs_stats",
+           ".frozen_params": ".learner.frozen_params", ".buffers": ".adversary.buffers",
+           ".active": ".adversary.active", ".count": ".adversary.count", ".edit_next": ".adversary.edit_next",
+           ".last_replayed": ".adversary.last_replayed", ".generator": ".adversary.generator",
+           ".antagonist": ".adversary.antagonist", ".next_generators": ".adversary.next_generators",
+           ".belief": ".tracker"}
+
+
+def current_name(path: str) -> str:
+    """A runner leaf's tree path (``jax.tree_util.keystr``) in this layout: one of the earlier
+    layout renamed by :data:`RENAMES`, any other unchanged."""
+    first = re.match(r"\.[A-Za-z_]+", path)
+    if first is not None and first.group(0) in RENAMES:
+        return RENAMES[first.group(0)] + path[first.end():]
+    return path
 
 
 def _named_leaves(tree) -> dict[str, object]:
@@ -86,6 +109,10 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
     checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
     wanted = _named_leaves(template)
     meta, stored, leaves = _read(path, flag, wanted)
+    renamed = {PREFIX + current_name(name[len(PREFIX):]): name for name in stored if name.startswith(PREFIX)}
+    if any(new != old for new, old in renamed.items()):  # the earlier layout: read under this one's names
+        _, _, old = _read(path, flag, [renamed[name] for name in wanted if name in renamed])
+        stored, leaves = list(renamed), {new: old[name] for new, name in renamed.items() if name in old}
     positional = any(name.startswith("leaf_") for name in stored)
     if positional:
         raise ConfigError(f"{flag}: {path} was written by an older remidi, which stored the state's arrays by "
@@ -177,7 +204,7 @@ def _flat(tree, prefix: str = "") -> dict:
 def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run: dict | None = None) -> None:
     """Write a run's state at ``done`` updates: the metrics logged so far (``steps``, ``history``
     and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``
-    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.driver.drive`,
+    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.run.driver.drive`,
     and ``run``, the algorithm, seeds and config it trains: :func:`check_run`)."""
     arrays = {}
     for i, h in enumerate(history):

@@ -12,9 +12,9 @@ values, advantages and targets are replaced by zeros before any arithmetic, so w
 recurrent net needs them as inputs) and must be finite. A minibatch with no unmasked entry
 leaves params, optimiser state and step count unchanged.
 
-Networks follow :mod:`remidi.engine.networks`:
+Networks follow :mod:`remidi.engine.core.networks`:
 ``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``; a ``dist`` from
-:mod:`remidi.engine.distributions` reads ``logits`` (categorical logits, or a Gaussian's mean
+:mod:`remidi.engine.core.distributions` reads ``logits`` (categorical logits, or a Gaussian's mean
 and log-std for continuous actions ``f32[T, N, A]``).
 """
 
@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import optax
 from flax.training.train_state import TrainState
 
-from remidi.engine.distributions import CATEGORICAL
+from remidi.engine.core.distributions import CATEGORICAL
 from remidi.errors import ConfigError
 
 
@@ -254,7 +254,7 @@ def ppo_update(
     ``init_carry``: the net's carry for the ``N`` envs at the rollout's first step (env axis
     first in every leaf). Minibatches are shuffled groups of ``N / minibatches`` envs with their
     whole ``T``-step sequences (with one minibatch, all envs in their order). ``apply_fn`` defaults to ``train_state.apply_fn``; ``dist`` is
-    the action distribution (:mod:`remidi.engine.distributions`). Jit-able with ``cfg``,
+    the action distribution (:mod:`remidi.engine.core.distributions`). Jit-able with ``cfg``,
     ``apply_fn`` and ``dist`` static. Returns ``(train_state, metrics)`` where metrics (total_loss,
     policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm, masked_fraction) are
     averaged over the minibatch steps that trained (an all-masked minibatch is skipped, and its

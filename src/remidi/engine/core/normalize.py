@@ -6,7 +6,7 @@ when it started (PPO then trains on exactly what the policy saw), and the statis
 rollout's observations afterwards. The distinguishability tracker compares *raw* observations.
 
 Observations are flattened: every leaf of the observation pytree, ``[..., D_leaf]`` after the
-batch axes, concatenated to ``f32[..., D]`` (:func:`remidi.engine.networks.flatten_obs`), so a
+batch axes, concatenated to ``f32[..., D]`` (:func:`remidi.engine.core.networks.flatten_obs`), so a
 normalising agent must read flat vector observations (the MLP networks do).
 """
 
@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.engine.networks import flatten_obs
+from remidi.engine.core.networks import flatten_obs
 
 CLIP = 10.0  # normalised observations are clipped to [−CLIP, CLIP]
 EPS = 1e-8

@@ -29,11 +29,16 @@ from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
-from remidi.engine import buffer as buf
-from remidi.engine.adversary import Proposal, RandomLevels, belief_contents, buffer_contents, earlier_buffers, switches
+from remidi.engine import learner as lrn
+from remidi.engine.adversaries import level_buffer as buf
+from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
+from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, switches
 from remidi.engine.config import buffer_config
-from remidi.engine.rollout import Frozen
+from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
+from remidi.engine.core.ppo import Batch, compute_gae, create_train_state, ppo_update
+from remidi.engine.core.rollout import Policy, Stepping, rollout
 from remidi.errors import ConfigError
 
 ESTIMATORS = ("paired", "flexible", "perfect")
@@ -89,7 +94,7 @@ def generator_rewards(regret: jax.Array, num_steps: int) -> tuple[jax.Array, jax
     """The generator's episode as a reward signal: ``(rewards f32[T, N], dones bool[T, N])`` with
     T = ``num_steps`` (the level-building MDP's budget), the regret ``f32[N]`` on the last step and
     0 before, and the episode ending there, so GAE never bootstraps past the generator's episode
-    (:func:`remidi.engine.ppo.compute_gae` gives ``reward − V`` at its last step whatever value
+    (:func:`remidi.engine.core.ppo.compute_gae` gives ``reward − V`` at its last step whatever value
     follows)."""
     n = regret.shape[0]
     last = jnp.arange(num_steps)[:, None] == num_steps - 1
@@ -108,9 +113,7 @@ def generator_net(setup):
       step, noise), ``paired.generator_hidden`` units per trunk layer;
     * ``reference``: the reference libraries' adversary (JaxUED, DCD): a 128-channel conv over a
       maze design, an embedded time step and the noise into a 256-unit LSTM
-      (:class:`remidi.engine.networks.GeneratorLSTMActorCritic`)."""
-    from remidi.engine.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
-
+      (:class:`remidi.engine.core.networks.GeneratorLSTMActorCritic`)."""
     builder, p = setup.task.level_builder, setup.cfg.paired
     if p.generator_network == "reference":
         return GeneratorLSTMActorCritic(num_actions=builder.num_actions)
@@ -124,8 +127,20 @@ def generator_ppo(setup):
     return dataclasses.replace(setup.cfg.ppo, lr=p.generator_lr, ent_coef=p.generator_ent_coef)
 
 
+@struct.dataclass
+class GeneratorState(AdversaryState):
+    """:class:`~remidi.engine.adversaries.base.AdversaryState` (the buffers: a generator
+    sequence's reservoirs) and PAIRED's learners: the ``generator``'s and the ``antagonist``'s
+    TrainState; ``next_generators``: a sequence's fresh generators of the later buffers (leaves
+    [K−1, ...]; None for one generator)."""
+
+    generator: object = None
+    antagonist: object = None
+    next_generators: object = None
+
+
 @dataclass(frozen=True)
-class LevelGenerator(RandomLevels):
+class LevelGenerator(Adversary):
     """PAIRED's adversary: a generator policy builds the N levels of each update in the task's
     level-building MDP (one episode of ``level_builder.num_steps`` design actions each); the
     protagonist (the agent) trains on all of them; then an antagonist, an agent of the same
@@ -135,10 +150,14 @@ class LevelGenerator(RandomLevels):
 
     trains_on_fresh: bool = True
 
-    def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
-        """A fresh generator (and antagonist) from ``rng`` (folded, never split)."""
-        from remidi.engine.ppo import create_train_state
+    def init(self, setup, example_level, example_obs, rng) -> GeneratorState:
+        """The buffers, a fresh generator and antagonist from ``rng`` (folded, never split)."""
+        base = super().init(setup, example_level, example_obs, rng)
+        return GeneratorState(buffers=base.buffers, active=base.active, count=base.count,
+                              **self._learners(setup, example_obs, rng))
 
+    def _learners(self, setup, example_obs, rng, antagonist: bool = True) -> dict:
+        """A fresh generator (and antagonist) from ``rng`` (folded, never split)."""
         builder = setup.task.level_builder
         gen_obs, _ = builder.reset_to_level(jax.random.PRNGKey(0), None, None)
         cfg = setup.cfg
@@ -151,33 +170,30 @@ class LevelGenerator(RandomLevels):
 
     def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
         """One episode of the generator per env; the levels are what its actions built."""
-        from remidi.engine.rollout import rollout
-
+        state = runner.adversary
         builder, n = setup.task.level_builder, setup.cfg.num_envs
         net = generator_net(setup)
-        traj, last_value = rollout(k_levels, builder, None, net.apply, runner.generator.params,
-                                   net.initialize_carry(n), jnp.zeros((n,), jnp.int32), builder.num_steps)
+        traj, last_value = rollout(k_levels, Stepping(builder, None),
+                                   Policy(net.apply, state.generator.params, net.initialize_carry(n)),
+                                   jnp.zeros((n,), jnp.int32), builder.num_steps)
         # the rollout's reset keys (as rollout splits them): the builder's episode keys
         reset_keys = jax.random.split(jax.random.split(k_levels)[1], n)
         levels = jax.vmap(builder.build)(reset_keys, traj.action.T)
         replay = jnp.asarray(False)
-        return Proposal(replay=replay, levels=levels, buffer=buf.select_buffer(runner.buffers, runner.active),
+        return Proposal(replay=replay, levels=levels, buffer=buf.select_buffer(state.buffers, state.active),
                         slots=None, train=jnp.asarray(True), generated=(traj, last_value))
 
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
         """The antagonist plays the levels and learns (the agent's rollout and masked PPO, with
         its parameters and nothing frozen); the generator is paid and learns."""
-        from remidi.engine import train as tr
-        from remidi.engine.ppo import Batch, compute_gae, ppo_update
-
-        cfg, task = setup.cfg, setup.task
+        cfg, task, state = setup.cfg, setup.task, runner.adversary
         n = cfg.num_envs
         k_roll, k_ant, k_gen = (jax.random.fold_in(rng, i) for i in (21, 22, 23))
         # under normalize_obs the antagonist reads observations normalised by the protagonist's
         # running statistics (both play these levels), which only the protagonist's rollout updates
-        as_antagonist = runner.replace(train_state=runner.antagonist)
-        traj, adv, targets, ant_mean, ant_best = tr.collect(setup, as_antagonist, k_roll, proposal.levels, None)
-        antagonist, _ = tr.learn(setup, as_antagonist, k_ant, traj, adv, targets)
+        as_antagonist = runner.learner.replace(train_state=state.antagonist)
+        traj, adv, targets, ant_mean, ant_best = lrn.collect(setup, as_antagonist, k_roll, proposal.levels, None)
+        antagonist, _ = lrn.learn(setup, as_antagonist, k_ant, traj, adv, targets)
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
         regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)
@@ -189,7 +205,7 @@ class LevelGenerator(RandomLevels):
         # PPO's value loss would otherwise dwarf its policy loss; the metrics stay unscaled
         rewards, dones = generator_rewards(paid * cfg.reward_scale, gen_traj.reward.shape[0])
         g_adv, g_targets = compute_gae(rewards, gen_traj.value, dones, gen_last, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-        generator, g_metrics = ppo_update(runner.generator, net.initialize_carry(n), Batch(
+        generator, g_metrics = ppo_update(state.generator, net.initialize_carry(n), Batch(
             obs=gen_traj.obs, reset=gen_traj.reset, actions=gen_traj.action, log_probs=gen_traj.log_prob,
             values=gen_traj.value, advantages=g_adv, targets=g_targets, mask=jnp.ones_like(dones)),
             k_gen, generator_ppo(setup), net.apply)
@@ -199,16 +215,17 @@ class LevelGenerator(RandomLevels):
         for name, t in tags.items():
             metrics[f"generated/{name}"] = jnp.sum(jnp.where(t, 1.0, 0.0)) / n
         metrics.update(regret_by_tag(tags, regret, ant_best - ant_mean, optimal, mean_return))
-        kept, inserted = self._keep(setup, runner, proposal, jax.random.fold_in(rng, 24))
-        return {"generator": generator, "antagonist": antagonist, **kept}, inserted, metrics
+        state = state.replace(generator=generator, antagonist=antagonist)
+        state, inserted = self._keep(setup, state, proposal, jax.random.fold_in(rng, 24))
+        return state, inserted, metrics
 
     def _pay(self, setup, regret, overlap):
         """f32[N]: what the generator is paid for each level: its regret estimate."""
         return regret
 
-    def _keep(self, setup, runner, proposal: Proposal, rng):
-        """``(changed Runner fields, inserted bool[N])``: what the adversary keeps of the levels: nothing."""
-        return {}, jnp.zeros((setup.cfg.num_envs,), bool)
+    def _keep(self, setup, state, proposal: Proposal, rng):
+        """``(state, inserted bool[N])``: what the adversary keeps of the levels: nothing."""
+        return state, jnp.zeros((setup.cfg.num_envs,), bool)
 
 
 OVERLAP_REGRETS = ("lowest", "zero")
@@ -235,11 +252,10 @@ class GeneratorSequence(LevelGenerator):
     estimate of the update's levels; ``zero``), so later generators learn to leave earlier
     supports.
 
-    With ``remidi.tracker=belief`` a learned model of each generator's trajectories judges
-    instead of its reservoir (the paper's appendix sketch, P(h | Λᵢ) learnt with Λᵢ: the model
-    learns from every update's rollout, all of them the active generator's levels, and is frozen
-    and calibrated with it, :mod:`remidi.engine.belief`); the reservoir is still kept, for the
-    audit against the exact tracker.
+    With a learned tracker (:mod:`remidi.engine.trackers.belief`) a model of each generator's
+    trajectories judges instead of its reservoir (the paper's appendix sketch, P(h | Λᵢ) learnt
+    with Λᵢ: every update's rollout shows the active generator's levels, :meth:`own_levels`); the
+    reservoir is still kept, for the audit against the exact tracker.
 
     Where it approximates Algorithm 1: the support is a finite sample of the generator's
     distribution (a level the generator rarely makes may be missing from it, and a later level
@@ -255,54 +271,51 @@ class GeneratorSequence(LevelGenerator):
             raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
                               "LevelGenerator); allowed: buffer_sequence=True")
 
-    def frozen(self, setup, runner) -> Frozen | None:
-        return earlier_buffers(setup, runner)
+    def frozen_levels(self, setup, runner):
+        return earlier_buffers(setup, runner.adversary)
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
-        """Every update plays the active generator's levels: its belief model learns from each."""
+        """Every update plays the active generator's levels: a learned tracker's model learns from each."""
         return jnp.asarray(True)
 
     def metrics(self, setup, runner) -> dict:
-        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``), and with
-        ``remidi.tracker=belief`` its model's thresholds (:func:`~remidi.engine.adversary.belief_contents`)."""
-        return {**buffer_contents(setup, runner), **belief_contents(setup, runner)}
+        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``)."""
+        return buffer_contents(setup, runner.adversary)
 
     def _pay(self, setup, regret, overlap):
         low = jnp.min(regret) if setup.cfg.paired.overlap_regret == "lowest" else 0.0
         return jnp.where(overlap, low, regret)
 
-    def _keep(self, setup, runner, proposal: Proposal, rng):
+    def _keep(self, setup, state, proposal: Proposal, rng):
         bcfg = dataclasses.replace(buffer_config(setup.cfg, setup.algo), staleness_coef=0.0, prioritization="rank")
-        active = buf.select_buffer(runner.buffers, runner.active)
+        active = buf.select_buffer(state.buffers, state.active)
         keys = jax.random.uniform(rng, (setup.cfg.num_envs,))
         new_buf, inserted, _ = buf.insert_batch(active, bcfg, proposal.levels, keys,
                                                 {"max_return": jnp.zeros((setup.cfg.num_envs,))}, keep_higher=True)
-        return {"buffers": buf.replace_buffer(runner.buffers, runner.active, new_buf)}, inserted
+        return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted
 
-    def memory(self, setup, example_level, example_obs, rng, antagonist: bool = True) -> dict:
+    def init(self, setup, example_level, example_obs, rng) -> GeneratorState:
         """The first generator and the antagonist, and the fresh generators of the later buffers
         (initialised here, once: initialising in the step would put batched QR decompositions,
         orthogonal initialisers, into the vmapped program, which hangs jaxlib's CPU runtime)."""
-        out = super().memory(setup, example_level, example_obs, rng, antagonist)
-        later = [super(GeneratorSequence, self).memory(setup, example_level, example_obs, jax.random.fold_in(rng, 100 + k),
-                                                       antagonist=False)["generator"]
+        state = super().init(setup, example_level, example_obs, rng)
+        later = [self._learners(setup, example_obs, jax.random.fold_in(rng, 100 + k), antagonist=False)["generator"]
                  for k in range(1, setup.cfg.remidi.num_buffers)]
-        out["next_generators"] = jax.tree.map(lambda *xs: jnp.stack(xs), *[g.replace(apply_fn=None, tx=None)
-                                                                           for g in later]) if later else None
-        return out
+        return state.replace(next_generators=jax.tree.map(
+            lambda *xs: jnp.stack(xs), *[g.replace(apply_fn=None, tx=None) for g in later]) if later else None)
 
-    def advance(self, setup, runner, proposal: Proposal, params) -> dict:
+    def advance(self, setup, runner, proposal: Proposal):
         """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
-        next and start a fresh generator (new parameters and optimiser state); with
-        ``remidi.tracker=belief`` the train step freezes its model (:func:`~remidi.engine.adversary.belief_freezes`)."""
-        out = super().advance(setup, runner, proposal, params)
-        if runner.next_generators is None:  # remidi.num_buffers=1: one generator, never switched
-            return out
-        switch = switches(setup, runner, out["count"])
-        fresh = jax.tree.map(lambda x: x[jnp.minimum(runner.active, x.shape[0] - 1)], runner.next_generators)
-        old = runner.generator
+        next and start a fresh generator (new parameters and optimiser state); a learned tracker
+        freezes its model at the same switch (the train step asks it)."""
+        state = super().advance(setup, runner, proposal)
+        if state.next_generators is None:  # remidi.num_buffers=1: one generator, never switched
+            return state
+        switch = switches(setup, state, state.count)
+        fresh = jax.tree.map(lambda x: x[jnp.minimum(state.active, x.shape[0] - 1)], state.next_generators)
+        old = state.generator
         pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
         generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
                                 step=pick(fresh.step, old.step))
-        return {**out, "generator": generator,
-                "active": jnp.where(switch, runner.active + 1, runner.active), "count": jnp.where(switch, 0, out["count"])}
+        return state.replace(generator=generator, active=jnp.where(switch, state.active + 1, state.active),
+                             count=jnp.where(switch, 0, state.count))

@@ -6,7 +6,7 @@
 jit-compiled ``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds
 (:func:`over_seeds`). After each block the driver evaluates, records the block's metrics
 (reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the progress bar and,
-every ``checkpoint_every`` updates, writes a checkpoint (:mod:`remidi.engine.checkpoint`)
+every ``checkpoint_every`` updates, writes a checkpoint (:mod:`remidi.engine.run.checkpoint`)
 atomically, so a killed run never leaves a corrupt checkpoint. ``resume`` continues from the last
 checkpoint and ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
 
@@ -42,15 +42,17 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from remidi import preemption
-from remidi.engine import evaluation
+from remidi.engine.run import evaluation
 from remidi.engine import train as tr
+from remidi.engine.setup import Setup
+from remidi.engine.algorithms import Algorithm
 from remidi.engine.config import UEDConfig
-from remidi.engine.seeds import SEED_BATCH
-from remidi.engine.validation import validate_ued_config
-from remidi.engine.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
+from remidi.engine.core.seeds import SEED_BATCH
+from remidi.engine.run.validation import validate_ued_config
+from remidi.engine.run.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
                                       remove_stale_temporaries, save_run)
 from remidi.envs.interface import UEDTask
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, RemidiError
 from remidi.files import code_version
 
 SEED_AXIS = "seed"
@@ -84,7 +86,7 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
     return out
 
 
-def load_run_state(setup: tr.Setup, seeds: list[int], path: Path, flag: str = "--resume"):
+def load_run_state(setup: Setup, seeds: list[int], path: Path, flag: str = "--resume"):
     """``(runner, meta)``: the training state of every seed (leaves with the seed axis first) from
     the checkpoint ``path`` of a run of ``setup``, checked against the structure :func:`_init`
     gives (traced, not compiled); errors as :func:`load_checkpoint`'s."""
@@ -93,7 +95,7 @@ def load_run_state(setup: tr.Setup, seeds: list[int], path: Path, flag: str = "-
 
 
 @partial(jax.jit, static_argnums=0)
-def _init(setup: tr.Setup, keys):
+def _init(setup: Setup, keys):
     # lax.map, not vmap: several *batched* QR decompositions (orthogonal initialisers) in one
     # program hang the CPU runtime of jaxlib 0.10.2 (reproduced with 2+ seeds); initialising
     # one seed after another avoids them, and runs once per run.
@@ -111,7 +113,7 @@ def over_seeds(fn):
     A vmapped axis of size 1 is not free: XLA keeps it in the network's matrix products and
     turns the train step's ``lax.cond`` into selects (the measurements are in
     ``docs/performance.md``, "A seed axis of size 1"; rare branches use
-    :func:`~remidi.engine.seeds.cond_per_seed`, which reads the axis name). ``S`` is the
+    :func:`~remidi.engine.core.seeds.cond_per_seed`, which reads the axis name). ``S`` is the
     axis's size where ``fn`` runs: under ``shard_map`` a device's share of the seeds."""
 
     def mapped(*args):
@@ -123,19 +125,19 @@ def over_seeds(fn):
     return mapped
 
 
-def run_steps(setup: tr.Setup, runner, length: int):
+def run_steps(setup: Setup, runner, length: int):
     """``length`` train steps for every seed of ``runner`` (leaves ``[S, ...]``):
     ``(runner, per-step metrics f[S, length])``."""
     return over_seeds(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
 
 
 @partial(jax.jit, static_argnums=(0, 2))
-def _run_block(setup: tr.Setup, runner, length: int):
+def _run_block(setup: Setup, runner, length: int):
     return run_steps(setup, runner, length)
 
 
 @partial(jax.jit, static_argnums=0)
-def _evaluate(setup: tr.Setup, runner, keys):
+def _evaluate(setup: Setup, runner, keys):
     return over_seeds(lambda r, k: {**evaluation.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r),
                                     **evaluation.tracker_audit(setup, r, jax.random.fold_in(k, 7))})(runner, keys)
 
@@ -171,17 +173,17 @@ def _per_shard(mesh, fn):
 
 
 @partial(jax.jit, static_argnums=(0, 1))
-def _init_sharded(mesh, setup: tr.Setup, keys):
+def _init_sharded(mesh, setup: Setup, keys):
     return _per_shard(mesh, lambda k: _init(setup, k))(keys)
 
 
 @partial(jax.jit, static_argnums=(0, 1, 3))
-def _run_block_sharded(mesh, setup: tr.Setup, runner, length: int):
+def _run_block_sharded(mesh, setup: Setup, runner, length: int):
     return _per_shard(mesh, lambda r: _run_block(setup, r, length))(runner)
 
 
 @partial(jax.jit, static_argnums=(0, 1))
-def _evaluate_sharded(mesh, setup: tr.Setup, runner, keys):
+def _evaluate_sharded(mesh, setup: Setup, runner, keys):
     return _per_shard(mesh, lambda r, k: _evaluate(setup, r, k))(runner, keys)
 
 
@@ -197,9 +199,7 @@ def _put(tree, sharding):
 def _check_finite(runner, done: int) -> None:
     """RemidiError (one line) when the agent's network parameters hold a NaN or an infinity:
     training diverged, and writing the checkpoint would overwrite the last good one with it."""
-    from remidi.errors import RemidiError
-
-    if not all(np.isfinite(np.asarray(leaf)).all() for leaf in jax.tree.leaves(runner.train_state.params)):
+    if not all(np.isfinite(np.asarray(leaf)).all() for leaf in jax.tree.leaves(runner.learner.train_state.params)):
         raise RemidiError(f"training diverged: the agent's network parameters are not finite after update {done} "
                           f"(NaN or inf; e.g. a NaN reward, or a learning rate too high); the last checkpoint before "
                           f"it is kept")
@@ -243,7 +243,7 @@ class Programs:
     mesh: jax.sharding.Mesh | None = None  # set when the seeds are sharded over devices
 
 
-def ued_programs(setup: tr.Setup, devices: int = 1) -> Programs:
+def ued_programs(setup: Setup, devices: int = 1) -> Programs:
     """The compiled programs of a UED run of ``setup``, on ``devices`` devices."""
     if devices == 1:
         return Programs(init=partial(_init, setup), run_block=partial(_run_block, setup),
@@ -268,14 +268,22 @@ class TrainResult:
     parts: list = ()
 
 
-def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | tr.Algorithm, seeds: list[int],
-                out: Path | None = None, resume: bool = False, progress: bool = True,
+@dataclass(frozen=True)
+class RunFolder:
+    """Where a run's checkpoints go, and whether to continue from the last one there (none: from 0)."""
+
+    path: Path
+    resume: bool = False
+
+
+def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm, seeds: list[int],
+                out: Path | RunFolder | None = None, progress: bool = True,
                 on_block: Callable[[int, dict], None] | None = None, devices: int = 1) -> TrainResult:
     """Train ``algo`` (a name or an :class:`~remidi.engine.algorithms.Algorithm`) for every seed
-    and return the :class:`TrainResult`. With ``out``, checkpoints go there every
-    ``checkpoint_every`` updates and at the end, and ``resume`` continues from the last one.
-    ``on_block(updates done, block metrics)`` is called after each block, once its checkpoint is
-    written.
+    and return the :class:`TrainResult`. With ``out`` (a folder, or a :class:`RunFolder` that
+    may resume), checkpoints go there every ``checkpoint_every`` updates and at the end, and a
+    resume continues from the last one. ``on_block(updates done, block metrics)`` is called after
+    each block, once its checkpoint is written.
 
     ``devices=N`` shards the seeds over the first N of ``jax.devices()`` (N must divide the
     number of seeds; :func:`check_devices`). In a multi-process run (``jax.distributed``) every
@@ -287,18 +295,20 @@ def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | tr.Algorithm, seeds: 
     desc = f"{setup.algo.name} × {len(seeds)} seed{'s' if len(seeds) != 1 else ''}" + \
         (f" on {devices} devices" if devices > 1 else "")
     run = {"algo": setup.algo.name, "seeds": [int(s) for s in seeds], "config": dataclasses.asdict(cfg)}
-    return drive(ued_programs(setup, devices), seeds, num_updates=cfg.num_updates, eval_every=cfg.eval_every,
-                 checkpoint_every=cfg.checkpoint_every, num_envs=cfg.num_envs, out=out, resume=resume,
-                 progress=progress, desc=desc, on_block=on_block, run=run)
+    folder = out if isinstance(out, RunFolder) or out is None else RunFolder(Path(out))
+    return drive(ued_programs(setup, devices), seeds, cfg, folder, desc if progress else None, on_block, run)
 
 
-def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every: int, checkpoint_every: int,
-          num_envs: int, out: Path | None = None, resume: bool = False, progress: bool = True, desc: str = "",
-          on_block: Callable[[int, dict], None] | None = None, run: dict | None = None) -> TrainResult:
-    """Run ``programs`` for every seed in blocks of ``eval_every`` updates (see
-    :func:`train_seeds`; ``num_envs`` turns replay counts into replay fractions). ``run``: the
-    algorithm, seeds and config trained, recorded in each checkpoint and checked on resume
-    (:func:`~remidi.engine.checkpoint.check_run`)."""
+def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolder | None = None,
+          progress: str | None = "", on_block: Callable[[int, dict], None] | None = None,
+          run: dict | None = None) -> TrainResult:
+    """Run ``programs`` for every seed in blocks of ``cfg.eval_every`` updates (see
+    :func:`train_seeds`; ``cfg.num_envs`` turns replay counts into replay fractions), with a
+    progress bar described by ``progress`` (None: none). ``run``: the algorithm, seeds and config
+    trained, recorded in each checkpoint and checked on resume
+    (:func:`~remidi.engine.run.checkpoint.check_run`)."""
+    num_updates, eval_every, checkpoint_every = cfg.num_updates, cfg.eval_every, cfg.checkpoint_every
+    num_envs, out, resume = cfg.num_envs, folder.path if folder else None, bool(folder and folder.resume)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
     mesh = programs.mesh
     sharding = None if mesh is None else NamedSharding(mesh, P(SEED_AXIS))
@@ -326,7 +336,7 @@ def drive(programs: Programs, seeds: list[int], *, num_updates: int, eval_every:
 
     if ckpt is not None and _in_any_process(preemption.requested()):  # SIGTERM came as the previous algorithm finished
         raise preemption.Preempted(None)
-    bar = _progress(num_updates, done, desc, progress and writer)
+    bar = _progress(num_updates, done, progress or "", progress is not None and writer)
     with ExitStack() as stack:
         armed = False  # once the first block is compiled and dispatched: a SIGTERM checkpoints, then stops
         while done < num_updates:

@@ -1,25 +1,21 @@
 """A pure-functional, jit-able PLR⊥ level buffer (robust prioritized level replay).
 
 The buffer is a fixed-capacity table of levels with a score, a last-seen time stamp, a validity
-flag and optional per-level extras. Every function here is pure and jit-able with the
-:class:`BufferConfig` as a static argument; no Python control flow depends on traced values, so a
-:class:`BufferState` can be ``vmap``-ed over seeds and K of them can be stacked along a leading
-axis and indexed with a traced integer (ReMiDi's sequence of adversaries, see
-:func:`stack_buffers`, :func:`select_buffer`, :func:`replace_buffer`). The public functions are
-wrapped in ``jax.jit`` (``config`` and ``n`` static), so eager calls are compiled once per
-config and shapes, and calls under an outer ``jit``/``vmap`` are simply inlined.
+flag and optional per-level extras. Every function is pure and jit-able with the
+:class:`~remidi.engine.config.BufferConfig` static; no Python control flow depends on traced
+values, so a :class:`BufferState` can be ``vmap``-ed over seeds and K of them stacked along a
+leading axis and indexed with a traced integer (ReMiDi's sequence: :func:`stack_buffers`,
+:func:`select_buffer`, :func:`replace_buffer`). The public functions are ``jax.jit``-wrapped
+(``config``, ``n`` static): compiled once per config and shapes, inlined under an outer jit.
 
 Empty slots
-    An empty slot has ``valid = False``, score ``0.0``, ``last_seen = 0``, zero extras and a
-    zero-filled level. Invalid slots never get sampling weight and their contents are ignored.
+    ``valid = False``, score 0, ``last_seen = 0``, zero extras and level; never sampled, ignored.
 
 Clock
-    ``state.time`` counts the train steps that touched the buffer. Each call of
-    :func:`sample_replay` (a replay step) and of :func:`insert_batch` (a step on fresh levels)
-    first advances the clock by one and then stamps every entry it touches (sampled, inserted,
-    or updated as a duplicate) with the new time, so a just-touched entry has staleness
-    ``time - last_seen = 0``. :func:`insert` (one level) and :func:`update_scores` do not move the
-    clock; :func:`insert` stamps with the current time.
+    ``state.time`` counts the train steps that touched the buffer. :func:`sample_replay` (a
+    replay step) and :func:`insert_batch` (fresh levels) advance it by one, then stamp every entry
+    they touch (sampled, inserted, updated as a duplicate) with it: staleness ``time - last_seen``
+    0. :func:`insert` (one level; stamps the current time) and :func:`update_scores` do not.
 
 Extras
     Per-level extras (``extra_names`` of :func:`init_buffer`) are written by :func:`insert` and
@@ -31,15 +27,13 @@ Extras
     by the new value. A new entry simply takes the given values.
 
 Scores
-    Higher scores are higher priority. A level scored ``-inf`` or NaN is never inserted; ``+inf``
-    is allowed. A valid entry whose score is later set to NaN by :func:`update_scores` ranks like
-    ``-inf``.
+    Higher is replayed more. A level scored ``-inf`` or NaN is never inserted (``+inf`` is); an
+    entry later set to NaN by :func:`update_scores` ranks like ``-inf``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Mapping, Sequence
 
@@ -47,39 +41,9 @@ import flax.struct
 import jax
 import jax.numpy as jnp
 
-from remidi.errors import ConfigError, one_of
+from remidi.engine.config import BufferConfig, validate_buffer_config
 
-PRIORITIZATIONS = ("rank", "topk")
 RUNNING_MAX_PREFIX = "max_"  # extras named max_* keep their maximum on updates (module docstring)
-
-
-@dataclass(frozen=True)
-class BufferConfig:
-    """Static (hashable) buffer hyperparameters.
-
-    Attributes:
-        capacity: number of slots.
-        prioritization: ``"rank"`` (weight ∝ (1/rank)^(1/temperature)) or ``"topk"`` (a softmax
-            of score/temperature over the ``topk_k`` highest-scored valid entries, zero elsewhere;
-            ``jaxued``'s ``topk`` at temperature 1).
-        temperature: β of rank prioritisation and of the top-k softmax, > 0.
-        topk_k: k of top-k prioritisation, ≥ 1 (clipped to the number of valid entries).
-        staleness_coef: ρ; replay weights = (1-ρ)·score weights + ρ·staleness weights.
-        replay_prob: probability of a replay step; used by the train loop, stored here.
-        min_fill: fraction of the capacity that must be valid before replay is allowed.
-        duplicate_check: if true, inserting a level equal to a valid entry updates that entry.
-    """
-
-    capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
-    prioritization: str = field(default="rank", metadata={"help": "replay sampling: rank or topk"})
-    temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation and of the top-k softmax"})
-    topk_k: int = field(default=32, metadata={"help": "k of top-k prioritisation"})
-    staleness_coef: float = field(default=0.3, metadata={"help": "ρ: weight of staleness in the replay distribution"})
-    replay_prob: float = field(default=0.8, metadata={"help": "probability that a train step replays buffer levels"})
-    min_fill: float = field(default=0.0, metadata={"help": "fraction of the buffer that must be filled before replay"})
-    duplicate_check: bool = field(default=False, metadata={
-        "help": "re-inserting a level already in the buffer updates it"})
-
 
 @flax.struct.dataclass
 class BufferState:
@@ -101,36 +65,6 @@ class BufferState:
     valid: jax.Array
     extras: dict
     time: jax.Array
-
-
-def _is_int(x) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _is_real(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _check_unit_interval(name: str, value) -> None:
-    if not (_is_real(value) and 0.0 <= value <= 1.0):
-        raise ConfigError(f"{name}: must be a number in [0, 1], got {value!r}")
-
-
-def validate_buffer_config(config: BufferConfig) -> None:
-    """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
-    if not (_is_int(config.capacity) and config.capacity >= 1):
-        raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
-    if config.prioritization not in PRIORITIZATIONS:
-        raise one_of("prioritization", config.prioritization, PRIORITIZATIONS)
-    if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
-        raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
-    if not (_is_int(config.topk_k) and config.topk_k >= 1):
-        raise ConfigError(f"topk_k: must be an integer ≥ 1, got {config.topk_k!r}")
-    _check_unit_interval("staleness_coef", config.staleness_coef)
-    _check_unit_interval("replay_prob", config.replay_prob)
-    _check_unit_interval("min_fill", config.min_fill)
-    if not isinstance(config.duplicate_check, bool):
-        raise ConfigError(f"duplicate_check: must be true or false, got {config.duplicate_check!r}")
 
 
 def init_buffer(config: BufferConfig, example_level, extra_names: Sequence[str] = ()) -> BufferState:
@@ -447,7 +381,7 @@ def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extra
 
 
 def valid_levels(state: BufferState):
-    """``(levels, valid)``: all stored levels (leading dim ``[capacity]``) and ``bool[capacity]``."""
+    """``(levels [capacity, ...], valid bool[capacity])``: every stored level and whether it is one."""
     return state.levels, state.valid
 
 

@@ -7,7 +7,7 @@ Every network is a :class:`flax.linen.Module` applied to a whole rollout at once
 - ``obs``: an observation pytree whose leaves are shaped ``[T, N, ...]`` (time, envs).
 - ``reset``: ``bool[T, N]``, True where a new episode starts at that step; a recurrent net
   re-initialises its carry *before* processing such a step.
-- ``logits``: the policy output (:mod:`remidi.engine.distributions`), ``f32[T, N, num_actions]``
+- ``logits``: the policy output (:mod:`remidi.engine.core.distributions`), ``f32[T, N, num_actions]``
   logits, or with ``continuous=True`` ``f32[T, N, 2·num_actions]``, the mean and log standard
   deviation of a diagonal Gaussian (the log-std is a state-independent parameter, zeros
   initially); ``value``: ``f32[T, N]``.
@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.engine.lstm import lstm_over_time
+from remidi.engine.core.lstm import lstm_over_time
 from remidi.errors import one_of
 
 ACTIVATIONS = {"tanh": nn.tanh, "relu": nn.relu}
@@ -152,7 +152,7 @@ class ResetLSTM(nn.Module):
 
     The parameters are those of :class:`flax.linen.OptimizedLSTMCell` (submodule ``cell``: input
     kernels ``ii if ig io`` ``[D, features]``, recurrent kernels and biases ``hi hf hg ho``, the
-    same initialisers), and so is the arithmetic (:mod:`remidi.engine.lstm`). The kernels and
+    same initialisers), and so is the arithmetic (:mod:`remidi.engine.core.lstm`). The kernels and
     the bias are joined once, outside the loop over time, into one ``[D + 1 + features,
     4·features]`` matrix that multiplies ``[x, 1, h]`` at each step, and the backward pass
     computes the weight gradients after the loop, as single large products.

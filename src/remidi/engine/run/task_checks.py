@@ -1,26 +1,20 @@
-"""Validation of a run before anything is written: the task itself (:func:`validate_task`: its
-fields, and one abstractly traced reset and step), every key of :class:`UEDConfig` against its
-allowed values and the task (one-line ConfigError naming the key), whether the network reads the
-task's observations, and warnings about valid runs that would train degenerately."""
+"""Checks of a task before a run: its fields, one abstractly traced reset and step
+(:func:`validate_task`), whether a network reads its observations
+(:func:`check_network_reads_observations`) and whether its step draws from its key
+(:func:`step_reads_its_key`). One-line ConfigErrors naming the field."""
 
 from __future__ import annotations
 
-import dataclasses
 import weakref
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.engine import buffer as buf
-from remidi.engine import scores as sc
-from remidi.engine.adversary import LevelBuffers
-from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
-from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name
-from remidi.engine.networks import flatten_obs, make_network
-from remidi.engine.paired import ESTIMATORS, GENERATOR_NETWORKS, OVERLAP_REGRETS, LevelGenerator
-from remidi.engine.train import example_observation, network_for
-from remidi.envs.interface import UEDTask, UnderspecifiedEnv, tree_equal
+from remidi.engine.core.networks import NETWORKS, flatten_obs, make_network
+from remidi.engine.setup import example_observation
+from remidi.envs.interface import UEDTask, UnderspecifiedEnv
+from remidi.errors import ConfigError
 
 
 _VALIDATED: weakref.WeakSet = weakref.WeakSet()  # tasks validate_task passed (UEDTask hashes by identity)
@@ -49,8 +43,6 @@ def _check_action_count(task) -> None:
     have would be taken silently (CartPole with 5 actions pushes 3, 5 and 7 times as hard)."""
     import math
 
-    from remidi.errors import ConfigError
-
     try:
         space = task.env.action_space(task.params)
     except Exception:  # noqa: BLE001 (an environment without a usable action space: nothing to compare)
@@ -70,8 +62,6 @@ def _check_action_count(task) -> None:
 def _traced(field: str, what: str, fn, *args, hint: str = ""):
     """``jax.eval_shape(fn, *args)``; ConfigError ``task.FIELD: WHAT failed: Type: message`` (one
     line, ``hint`` appended) when the user's code raises."""
-    from remidi.errors import ConfigError
-
     try:
         return jax.eval_shape(fn, *args)
     except Exception as err:  # noqa: BLE001 (the user's code: report its own error in one line)
@@ -88,8 +78,6 @@ def _is_scalar(x, kind: str) -> bool:
 
 def _task_size(field: str, value) -> None:
     """ConfigError unless ``value`` is an integer ≥ 1 (a Python or NumPy integer, not a bool)."""
-    from remidi.errors import ConfigError
-
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ConfigError(f"{field}: must be an integer ≥ 1, got {value!r}")
 
@@ -131,8 +119,6 @@ def validate_task(task: UEDTask) -> None:
     set is a batch of such levels (a leading level axis, the same on every leaf) that its
     environment resets to an observation of the training observation's shapes. Checked once per
     task object."""
-    from remidi.errors import ConfigError
-
     if not isinstance(task, UEDTask):
         raise ConfigError(f"task: must be a remidi UEDTask, got a {type(task).__name__}")
     if task in _VALIDATED:
@@ -272,8 +258,6 @@ def _observation_batch(task: UEDTask, flat: bool):
     """The task's first observation as a ``[1, 1, ...]`` batch (flattened to one vector if
     ``flat``), shapes only. Raises ConfigError, once, with the environment's own error when its
     level generator or reset fails (a network cannot be judged on an environment that does not run)."""
-    from remidi.errors import ConfigError
-
     def first():
         obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
         return flatten_obs(obs) if flat else obs
@@ -303,9 +287,6 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
     one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
     run). The error names the networks that can; an environment that fails to produce an
     observation gets its own one-line error instead (:func:`_observation_batch`)."""
-    from remidi.engine.networks import NETWORKS
-    from remidi.errors import ConfigError
-
     obs = _observation_batch(task, flat)
     err = _read_error(net, obs)
     if err is None:
@@ -317,7 +298,7 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
                       f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
 
 
-def _step_reads_its_key(task: UEDTask) -> bool:
+def step_reads_its_key(task: UEDTask) -> bool:
     """Whether the observation, state or end that ``task.env.step_env`` returns depend on its key
     (a step that draws its own randomness; a random reward or info alone does not change what the
     tracker compares), read from its traced program as :func:`_reset_reads_its_key` reads the
@@ -342,214 +323,3 @@ def _trace_step_key_use(task: UEDTask) -> bool:
             jax.tree.map(lambda _: True, done), jax.tree.map(lambda _: False, info)
 
     return _reads_key(lambda k: task.env.step_env(k, state, action, task.params), jax.random.PRNGKey(1), kept=kept)
-
-
-def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_step: bool = False) -> list[str]:
-    """One-line warnings about a valid run that would train degenerately without saying so:
-
-    * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
-      ``engine/scores.py``: every built-in one) on rollouts shorter than the task's episode limit: a
-      level whose episode does not end inside the rollout scores −inf (``pvl``, ``maxmc``,
-      ``learnability``: with every episode too long the buffer holds one level and replays only it)
-      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which);
-    * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
-      give different first observations): the tracker assumes an episode is a function of the
-      level and the actions, so it may judge identical levels distinguishable;
-    * with ``check_step`` (a user's task: tracing a step costs seconds for Brax, whose steps are
-      known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
-      it steps each frozen level with the agent's own draws, so a prefix another draw of that level
-      would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
-    """
-    out = []
-    algo = get_algorithm(algo)
-    score = sc.SCORES[score_name(cfg, algo)]
-    if algo.replays and score.needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
-        out.append(f"score {score.name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) "
-                   f"is shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not "
-                   f"end {score.unfinished}; raise num_steps or use another score")
-    if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
-        level = task.sample_level(jax.random.PRNGKey(0))
-        obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
-        if not bool(tree_equal(obs[0], obs[1])):
-            out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
-                       "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
-                       "actions; put the random seed into the level (UEDTask.deterministic_reset)")
-    if check_step and algo.buffer_sequence and cfg.remidi.num_buffers > 1 \
-            and cfg.remidi.tracker in ("prefix", "per_step") and _step_reads_its_key(task):
-        out.append("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
-                   "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
-                   "would give counts as distinguishable; draw the step's randomness from a seed the level holds "
-                   "(remidi.envs.noisy does; UEDTask.reseed_level redraws it) or judge with remidi.tracker=belief "
-                   "or simulated")
-    return out
-
-
-def rehearses(algo: Algorithm) -> bool:
-    """``algo`` can take ``remidi.rehearsal``: a sequence of level buffers (ReMiDi, ReMiDi over ACCEL)."""
-    return isinstance(algo.adversary, LevelBuffers) and algo.buffer_sequence
-
-
-def validate_section(prefix: str, validate) -> None:
-    """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
-    section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
-    from remidi.errors import ConfigError
-
-    try:
-        validate()
-    except ConfigError as err:
-        msg = str(err)
-        raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
-
-
-def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
-    """Why ``task`` cannot run ``algo`` (None: it can): an algorithm that edits levels needs a
-    level mutator, one that learns a level generator a level-building MDP."""
-    if algo.edits and task.mutate_level is None:
-        return f"{algo.name} edits levels, but this task has no level mutator (UEDTask.mutate_level)"
-    if isinstance(algo.adversary, LevelGenerator) and task.level_builder is None:
-        return (f"{algo.name} learns a level generator, but this task has no level-building MDP "
-                f"(UEDTask.level_builder)")
-    return None
-
-
-def supported_algorithms(task: UEDTask) -> list[str]:
-    """The registered algorithms ``task`` can run (:func:`task_refusal`), in their order."""
-    return [name for name, algo in ALGORITHMS.items() if task_refusal(algo, task) is None]
-
-
-def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
-    """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
-    from remidi.engine.ppo import validate_ppo_config
-    from remidi.engine.tracker import MODES
-    from remidi.errors import ConfigError
-    from remidi.errors import choice, positive_int, require
-
-    algo = get_algorithm(algo)
-    validate_task(task)
-    for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
-        positive_int(key, getattr(cfg, key))
-    steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count
-    if steps >= 2**31:
-        raise ConfigError(f"num_updates: must keep num_updates × ppo.epochs × ppo.minibatches below 2^31 "
-                          f"(the optimiser counts its steps in 32 bits), got {cfg.num_updates} × {cfg.ppo.epochs} × "
-                          f"{cfg.ppo.minibatches} = {steps}; lower num_updates")
-    if cfg.eval_every > cfg.num_updates:
-        raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
-                          f"lower eval_every or raise num_updates")
-    require(isinstance(cfg.reseed, bool), "reseed", "true or false", cfg.reseed)
-    require(not cfg.reseed or task.reseed_level is not None, "reseed", "false for a task without reseed_level (its "
-            "levels carry no randomness of their own to draw afresh)", cfg.reseed)
-    choice("score", cfg.score, sc.SCORES)
-    score = sc.SCORES[score_name(cfg, algo)]
-    for needed, what, has in (
-            (score.needs_optimum, "the environment's optimal return, which this task does not provide "
-                                  "(UEDTask.optimal_return)", task.optimal_return is not None),
-            (score.needs_solved, "a solve criterion, which this task does not define (UEDTask.solved)",
-             task.solved is not None)):
-        if needed and not has:
-            fits = [s.name for s in sc.SCORES.values() if not (s.needs_optimum and task.optimal_return is None)
-                    and not (s.needs_solved and task.solved is None)]
-            raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(fits)}")
-    require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
-    if score.needs_optimum and cfg.discounted_regret and task.optimal_discounted_return is None:
-        raise ConfigError(f"discounted_regret: this task gives no discounted optimal return "
-                          f"(UEDTask.optimal_discounted_return), so {score.name} cannot use the discounted utility; "
-                          f"allowed: false (undiscounted returns on both sides)")
-    for key in ("hidden_size", "lstm_size"):
-        require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
-                "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
-    require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
-    # the network kind first (at its default sizes), then the sizes: a preset's hidden_size must not
-    # hide that the network picked cannot read the task's observations
-    check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
-                                     cfg.network, task, cfg.normalize_obs)
-    network_for(cfg, task)  # ConfigError if the network has no layer for hidden_size / lstm_size
-    r = cfg.remidi
-    positive_int("remidi.num_buffers", r.num_buffers)
-    positive_int("remidi.buffer_capacity", r.buffer_capacity)
-    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
-    require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
-            "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
-    choice("remidi.count", r.count, ("updates", "replays"))
-    require(r.count == "updates" or algo.replays or not algo.buffer_sequence, "remidi.count", "updates with a "
-            "learned generator (a generator never replays, so counting replays would never switch it)", r.count)
-    if r.tracker not in MODES + ("belief", "simulated"):  # the exact tracker is "prefix" (the definition); name it so
-        raise ConfigError(f"remidi.tracker: unknown value {r.tracker!r}; allowed: prefix (the exact tracker, the "
-                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model), "
-                          f"simulated (the frozen levels simulated under fresh randomness, with a learnt noise model)")
-    # the belief model's keys are checked whichever tracker runs: a bad value is a mistake either way
-    require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)", r.belief_false_rate)
-    positive_int("remidi.belief_hidden", r.belief_hidden)
-    positive_int("remidi.belief_calibration", r.belief_calibration)
-    positive_int("remidi.belief_epochs", r.belief_epochs)
-    require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
-    require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
-    require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
-    if r.tracker == "simulated":
-        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step or belief with a "
-                "learned generator (the simulated model needs the adversary's levels: a buffer's)", r.tracker)
-        require(task.deterministic_reset, "remidi.tracker", "prefix, per_step or belief for a task whose reset draws "
-                "randomness (the simulated model follows the frozen levels from their fixed starts)", r.tracker)
-    if r.tracker in ("belief", "simulated"):
-        require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
-                "(the reference learns from the task generator's fresh levels, which a generator never plays)",
-                r.belief_reference)
-        require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
-                "(the belief model reads discrete actions)", r.tracker)
-        from remidi.engine import belief as bl
-
-        obs = example_observation(task)[0]
-        problem = bl.coding_problem(bl.coding_for(obs), obs)
-        if problem is not None:
-            raise ConfigError(f"remidi.tracker: {r.tracker} cannot read this task: {problem}; allowed here: prefix, "
-                              f"per_step")
-    choice("remidi.policy", r.policy, POLICIES)
-    if r.policy == "combine":
-        require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
-                "observations normalised by statistics gathered after they were frozen)", r.policy)
-        require(r.tracker in ("prefix", "belief"), "remidi.tracker", "prefix or belief with remidi.policy=combine (a "
-                "policy per buffer acts where that buffer's levels produced, or its model explains, the whole prefix)",
-                r.tracker)
-    require(isinstance(r.rehearsal, (int, float)) and not isinstance(r.rehearsal, bool) and 0 <= r.rehearsal <= 1,
-            "remidi.rehearsal", "a probability in [0, 1]", r.rehearsal)
-    if r.rehearsal > 0:
-        sequences = [a for a in ALGORITHMS if rehearses(ALGORITHMS[a])]
-        if not rehearses(algo):
-            raise ConfigError(f"remidi.rehearsal: {algo.name} has no sequence of level buffers to rehearse; allowed: 0, "
-                              f"or a probability with --algo {' or '.join(sequences)}")
-        require(r.policy == "masked", "remidi.policy", "masked with remidi.rehearsal (under combine the frozen "
-                "policies act on the earlier buffers' levels, so the trained one never does)", r.policy)
-    positive_int("accel.num_edits", cfg.accel.num_edits)
-    require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
-    if algo.edits and task.mutate_level is None:
-        raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
-    if algo.edits and cfg.accel.easy_start and task.easy_level is None:
-        raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
-                          "allowed: false")
-    if isinstance(algo.adversary, LevelGenerator):
-        if task.level_builder is None:
-            raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
-        p = cfg.paired
-        choice("paired.estimator", p.estimator, ESTIMATORS)
-        if p.estimator == "perfect" and task.optimal_return is None:
-            raise ConfigError("paired.estimator: perfect needs the task's optimal return (UEDTask.optimal_return); "
-                              "allowed: paired, flexible")
-        require(isinstance(p.clip_negative, bool), "paired.clip_negative", "true or false", p.clip_negative)
-        choice("paired.generator_network", p.generator_network, GENERATOR_NETWORKS)
-        positive_int("paired.generator_hidden", p.generator_hidden)
-        require(p.generator_lr > 0, "paired.generator_lr", "> 0", p.generator_lr)
-        require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)
-        choice("paired.overlap_regret", p.overlap_regret, OVERLAP_REGRETS)
-        require(cfg.remidi.policy == "masked", "remidi.policy", "masked with a learned level generator (Combine "
-                "over generators is not implemented)", cfg.remidi.policy)
-    validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
-    validate_section("buffer.", lambda: buf.validate_buffer_config(cfg.buffer))
-    validate_section("buffer.", lambda: buf.validate_buffer_config(buffer_config(cfg, algo)))
-    if algo.buffer_sequence:
-        needed = (r.num_buffers - 1) * r.steps_per_buffer
-        if needed >= cfg.num_updates:
-            raise ConfigError(
-                f"remidi.num_buffers: must be small enough that the last buffer gets updates, but "
-                f"(num_buffers − 1) × steps_per_buffer = ({r.num_buffers} − 1) × {r.steps_per_buffer} = {needed} "
-                f"is not below num_updates = {cfg.num_updates}; lower remidi.num_buffers or "
-                f"remidi.steps_per_buffer, or raise num_updates")

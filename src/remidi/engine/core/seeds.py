@@ -1,6 +1,6 @@
 """The seed axis of a compiled program, and a branch that stays a branch over it.
 
-:func:`remidi.engine.driver.over_seeds` runs a one-seed program over S seeds with ``jax.vmap``
+:func:`remidi.engine.run.driver.over_seeds` runs a one-seed program over S seeds with ``jax.vmap``
 (axis name :data:`SEED_BATCH`). ``vmap`` turns a ``lax.cond`` whose predicate is a per-seed value
 into *both* branches and a select, so a branch taken at a few updates of a run (a buffer switch's
 calibration, which replays every recorded rollout) costs every update of a multi-seed run.

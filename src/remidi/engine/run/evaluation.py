@@ -6,11 +6,11 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from remidi.engine import tracker as trk
-from remidi.engine.adversary import tracker_budget
-from remidi.engine.distributions import for_task
-from remidi.engine.rollout import combine, rollout
-from remidi.engine.train import Runner, Setup, collect, combines, frozen_levels, policy_apply
+from remidi.engine.core.distributions import for_task
+from remidi.engine.core.rollout import Policy, Stepping, combine, rollout
+from remidi.engine.learner import combines
+from remidi.engine.setup import Setup, policy_apply
+from remidi.engine.train import Runner
 from remidi.envs.interface import UEDTask
 
 
@@ -40,22 +40,21 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
 def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
     """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
     the policy that acts there (under ``remidi.policy=combine``, the combined policy:
-    :func:`~remidi.engine.rollout.combine`)."""
+    :func:`~remidi.engine.core.rollout.combine`)."""
     task, net = setup.task, setup.net
     n = jax.tree.leaves(levels)[0].shape[0]
     keys = jax.random.split(jax.random.PRNGKey(0), n)
     obs, _ = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(keys, levels, task.params)
     obs_in, reset = jax.tree.map(lambda x: x[None], obs), jnp.ones((n,), bool)
-    apply_fn = policy_apply(setup, runner)
+    apply_fn = policy_apply(setup, runner.learner)
     carry = net.initialize_carry(n)
-    _, (logits, _) = apply_fn({"params": runner.train_state.params}, carry, obs_in, reset[None])
+    _, (logits, _) = apply_fn({"params": runner.learner.train_state.params}, carry, obs_in, reset[None])
     logits = logits[0]
     if combines(setup):
-        # every frozen level stepped at the first observation: the reference tracker (the learned
-        # models judge the first observation themselves under remidi.tracker=belief)
-        frozen = frozen_levels(setup, runner)
-        if frozen.belief is None:
-            frozen = frozen.replace(tracker=trk.ExactTracker())
+        # every frozen level stepped at the first observation: the tracker's reference (the exact
+        # trackers' reference tracker; a learned tracker judges the first observation itself)
+        frozen = setup.tracker.frozen(setup, runner)
+        frozen = frozen.replace(tracker=frozen.tracker.at_first_observation())
         tstate = frozen.tracker.start(task.env, task.params, frozen, keys, obs)
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)
@@ -69,12 +68,13 @@ def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng)
     ``(returns f32[L, attempts], discounted f32[L, attempts])``, the latter Σ_t γ^t r_t with
     γ = ``ppo.gamma``. One rollout of ``task.max_episode_steps`` on L·attempts envs."""
     task = setup.task
-    frozen = frozen_levels(setup, runner) if combines(setup) else None  # act as the combined policy
+    frozen = setup.tracker.frozen(setup, runner) if combines(setup) else None  # act as the combined policy
     tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
     n = jax.tree.leaves(tiled)[0].shape[0]
-    traj, _ = rollout(rng, env, task.params, policy_apply(setup, runner), runner.train_state.params,
-                      setup.net.initialize_carry(n), tiled, task.max_episode_steps, frozen, tracker_env=task.env,
-                      dist=for_task(task.continuous), deterministic_reset=task.deterministic_reset)
+    traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env),
+                      Policy(policy_apply(setup, runner.learner), runner.learner.train_state.params,
+                             setup.net.initialize_carry(n)),
+                      tiled, task.max_episode_steps, frozen, dist=for_task(task.continuous))
     returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
     discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
     return returns, discounted
@@ -124,34 +124,6 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
 
 
 def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
-    """``remidi.tracker=belief``: the learned models' judgement against the exact tracker's on the
-    same rollout, one batch of ``num_envs`` fresh levels of the task's generator played by the
-    current policy for ``num_steps`` steps (both rollouts take the same key and the trackers do
-    not act, so their steps are the same): ``belief/explained`` and ``belief/exact_explained``
-    (the share of steps whose prefix each tracker calls indistinguishable from an earlier
-    adversary's) and ``belief/agreement`` (the share of steps they judge alike); per level tag
-    of the task the two shares over the levels of that kind and of the others
-    (``belief/explained/<tag>``, ``belief/explained/not-<tag>``, ``belief/exact_explained/...``;
-    NaN where the batch holds no such level); NaN while no buffer is frozen. Empty for every
-    other run."""
-    if runner.belief is None:
-        return {}
-    cfg = setup.cfg
-    k_levels, k_roll = jax.random.split(rng)
-    levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))
-    frozen = frozen_levels(setup, runner).replace(params=None)  # the current policy acts in both
-    # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
-    exact = frozen.replace(belief=None, tracker=trk.make_tracker("prefix", tracker_budget(setup, "prefix")))
-    belief = collect(setup, runner, k_roll, levels, frozen)[0].indist
-    reference = collect(setup, runner, k_roll, levels, exact)[0].indist
-    nan = jnp.where(runner.active > 0, 0.0, jnp.nan)
-    out = {"belief/explained": jnp.mean(belief.astype(jnp.float32)) + nan,
-           "belief/exact_explained": jnp.mean(reference.astype(jnp.float32)) + nan,
-           "belief/agreement": jnp.mean((belief == reference).astype(jnp.float32)) + nan}
-    for tag, tagged in jax.vmap(setup.task.level_tags)(levels).items():  # bool[N]: the levels of one kind
-        for kind, mask in ((tag, tagged), (f"not-{tag}", ~tagged)):
-            steps = jnp.maximum(jnp.sum(mask) * belief.shape[0], 1)
-            none = jnp.where(jnp.any(mask), 0.0, jnp.nan)
-            out[f"belief/explained/{kind}"] = jnp.sum(belief & mask[None, :]) / steps + nan + none
-            out[f"belief/exact_explained/{kind}"] = jnp.sum(reference & mask[None, :]) / steps + nan + none
-    return out
+    """What the run's tracker reports of its judgement (:meth:`~remidi.engine.trackers.base.Tracker.audit`:
+    a learned tracker against the exact one on one rollout; nothing for the exact trackers)."""
+    return setup.tracker.audit(setup, runner, rng)

@@ -1,0 +1,70 @@
+"""ACCEL's adversary (Parker-Holder et al., 2022): PLR⊥ whose update after a replay edits the
+levels it replayed and offers the edits to the buffer like fresh levels."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.engine.adversaries.base import AdversaryState, Proposal
+from remidi.engine.adversaries.plr import LevelBuffers
+
+
+@struct.dataclass
+class EditingState(AdversaryState):
+    """:class:`~remidi.engine.adversaries.base.AdversaryState` and ACCEL's memory of the last
+    replay: ``edit_next`` (bool[], the next update edits the levels this one replayed) and
+    ``last_replayed`` (the levels of the last replay, leaves [N, ...])."""
+
+    edit_next: jax.Array = None
+    last_replayed: object = None
+
+
+@dataclass(frozen=True)
+class EditingBuffers(LevelBuffers):
+    """ACCEL's adversary: :class:`~remidi.engine.adversaries.plr.LevelBuffers` whose update after
+    a replay edits the levels it replayed (``accel.num_edits`` edits each by the task's mutator)
+    and offers the edits to the buffer like fresh levels, without training on them; with
+    ``accel.easy_start``, fresh levels come from the task's easy generator. With a buffer
+    sequence, edits a frozen level explains are rejected like fresh levels."""
+
+    def init(self, setup, example_level, example_obs, rng) -> EditingState:
+        base = super().init(setup, example_level, example_obs, rng)
+        return EditingState(buffers=base.buffers, active=base.active, count=base.count,
+                            edit_next=jnp.asarray(False),
+                            last_replayed=jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level))
+
+    def _fresh(self, setup, k_levels):
+        generate = setup.task.easy_level if setup.cfg.accel.easy_start else setup.task.sample_level
+        return jax.vmap(generate)(jax.random.split(k_levels, setup.cfg.num_envs))
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        base = super().propose(setup, runner, k_branch, k_levels, k_sample)  # replayed or fresh levels
+        state = runner.adversary
+        edit = state.edit_next
+        replay = base.replay & ~edit
+        edited = edit_levels(setup, state.last_replayed, jax.random.fold_in(k_levels, 1))
+        levels = jax.tree.map(lambda e, chosen: jnp.where(edit, e, chosen), edited, base.levels)
+        train = replay | self.trains_on_fresh
+        rehearse = base.rehearse
+        if rehearse is not None:  # an edit update never rehearses (the edits of the last replay come first)
+            rehearse = rehearse & ~edit
+            train = train | rehearse
+        return Proposal(replay=replay, levels=levels, buffer=base.buffer, slots=base.slots, train=train, edit=edit,
+                        rehearse=rehearse)
+
+    def advance(self, setup, runner, proposal: Proposal):
+        """After a replay the next update edits its levels."""
+        state = super().advance(setup, runner, proposal)
+        last = jax.tree.map(lambda c, o: jnp.where(proposal.replay, c, o), proposal.levels, state.last_replayed)
+        return state.replace(edit_next=proposal.replay, last_replayed=last)
+
+
+def edit_levels(setup, levels, rng):
+    """ACCEL's edits: ``accel.num_edits`` edits of each of ``levels`` [N] by the task's mutator."""
+    n = jax.tree.leaves(levels)[0].shape[0]
+    edits = setup.cfg.accel.num_edits
+    return jax.vmap(lambda key, level: setup.task.mutate_level(key, level, edits))(jax.random.split(rng, n), levels)

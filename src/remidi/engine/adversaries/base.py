@@ -1,0 +1,168 @@
+"""The adversary's protocol: where an update's levels come from, and what becomes of them once
+scored; and DR's adversary, the protocol's default behaviour.
+
+The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
+(:attr:`~remidi.engine.algorithms.Algorithm.adversary`), never its flags:
+
+* :meth:`Adversary.init`: its state (``Runner.adversary``; :class:`AdversaryState` or a subclass);
+* :meth:`Adversary.propose`: the N levels of this update (a :class:`Proposal`: where they come
+  from, whether the learner trains on them);
+* :meth:`Adversary.frozen_levels`: the earlier adversaries' levels, what the distinguishability
+  tracker (:mod:`remidi.engine.trackers`) tracks against (None: nothing is frozen);
+* :meth:`Adversary.own_levels`: whether this update's rollout played the active adversary's own
+  levels (what a learned tracker's model of it learns from);
+* :meth:`Adversary.update`: after scoring: the buffer's new scores or insertions (a level a
+  frozen level explains completely is never inserted), and the best-return record of MaxMC;
+* :meth:`Adversary.advance`: after the learner: a sequence's switch (freeze the active
+  adversary, move to the next), ACCEL's memory of the last replay, a fresh generator;
+* :meth:`Adversary.metrics`: what its buffers hold (tag shares, size).
+
+Implementations, each the one before plus what it adds: :class:`RandomLevels` (DR, here);
+:class:`~remidi.engine.adversaries.plr.LevelBuffers` (the PLR family and ReMiDi's sequence of
+buffers); :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL); and
+:class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
+:class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED), built on this
+base directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.engine.adversaries import level_buffer as buf
+from remidi.engine.config import buffer_config, num_buffers
+from remidi.errors import ConfigError
+
+
+@struct.dataclass
+class AdversaryState:
+    """What every adversary carries: ``buffers`` (K stacked level buffers, leaves [K, capacity,
+    ...]: the PLR family's, a generator sequence's reservoirs; one unused buffer for DR),
+    ``active`` (i32[], the index of the buffer being filled and replayed) and ``count`` (i32[],
+    updates, or replays, spent on the active one)."""
+
+    buffers: buf.BufferState
+    active: jax.Array
+    count: jax.Array
+
+
+@struct.dataclass
+class Proposal:
+    """The levels of one update and where they came from.
+
+    levels: leaves [N, ...]; replay: bool[], replayed from the active buffer (else fresh from the
+    generator, or edited); train: bool[], the learner trains on this update's rollout; buffer: the
+    active buffer as sampled (its replay counters advanced; as it was for an adversary without
+    replay); slots: i32[N], the replayed levels' slots in it (None without replay); edit: bool[],
+    the levels are edits of the last replay's (None for an adversary that does not edit);
+    rehearse: bool[], the levels come from a frozen buffer (``remidi.rehearsal``, see
+    :func:`~remidi.engine.adversaries.plr.rehearse_frozen`): trained on at every step, given to
+    no buffer (None without rehearsal).
+    """
+
+    replay: jax.Array
+    levels: object
+    buffer: buf.BufferState
+    slots: jax.Array | None
+    train: jax.Array
+    edit: jax.Array | None = None
+    generated: object = None  # PAIRED: the generator's episode that built the levels
+    rehearse: jax.Array | None = None
+
+    def explained(self, indist: jax.Array) -> jax.Array:
+        """bool[T, N]: the steps the learner and the buffer treat as explained by a frozen level:
+        the tracker's ``indist``, none on a rehearsal (its levels are frozen levels, so the tracker
+        explains every step; rehearsal trains on them exactly to keep that behaviour)."""
+        return indist if self.rehearse is None else indist & ~self.rehearse
+
+
+@dataclass(frozen=True)
+class Adversary:
+    """The protocol, with DR's behaviour: N fresh levels from the task's generator every update,
+    all trained on, nothing kept.
+
+    ``trains_on_fresh``: the learner trains on rollouts of fresh levels too (DR, PLR without the
+    robust ⊥); False: only on replays (an adversary that replays)."""
+
+    trains_on_fresh: bool = True
+
+    def __post_init__(self):
+        # an adversary that never replays (DR, a learned generator) trains the agent on fresh levels or never
+        if not self.trains_on_fresh and not self.replays:
+            raise ConfigError(f"adversary: {type(self).__name__} without trains_on_fresh would never train the agent "
+                             "(it has no replay); allowed: trains_on_fresh=True")
+
+    #: it keeps level buffers and replays from them (the PLR family)
+    replays = False
+
+    def init(self, setup, example_level, example_obs, rng) -> AdversaryState:
+        """The initial state: K empty buffers of levels like ``example_level``; ``rng`` (the
+        runner's key, which an adversary that needs one folds, never splits)."""
+        one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
+        zero = jnp.zeros((), jnp.int32)
+        return AdversaryState(buffers=buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo)), active=zero,
+                              count=zero)
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        state = runner.adversary
+        new = self._fresh(setup, k_levels)
+        replay = jnp.asarray(False)
+        return Proposal(replay=replay, levels=new, buffer=buf.select_buffer(state.buffers, state.active),
+                        slots=None, train=replay | self.trains_on_fresh)
+
+    def _fresh(self, setup, k_levels):
+        """N fresh levels from the task's generator."""
+        return jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs))
+
+    def frozen_levels(self, setup, runner):
+        """``(levels [F, ...], valid bool[F])``: the earlier adversaries' levels; None: none."""
+        return None
+
+    def active_levels(self, setup, runner):
+        """``(levels [C, ...], valid bool[C])``: the active buffer's levels (a simulated tracker
+        calibrates against them at the switch)."""
+        active = buf.select_buffer(runner.adversary.buffers, runner.adversary.active)
+        return active.levels, active.valid
+
+    def own_levels(self, proposal: Proposal) -> jax.Array:
+        """bool[]: this update's rollout shows the active adversary's own levels: a replay of the
+        active buffer (its fresh levels are the task generator's, not the adversary's)."""
+        return proposal.replay
+
+    def best_return(self, proposal: Proposal, best_return):
+        """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's
+        (``best_return``: the best return of an episode that ended in it, −inf where none did)."""
+        return best_return
+
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+        """After scoring: ``(state, inserted bool[N], step metrics)``; nothing is kept.
+        ``best_return``: :meth:`best_return`'s record (−inf where no episode ended);
+        ``mean_return`` f32[N]: the agent's mean episodic return on each level (the partial return
+        where no episode ended); ``rng`` for an adversary that learns."""
+        return runner.adversary, jnp.zeros((setup.cfg.num_envs,), bool), {}
+
+    def advance(self, setup, runner, proposal: Proposal):
+        """The state after the learner (``runner``: after :meth:`update`). Counts the update on the
+        active buffer (a replay with ``remidi.count=replays``); with one buffer nothing switches."""
+        state = runner.adversary
+        count = state.count + (proposal.replay.astype(jnp.int32) if setup.cfg.remidi.count == "replays" else 1)
+        return state.replace(count=count)
+
+    def metrics(self, setup, runner) -> dict:
+        """What the adversary's buffers hold: nothing without buffers."""
+        return {}
+
+
+@dataclass(frozen=True)
+class RandomLevels(Adversary):
+    """DR's adversary: the protocol's default, fresh random levels every update."""
+
+
+def tag_counts(setup, levels, weight) -> dict[str, jax.Array]:
+    """Σ weight over the levels [N] that carry each tag."""
+    tags = jax.vmap(setup.task.level_tags)(levels)
+    return {name: jnp.sum(jnp.where(t, weight, 0.0)) for name, t in tags.items()}

@@ -1,0 +1,159 @@
+"""The PLR family's adversary (:class:`LevelBuffers`): PLR⊥, minimax return, and ReMiDi's
+sequence of level buffers.
+
+With probability ``buffer.replay_prob``, once the active buffer can replay, an update replays N
+levels sampled from it (by score rank or top-k, mixed with staleness:
+:mod:`remidi.engine.adversaries.level_buffer`); otherwise it plays N fresh levels, scored and
+inserted by score. With ``buffer_sequence`` (ReMiDi) the adversary is a sequence of
+``remidi.num_buffers`` buffers: after ``remidi.steps_per_buffer`` updates the active one is frozen
+and the next takes over (the last stays); the frozen ones' levels go to the tracker
+(:meth:`LevelBuffers.frozen_levels`), a fresh level a frozen one explains at every step (a
+complete overlap) is never inserted, and with ``remidi.rehearsal`` an update may instead rehearse
+a frozen buffer's levels (:func:`rehearse_frozen`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+
+from remidi.engine.adversaries import level_buffer as buf
+from remidi.engine.adversaries.base import Adversary, Proposal, tag_counts
+from remidi.engine.config import buffer_config
+
+
+@dataclass(frozen=True)
+class LevelBuffers(Adversary):
+    """The PLR family's adversary (module docstring). State: :class:`~remidi.engine.adversaries.base.AdversaryState`."""
+
+    trains_on_fresh: bool = False
+    buffer_sequence: bool = False
+
+    replays = True
+
+    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``: which)
+        or N fresh levels (``k_levels``)."""
+        state, bcfg = runner.adversary, buffer_config(setup.cfg, setup.algo)
+        active = buf.select_buffer(state.buffers, state.active)
+        replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
+        new = self._fresh(setup, k_levels)
+        sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, setup.cfg.num_envs)
+        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+        proposal = Proposal(replay=replay, levels=levels, buffer=sampled, slots=slots,
+                            train=replay | self.trains_on_fresh)
+        if self.buffer_sequence and setup.cfg.remidi.rehearsal > 0:
+            proposal = rehearse_frozen(setup, state, proposal, jax.random.fold_in(k_branch, 1))
+        return proposal
+
+    def frozen_levels(self, setup, runner):
+        """A sequence's earlier buffers (:func:`earlier_buffers`); nothing for a single buffer."""
+        return earlier_buffers(setup, runner.adversary) if self.buffer_sequence else None
+
+    def best_return(self, proposal: Proposal, best_return):
+        """For a replayed level, the buffer's record too."""
+        record = proposal.buffer.extras["max_return"][proposal.slots]
+        return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
+
+    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+        """Replayed levels get their new ``scores`` [N]; fresh levels are inserted into the active
+        buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
+        bool[N]: scored −inf); a rehearsal changes no buffer."""
+        state, n = runner.adversary, setup.cfg.num_envs
+        bcfg = buffer_config(setup.cfg, setup.algo)
+
+        def rescore(_):
+            return (buf.update_scores(proposal.buffer, proposal.slots, scores, {"max_return": best_return}),
+                    jnp.zeros((n,), bool))
+
+        def insert(_):
+            active = buf.select_buffer(state.buffers, state.active)
+            new_buf, ins, _ = buf.insert_batch(active, bcfg, proposal.levels, jnp.where(overlap, -jnp.inf, scores),
+                                               {"max_return": best_return})
+            return new_buf, ins
+
+        if proposal.rehearse is None:
+            new_buf, inserted = jax.lax.cond(proposal.replay, rescore, insert, None)
+        else:
+            def keep(_):
+                return buf.select_buffer(state.buffers, state.active), jnp.zeros((n,), bool)
+
+            branch = jnp.where(proposal.rehearse, 2, proposal.replay.astype(jnp.int32))
+            new_buf, inserted = jax.lax.switch(branch, (insert, rescore, keep), None)
+        return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted, {}
+
+    def advance(self, setup, runner, proposal: Proposal):
+        """After ``remidi.steps_per_buffer`` counted updates on the active buffer of a sequence:
+        freeze it and move to the next, staying on the last."""
+        state = super().advance(setup, runner, proposal)
+        switch = switches(setup, state, state.count) if self.buffer_sequence else jnp.asarray(False)
+        return state.replace(active=jnp.where(switch, state.active + 1, state.active),
+                             count=jnp.where(switch, 0, state.count))
+
+    def metrics(self, setup, runner) -> dict:
+        return buffer_contents(setup, runner.adversary)
+
+
+def earlier_buffers(setup, state):
+    """``(levels, valid)``: the levels of every buffer of a sequence before the active one, as one
+    batch of F = (K−1)·capacity (buffer-major; None with fewer than two buffers)."""
+    if setup.cfg.remidi.num_buffers < 2:
+        return None
+    earlier = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
+    k = earlier.valid.shape[0]
+    valid = earlier.valid & (jnp.arange(k) < state.active)[:, None]
+    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
+    return flat, valid.reshape(-1)
+
+
+def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
+    """``remidi.rehearsal``: with that probability, once an earlier buffer of the sequence holds
+    levels, ``proposal`` gives way to a rehearsal: N levels drawn uniformly (with replacement) from
+    the valid levels of one of the non-empty earlier buffers, chosen uniformly. A rehearsal trains
+    on every step (:meth:`Proposal.explained`), is no replay of the active buffer (``replay``
+    False: nothing is rescored, inserted or sampled, and ``remidi.count=replays`` does not count
+    it), and reads the frozen buffers without changing them (no clock tick, no ``last_seen``).
+
+    Uniform, not by the frozen buffer's replay distribution: its scores stopped being updated when
+    it was frozen, and rehearsal is meant to keep the behaviour on the whole of an earlier
+    adversary's support, not on the levels that had the most regret then."""
+    n = setup.cfg.num_envs
+    k_draw, k_buffer, k_slots = jax.random.split(rng, 3)
+    valid = state.buffers.valid  # bool[K, C]
+    k, capacity = valid.shape
+    eligible = (jnp.arange(k) < state.active) & jnp.any(valid, axis=1)  # frozen and not empty
+    rehearse = jnp.any(eligible) & (jax.random.uniform(k_draw) < setup.cfg.remidi.rehearsal)
+    which = jax.random.choice(k_buffer, k, p=jnp.where(jnp.any(eligible), eligible / jnp.maximum(jnp.sum(eligible), 1),
+                                                         1.0 / k))
+    chosen = valid[which]
+    slots = jax.random.choice(k_slots, capacity, (n,), replace=True,
+                              p=jnp.where(jnp.any(chosen), chosen / jnp.maximum(jnp.sum(chosen), 1), 1.0 / capacity))
+    frozen = buf.get_levels(buf.select_buffer(state.buffers, which), slots)
+    levels = jax.tree.map(lambda f, o: jnp.where(rehearse, f, o), frozen, proposal.levels)
+    return proposal.replace(levels=levels, replay=proposal.replay & ~rehearse, train=proposal.train | rehearse,
+                            rehearse=rehearse)
+
+
+def switches(setup, state, count) -> jax.Array:
+    """bool[]: a sequence moves to its next buffer (or generator): ``count`` (this update's count on
+    the active one) reached ``remidi.steps_per_buffer`` and the active one is not the last."""
+    k = state.buffers.valid.shape[0]
+    return (count >= setup.cfg.remidi.steps_per_buffer) & (state.active + 1 < k)
+
+
+def buffer_contents(setup, state) -> dict:
+    """Share of each tag among the valid levels of every buffer (``buffer_fraction/<tag>/b<k>``)
+    and of the active one (``buffer_fraction/<tag>``); the active buffer's size."""
+    out = {}
+    valid = state.buffers.valid  # bool[K, C]
+    sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]
+    counts = jax.vmap(lambda levels, v: tag_counts(setup, levels, v.astype(jnp.float32)))(state.buffers.levels, valid)
+    for name, c in counts.items():  # c: f32[K]
+        fractions = c / sizes
+        for b in range(valid.shape[0]):
+            out[f"buffer_fraction/{name}/b{b}"] = fractions[b]
+        out[f"buffer_fraction/{name}"] = fractions[state.active]
+    out["buffer_size"] = jnp.sum(valid[state.active]).astype(jnp.float32)
+    return out

@@ -1,0 +1,193 @@
+"""Validation of a run before anything is written: the task itself
+(:mod:`remidi.engine.run.task_checks`), every key of :class:`UEDConfig` against its allowed values
+and the task (one-line ConfigError naming the key; the tracker's keys:
+:func:`remidi.engine.trackers.validate_tracker`), whether the network reads the task's
+observations, and warnings about valid runs that would train degenerately."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+
+from remidi.engine.adversaries import scores as sc
+from remidi.engine.adversaries.paired import ESTIMATORS, GENERATOR_NETWORKS, OVERLAP_REGRETS, LevelGenerator
+from remidi.engine.adversaries.plr import LevelBuffers
+from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
+from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name, validate_buffer_config
+from remidi.engine.core.ppo import validate_ppo_config
+from remidi.engine.run.task_checks import check_network_reads_observations, step_reads_its_key, validate_task
+from remidi.engine.setup import network_for
+from remidi.engine.trackers import tracker_for, validate_tracker
+from remidi.envs.interface import UEDTask, tree_equal
+from remidi.errors import ConfigError, choice, positive_int, require
+
+
+def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_step: bool = False) -> list[str]:
+    """One-line warnings about a valid run that would train degenerately without saying so:
+
+    * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
+      ``engine/adversaries/scores.py``: every built-in one) on rollouts shorter than the task's episode limit: a
+      level whose episode does not end inside the rollout scores −inf (``pvl``, ``maxmc``,
+      ``learnability``: with every episode too long the buffer holds one level and replays only it)
+      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which);
+    * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
+      give different first observations): the tracker assumes an episode is a function of the
+      level and the actions, so it may judge identical levels distinguishable;
+    * with ``check_step`` (a user's task: tracing a step costs seconds for Brax, whose steps are
+      known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
+      it steps each frozen level with the agent's own draws, so a prefix another draw of that level
+      would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
+    """
+    out = []
+    algo = get_algorithm(algo)
+    score = sc.SCORES[score_name(cfg, algo)]
+    if algo.replays and score.needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
+        out.append(f"score {score.name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) "
+                   f"is shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not "
+                   f"end {score.unfinished}; raise num_steps or use another score")
+    if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
+        level = task.sample_level(jax.random.PRNGKey(0))
+        obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
+        if not bool(tree_equal(obs[0], obs[1])):
+            out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
+                       "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
+                       "actions; put the random seed into the level (UEDTask.deterministic_reset)")
+    if check_step and algo.buffer_sequence and cfg.remidi.num_buffers > 1 \
+            and not tracker_for(task, cfg, algo).learns and step_reads_its_key(task):
+        out.append("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
+                   "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
+                   "would give counts as distinguishable; draw the step's randomness from a seed the level holds "
+                   "(remidi.envs.noisy does; UEDTask.reseed_level redraws it) or judge with remidi.tracker=belief "
+                   "or simulated")
+    return out
+
+
+def rehearses(algo: Algorithm) -> bool:
+    """``algo`` can take ``remidi.rehearsal``: a sequence of level buffers (ReMiDi, ReMiDi over ACCEL)."""
+    return isinstance(algo.adversary, LevelBuffers) and algo.buffer_sequence
+
+
+def validate_section(prefix: str, validate) -> None:
+    """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
+    section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
+    try:
+        validate()
+    except ConfigError as err:
+        msg = str(err)
+        raise ConfigError(msg if msg.startswith(prefix) else prefix + msg) from None
+
+
+def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
+    """Why ``task`` cannot run ``algo`` (None: it can): an algorithm that edits levels needs a
+    level mutator, one that learns a level generator a level-building MDP."""
+    if algo.edits and task.mutate_level is None:
+        return f"{algo.name} edits levels, but this task has no level mutator (UEDTask.mutate_level)"
+    if isinstance(algo.adversary, LevelGenerator) and task.level_builder is None:
+        return (f"{algo.name} learns a level generator, but this task has no level-building MDP "
+                f"(UEDTask.level_builder)")
+    return None
+
+
+def supported_algorithms(task: UEDTask) -> list[str]:
+    """The registered algorithms ``task`` can run (:func:`task_refusal`), in their order."""
+    return [name for name, algo in ALGORITHMS.items() if task_refusal(algo, task) is None]
+
+
+def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
+    """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
+    algo = get_algorithm(algo)
+    validate_task(task)
+    for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
+        positive_int(key, getattr(cfg, key))
+    steps = cfg.num_updates * cfg.ppo.epochs * cfg.ppo.minibatches  # the optimiser's int32 step count
+    if steps >= 2**31:
+        raise ConfigError(f"num_updates: must keep num_updates × ppo.epochs × ppo.minibatches below 2^31 "
+                          f"(the optimiser counts its steps in 32 bits), got {cfg.num_updates} × {cfg.ppo.epochs} × "
+                          f"{cfg.ppo.minibatches} = {steps}; lower num_updates")
+    if cfg.eval_every > cfg.num_updates:
+        raise ConfigError(f"eval_every: must be ≤ num_updates ({cfg.num_updates}), got {cfg.eval_every}; "
+                          f"lower eval_every or raise num_updates")
+    require(isinstance(cfg.reseed, bool), "reseed", "true or false", cfg.reseed)
+    require(not cfg.reseed or task.reseed_level is not None, "reseed", "false for a task without reseed_level (its "
+            "levels carry no randomness of their own to draw afresh)", cfg.reseed)
+    choice("score", cfg.score, sc.SCORES)
+    score = sc.SCORES[score_name(cfg, algo)]
+    for needed, what, has in (
+            (score.needs_optimum, "the environment's optimal return, which this task does not provide "
+                                  "(UEDTask.optimal_return)", task.optimal_return is not None),
+            (score.needs_solved, "a solve criterion, which this task does not define (UEDTask.solved)",
+             task.solved is not None)):
+        if needed and not has:
+            fits = [s.name for s in sc.SCORES.values() if not (s.needs_optimum and task.optimal_return is None)
+                    and not (s.needs_solved and task.solved is None)]
+            raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(fits)}")
+    require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
+    if score.needs_optimum and cfg.discounted_regret and task.optimal_discounted_return is None:
+        raise ConfigError(f"discounted_regret: this task gives no discounted optimal return "
+                          f"(UEDTask.optimal_discounted_return), so {score.name} cannot use the discounted utility; "
+                          f"allowed: false (undiscounted returns on both sides)")
+    for key in ("hidden_size", "lstm_size"):
+        require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
+                "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
+    require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
+    # the network kind first (at its default sizes), then the sizes: a preset's hidden_size must not
+    # hide that the network picked cannot read the task's observations
+    check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
+                                     cfg.network, task, cfg.normalize_obs)
+    network_for(cfg, task)  # ConfigError if the network has no layer for hidden_size / lstm_size
+    r = cfg.remidi
+    positive_int("remidi.num_buffers", r.num_buffers)
+    positive_int("remidi.buffer_capacity", r.buffer_capacity)
+    positive_int("remidi.steps_per_buffer", r.steps_per_buffer)
+    choice("remidi.count", r.count, ("updates", "replays"))
+    require(r.count == "updates" or algo.replays or not algo.buffer_sequence, "remidi.count", "updates with a "
+            "learned generator (a generator never replays, so counting replays would never switch it)", r.count)
+    validate_tracker(cfg, algo, task)
+    choice("remidi.policy", r.policy, POLICIES)
+    if r.policy == "combine":
+        require(not cfg.normalize_obs, "remidi.policy", "masked with normalize_obs (the frozen policies would read "
+                "observations normalised by statistics gathered after they were frozen)", r.policy)
+    require(isinstance(r.rehearsal, (int, float)) and not isinstance(r.rehearsal, bool) and 0 <= r.rehearsal <= 1,
+            "remidi.rehearsal", "a probability in [0, 1]", r.rehearsal)
+    if r.rehearsal > 0:
+        sequences = [a for a in ALGORITHMS if rehearses(ALGORITHMS[a])]
+        if not rehearses(algo):
+            raise ConfigError(f"remidi.rehearsal: {algo.name} has no sequence of level buffers to rehearse; allowed: 0, "
+                              f"or a probability with --algo {' or '.join(sequences)}")
+        require(r.policy == "masked", "remidi.policy", "masked with remidi.rehearsal (under combine the frozen "
+                "policies act on the earlier buffers' levels, so the trained one never does)", r.policy)
+    positive_int("accel.num_edits", cfg.accel.num_edits)
+    require(isinstance(cfg.accel.easy_start, bool), "accel.easy_start", "true or false", cfg.accel.easy_start)
+    if algo.edits and task.mutate_level is None:
+        raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
+    if algo.edits and cfg.accel.easy_start and task.easy_level is None:
+        raise ConfigError("accel.easy_start: this task has no easy-level generator (UEDTask.easy_level); "
+                          "allowed: false")
+    if isinstance(algo.adversary, LevelGenerator):
+        if task.level_builder is None:
+            raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
+        p = cfg.paired
+        choice("paired.estimator", p.estimator, ESTIMATORS)
+        if p.estimator == "perfect" and task.optimal_return is None:
+            raise ConfigError("paired.estimator: perfect needs the task's optimal return (UEDTask.optimal_return); "
+                              "allowed: paired, flexible")
+        require(isinstance(p.clip_negative, bool), "paired.clip_negative", "true or false", p.clip_negative)
+        choice("paired.generator_network", p.generator_network, GENERATOR_NETWORKS)
+        positive_int("paired.generator_hidden", p.generator_hidden)
+        require(p.generator_lr > 0, "paired.generator_lr", "> 0", p.generator_lr)
+        require(p.generator_ent_coef >= 0, "paired.generator_ent_coef", "≥ 0", p.generator_ent_coef)
+        choice("paired.overlap_regret", p.overlap_regret, OVERLAP_REGRETS)
+        require(cfg.remidi.policy == "masked", "remidi.policy", "masked with a learned level generator (Combine "
+                "over generators is not implemented)", cfg.remidi.policy)
+    validate_section("ppo.", lambda: validate_ppo_config(cfg.ppo, cfg.num_envs))
+    validate_section("buffer.", lambda: validate_buffer_config(cfg.buffer))
+    validate_section("buffer.", lambda: validate_buffer_config(buffer_config(cfg, algo)))
+    if algo.buffer_sequence:
+        needed = (r.num_buffers - 1) * r.steps_per_buffer
+        if needed >= cfg.num_updates:
+            raise ConfigError(
+                f"remidi.num_buffers: must be small enough that the last buffer gets updates, but "
+                f"(num_buffers − 1) × steps_per_buffer = ({r.num_buffers} − 1) × {r.steps_per_buffer} = {needed} "
+                f"is not below num_updates = {cfg.num_updates}; lower remidi.num_buffers or "
+                f"remidi.steps_per_buffer, or raise num_updates")

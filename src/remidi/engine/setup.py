@@ -1,0 +1,69 @@
+"""The static set-up of a run (:class:`Setup`: the task, the config, the algorithm, and the
+components derived from them: the network and the tracker) and what is read off it before a
+runner exists (the network of a config, an example observation)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import partial
+
+import jax
+
+from remidi.engine.config import UEDConfig
+from remidi.engine.core import normalize as nrm
+from remidi.engine.core.networks import NETWORKS, make_network
+from remidi.envs.interface import UEDTask
+from remidi.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Static pieces of a run: the task, the config, the algorithm (its adversary and score,
+    :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
+    equality: the agent's network and the distinguishability tracker
+    (:mod:`remidi.engine.trackers`). Hashable: a static argument under jit. Built by
+    :func:`remidi.engine.train.make_setup`."""
+
+    task: UEDTask
+    cfg: UEDConfig
+    algo: object
+    net: object = field(compare=False)
+    tracker: object = field(compare=False, default=None)
+
+
+def network_for(cfg: UEDConfig, task: UEDTask):
+    """The network ``cfg.network`` for the task's actions, with ``hidden_size``/``lstm_size``
+    where set (ConfigError if that network has no such layer)."""
+    options = {}
+    cls = NETWORKS.get(cfg.network)
+    fields = {f.name: f.default for f in dataclasses.fields(cls)} if cls is not None else {}
+    for key, option, value in (("hidden_size", "hidden", cfg.hidden_size), ("lstm_size", "lstm_size", cfg.lstm_size)):
+        if value == 0:
+            continue
+        if option not in fields:
+            raise ConfigError(f"{key}: the network {cfg.network} has no such layer; leave it 0 or pick a network "
+                              f"that has one")
+        options[option] = (value,) * len(fields[option]) if option == "hidden" else value
+    return make_network(cfg.network, task.num_actions, task.continuous, **options)
+
+
+def policy_apply(setup: Setup, learner):
+    """The network's ``apply`` reading observations as the agent sees them (normalised with the
+    learner's running statistics under ``normalize_obs``)."""
+    return nrm.normalizing_apply(setup.net.apply, learner.obs_stats)
+
+
+def example_observation(task: UEDTask, key=None):
+    """One observation (unbatched leaves): the first of a level the task samples with ``key``
+    (``PRNGKey(0)`` if None), reset with the same key. Returns ``(obs, level)``.
+
+    One compiled program: called outside a trace, the generator's and the reset's operations
+    would each compile a program of their own (about a hundred for the maze, seconds per process)."""
+    return _first_observation(task, jax.random.PRNGKey(0) if key is None else key)
+
+
+@partial(jax.jit, static_argnums=0)
+def _first_observation(task: UEDTask, key):
+    level = task.sample_level(key)
+    return task.env.reset_to_level(key, level, task.params)[0], level

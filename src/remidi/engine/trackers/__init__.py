@@ -1,0 +1,98 @@
+"""ReMiDi's distinguishability trackers, one module each (the protocol:
+:mod:`~remidi.engine.trackers.base`), and the choice of one for a run (:func:`tracker_for`).
+
+``remidi.tracker`` names it: ``prefix`` (the default, :mod:`~remidi.engine.trackers.exact`: one
+frozen level produced the whole prefix; candidate slots per env, ``remidi.tracker_budget``, where
+the reset allows, else every frozen level stepped), ``per_step`` (the authors' looser rule, same
+module), ``belief`` (:mod:`~remidi.engine.trackers.belief`) and ``simulated``
+(:mod:`~remidi.engine.trackers.simulated`). The keys keep their names in ``remidi.*`` (run folders'
+``config.json`` files use them); only this package reads the ``remidi.tracker*`` and
+``remidi.belief_*`` keys.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+
+from remidi.engine.setup import example_observation
+from remidi.engine.trackers.base import Frozen, Tracker
+from remidi.engine.trackers.belief import BeliefTracker
+from remidi.engine.trackers.belief_model import BeliefModel, coding_for, coding_problem
+from remidi.engine.trackers.exact import MODES, exact_budget, make_tracker
+from remidi.engine.trackers.simulated import Simulated
+from remidi.errors import ConfigError, positive_int, require
+
+#: every value of ``remidi.tracker``
+TRACKERS = MODES + ("belief", "simulated")
+
+
+@functools.lru_cache(maxsize=None)
+def model_for(task, hidden: int) -> BeliefModel:
+    """The belief model of ``task`` (its observations' coding, its actions) with ``hidden`` GRU units."""
+    obs = jax.eval_shape(lambda: example_observation(task)[0])
+    return BeliefModel(coding_for(obs), num_actions=task.num_actions, hidden=hidden)
+
+
+def tracker_for(task, cfg, algo) -> Tracker:
+    """The tracker of a run of ``algo`` on ``task`` under ``cfg`` (``remidi.tracker``): the exact
+    one of ``remidi.tracker``'s mode unless a learned one judges, which it does only for a
+    sequence of at least two adversaries (nothing else freezes one)."""
+    r = cfg.remidi
+    sequence = algo.buffer_sequence and r.num_buffers >= 2
+    if not sequence or r.tracker in MODES:
+        mode = r.tracker if r.tracker in MODES else "prefix"
+        budget = 0
+        if mode == "prefix" and task.deterministic_reset:
+            budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
+        return make_tracker(mode, budget)
+    settings = dict(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate, margin=r.belief_margin,
+                    calibration=r.belief_calibration, reference=r.belief_reference)
+    model = model_for(task, r.belief_hidden)
+    if r.tracker == "simulated":
+        return Simulated(model, budget=r.tracker_budget, capacity=r.buffer_capacity, reseed=task.reseed_level,
+                         **settings)
+    return BeliefTracker(model, **settings)
+
+
+def validate_tracker(cfg, algo, task) -> None:
+    """ConfigError (one line, naming the key) for tracker keys the run cannot take."""
+    r = cfg.remidi
+    require(isinstance(r.tracker_budget, int) and not isinstance(r.tracker_budget, bool) and r.tracker_budget >= 0,
+            "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
+    if r.tracker not in TRACKERS:  # the exact tracker is "prefix" (the definition); name it so
+        raise ConfigError(f"remidi.tracker: unknown value {r.tracker!r}; allowed: prefix (the exact tracker, the "
+                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model), "
+                          f"simulated (the frozen levels simulated under fresh randomness, with a learnt noise model)")
+    # the belief model's keys are checked whichever tracker runs: a bad value is a mistake either way
+    require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)", r.belief_false_rate)
+    positive_int("remidi.belief_hidden", r.belief_hidden)
+    positive_int("remidi.belief_calibration", r.belief_calibration)
+    positive_int("remidi.belief_epochs", r.belief_epochs)
+    require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
+    require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
+    require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
+    if r.tracker == "simulated":
+        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step or belief with a "
+                "learned generator (the simulated model needs the adversary's levels: a buffer's)", r.tracker)
+        require(task.deterministic_reset, "remidi.tracker", "prefix, per_step or belief for a task whose reset draws "
+                "randomness (the simulated model follows the frozen levels from their fixed starts)", r.tracker)
+    if r.tracker in ("belief", "simulated"):
+        require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
+                "(the reference learns from the task generator's fresh levels, which a generator never plays)",
+                r.belief_reference)
+        require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
+                "(the belief model reads discrete actions)", r.tracker)
+        obs = example_observation(task)[0]
+        problem = coding_problem(coding_for(obs), obs)
+        if problem is not None:
+            raise ConfigError(f"remidi.tracker: {r.tracker} cannot read this task: {problem}; allowed here: prefix, "
+                              f"per_step")
+    if r.policy == "combine":
+        require(r.tracker in ("prefix", "belief"), "remidi.tracker", "prefix or belief with remidi.policy=combine (a "
+                "policy per buffer acts where that buffer's levels produced, or its model explains, the whole prefix)",
+                r.tracker)
+
+
+__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "model_for"]

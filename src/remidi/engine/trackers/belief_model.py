@@ -1,0 +1,337 @@
+"""The learned belief model P(h | Λ): a GRU over an episode's (observation, action) pairs that
+predicts the next observation, for the belief tracker (:mod:`remidi.engine.trackers.belief`).
+
+The exact trackers (:mod:`remidi.engine.trackers.exact`) replay frozen levels and compare
+observations: exact when the environment is deterministic given the level, useless when the
+environment's randomness is in what the agent sees (:mod:`remidi.envs.noisy`). The paper's
+appendix proposes instead to learn, with each adversary Λᵢ, a model of the trajectories it
+produces. This module is that model, for discrete observations:
+
+* an :class:`ObsCoding` reads an observation pytree as E *entries*, each a category in
+  ``[0, K)`` (the lever's one-hot vector: K = 2 per entry; the maze's egocentric image, integers
+  divided by 10: ``round(10·x)``, K = 11; its direction: K = 4);
+* the model is a GRU over the episode's (observation, action) pairs whose state ``h_t`` (zeros at
+  an episode's start) predicts the next observation as E independent categoricals (a
+  *factorised* categorical); the first observation of an episode is predicted from the zero
+  state, i.e. it is the adversary's distribution of first observations;
+* the same state predicts whether the episode *continues* (a Bernoulli): at every later step of
+  an episode the step's likelihood includes "it did not end before this step", and training also
+  sees the steps where episodes did end, so a prefix that goes on where the adversary's episodes
+  end is unlikely under its model, as the exact tracker requires that a frozen level's episode
+  not end where the agent's goes on (where the agent's ends, both restart);
+* :func:`step_logliks` gives ``log P(o_t, and that the episode went on to t | o_<t, a_<t)`` per
+  step of a batch of trajectories (episodes delimited by ``reset``), :func:`prefix_scores` the
+  mean log-likelihood per step of each episode's prefix so far (the score a threshold is
+  compared with), :func:`fit_step` one Optax update on a batch, masked to the chosen steps;
+* :func:`frozen_logliks` and :func:`frozen_step` run B frozen models side by side, step by step
+  (what a tracker does during a rollout); the ``*_reference`` functions keep a model of the task
+  generator's trajectories, the denominator of a likelihood ratio.
+
+All functions are pure over pytrees (params are a dict of arrays) and jit/vmap-friendly; the
+coding, sizes and optimiser are static. Shapes: T steps, N envs, E entries, K categories,
+A actions, H hidden units, B frozen models.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from remidi.engine.core.seeds import cond_per_seed
+
+# ---------------------------------------------------------------------------- observations
+@dataclass(frozen=True)
+class ObsCoding:
+    """How an observation pytree reads as E categorical entries (static, hashable).
+
+    Per leaf of the observation (in ``jax.tree.leaves`` order): ``scales[i]`` (an entry's
+    category is ``round(x · scale)``, clipped to ``[0, categories[i])``). ``categories``: K of
+    each leaf; the model uses ``max(categories)`` for every entry (an unused category simply
+    gets no mass). ``sizes``: the number of entries of each leaf (its size); ``ndims``: the
+    number of dims of one observation's leaf (its trailing dims in a batch)."""
+
+    scales: tuple[float, ...]
+    categories: tuple[int, ...]
+    sizes: tuple[int, ...]
+    ndims: tuple[int, ...] | None = None
+
+    @property
+    def num_entries(self) -> int:
+        return sum(self.sizes)
+
+    @property
+    def num_categories(self) -> int:
+        return max(self.categories)
+
+    def encode(self, obs) -> jax.Array:
+        """i32[..., E]: the categories of an observation with any leading batch dims (the
+        leaves' trailing dims are the ones of one observation, of ``sizes``)."""
+        leaves = jax.tree.leaves(obs)
+        out = []
+        ndims = self.ndims or (None,) * len(leaves)
+        for leaf, scale, k, size, nd in zip(leaves, self.scales, self.categories, self.sizes, ndims):
+            lead = leaf.shape[:leaf.ndim - (_event_ndim(leaf, size) if nd is None else nd)]
+            flat = jnp.reshape(leaf, lead + (size,)).astype(jnp.float32)
+            out.append(jnp.clip(jnp.round(flat * scale), 0, k - 1).astype(jnp.int32))
+        return jnp.concatenate(out, axis=-1)
+
+
+def _event_ndim(leaf, size: int) -> int:
+    """How many trailing dims of ``leaf`` make up one observation of ``size`` entries (for a
+    coding built without ``ndims``)."""
+    n, prod = 0, 1
+    while prod < size:
+        n += 1
+        prod *= leaf.shape[leaf.ndim - n]
+    if prod != size:
+        raise ValueError(f"an observation leaf of shape {leaf.shape} does not end in {size} entries")
+    return n
+
+
+def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
+    """The coding of the task's observation ``example_obs`` (one unbatched observation).
+
+    ``categories`` maps a leaf's field name to ``(scale, K)``; unnamed leaves: the maze's
+    ``image`` is ``(10, 11)`` (MiniGrid's object, colour and state ids divided by 10, K the most
+    object types), ``agent_dir`` ``(1, 4)``, and any other leaf ``(1, 2)`` (one-hot vectors and
+    bits, as the lever's)."""
+    defaults = {"image": (10.0, 11), "agent_dir": (1.0, 4)}
+    defaults.update(categories or {})
+    scales, ks, sizes, ndims = [], [], [], []
+    for path, leaf in jax.tree_util.tree_leaves_with_path(example_obs):
+        name = getattr(path[-1], "name", None) if path else None
+        scale, k = defaults.get(name, (1.0, 2))
+        scales.append(float(scale))
+        ks.append(int(k))
+        sizes.append(max(1, math.prod(leaf.shape)))
+        ndims.append(len(leaf.shape))
+    return ObsCoding(scales=tuple(scales), categories=tuple(ks), sizes=tuple(sizes), ndims=tuple(ndims))
+
+
+def coding_problem(coding: ObsCoding, obs) -> str | None:
+    """Why ``coding`` cannot read the observation ``obs`` (one unbatched observation, concrete
+    values) without losing information, or None: every value of a leaf must be a category
+    ``c / scale`` with ``c`` an integer in ``[0, K)``. The message names the leaf and a value."""
+    for (path, leaf), scale, k in zip(jax.tree_util.tree_leaves_with_path(obs), coding.scales, coding.categories):
+        x = np.asarray(leaf, np.float64).ravel()
+        c = x * scale
+        bad = (np.abs(c - np.round(c)) > 1e-4) | (c < -1e-4) | (c > k - 1 + 1e-4)
+        if bad.any():
+            name = jax.tree_util.keystr(path)
+            where = f"the observation field {name}" if name else "the observation"
+            return (f"{where} holds {x[bad][0]:.4g}, which is no category "
+                    f"round(x·{scale:g}) in [0, {k}) (the belief model reads discrete observations: one-hot or "
+                    f"integer-coded entries)")
+    return None
+
+
+# ---------------------------------------------------------------------------- the model
+@dataclass(frozen=True)
+class BeliefModel:
+    """A GRU next-observation model over ``coding``'s entries and ``num_actions`` discrete
+    actions with ``hidden`` units (static, hashable: pass it as a static argument)."""
+
+    coding: ObsCoding
+    num_actions: int
+    hidden: int = 64
+
+    @property
+    def input_size(self) -> int:
+        return self.coding.num_entries * self.coding.num_categories + self.num_actions
+
+    def init(self, rng) -> dict:
+        """The parameters: GRU kernels ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], biases ``b`` f32[3H],
+        ``bh`` f32[H] (the candidate's recurrent bias), head ``wo`` f32[H, E·K], ``bo`` f32[E·K],
+        and the episode-continues logit's ``wc`` f32[H], ``bc`` f32[]."""
+        d, h, ek = self.input_size, self.hidden, self.coding.num_entries * self.coding.num_categories
+        k1, k2, k3, k4 = jax.random.split(rng, 4)
+        return {"wx": jax.random.normal(k1, (d, 3 * h)) / jnp.sqrt(d),
+                "wh": jax.random.normal(k2, (h, 3 * h)) / jnp.sqrt(h),
+                "b": jnp.zeros((3 * h,)), "bh": jnp.zeros((h,)),
+                "wo": jax.random.normal(k3, (h, ek)) * 0.1 / jnp.sqrt(h), "bo": jnp.zeros((ek,)),
+                "wc": jax.random.normal(k4, (h,)) * 0.1 / jnp.sqrt(h), "bc": jnp.zeros(())}
+
+    def initial_hidden(self, batch_shape=()) -> jax.Array:
+        """f32[..., H]: the state at an episode's start (zeros)."""
+        return jnp.zeros(tuple(batch_shape) + (self.hidden,))
+
+    def loglik(self, params, hidden, cats) -> jax.Array:
+        """f32[...]: log P(observation with categories ``cats`` i32[..., E] | state ``hidden`` f32[..., H])."""
+        e, k = self.coding.num_entries, self.coding.num_categories
+        logits = (hidden @ params["wo"] + params["bo"]).reshape(hidden.shape[:-1] + (e, k))
+        logp = jax.nn.log_softmax(logits, axis=-1)
+        return jnp.sum(jnp.take_along_axis(logp, cats[..., None], axis=-1)[..., 0], axis=-1)
+
+    def continues(self, params, hidden, go_on) -> jax.Array:
+        """f32[...]: log P(the episode continues, where ``go_on`` bool[...]; else ends | ``hidden``
+        f32[..., H], the state after a step's observation and action)."""
+        logit = hidden @ params["wc"] + params["bc"]
+        return jnp.where(go_on, jax.nn.log_sigmoid(logit), jax.nn.log_sigmoid(-logit))
+
+    def cell(self, params, hidden, cats, action) -> jax.Array:
+        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` i32[...]."""
+        k = self.coding.num_categories
+        x = jnp.concatenate([jax.nn.one_hot(cats, k).reshape(cats.shape[:-1] + (-1,)),
+                             jax.nn.one_hot(action, self.num_actions)], axis=-1)
+        gx = x @ params["wx"] + params["b"]
+        gh = hidden @ params["wh"]
+        h = self.hidden
+        z = jax.nn.sigmoid(gx[..., :h] + gh[..., :h])
+        r = jax.nn.sigmoid(gx[..., h:2 * h] + gh[..., h:2 * h])
+        n = jnp.tanh(gx[..., 2 * h:] + r * (gh[..., 2 * h:] + params["bh"]))
+        return (1.0 - z) * n + z * hidden
+
+
+def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
+    """f32[T, N]: ``log P(obs[t], and at a later step of an episode that it continued | the
+    episode's observations and actions before t)``.
+
+    ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
+    episode: the state restarts from zeros; a rollout's first step starts what it holds of its
+    episode, marked or not)."""
+    return coded_logliks(model, params, model.coding.encode(obs), action, reset)
+
+
+def coded_logliks(model: BeliefModel, params, cats, action, reset) -> jax.Array:
+    """:func:`step_logliks` of observations already coded, ``cats`` int[T, N, E]."""
+    obs_ll, went_on = _scan_logliks(model, params, cats, action, reset)
+    return obs_ll + jnp.where(reset, 0.0, went_on)
+
+
+def _scan_logliks(model: BeliefModel, params, cats, action, reset):
+    """(f32[T, N] ``log P(obs[t] | the episode before t)``, f32[T, N] ``log P(the episode went on
+    to step t, where it did; else that it ended after step t − 1)``, 0 at the rollout's first
+    step). The second is the outcome of step t − 1: a prefix's score includes it where the
+    episode went on; where it ended the model learns from it, and the agent's next episode
+    starts afresh."""
+    cats = cats.astype(jnp.int32)
+    n = action.shape[1]
+
+    def body(carry, inp):
+        hidden, seen = carry  # seen: a step of this rollout came before (its state is in hidden)
+        c, a, r = inp
+        went_on = jnp.where(seen, model.continues(params, hidden, ~r), 0.0)  # a rollout's first step starts
+        hidden = jnp.where(r[:, None], 0.0, hidden)
+        return (model.cell(params, hidden, c, a), jnp.ones_like(seen)), (model.loglik(params, hidden, c), went_on)
+
+    _, out = jax.lax.scan(body, (model.initial_hidden((n,)), jnp.zeros((n,), bool)), (cats, action, reset))
+    return out
+
+
+def episode_running(op, x, start) -> jax.Array:
+    """[T, N]: ``op`` (a binary function: ``jnp.add``, ``jnp.minimum``) folded over ``x`` [T, N]
+    along each episode's steps so far (step t included), restarting where ``start`` bool[T, N]
+    (and at step 0: a rollout's first step starts what it holds of its episode)."""
+
+    def body(acc, inp):
+        xt, s = inp
+        acc = jnp.where(s, xt, op(acc, xt))
+        return acc, acc
+
+    return jax.lax.scan(body, x[0], (x, start.at[0].set(True)))[1]
+
+
+def prefix_lengths(reset) -> jax.Array:
+    """i32[T, N]: the number of steps of each episode's prefix so far (step t included)."""
+    return episode_running(jnp.add, jnp.ones(reset.shape, jnp.int32), reset)
+
+
+def prefix_scores(ll, reset) -> jax.Array:
+    """f32[T, N]: the mean of ``ll`` f32[T, N] over each episode's steps so far (step t included)."""
+    return episode_running(jnp.add, ll, reset) / prefix_lengths(reset)
+
+
+def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
+    """f32[]: the mean negative log-likelihood per step over the steps of ``mask`` bool[T, N]
+    (all if None), each step's observation and its outcome (the episode went on or ended after
+    it); 0 when no step is masked in."""
+    obs_ll, outcome = _scan_logliks(model, params, model.coding.encode(obs), action, reset)
+    mask = jnp.ones(obs_ll.shape, bool) if mask is None else mask
+    outcome = jnp.concatenate([outcome[1:], jnp.zeros_like(outcome[:1])])  # step t's outcome, seen at t + 1
+    return -jnp.sum(jnp.where(mask, obs_ll + outcome, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
+
+
+def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.GradientTransformation:
+    """The belief model's optimiser: Adam after global gradient-norm clipping."""
+    return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(lr))
+
+
+def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
+             mask=None):
+    """One Optax update on a batch of trajectories (as :func:`belief_loss`). Returns
+    ``(params, opt_state, loss f32[])`` (the loss before the update). An all-masked batch gives a
+    zero gradient."""
+    loss, grads = jax.value_and_grad(lambda p: belief_loss(model, p, obs, action, reset, mask))(params)
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    return optax.apply_updates(params, updates), opt_state, loss
+
+
+def fit_steps(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
+              steps: int):
+    """``steps`` :func:`fit_step` updates on the same batch (one ``lax.scan``). Returns ``(params,
+    opt_state, losses f32[steps])`` (each the loss before its update)."""
+
+    def body(carry, _):
+        p, o = carry
+        p, o, loss = fit_step(model, optimizer, p, o, obs, action, reset)
+        return (p, o), loss
+
+    (params, opt_state), losses = jax.lax.scan(body, (params, opt_state), None, length=steps)
+    return params, opt_state, losses
+
+
+
+# ---------------------------------------------------------------------------- frozen models
+def frozen_logliks(model: BeliefModel, params, hidden, cats) -> jax.Array:
+    """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats``
+    [N, E] from ``hidden`` [N, B, H]."""
+    return jax.vmap(lambda p, h: model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(params, hidden)
+
+
+def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, done):
+    """Each frozen model (``params`` leaves [B, ...]) one step on: its state [N, B, H] after the
+    last observation ``last`` [N, E] and ``action`` [N] (zeros where ``done`` bool[N]: an episode
+    starts), and the summed log-likelihood ``total`` [N, B] of the episode with ``cats`` [N, E]
+    (and, where it goes on, with its continuing: :func:`step_logliks` step by step)."""
+    cells = jax.vmap(lambda p, h: model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
+    goes_on = jax.vmap(lambda p, h: model.continues(p, h, True), in_axes=(0, 1), out_axes=1)(params, cells)
+    hidden = jnp.where(done[:, None, None], 0.0, cells)
+    return hidden, jnp.where(done[:, None], 0.0, total + goes_on) + frozen_logliks(model, params, hidden, cats)
+
+
+def init_reference(model: BeliefModel, optimizer, num_buffers: int, rng):
+    """A fresh reference model of the task generator's trajectories: ``(ref, ref_opt, ref_frozen)``,
+    its parameters, its optimiser state and its copies for the ``num_buffers`` buffers (leaves
+    [K, ...], each set by :func:`freeze_reference` when its buffer is frozen)."""
+    ref = model.init(jax.random.fold_in(rng, 1))
+    return ref, optimizer.init(ref), jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
+
+
+def freeze_reference(memory, active):
+    """``memory.ref_frozen`` (any memory with ``ref`` and ``ref_frozen``; None without a reference)
+    with the reference as it is now frozen for buffer ``active``."""
+    if memory.ref is None:
+        return None
+    return jax.tree.map(lambda all_, r: all_.at[active].set(r), memory.ref_frozen, memory.ref)
+
+
+def earlier_references(memory):
+    """The references frozen with the buffers before the last (leaves [K − 1, ...]; None without
+    a reference): what the rollout's tracker reads, as its frozen models."""
+    return None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
+
+
+def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fresh):
+    """``memory`` (any with ``ref`` and ``ref_opt``) with the generator's reference model fit
+    ``epochs`` steps on ``traj``, a rollout of fresh levels (``fresh`` bool[]; else unchanged)."""
+
+    def fit(m):
+        ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)
+        return m.replace(ref=ref, ref_opt=ref_opt)
+
+    return cond_per_seed(fresh, fit, lambda m: m, memory)

@@ -1,0 +1,394 @@
+"""The simulated tracker (``remidi.tracker=simulated``): the frozen levels simulated under fresh
+randomness, judged with a learnt noise model.
+
+The exact tracker asks whether one frozen level produced exactly the agent's observations; with
+randomness in what the agent sees (a noisy TV, a noise code) no level ever does. The learned
+adversary-level model (:mod:`remidi.engine.trackers.belief`) generalises over levels and cannot
+say "one of *these* levels". This model keeps the exact tracker's level-conditioning and learns
+only the noise:
+
+    P(h | θ) = Π_t Π_e q(o_e,t | d_t, ô¹_e,t, ô²_e,t),     P(h | Λ) = mean over θ ∈ Λ of P(h | θ)
+
+where ô¹, ô² are the frozen level θ stepped in lock-step with the agent's actions under two fresh
+draws of its randomness (``UEDTask.reseed_level``; a task without one is deterministic given the
+level, and both copies are θ itself), ``d_t`` says whether the two simulated observations agree
+entirely, and ``q`` is the noise table of :mod:`remidi.engine.trackers.noise`. One more entry (the
+last, K = 2) is the episode's end: whether the step before ended it.
+
+In a deterministic environment every triple agrees, ``q`` learns the identity and the mixture *is*
+the exact tracker; where the randomness is, the rows with ``d = 0`` learn its distribution, so a
+fresh draw of the same situation costs what noise costs. Judged alone (a threshold on the
+mixture) or as a ratio over a model of the generator's trajectories (needed on a noisy TV, where
+uniform noise makes any view as likely as any other). Measured on constructed adversaries:
+``docs/belief_probe_simulated.py``, ``docs/belief-tracker-plan.md``.
+
+:class:`SimulatedTracker` is the rollout's component over one set of frozen buffers;
+:class:`Simulated` the run's tracker (:mod:`remidi.engine.trackers.base`), which keeps the table,
+the reference and the calibration record (:class:`SimMemory`) and builds a
+:class:`SimulatedTracker` for each rollout.
+
+Shapes: E entries of the observation coding plus the end entry (E + 1), K categories, F frozen
+levels, S candidate slots per env (each with two simulated copies).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from remidi.engine.core.seeds import cond_per_seed
+from remidi.engine.trackers.audit import audit_against_exact, threshold_metrics
+from remidi.engine.trackers.base import Frozen, Tracker, fresh_levels
+from remidi.engine.trackers.belief_model import (BeliefModel, ObsCoding, earlier_references, fit_reference,
+                                                 freeze_reference, frozen_logliks, frozen_step, init_reference,
+                                                 make_optimizer, prefix_lengths)
+from remidi.engine.trackers.calibration import calibrate_monotone, length_bucket, num_length_buckets
+from remidi.engine.trackers.noise import (SMOOTHING, candidates, count_rollout, init_counts, log_q, mixture,
+                                          recorded_codes, step_logq, with_end)
+from remidi.envs.interface import tree_equal
+
+
+# ---------------------------------------------------------------------------- the tracker
+@struct.dataclass
+class FrozenSims:
+    """What the simulated tracker reads from the rollout's ``Frozen.belief``: ``logq`` (:func:`log_q`
+    of the run's table), ``threshold`` f32[B, L] (per prefix-length bucket), ``valid`` bool[B]
+    (buffer b has been frozen), ``ref`` (leaves [B, ...]: the generator's GRU model frozen with
+    each buffer, the ratio's denominator; None: judge by the mixture alone) and ``key`` (the
+    randomness of the frozen levels' copies in this rollout)."""
+
+    logq: jax.Array
+    threshold: jax.Array
+    valid: jax.Array
+    key: jax.Array
+    ref: Any = None
+
+
+@struct.dataclass
+class SimState:
+    """The tracker state of one env (leaves [N, ...] in the component): ``index`` i32[S] (the
+    frozen level each slot follows, −1 empty), the slots' two copies' environment states (leaves
+    [S, 2, ...]) and their first states, ``total`` f32[S] (log P(prefix | the slot's level)) and
+    ``start_total`` (its first observation's), ``count`` i32[] (the prefix's steps), the
+    reference's GRU state f32[B, H], summed log-likelihood f32[B] and the last coded observation
+    i32[E + 1] (its input), and ``match`` bool[B] (buffer b explains the prefix)."""
+
+    index: jax.Array
+    copies: Any
+    start_copies: Any
+    total: jax.Array
+    start_total: jax.Array
+    count: jax.Array
+    match: jax.Array
+    last: jax.Array
+    ref_hidden: Any = None
+    ref_total: Any = None
+
+
+@dataclass(frozen=True)
+class SimulatedTracker(Tracker):
+    """The simulated belief model as a tracker component over N rollout envs (the rollout's
+    ``frozen``: levels [F, ...] buffer-major with ``valid`` bool[F], and ``belief`` a
+    :class:`FrozenSims`). ``budget`` candidate slots per env, each following one frozen level in
+    two copies; ``reseed`` (static: ``UEDTask.reseed_level``, or None) draws a copy's randomness;
+    ``ref_model`` the GRU of the ratio's reference. The environment's reset must ignore its key
+    (the candidate tracker's condition): the copies' first states are computed once per rollout."""
+
+    coding: ObsCoding
+    ref_model: BeliefModel
+    num_buffers: int
+    budget: int = 64
+    reseed: Callable | None = None
+
+    def __hash__(self):
+        return hash((self.coding, self.ref_model, self.num_buffers, self.budget, id(self.reseed)))
+
+    def __eq__(self, other):
+        return (isinstance(other, SimulatedTracker) and (self.coding, self.ref_model, self.num_buffers, self.budget)
+                == (other.coding, other.ref_model, other.num_buffers, other.budget) and self.reseed is other.reseed)
+
+    # -- scoring
+    def scores(self, frozen, state: SimState) -> jax.Array:
+        """f32[N, B]: each frozen buffer's score of each env's prefix, per step: the mixture's
+        log-likelihood, minus the reference's with a reference, over the prefix's length."""
+        capacity = frozen.valid.shape[0] // self.num_buffers
+        mix = jax.vmap(mixture, in_axes=(0, 0, None, None, None))(state.total, state.index, frozen.valid,
+                                                                   self.num_buffers, capacity)  # [N, B]
+        score = mix if state.ref_total is None else mix - state.ref_total
+        return score / jnp.maximum(state.count, 1)[:, None]
+
+    def _judge(self, frozen, state: SimState) -> jax.Array:
+        """bool[N, B]: each frozen buffer's score reaches its threshold for the prefix's length."""
+        sims = frozen.belief
+        tau = sims.threshold[:, length_bucket(state.count, sims.threshold.shape[1])].T  # [N, B]
+        return sims.valid[None, :] & (self.scores(frozen, state) >= tau)
+
+    def _copies(self, frozen):
+        """The frozen levels' two copies (leaves [F, ...] each), their randomness drawn afresh."""
+        if self.reseed is None:
+            return frozen.levels, frozen.levels
+        f = frozen.valid.shape[0]
+        k1, k2 = jax.random.split(frozen.belief.key)
+        return (jax.vmap(self.reseed)(jax.random.split(k1, f), frozen.levels),
+                jax.vmap(self.reseed)(jax.random.split(k2, f), frozen.levels))
+
+    # -- the component's methods
+    def start_coded(self, env, params, frozen, agent) -> SimState:
+        """The state at the envs' first coded observations ``agent`` i32[N, E + 1]."""
+        n = agent.shape[0]
+        key0 = jax.random.PRNGKey(0)  # the reset ignores it
+        firsts = [jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(key0, lv, params) for lv in self._copies(frozen)]
+        c1, c2 = (with_end(self.coding, obs, jnp.zeros(frozen.valid.shape, bool)) for obs, _ in firsts)
+        index, total = jax.vmap(candidates, in_axes=(None, 0, None, None, None, None))(
+            frozen.belief.logq, agent, c1, c2, frozen.valid, self.budget)  # [N, S]
+        gather = lambda states: jax.tree.map(lambda x: x[jnp.maximum(index, 0)], states)  # noqa: E731
+        copies = jax.tree.map(lambda a, b: jnp.stack([a, b], axis=2), gather(firsts[0][1]), gather(firsts[1][1]))
+        count = jnp.ones((n,), jnp.int32)
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            ref_hidden = self.ref_model.initial_hidden((n, self.num_buffers))
+            ref_total = frozen_logliks(self.ref_model, frozen.belief.ref, ref_hidden, agent[:, :-1])
+        state = SimState(index=index, copies=copies, start_copies=copies, total=total, start_total=total,
+                         count=count, match=jnp.zeros((n, self.num_buffers), bool), last=agent,
+                         ref_hidden=ref_hidden, ref_total=ref_total)
+        return state.replace(match=self._judge(frozen, state))
+
+    def start(self, env, params, frozen, reset_keys, obs, starts=None) -> SimState:
+        return self.start_coded(env, params, frozen, with_end(self.coding, obs, jnp.zeros(reset_keys.shape[:1], bool)))
+
+    def explained(self, state: SimState) -> jax.Array:
+        return jnp.any(state.match, axis=-1)
+
+    def advance_coded(self, env, params, frozen, env_keys, state: SimState, action, agent, done) -> SimState:
+        """After the envs took ``action`` [N] with ``env_keys`` [N] and saw the coded observation
+        ``agent`` i32[N, E + 1] (the next episode's first where ``done`` bool[N]: the slots restart)."""
+        step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
+        step = jax.vmap(jax.vmap(jax.vmap(env.step, in_axes=(None, 0, None, None)),  # the two copies
+                                 in_axes=(None, 0, None, None)),  # the slots
+                        in_axes=(0, 0, 0, None))  # the envs
+        obs, copies, _, ended, _ = step(step_keys, state.copies, action, params)
+        codes = with_end(self.coding, obs, ended)  # [N, S, 2, E + 1]
+        lq = step_logq(frozen.belief.logq, agent[:, None], codes[:, :, 0], codes[:, :, 1])  # [N, S]
+        total = jnp.where(state.index >= 0, state.total + lq, -jnp.inf)
+        restart = done[:, None]
+        total = jnp.where(restart, state.start_total, total)
+        copies = jax.tree.map(lambda s, c: jnp.where(restart.reshape(restart.shape + (1,) * (c.ndim - 2)), s, c),
+                              state.start_copies, copies)
+        count = jnp.where(done, 0, state.count) + 1
+        ref_hidden = ref_total = None
+        if frozen.belief.ref is not None:
+            ref_hidden, ref_total = frozen_step(self.ref_model, frozen.belief.ref, state.ref_hidden, state.ref_total,
+                                                state.last[:, :-1], action, agent[:, :-1], done)
+        state = state.replace(copies=copies, total=total, count=count, last=agent, ref_hidden=ref_hidden,
+                              ref_total=ref_total)
+        fresh = self._judge(frozen, state)
+        return state.replace(match=jnp.where(done[:, None], fresh, state.match & fresh))
+
+    def advance(self, env, params, frozen, env_keys, state: SimState, action, next_obs, done) -> SimState:
+        # the agent's own end entry is 0: an ended episode restarts (as the exact tracker does)
+        agent = with_end(self.coding, next_obs, jnp.zeros(done.shape, bool))
+        return self.advance_coded(env, params, frozen, env_keys, state, action, agent, done)
+
+    def overflow(self, state: SimState) -> jax.Array:
+        return jnp.zeros(state.count.shape, jnp.int32)
+
+
+def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, actions, resets, key) -> jax.Array:
+    """f32[T, N, B]: the tracker's per-step scores (:meth:`SimulatedTracker.scores`) of a recorded
+    rollout (``codes`` i32[T, N, E + 1] of :func:`recorded_codes`, ``actions`` [T, N], ``resets``
+    bool[T, N]) against ``frozen``: what calibration needs, the same computation as in a rollout."""
+    agent = codes.at[:, :, -1].set(0)  # an ended episode restarts: the agent's own end entry is 0
+    state = tracker.start_coded(env, params, frozen, agent[0])
+    first = tracker.scores(frozen, state)
+    n = actions.shape[1]
+
+    def body(state, inp):
+        act, obs, restart, k = inp
+        state = tracker.advance_coded(env, params, frozen, jax.random.split(k, n), state, act, obs, restart)
+        return state, tracker.scores(frozen, state)
+
+    keys = jax.random.split(key, actions.shape[0] - 1)
+    _, later = jax.lax.scan(body, state, (actions[:-1], agent[1:], resets[1:], keys))
+    return jnp.concatenate([first[None], later])
+
+
+# ---------------------------------------------------------------------------- in a run
+@struct.dataclass
+class SimMemory:
+    """What a ReMiDi run with ``remidi.tracker=simulated`` carries (``Runner.tracker``).
+
+    ``counts`` (:func:`init_counts`): the noise table, learnt from every rollout (the noise is the
+    environment's, not an adversary's); ``ref`` / ``ref_opt``: the generator's GRU model (the
+    ratio's denominator, learning from rollouts of fresh levels; None without
+    ``remidi.belief_reference``), copied into ``ref_frozen`` [K, ...] when buffer k is frozen;
+    ``threshold`` f32[K, L] (+inf until calibrated); the active buffer's last R replays
+    (``codes`` i8[R, T, N, E + 1], ``actions``, ``resets``, and the replayed ``levels`` leaves
+    [R, N, ...]; ``written`` i32[] since the switch), scored against the buffer at its freeze to
+    calibrate its threshold (the envs whose level the buffer has since dropped left out)."""
+
+    counts: jax.Array
+    threshold: jax.Array
+    codes: jax.Array
+    actions: jax.Array
+    resets: jax.Array
+    levels: Any
+    written: jax.Array
+    ref: Any = None
+    ref_opt: Any = None
+    ref_frozen: Any = None
+
+
+def simulation_key(runner, purpose: int) -> jax.Array:
+    """The simulated tracker's key for one of its uses in this update (19: the rollout's frozen
+    copies, 23: the counted replays, 29: the calibration): from the seed's own key, so each seed
+    draws its own noise. ``runner.rng``'s children in the train step are ``fold_in(rng, 0..5)``
+    (``split`` with JAX's partitionable threefry), so ``purpose`` must not be below 6."""
+    return jax.random.fold_in(runner.rng, purpose)
+
+
+@dataclass(frozen=True)
+class Simulated(Tracker):
+    """The run's simulated tracker: ``model`` (the observation coding, and the GRU of the ratio's
+    reference), ``budget`` candidate slots per env at most (``remidi.tracker_budget``),
+    ``capacity`` each buffer's (``remidi.buffer_capacity``), ``reseed`` (static:
+    ``UEDTask.reseed_level``, or None); the ``remidi.belief_*`` settings as the belief tracker's
+    (:class:`~remidi.engine.trackers.belief.BeliefTracker`). The environment's reset must ignore
+    its key (the candidate tracker's condition)."""
+
+    model: BeliefModel
+    budget: int = 64
+    capacity: int = 32
+    reseed: Callable | None = None
+    lr: float = 1e-2
+    epochs: int = 4
+    false_rate: float = 0.05
+    margin: float = 1e-3
+    calibration: int = 16
+    reference: bool = False
+
+    learns = True
+
+    def _settings(self):
+        return (self.model, self.budget, self.capacity, self.lr, self.epochs, self.false_rate, self.margin,
+                self.calibration, self.reference)
+
+    def __hash__(self):
+        return hash(self._settings() + (id(self.reseed),))
+
+    def __eq__(self, other):
+        return isinstance(other, Simulated) and self._settings() == other._settings() and self.reseed is other.reseed
+
+    @property
+    def optimizer(self):
+        return make_optimizer(self.lr)
+
+    def component(self, num_buffers: int) -> SimulatedTracker:
+        """The rollout's component over ``num_buffers`` frozen buffers (the earlier buffers; one to calibrate)."""
+        return SimulatedTracker(self.model.coding, self.model, num_buffers,
+                                budget=min(self.budget, num_buffers * self.capacity), reseed=self.reseed)
+
+    def init(self, setup, rng) -> SimMemory:
+        """A fresh memory: an empty table, ``calibration`` replays of the rollout's T steps of N envs
+        recorded (levels like the task's), thresholds per length bucket (prefixes of at most the
+        episode limit), and with ``reference`` a fresh GRU reference (from ``fold_in(rng, 31)``)."""
+        cfg, coding = setup.cfg, self.model.coding
+        rng = jax.random.fold_in(rng, 31)
+        level = jax.eval_shape(setup.task.sample_level, jax.random.PRNGKey(0))
+        num_buffers, batch = cfg.remidi.num_buffers, (self.calibration, cfg.num_steps, cfg.num_envs)
+        ref, ref_opt, ref_frozen = init_reference(self.model, self.optimizer, num_buffers, rng) \
+            if self.reference else (None,) * 3
+        buckets = num_length_buckets(min(cfg.num_steps, setup.task.max_episode_steps or cfg.num_steps))
+        threshold = jnp.full((num_buffers, buckets), jnp.inf, jnp.float32)  # strongly typed, as a checkpoint restores it
+        return SimMemory(counts=init_counts(coding), threshold=threshold,
+                         codes=jnp.zeros(batch + (coding.num_entries + 1,), jnp.int8),
+                         actions=jnp.zeros(batch, jnp.int32), resets=jnp.ones(batch, bool),
+                         levels=jax.tree.map(lambda x: jnp.zeros(batch[:1] + (cfg.num_envs,) + x.shape, x.dtype), level),
+                         written=jnp.zeros((), jnp.int32), ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen)
+
+    def frozen(self, setup, runner) -> Frozen | None:
+        """The earlier buffers' levels, simulated with the learnt noise (the copies' key: 19)."""
+        view = super().frozen(setup, runner)
+        if view is None:
+            return None
+        k = setup.cfg.remidi.num_buffers - 1  # the last buffer is never frozen
+        return view.replace(tracker=self.component(k), belief=frozen_sims(runner.tracker, runner.adversary.active,
+                                                                          SMOOTHING, simulation_key(runner, 19)))
+
+    def learn(self, setup, runner, proposal, traj):
+        """After a rollout (``traj`` leaves [T, N, ...]) of the proposal's levels: the noise table
+        counts its triples (every rollout, key 23); a rollout of the active adversary's own levels
+        is recorded for its calibration; the reference learns from rollouts of fresh levels."""
+        memory, levels, task = runner.tracker, proposal.levels, setup.task
+        coding, own = self.model.coding, setup.algo.adversary.own_levels(proposal)
+        counts = count_rollout(memory.counts, task.env, task.params, coding, task.reseed_level, levels, traj,
+                               simulation_key(runner, 23))
+        rows = memory.codes.shape[0]
+        row = jnp.where(own, memory.written % rows, rows)  # rows: out of bounds, dropped
+        memory = memory.replace(
+            counts=counts,
+            codes=memory.codes.at[row].set(recorded_codes(coding, traj.obs, traj.reset).astype(jnp.int8), mode="drop"),
+            actions=memory.actions.at[row].set(traj.action, mode="drop"),
+            resets=memory.resets.at[row].set(traj.reset, mode="drop"),
+            levels=jax.tree.map(lambda all_, x: all_.at[row].set(x, mode="drop"), memory.levels, levels),
+            written=memory.written + own.astype(jnp.int32))
+        if memory.ref is not None:
+            memory = fit_reference(self.model, self.optimizer, memory, traj, self.epochs, fresh_levels(proposal))
+        return memory, {}
+
+    def freeze(self, setup, runner, switch):
+        """At a switch (``switch`` bool[]): the active buffer's threshold is calibrated on its
+        recorded replays, each scored against the buffer's levels as the tracker will score fresh
+        prefixes against it (with the reference frozen now;
+        :func:`~remidi.engine.trackers.calibration.calibrate_monotone`; +inf, explaining nothing,
+        without a recorded replay; key 29); the reference is frozen with it and the record
+        emptied. Computed only at a switch."""
+        task, active = setup.task, runner.adversary.active
+        buffer_levels, buffer_valid = setup.algo.adversary.active_levels(setup, runner)
+        tracker, key = self.component(1), simulation_key(runner, 29)
+
+        def switched(m: SimMemory) -> SimMemory:
+            rows = m.codes.shape[0]
+            frozen = _one_buffer(buffer_levels, buffer_valid, m, key,
+                                 None if m.ref is None else jax.tree.map(lambda x: x[None], m.ref))
+            scores = jax.lax.map(lambda x: score_recorded(tracker, task.env, task.params, frozen, x[0].astype(jnp.int32),
+                                                          x[1], x[2], jax.random.fold_in(key, 1))[..., 0],
+                                 (m.codes, m.actions, m.resets))  # [R, T, N]
+            lengths = jax.vmap(prefix_lengths)(m.resets)
+            # an env's replayed level counts only if the buffer still holds it (PLR replaces levels)
+            held = jax.vmap(jax.vmap(lambda lv: jnp.any(buffer_valid & jax.vmap(tree_equal, in_axes=(0, None))(
+                buffer_levels, lv))))(m.levels)  # [R, N]
+            valid = (jnp.arange(rows) < m.written)[:, None, None] & held[:, None, :]
+            valid = jnp.broadcast_to(valid, scores.shape)
+            tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, self.false_rate,
+                                     m.threshold.shape[1], valid, margin=self.margin)
+            tau = jnp.where(jnp.any(valid), tau, jnp.inf)
+            return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
+                             ref_frozen=freeze_reference(m, active))
+
+        return cond_per_seed(switch, switched, lambda m: m, runner.tracker)
+
+    def metrics(self, setup, runner) -> dict:
+        """The thresholds (:func:`~remidi.engine.trackers.audit.threshold_metrics`; no model of the
+        buffer's own: its scores are the mixture's)."""
+        return threshold_metrics(runner.tracker.threshold, runner.adversary.active)
+
+    def audit(self, setup, runner, rng) -> dict:
+        return audit_against_exact(self, setup, runner, rng)
+
+
+def _one_buffer(levels, valid, memory: SimMemory, key, ref):
+    return Frozen(levels=levels, valid=valid,
+                  belief=FrozenSims(logq=log_q(memory.counts, SMOOTHING),
+                                    threshold=jnp.zeros((1, memory.threshold.shape[1])),
+                                    valid=jnp.ones((1,), bool), key=key, ref=ref))
+
+
+def frozen_sims(memory: SimMemory, active, smoothing: float, key) -> FrozenSims:
+    """What the rollout's tracker reads: the buffers before ``active`` (B = K − 1 entries)."""
+    k = memory.threshold.shape[0]
+    return FrozenSims(logq=log_q(memory.counts, smoothing), threshold=memory.threshold[:-1],
+                      valid=jnp.arange(k - 1) < active, key=key, ref=earlier_references(memory))

@@ -219,7 +219,8 @@ class UEDSpec:
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
     (None: it can; :func:`remidi.engine.run.validation.task_refusal` of one task). ``check_step``: warn
-    of a step that draws from its key (a user's task, :func:`make_train`)."""
+    of a step that draws from its key (a user's task, :func:`make_train`). ``notes``: lines ``remidi
+    list NAME`` prints (:attr:`~remidi.experiments.base.Experiment.notes`)."""
 
     name: str
     description: str
@@ -235,6 +236,7 @@ class UEDSpec:
     builds_levels: bool = True
     refusal: Callable[[Any], str | None] | None = None
     check_step: bool = False
+    notes: tuple[str, ...] = ()
 
 
 def make_ued_experiment(spec: UEDSpec) -> Experiment:
@@ -273,5 +275,6 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
         preset_reasons=preset_reasons or {},
+        notes=tuple(spec.notes),
         make_task=task_for,
     )

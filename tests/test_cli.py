@@ -445,6 +445,20 @@ def test_list_shows_every_key_with_its_default_and_meaning(capsys):
     assert any(line.split()[:2] == ["log_every", "10"] for line in out.splitlines())
 
 
+def test_list_lever_says_which_paired_estimator_the_results_pages_claims_use(capsys):
+    """PAIRED's own estimator stays PAIRED's default, and `remidi list lever` (and lever-noisy) says
+    that the results page's PAIRED claims use the exact regret instead, and why."""
+    for name in ("lever", "lever-noisy"):
+        code, out, _ = run_cli(capsys, "list", name)
+        lines = out.splitlines()
+        assert any(line.split()[:2] == ["paired.estimator", "paired"] for line in lines)  # the default, unchanged
+        (note,) = [line for line in lines if "paired.estimator=perfect" in line]
+        assert note.lstrip().startswith("note:") and "results page" in note and "default" in note
+        assert "cannot see a hidden answer" in note  # the why: PAIRED's antagonist misses the irreducible regret
+    code, out, _ = run_cli(capsys, "list", "tabular-shared")
+    assert "note:" not in out
+
+
 def test_list_alone_is_one_line_per_experiment_with_its_presets(capsys):
     from remidi.experiments import all_experiments
 

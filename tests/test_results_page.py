@@ -262,6 +262,15 @@ def test_labels_name_what_differs_from_the_exact_single_policy_form():
     assert run_table.label("remidi", {}) == "remidi"
     assert run_table.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 2.0}}) == "remidi (belief, margin 2)"
     assert run_table.label("remidi", {"remidi": {"tracker": "belief", "belief_margin": 1e-3}}) == "remidi (belief)"
+    # remidi.belief_spread: named where it differs from the default; a run from before the key is named as before
+    from remidi.engine.config import ReMiDiConfig
+
+    assert run_table.BELIEF_SPREAD == ReMiDiConfig().belief_spread
+    spread = {"tracker": "belief", "belief_spread": run_table.BELIEF_SPREAD}
+    assert run_table.label("remidi", {"remidi": spread}) == "remidi (belief)"
+    assert run_table.label("remidi", {"remidi": {"tracker": "belief", "belief_spread": 0.0}}) == "remidi (belief, spread 0)"
+    assert run_table.label("remidi", {"remidi": {"tracker": "simulated", "belief_spread": 0.0, "belief_margin": 5.0}}) \
+        == "remidi (simulated, margin 5, spread 0)"
     assert run_table.label("remidi", {"remidi": {"policy": "combine"}}) == "remidi (combine)"
     assert run_table.label("remidi-accel", {"remidi": {"rehearsal": 0.1}}) == "remidi-accel (rehearsal 0.1)"
     assert run_table.label("remidi", {"remidi": {"policy": "masked"}},

@@ -81,3 +81,44 @@ def test_training_prints_it_in_the_first_process(monkeypatch, capsys, process):
     printed = "remidi: warning: seed 7: in updates 1–150 the agent trained on nothing" in capsys.readouterr().err
     assert printed == (process == 0)
     assert result.extra["stalled_updates"] == {"7": [[1, 150]]}  # summary.json keeps it, for every process
+
+
+# ------------------------------------------------------------------ a learned tracker that cannot separate
+def test_a_learned_tracker_whose_audit_explains_nearly_everything_is_reported():
+    """The last audit's numbers of the results page's runs (docs/results/data, per seed): the
+    T-maze belief runs (explained 1.00 and 0.91, agreement with the exact tracker 0.53 and 0.59)
+    and blindfold-noisy's (0.94, agreement 0.06) cannot separate the adversaries; the lever-noisy
+    belief runs (0.44, agreement 0.56), the simulated model's T-maze runs (0.54, agreement 1.00) and
+    a deterministic task whose fresh levels almost all overlap (0.95 explained, agreement 0.97)
+    can. A seed with no audit yet (NaN: nothing frozen) says nothing."""
+    final = {"belief/explained": np.array([1.0, 0.91, 0.94, 0.44, 0.54, 0.95, NAN]),
+             "belief/agreement": np.array([0.53, 0.59, 0.06, 0.56, 1.0, 0.97, NAN])}
+    line = ued.separation_warning([10, 11, 12, 13, 14, 15, 16], final)
+    assert line.startswith("the learned tracker cannot separate the adversaries: ")
+    assert "1.00 on seed 10, 0.91 on seed 11, 0.94 on seed 12 of the steps" in line
+    assert all(f"seed {s}" not in line for s in (13, 14, 15, 16)) and "\n" not in line
+    quiet = {k: v[3:] for k, v in final.items()}
+    assert ued.separation_warning([13, 14, 15, 16], quiet) is None
+    assert ued.separation_warning([0], {"solve_rate/visible": np.array([0.5])}) is None  # no learned tracker
+
+
+@pytest.mark.parametrize("explained, warned", [(0.97, True), (0.45, False)])
+def test_training_prints_the_separation_warning_once_the_run_ends(monkeypatch, capsys, explained, warned):
+    from remidi.engine.run.driver import TrainResult
+
+    def fake_train_seeds(task, cfg, algo, seeds, *, on_block=None, **kwargs):
+        history = {"belief/explained": np.array([[NAN, explained]]), "belief/agreement": np.array([[NAN, 0.5]])}
+        return TrainResult(np.array([BLOCK, 2 * BLOCK]), history, {"replay": np.zeros((1, 2 * BLOCK))}, None, [])
+
+    monkeypatch.setattr(ued, "train_seeds", fake_train_seeds)
+    monkeypatch.setattr(ued, "run_warnings", lambda *args: [])
+    cfg = UEDConfig(num_envs=ENVS, eval_every=BLOCK, num_updates=2 * BLOCK)
+    ued.make_train(lambda c: None, ())(RunContext(experiment="x", algo="remidi", preset="smoke", seeds=[3],
+                                                  config=cfg, out=None))
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "cannot separate" in line]
+    assert lines == ([f"remidi: warning: the learned tracker cannot separate the adversaries: at the last audit its "
+                      f"frozen models explain {explained:.2f} on seed 3 of the steps of fresh generator levels "
+                      f"(belief/explained; the exact tracker judges 0.50 of them alike), so a later adversary's "
+                      f"levels are rejected or masked as an earlier one's whatever they hold (docs/belief.md, \"The "
+                      f"learned belief tracker\")"] if warned else [])

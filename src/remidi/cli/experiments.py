@@ -85,6 +85,8 @@ def _cmd_list(args) -> int:
         cfg = resolve_config(exp, name, {})
         for key, why in reasons.items():
             print(f"    {key:<{width}}  {_format_value(get_value(cfg, key))}: {why}")
+    for note in exp.notes:
+        print(f"  note: {note}")
     default = default_preset(exp)
     configs = {name: resolve_config(exp, name, {}) for name in exp.presets}
     print(f"  --set keys, each with its default (the {default} preset's; [another preset's] where it "

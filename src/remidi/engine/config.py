@@ -108,6 +108,19 @@ class ReMiDiConfig:
     belief_margin: float = field(default=1e-3, metadata={
         "help": "ReMiDi, tracker=belief: nats per step the threshold is lowered below the calibrated quantile "
                 "(a tolerance for score differences the model should not care about)"})
+    # the threshold is at most the held-out scores' median minus belief_spread robust standard
+    # deviations (engine/trackers/calibration.py, spread_fence): the held-out scores are the adversary's
+    # own few levels replayed, and the next adversary searches the tail of their kind (lever-noisy's
+    # noise codes) that their quantile cannot see; 0: the quantile alone (runs before this key). 6: at
+    # the lever-noisy switch (paper preset, seeds 100–101; smoke, seeds 0–1) it lies 0.4–2.1 nats below
+    # the lowest of 10⁴ fresh hidden levels' scores and 1.8–12.8 above the highest visible level's (4
+    # lets 0.6 % of fresh hidden levels through at smoke, 5 lets 3 in 10⁴ through, 8 lies 0.1 nats
+    # above visible ones)
+    belief_spread: float = field(default=6.0, metadata={
+        "help": "ReMiDi, tracker=belief or simulated: the threshold is at most the median of the held-out scores "
+                "minus this many robust standard deviations of one model version's scores (the median over "
+                "recorded rollouts of each one's MAD × 1.4826), per prefix-length bucket, before the margin "
+                "(0: the false-rate quantile alone)"})
     belief_hidden: int = field(default=64, metadata={"help": "ReMiDi, tracker=belief: the model's GRU units"})
     belief_lr: float = field(default=1e-2, metadata={"help": "ReMiDi, tracker=belief: the model's Adam learning rate"})
     belief_epochs: int = field(default=4, metadata={

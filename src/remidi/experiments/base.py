@@ -76,6 +76,9 @@ class Experiment:
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
     preset_reasons: dict[str, dict[str, str]] = field(default_factory=dict)
+    # lines `remidi list NAME` prints after the presets: what a user must know to read the results
+    # page's runs of this experiment (e.g. a setting its claims use that is not the default)
+    notes: tuple[str, ...] = ()
     # config → the UEDTask a run of this experiment trains on (UED experiments; None for the tabular
     # games): for tools that reload a run's agent (remidi evaluate)
     make_task: Callable[[Any], Any] | None = None

@@ -181,8 +181,14 @@ def config_to_dict(config) -> dict[str, Any]:
     return dataclasses.asdict(config)
 
 
+# keys added with a default that changes what a run does, and the value a run written before the
+# key existed used: such a run (its config.json without the key) resumes as it started
+BEFORE_THE_KEY = {"remidi.belief_spread": 0.0}
+
+
 def config_from_dict(cls, data: dict[str, Any]):
-    """Rebuild a config dataclass from :func:`config_to_dict` output (e.g. a run's config.json)."""
+    """Rebuild a config dataclass from :func:`config_to_dict` output (e.g. a run's config.json); a
+    key of :data:`BEFORE_THE_KEY` it lacks takes the value the run was written with."""
     flat: dict[str, Any] = {}
 
     def walk(prefix, d):
@@ -194,4 +200,5 @@ def config_from_dict(cls, data: dict[str, Any]):
 
     walk("", data)
     settable = set(field_names(cls()))
+    flat.update({k: v for k, v in BEFORE_THE_KEY.items() if k in settable and k not in flat})
     return apply_overrides(cls(), {k: v for k, v in flat.items() if k in settable}, source="config.json")

@@ -95,6 +95,34 @@ def stalled_updates(seeds: list[int], steps: np.ndarray, history: dict[str, np.n
     return out
 
 
+# a learned tracker's audit (engine/trackers/audit.py, audit_against_exact) that explains at least this
+# share of the steps of fresh generator levels, where it and the exact tracker judge fewer than this
+# share alike, says the frozen models cannot tell the later adversaries' levels from the earlier ones'
+UNSEPARATED = 0.9
+
+
+def separation_warning(seeds: list[int], final: dict[str, np.ndarray]) -> str | None:
+    """The one-line warning for a run with a learned tracker (``remidi.tracker=belief`` or
+    ``simulated``) whose last audit (``final``: each metric's last logged point, f[S]) shows frozen
+    models that cannot separate the adversaries: on fresh generator levels they explain at least
+    :data:`UNSEPARATED` of the steps (``belief/explained``) while judging fewer than that share as
+    the exact tracker does (``belief/agreement``): a later adversary's levels are then rejected or
+    masked as an earlier one's, whatever they hold (the mazes of docs/results.md: 0.91–1.00 explained,
+    agreement 0.00–0.66). None where no seed shows it or the run has no audit."""
+    explained, agreement = final.get("belief/explained"), final.get("belief/agreement")
+    if explained is None or agreement is None:
+        return None
+    explained, agreement = np.asarray(explained, float), np.asarray(agreement, float)
+    bad = np.flatnonzero((explained >= UNSEPARATED) & (agreement < UNSEPARATED))  # NaN (no audit yet): False
+    if not bad.size:
+        return None
+    which = ", ".join(f"{explained[i]:.2f} on seed {seeds[i]}" for i in bad)
+    return (f"the learned tracker cannot separate the adversaries: at the last audit its frozen models explain {which} "
+            f"of the steps of fresh generator levels (belief/explained; the exact tracker judges "
+            f"{np.nanmean(agreement[bad]):.2f} of them alike), so a later adversary's levels are rejected or masked as "
+            f"an earlier one's whatever they hold (docs/belief.md, \"The learned belief tracker\")")
+
+
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                check_step: bool = False):
@@ -125,6 +153,9 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         if derive is not None:
             history.update(derive(history))
         final = {name: history[name][:, -1] for name in history}
+        unseparated = separation_warning(ctx.seeds, final)
+        if unseparated is not None and jax.process_index() == 0:  # one process says it
+            print(f"remidi: warning: {unseparated}", file=sys.stderr, flush=True)
         final.update(final_replay_fractions(result.per_step, cfg.num_envs))
         ordered = {name: final[name] for name in summary_metrics if name in final}
         ordered.update({k: v for k, v in final.items() if k not in ordered})
@@ -188,7 +219,8 @@ class UEDSpec:
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
     (None: it can; :func:`remidi.engine.run.validation.task_refusal` of one task). ``check_step``: warn
-    of a step that draws from its key (a user's task, :func:`make_train`)."""
+    of a step that draws from its key (a user's task, :func:`make_train`). ``notes``: lines ``remidi
+    list NAME`` prints (:attr:`~remidi.experiments.base.Experiment.notes`)."""
 
     name: str
     description: str
@@ -204,6 +236,7 @@ class UEDSpec:
     builds_levels: bool = True
     refusal: Callable[[Any], str | None] | None = None
     check_step: bool = False
+    notes: tuple[str, ...] = ()
 
 
 def make_ued_experiment(spec: UEDSpec) -> Experiment:
@@ -242,5 +275,6 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         divisor_keys=("eval_every",),  # the length of a compiled block of updates
         shards_seeds=True,  # train_seeds(devices=N): remidi run --devices N
         preset_reasons=preset_reasons or {},
+        notes=tuple(spec.notes),
         make_task=task_for,
     )

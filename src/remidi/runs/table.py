@@ -25,6 +25,10 @@ from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
 
+# remidi.belief_spread's default (engine/config.py, ReMiDiConfig; this module stays free of JAX):
+# a learned-tracker run with another value is named with it (label)
+BELIEF_SPREAD = 6.0
+
 CI_SEED = 0  # the bootstrap's random seed: the same data give the same table, digit for digit
 NOTE = ("± is the sample standard deviation over seeds (ddof 1); IQM is the interquartile mean "
         "(mean of the middle 50% of seeds); 95% CI is the percentile-bootstrap confidence interval "
@@ -90,6 +94,7 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
     regret estimator (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief
     tracker); a buffer sequence's with what differs from its exact single-policy form
     (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``,
+    ``remidi (belief, spread 0)`` for a ``remidi.belief_spread`` other than its default,
     ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's
     ``command`` asked for the default policy by name: a baseline run beside its variants, kept
     apart from the plain runs of earlier claims); the others by name."""
@@ -109,6 +114,9 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
             parts.append(f"false rate {r['belief_false_rate']:g}")
         if r.get("belief_margin", 1e-3) != 1e-3:
             parts.append(f"margin {r['belief_margin']:g}")
+    # a run from before remidi.belief_spread has no such key and is named as it always was
+    if r.get("tracker") in ("belief", "simulated") and r.get("belief_spread", BELIEF_SPREAD) != BELIEF_SPREAD:
+        parts.append(f"spread {r['belief_spread']:g}")
     if r.get("policy") == "combine":
         parts.append("combine")
     elif any(str(token).endswith("remidi.policy=masked") for token in command or []):

@@ -48,7 +48,7 @@ def tracker_for(task, cfg, algo) -> Tracker:
             budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
         return make_tracker(mode, budget)
     settings = dict(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate, margin=r.belief_margin,
-                    calibration=r.belief_calibration, reference=r.belief_reference)
+                    spread=r.belief_spread, calibration=r.belief_calibration, reference=r.belief_reference)
     model = model_for(task, r.belief_hidden)
     if r.tracker == "simulated":
         return Simulated(model, budget=r.tracker_budget, capacity=r.buffer_capacity, reseed=task.reseed_level,
@@ -71,6 +71,7 @@ def validate_tracker(cfg, algo, task) -> None:
     positive_int("remidi.belief_calibration", r.belief_calibration)
     positive_int("remidi.belief_epochs", r.belief_epochs)
     require(r.belief_margin >= 0, "remidi.belief_margin", "≥ 0", r.belief_margin)
+    require(r.belief_spread >= 0, "remidi.belief_spread", "≥ 0", r.belief_spread)
     require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
     require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
     if r.tracker == "simulated":

@@ -73,7 +73,7 @@ class BeliefTracker(Tracker):
     it. Rollout methods on leaves [N, ...]; the frozen levels themselves are not stepped.
 
     Its settings are the ``remidi.belief_*`` keys: ``lr`` the models' Adam learning rate,
-    ``epochs`` their updates per rollout, ``false_rate`` and ``margin`` the calibration's,
+    ``epochs`` their updates per rollout, ``false_rate``, ``margin`` and ``spread`` the calibration's,
     ``calibration`` the rollouts recorded for it, ``reference`` judge by the ratio over a model of
     the task generator's trajectories."""
 
@@ -82,6 +82,7 @@ class BeliefTracker(Tracker):
     epochs: int = 4
     false_rate: float = 0.05
     margin: float = 1e-3
+    spread: float = 0.0
     calibration: int = 16
     reference: bool = False
 
@@ -116,7 +117,7 @@ class BeliefTracker(Tracker):
     def freeze(self, setup, runner, switch):
         """At a switch the active adversary's model is frozen and calibrated (:func:`freeze`)."""
         return freeze(self.optimizer, runner.tracker, runner.adversary.active, switch, self.false_rate,
-                      self.margin, self.model)
+                      self.margin, self.model, self.spread)
 
     def metrics(self, setup, runner) -> dict:
         """:func:`~remidi.engine.trackers.audit.threshold_metrics`, and ``belief/heldout_score``
@@ -311,11 +312,13 @@ def uniform_score(model: BeliefModel) -> float:
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3,
-           model: BeliefModel | None = None) -> BeliefMemory:
+           model: BeliefModel | None = None, spread: float = 0.0) -> BeliefMemory:
     """At a buffer switch (``switch`` bool[]) the active model is frozen: its thresholds are
     calibrated on the recorded scores per prefix-length bucket for the monotone judgement
     (:func:`calibrate_monotone`; +inf, explaining nothing, if no replay was recorded: the model
-    learnt from at most one replay) and lowered by ``margin`` nats per step, the record emptied
+    learnt from at most one replay; each at most its
+    :func:`~remidi.engine.trackers.calibration.spread_fence` of ``spread`` robust standard
+    deviations) and lowered by ``margin`` nats per step, the record emptied
     and the optimiser restarted for the next model. Computed only at a switch. With a reference
     (``model`` needed) the recorded scores become ratios: minus the frozen reference's prefix
     scores of the recorded rollouts, computed now by the reference that is frozen with the model."""
@@ -327,7 +330,8 @@ def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, m
         if m.ref is not None:
             ref_ll = jax.vmap(lambda c, a, r: coded_logliks(model, m.ref, c, a, r))(m.codes, m.actions, m.resets)
             scores = scores - jax.vmap(prefix_scores)(ref_ll, m.resets)
-        tau = calibrate_monotone(scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin)
+        tau = calibrate_monotone(scores, m.lengths, false_rate, m.threshold.shape[1], valid, margin=margin,
+                                 spread=spread)
         tau = jnp.where(m.written > 0, tau, jnp.inf)
         nxt = jax.tree.map(lambda x: x[jnp.minimum(active + 1, k - 1)], m.params)
         return m.replace(threshold=m.threshold.at[active].set(tau), opt_state=optimizer.init(nxt),

@@ -267,6 +267,7 @@ class Simulated(Tracker):
     epochs: int = 4
     false_rate: float = 0.05
     margin: float = 1e-3
+    spread: float = 0.0
     calibration: int = 16
     reference: bool = False
 
@@ -274,7 +275,7 @@ class Simulated(Tracker):
 
     def _settings(self):
         return (self.model, self.budget, self.capacity, self.lr, self.epochs, self.false_rate, self.margin,
-                self.calibration, self.reference)
+                self.spread, self.calibration, self.reference)
 
     def __hash__(self):
         return hash(self._settings() + (id(self.reseed),))
@@ -343,9 +344,9 @@ class Simulated(Tracker):
         """At a switch (``switch`` bool[]): the active buffer's threshold is calibrated on its
         recorded replays, each scored against the buffer's levels as the tracker will score fresh
         prefixes against it (with the reference frozen now;
-        :func:`~remidi.engine.trackers.calibration.calibrate_monotone`; +inf, explaining nothing,
-        without a recorded replay; key 29); the reference is frozen with it and the record
-        emptied. Computed only at a switch."""
+        :func:`~remidi.engine.trackers.calibration.calibrate_monotone`, with ``spread``; +inf,
+        explaining nothing, without a recorded replay; key 29); the reference is frozen with it and
+        the record emptied. Computed only at a switch."""
         task, active = setup.task, runner.adversary.active
         buffer_levels, buffer_valid = setup.algo.adversary.active_levels(setup, runner)
         tracker, key = self.component(1), simulation_key(runner, 29)
@@ -364,7 +365,7 @@ class Simulated(Tracker):
             valid = (jnp.arange(rows) < m.written)[:, None, None] & held[:, None, :]
             valid = jnp.broadcast_to(valid, scores.shape)
             tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, self.false_rate,
-                                     m.threshold.shape[1], valid, margin=self.margin)
+                                     m.threshold.shape[1], valid, margin=self.margin, spread=self.spread)
             tau = jnp.where(jnp.any(valid), tau, jnp.inf)
             return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
                              ref_frozen=freeze_reference(m, active))

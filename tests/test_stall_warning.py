@@ -39,7 +39,7 @@ def test_the_warning_names_the_seed_updates_and_counts_once_and_the_belief_hint(
     first, second = check(300, BLOCK_METRICS)  # the first block of this invocation: a resume from update 150
     assert first == ("seed 3: in updates 151–300 the agent trained on nothing: a frozen adversary explained 4800 of "
                      "the 4800 levels played; with remidi.tracker=belief the frozen models may explain too much "
-                     "(README, \"The learned belief tracker\")"), first
+                     "(docs/belief.md, \"The learned belief tracker\")"), first
     assert second.startswith("seed 4: in updates 151–300 the agent trained on nothing: a frozen adversary explained "
                              "4709 of the 4800 levels played;"), second
     assert check(450, BLOCK_METRICS) == []  # once per seed

@@ -72,7 +72,7 @@ def paper_config() -> BraxUEDConfig:
 
 
 # smoke: the same algorithm on a smaller agent, 64 envs and 40 updates; 1–2.5 minutes per
-# algorithm for 2 seeds on a 2-core CPU. Measured (README): PLR⊥ and minimax return replay type B
+# algorithm for 2 seeds on a 2-core CPU. Measured (docs/experiments.md): PLR⊥ and minimax return replay type B
 # 74–95% of the time; ReMiDi none, and it walks on hopper (202 vs 15) and walker2d (117 vs −0.4);
 # the ant needs about 120 updates to separate (−7 vs −23)
 SMOKE = {

@@ -57,8 +57,8 @@ def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> C
     warned: set[int] = set()
     start: list[int | None] = [None]  # where the block before ended (None: the first of this invocation)
     hint = ("" if tracker in ("prefix", "per_step") else
-            f"; with remidi.tracker={tracker} the frozen models may explain too much (README, \"The learned belief "
-            f"tracker\")")
+            f"; with remidi.tracker={tracker} the frozen models may explain too much "
+            f"(docs/belief.md, \"The learned belief tracker\")")
 
     def check(done: int, metrics: dict) -> list[str]:
         first = start[0] if start[0] is not None else (done - 1) // block * block

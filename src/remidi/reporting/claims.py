@@ -106,31 +106,31 @@ CLAIMS = (
           "evaluate:solve_rate/visible", ("lever-noisy",),
           greater=(("remidi-paired (perfect, belief)", "remidi-paired (perfect)"),)),
     Claim("lever-belief-agreement", "beyond the paper (lever)", "on the deterministic lever game the learned "
-          "belief tracker (defaults) judges steps as the exact tracker does (bound: the share of steps of the last "
+          "belief tracker (defaults, no spread fence) judges steps as the exact tracker does (bound: the share of steps of the last "
           "audit rollout both judge alike in [0.95, 1])", "summary:belief/agreement", ("lever",),
           bounds=(("remidi (belief)", 0.95, 1.0),)),
     Claim("lever-belief-visible", "beyond the paper (lever)", "on the deterministic lever game ReMiDi with the "
-          "learned belief tracker (defaults) solves visible-answer levels more often than PLR⊥",
+          "learned belief tracker (defaults, no spread fence) solves visible-answer levels more often than PLR⊥",
           "evaluate:solve_rate/visible", ("lever",), greater=(("remidi (belief)", "plr"),)),
     Claim("blindfold-noisy-belief", "beyond the paper (blindfold-noisy)", "ReMiDi with the learned belief "
-          "tracker (defaults) keeps fewer blind levels in its last buffer than with the exact tracker",
+          "tracker (defaults, no spread fence) keeps fewer blind levels in its last buffer than with the exact tracker",
           "summary:buffer_fraction/blind", ("blindfold-noisy",), greater=(("remidi", "remidi (belief)"),),
           min_seeds=5),
     Claim("blindfold-noisy-belief-heldout", "beyond the paper (blindfold-noisy)", "ReMiDi with the learned "
-          "belief tracker (defaults) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean",
+          "belief tracker (defaults, no spread fence) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean",
           ("blindfold-noisy",), greater=(("remidi (belief)", "plr"),), min_seeds=5),
     Claim("tmaze-belief-agreement", "beyond the paper (T-maze)", "on the deterministic T-maze task the "
-          "learned belief tracker (defaults) judges steps as the exact tracker does (bound: the share of steps of "
+          "learned belief tracker (defaults, no spread fence) judges steps as the exact tracker does (bound: the share of steps of "
           "the last audit rollout both judge alike in [0.9, 1]; the smoke preset measured 0.42–0.73 before this "
           "claim was stated)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (belief)", 0.9, 1.0),),
           min_seeds=5),
     Claim("tmaze-belief-heldout", "beyond the paper (T-maze)", "ReMiDi with the learned belief tracker "
-          "(defaults) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
+          "(defaults, no spread fence) solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (belief)", "plr"),), min_seeds=5),
     Claim("blindfold-noisy-simulated", "beyond the paper (blindfold-noisy)", "ReMiDi with the simulated "
           "belief model (remidi.tracker=simulated judged by the ratio over the generator, belief_false_rate 0, "
           "belief_margin 5 nats per step: chosen on constructed adversaries and one smoke seed per domain, "
-          "docs/belief-tracker-plan.md) keeps fewer blind levels in its last buffer than with the exact tracker "
+          "docs/notes/belief-tracker-plan.md) keeps fewer blind levels in its last buffer than with the exact tracker "
           "(smoke preset, 1 seed, before this claim: 0.00 against the exact tracker's 0.53–0.59)", "summary:buffer_fraction/blind", ("blindfold-noisy",),
           greater=(("remidi", "remidi (simulated, ratio, false rate 0, margin 5)"),), min_seeds=5),
     Claim("blindfold-noisy-simulated-heldout", "beyond the paper (blindfold-noisy)", "ReMiDi with the "
@@ -139,7 +139,7 @@ CLAIMS = (
     Claim("tmaze-simulated-agreement", "beyond the paper (T-maze)", "on the deterministic T-maze task the "
           "simulated belief model judges steps as the exact tracker does (bound: the share of steps of the last audit "
           "rollout both judge alike in [0.95, 1]; before this claim: 1.00 on the constructed adversary of "
-          "docs/belief_probe_simulated.py, and 1.0 at every audit of one smoke seed)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (simulated, ratio, false rate 0, margin 5)", 0.95, 1.0),), min_seeds=5),
+          "docs/notes/belief_probe_simulated.py, and 1.0 at every audit of one smoke seed)", "summary:belief/agreement", ("tmaze",), bounds=(("remidi (simulated, ratio, false rate 0, margin 5)", 0.95, 1.0),), min_seeds=5),
     Claim("tmaze-simulated-heldout", "beyond the paper (T-maze)", "ReMiDi with the simulated belief model "
           "solves more held-out mazes than PLR⊥", "evaluate:solve_rate/mean", ("tmaze",),
           greater=(("remidi (simulated, ratio, false rate 0, margin 5)", "plr"),), min_seeds=5),

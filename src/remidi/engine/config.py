@@ -101,10 +101,10 @@ class ReMiDiConfig:
     # remidi.tracker=belief (engine/trackers/belief.py): each adversary (buffer or generator) has a learned
     # model of its trajectories, trained on the rollouts of its own levels (a buffer's replays, a
     # generator's every update) and frozen with it; its threshold is the belief_false_rate quantile
-    # of the prefix scores of its last belief_calibration such rollouts
+    # of the prefix scores of its last belief_calibration such rollouts, at most belief_spread's fence
     belief_false_rate: float = field(default=0.05, metadata={
         "help": "ReMiDi, tracker=belief: share of the adversary's own trajectory prefixes its frozen model may call "
-                "distinguishable (sets the threshold)"})
+                "distinguishable (the threshold is at most this quantile; belief_spread may lower it)"})
     belief_margin: float = field(default=1e-3, metadata={
         "help": "ReMiDi, tracker=belief: nats per step the threshold is lowered below the calibrated quantile "
                 "(a tolerance for score differences the model should not care about)"})

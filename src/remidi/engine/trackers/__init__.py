@@ -19,7 +19,7 @@ import jax
 from remidi.engine.setup import example_observation
 from remidi.engine.trackers.base import Frozen, Tracker
 from remidi.engine.trackers.belief import BeliefTracker
-from remidi.engine.trackers.belief_model import BeliefModel, coding_for, coding_problem
+from remidi.engine.trackers.belief_model import BeliefModel, LearnedSettings, coding_for, coding_problem
 from remidi.engine.trackers.exact import MODES, exact_budget, make_tracker
 from remidi.engine.trackers.simulated import Simulated
 from remidi.errors import ConfigError, positive_int, require
@@ -47,13 +47,14 @@ def tracker_for(task, cfg, algo) -> Tracker:
         if mode == "prefix" and task.deterministic_reset:
             budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
         return make_tracker(mode, budget)
-    settings = dict(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate, margin=r.belief_margin,
-                    spread=r.belief_spread, calibration=r.belief_calibration, reference=r.belief_reference)
+    settings = LearnedSettings(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate,
+                               margin=r.belief_margin, spread=r.belief_spread, calibration=r.belief_calibration,
+                               reference=r.belief_reference)
     model = model_for(task, r.belief_hidden)
     if r.tracker == "simulated":
         return Simulated(model, budget=r.tracker_budget, capacity=r.buffer_capacity, reseed=task.reseed_level,
-                         **settings)
-    return BeliefTracker(model, **settings)
+                         settings=settings)
+    return BeliefTracker(model, settings=settings)
 
 
 def validate_tracker(cfg, algo, task) -> None:

@@ -32,7 +32,7 @@ from remidi.engine.trackers.audit import audit_against_exact, threshold_metrics
 from remidi.engine.trackers.base import Frozen, Tracker, fresh_levels
 from remidi.engine.trackers.belief_model import (BeliefModel, coded_logliks, earlier_references, fit_reference,
                                                  fit_steps, freeze_reference, frozen_logliks, frozen_step,
-                                                 init_reference, make_optimizer, prefix_lengths, prefix_scores,
+                                                 LearnedSettings, init_reference, prefix_lengths, prefix_scores,
                                                  step_logliks)
 from remidi.engine.trackers.calibration import calibrate_monotone, length_bucket, num_length_buckets
 
@@ -72,34 +72,24 @@ class BeliefTracker(Tracker):
     once distinguishable, the rest of the episode is); explained when some valid model explains
     it. Rollout methods on leaves [N, ...]; the frozen levels themselves are not stepped.
 
-    Its settings are the ``remidi.belief_*`` keys: ``lr`` the models' Adam learning rate,
-    ``epochs`` their updates per rollout, ``false_rate``, ``margin`` and ``spread`` the calibration's,
-    ``calibration`` the rollouts recorded for it, ``reference`` judge by the ratio over a model of
-    the task generator's trajectories."""
+    Its settings are the ``remidi.belief_*`` keys (:class:`LearnedSettings`)."""
 
     model: BeliefModel
-    lr: float = 1e-2
-    epochs: int = 4
-    false_rate: float = 0.05
-    margin: float = 1e-3
-    spread: float = 0.0
-    calibration: int = 16
-    reference: bool = False
+    settings: LearnedSettings = LearnedSettings()
 
     learns = True
 
     @property
     def optimizer(self):
-        """The models' optimiser (:func:`~remidi.engine.trackers.belief_model.make_optimizer`)."""
-        return make_optimizer(self.lr)
+        return self.settings.optimizer
 
     # -- per update
     def init(self, setup, rng) -> BeliefMemory:
         """Fresh models for the ``remidi.num_buffers`` adversaries (from ``fold_in(rng, 31)``)."""
         cfg = setup.cfg
-        return init_memory(self.model, self.optimizer, cfg.remidi.num_buffers, self.calibration,
+        return init_memory(self.model, self.optimizer, cfg.remidi.num_buffers, self.settings.calibration,
                            (cfg.num_steps, cfg.num_envs), jax.random.fold_in(rng, 31),
-                           max_length=setup.task.max_episode_steps, reference=self.reference)
+                           max_length=setup.task.max_episode_steps, reference=self.settings.reference)
 
     def frozen(self, setup, runner) -> Frozen | None:
         """The earlier adversaries' learned models judge (their levels kept for the audit)."""
@@ -111,13 +101,13 @@ class BeliefTracker(Tracker):
     def learn(self, setup, runner, proposal, traj):
         """The active adversary's model learns from a rollout of its own levels (:func:`learn`)."""
         memory, loss = learn(self.model, self.optimizer, runner.tracker, runner.adversary.active, traj,
-                             setup.algo.adversary.own_levels(proposal), self.epochs, fresh=fresh_levels(proposal))
+                             setup.algo.adversary.own_levels(proposal), self.settings.epochs, fresh=fresh_levels(proposal))
         return memory, {"belief/loss": loss}
 
     def freeze(self, setup, runner, switch):
         """At a switch the active adversary's model is frozen and calibrated (:func:`freeze`)."""
-        return freeze(self.optimizer, runner.tracker, runner.adversary.active, switch, self.false_rate,
-                      self.margin, self.model, self.spread)
+        return freeze(self.optimizer, runner.tracker, runner.adversary.active, switch, self.settings.false_rate,
+                      self.settings.margin, self.model, self.settings.spread)
 
     def metrics(self, setup, runner) -> dict:
         """:func:`~remidi.engine.trackers.audit.threshold_metrics`, and ``belief/heldout_score``

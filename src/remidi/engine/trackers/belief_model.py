@@ -261,6 +261,28 @@ def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.Gradie
     return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(lr))
 
 
+@dataclass(frozen=True)
+class LearnedSettings:
+    """How a learned tracker (belief or simulated) learns and calibrates: the ``remidi.belief_*``
+    keys. ``lr`` the models' Adam learning rate, ``epochs`` their updates per rollout,
+    ``false_rate``, ``margin`` and ``spread`` the calibration's, ``calibration`` the rollouts
+    recorded for it, ``reference`` judge by the ratio over a model of the task generator's
+    trajectories."""
+
+    lr: float = 1e-2
+    epochs: int = 4
+    false_rate: float = 0.05
+    margin: float = 1e-3
+    spread: float = 0.0
+    calibration: int = 16
+    reference: bool = False
+
+    @property
+    def optimizer(self) -> optax.GradientTransformation:
+        """The models' optimiser (:func:`make_optimizer`)."""
+        return make_optimizer(self.lr)
+
+
 def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
              mask=None):
     """One Optax update on a batch of trajectories (as :func:`belief_loss`). Returns

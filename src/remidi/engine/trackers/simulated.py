@@ -45,7 +45,7 @@ from remidi.engine.trackers.audit import audit_against_exact, threshold_metrics
 from remidi.engine.trackers.base import Frozen, Tracker, fresh_levels
 from remidi.engine.trackers.belief_model import (BeliefModel, ObsCoding, earlier_references, fit_reference,
                                                  freeze_reference, frozen_logliks, frozen_step, init_reference,
-                                                 make_optimizer, prefix_lengths)
+                                                 LearnedSettings, prefix_lengths)
 from remidi.engine.trackers.calibration import calibrate_monotone, length_bucket, num_length_buckets
 from remidi.engine.trackers.noise import (SMOOTHING, candidates, count_rollout, init_counts, log_q, mixture,
                                           recorded_codes, step_logq, with_end)
@@ -263,19 +263,12 @@ class Simulated(Tracker):
     budget: int = 64
     capacity: int = 32
     reseed: Callable | None = None
-    lr: float = 1e-2
-    epochs: int = 4
-    false_rate: float = 0.05
-    margin: float = 1e-3
-    spread: float = 0.0
-    calibration: int = 16
-    reference: bool = False
+    settings: LearnedSettings = LearnedSettings()
 
     learns = True
 
     def _settings(self):
-        return (self.model, self.budget, self.capacity, self.lr, self.epochs, self.false_rate, self.margin,
-                self.spread, self.calibration, self.reference)
+        return (self.model, self.budget, self.capacity, self.settings)
 
     def __hash__(self):
         return hash(self._settings() + (id(self.reseed),))
@@ -285,7 +278,7 @@ class Simulated(Tracker):
 
     @property
     def optimizer(self):
-        return make_optimizer(self.lr)
+        return self.settings.optimizer
 
     def component(self, num_buffers: int) -> SimulatedTracker:
         """The rollout's component over ``num_buffers`` frozen buffers (the earlier buffers; one to calibrate)."""
@@ -299,9 +292,9 @@ class Simulated(Tracker):
         cfg, coding = setup.cfg, self.model.coding
         rng = jax.random.fold_in(rng, 31)
         level = jax.eval_shape(setup.task.sample_level, jax.random.PRNGKey(0))
-        num_buffers, batch = cfg.remidi.num_buffers, (self.calibration, cfg.num_steps, cfg.num_envs)
+        num_buffers, batch = cfg.remidi.num_buffers, (self.settings.calibration, cfg.num_steps, cfg.num_envs)
         ref, ref_opt, ref_frozen = init_reference(self.model, self.optimizer, num_buffers, rng) \
-            if self.reference else (None,) * 3
+            if self.settings.reference else (None,) * 3
         buckets = num_length_buckets(min(cfg.num_steps, setup.task.max_episode_steps or cfg.num_steps))
         threshold = jnp.full((num_buffers, buckets), jnp.inf, jnp.float32)  # strongly typed, as a checkpoint restores it
         return SimMemory(counts=init_counts(coding), threshold=threshold,
@@ -337,7 +330,7 @@ class Simulated(Tracker):
             levels=jax.tree.map(lambda all_, x: all_.at[row].set(x, mode="drop"), memory.levels, levels),
             written=memory.written + own.astype(jnp.int32))
         if memory.ref is not None:
-            memory = fit_reference(self.model, self.optimizer, memory, traj, self.epochs, fresh_levels(proposal))
+            memory = fit_reference(self.model, self.optimizer, memory, traj, self.settings.epochs, fresh_levels(proposal))
         return memory, {}
 
     def freeze(self, setup, runner, switch):
@@ -364,8 +357,8 @@ class Simulated(Tracker):
                 buffer_levels, lv))))(m.levels)  # [R, N]
             valid = (jnp.arange(rows) < m.written)[:, None, None] & held[:, None, :]
             valid = jnp.broadcast_to(valid, scores.shape)
-            tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, self.false_rate,
-                                     m.threshold.shape[1], valid, margin=self.margin, spread=self.spread)
+            tau = calibrate_monotone(jnp.maximum(scores, -1e9), lengths, self.settings.false_rate,
+                                     m.threshold.shape[1], valid, margin=self.settings.margin, spread=self.settings.spread)
             tau = jnp.where(jnp.any(valid), tau, jnp.inf)
             return m.replace(threshold=m.threshold.at[active].set(tau), written=jnp.zeros((), jnp.int32),
                              ref_frozen=freeze_reference(m, active))

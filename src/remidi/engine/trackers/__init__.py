@@ -43,10 +43,7 @@ def tracker_for(task, cfg, algo) -> Tracker:
     sequence = algo.buffer_sequence and r.num_buffers >= 2
     if not sequence or r.tracker in MODES:
         mode = r.tracker if r.tracker in MODES else "prefix"
-        budget = 0
-        if mode == "prefix" and task.deterministic_reset:
-            budget = min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)
-        return make_tracker(mode, budget)
+        return make_tracker(mode, exact_budget(task, r, mode))
     settings = LearnedSettings(lr=r.belief_lr, epochs=r.belief_epochs, false_rate=r.belief_false_rate,
                                margin=r.belief_margin, spread=r.belief_spread, calibration=r.belief_calibration,
                                reference=r.belief_reference)

@@ -38,7 +38,8 @@ def audit_against_exact(tracker, setup, runner, rng) -> dict[str, jax.Array]:
     levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))
     frozen = tracker.frozen(setup, runner).replace(params=None)  # the current policy acts in both
     # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
-    exact = frozen.replace(belief=None, tracker=make_tracker("prefix", exact_budget(setup, "prefix")))
+    budget = exact_budget(setup.task, cfg.remidi, "prefix")
+    exact = frozen.replace(belief=None, tracker=make_tracker("prefix", budget))
     belief = collect(setup, runner.learner, k_roll, levels, frozen)[0].indist
     reference = collect(setup, runner.learner, k_roll, levels, exact)[0].indist
     nan = jnp.where(runner.adversary.active > 0, 0.0, jnp.nan)

@@ -274,11 +274,11 @@ def step_with_slots(envs, env_keys, state, tstate, action, tracker: CandidateTra
     return next_obs, state, reward, done, tstate
 
 
-def exact_budget(setup, mode: str | None = None) -> int:
+def exact_budget(task, r, mode: str) -> int:
     """Slots per env of the candidate tracker, or 0 for the reference tracker, for the exact
-    tracker of ``mode`` (default: ``remidi.tracker``): ``remidi.tracker_budget``, at most the
-    number of frozen levels, for the prefix mode on a task whose reset ignores its key."""
-    r = setup.cfg.remidi
-    if (mode or r.tracker) != "prefix" or not setup.task.deterministic_reset:
+    tracker of ``mode`` on ``task`` under ``r`` (the run's ``ReMiDiConfig``):
+    ``remidi.tracker_budget``, at most the number of frozen levels, for the prefix mode on a task
+    whose reset ignores its key."""
+    if mode != "prefix" or not task.deterministic_reset:
         return 0
     return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)

@@ -16,6 +16,7 @@ from remidi.engine.adversaries.base import Adversary, RandomLevels
 from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
 from remidi.engine.adversaries.plr import LevelBuffers
 from remidi.engine.adversaries.scores import SCORES, check_name
+from remidi.engine.adversaries.sfl import LearnabilityBuffers
 from remidi.errors import ConfigError, one_of
 
 
@@ -31,7 +32,9 @@ class Algorithm:
         ``remidi.num_buffers`` buffers, levels a frozen one explains rejected and PPO's loss masked on
         the steps a frozen level explains), :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL),
         :class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
-        :class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED).
+        :class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED),
+        :class:`~remidi.engine.adversaries.sfl.LearnabilityBuffers` (SFL; ``buffer_sequence=True``:
+        ReMiDi over SFL).
         Its ``trains_on_fresh``: PPO learns from rollouts on fresh levels too (robust PLR⊥ and its
         relatives learn only from replays).
     score: the level score it always uses (``minimax-return``: ``neg_return``); None: the config's
@@ -47,7 +50,8 @@ class Algorithm:
     def __post_init__(self):
         if not isinstance(self.adversary, Adversary):
             raise ConfigError(f"algorithm {self.name}: adversary must be a remidi.engine.adversaries.base adversary "
-                              f"(an Adversary: RandomLevels, LevelBuffers, EditingBuffers, LevelGenerator or GeneratorSequence), "
+                              f"(an Adversary: RandomLevels, LevelBuffers, EditingBuffers, LevelGenerator, GeneratorSequence or "
+                              f"LearnabilityBuffers), "
                               f"got {type(self.adversary).__name__}")
 
     def score_name(self, configured: str) -> str:
@@ -95,9 +99,17 @@ REMIDI_PAIRED = Algorithm("remidi-paired", GeneratorSequence(),
                           description="ReMiDi over PAIRED: a sequence of generators, one antagonist; levels an earlier "
                                       "generator's support explains pay the generator little and train nothing")
 
+SFL = Algorithm("sfl", LearnabilityBuffers(), score="learnability",
+                description="SFL (sampling for learnability): every sfl.refresh_every updates the current policy "
+                            "plays fresh levels and keeps the most learnable, p(1 − p); each update mixes them with "
+                            "fresh levels")
+REMIDI_SFL = Algorithm("remidi-sfl", LearnabilityBuffers(buffer_sequence=True), score="learnability",
+                       description="ReMiDi over SFL: a sequence of SFL buffers; levels an earlier buffer explains are "
+                                   "never kept, and the loss is masked where they explain")
+
 #: every algorithm ``--algo`` accepts, by name, in the order the docs and plots list them
 ALGORITHMS: dict[str, Algorithm] = {a.name: a for a in (DR, PLR, MINIMAX_RETURN, REMIDI, ACCEL, REMIDI_ACCEL, PAIRED,
-                                                        REMIDI_PAIRED)}
+                                                        REMIDI_PAIRED, SFL, REMIDI_SFL)}
 BUILTIN_ALGORITHMS = tuple(ALGORITHMS)  # the library's own, in order
 
 

@@ -1,4 +1,4 @@
-"""A UED run's configuration: :class:`UEDConfig` (with the buffer, ReMiDi, ACCEL and PAIRED
+"""A UED run's configuration: :class:`UEDConfig` (with the buffer, ReMiDi, ACCEL, PAIRED and SFL
 sections) and what it derives for an algorithm (its score, number of buffers, buffer settings). Each key's help text
 lives next to its field (``remidi list`` prints them)."""
 
@@ -179,6 +179,44 @@ class PairedConfig:
 
 
 @dataclass(frozen=True)
+class SFLConfig:
+    """SFL's learnability buffer (Rutherford et al., 2024, "No Regrets"; algorithms ``sfl``,
+    ``remidi-sfl``: :mod:`remidi.engine.adversaries.sfl`). The defaults are the published ones of
+    the authors' JaxUED maze configuration (``sfl/train/config/minigrid-sfl.yaml`` and
+    ``learning/ippo-minigrid.yaml`` in amacrutherford/sampling-for-learnability); Kinetix's
+    (``configs/ued/sfl.yaml`` in FLAIROx/Kinetix) are given beside each. The experiments' presets
+    scale them to their runs (``remidi list NAME``)."""
+
+    batch_size: int = field(default=5000, metadata={
+        "help": "SFL: fresh levels rolled out per batch of a buffer refresh (published: 5000 maze, 4096 Kinetix)"})
+    num_batches: int = field(default=5, metadata={
+        "help": "SFL: batches per refresh; batch_size × num_batches candidate levels (published: 5 maze, "
+                "3 Kinetix)"})
+    rollout_steps: int = field(default=2000, metadata={
+        "help": "SFL: steps the current policy plays each candidate (several episodes; its solve rate p over "
+                "the episodes that end) (published: 2000 maze, 512 Kinetix)"})
+    buffer_size: int = field(default=1000, metadata={
+        "help": "SFL: K, the candidates with the highest learnability p(1 − p) kept (remidi-sfl: each buffer "
+                "keeps remidi.buffer_capacity) (published: 1000 maze, 1024 Kinetix)"})
+    refresh_every: int = field(default=100, metadata={
+        "help": "SFL: updates between refreshes of the buffer, the first before update 0 (remidi-sfl: counted "
+                "on the active buffer, so a new buffer is filled at its first update) (published: 100 maze, "
+                "the evaluation period; 128 Kinetix, buffer_update_frequency)"})
+    sampled_envs_ratio: float = field(default=0.5, metadata={
+        "help": "SFL: share of an update's envs drawn uniformly (with replacement) from the buffer, "
+                "round(ratio × num_envs); the rest are fresh levels (published: 0.5 maze and Kinetix)"})
+
+
+def validate_sfl_config(config: SFLConfig) -> None:
+    """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field without ``sfl.``) if invalid."""
+    for name in ("batch_size", "num_batches", "rollout_steps", "buffer_size", "refresh_every"):
+        value = getattr(config, name)
+        if not (_is_int(value) and value >= 1):
+            raise ConfigError(f"{name}: must be an integer ≥ 1, got {value!r}")
+    _check_unit_interval("sampled_envs_ratio", config.sampled_envs_ratio)
+
+
+@dataclass(frozen=True)
 class UEDConfig:
     """A UED run's hyper-parameters (hashable; static under jit)."""
 
@@ -218,6 +256,7 @@ class UEDConfig:
     remidi: ReMiDiConfig = field(default_factory=ReMiDiConfig)
     accel: AccelConfig = field(default_factory=AccelConfig)
     paired: PairedConfig = field(default_factory=PairedConfig)
+    sfl: SFLConfig = field(default_factory=SFLConfig)
 
     def __post_init__(self):
         # the learning-rate schedule spans the run: ppo.total_updates is always num_updates

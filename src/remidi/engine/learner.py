@@ -65,13 +65,8 @@ def collect(setup: Setup, learner: LearnerState, rng, levels, frozen):
     with the buffer's record for MaxMC). Advantages and targets are in units of
     ``reward × reward_scale``, returns in the environment's.
     """
-    cfg, task = setup.cfg, setup.task
-    if cfg.reseed:  # a stochastic environment: each rollout draws the levels' own randomness afresh
-        levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.fold_in(rng, 17), cfg.num_envs), levels)
-    carry = setup.net.initialize_carry(cfg.num_envs)
-    traj, last_value = rollout(rng, Stepping(task.env, task.params, task.deterministic_reset),
-                               Policy(policy_apply(setup, learner), learner.train_state.params, carry), levels,
-                               cfg.num_steps, frozen, dist=for_task(task.continuous))
+    cfg = setup.cfg
+    traj, last_value = play(setup, learner, rng, levels, cfg.num_steps, frozen)
     adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
                                cfg.ppo.gae_lambda)
     mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
@@ -97,6 +92,21 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
     return sc.score_levels(score.name, sc.ScoreInputs(
         mean_return=mean_return, values=traj.value * unscale, advantages=adv * unscale, max_return=max_return,
         done=traj.done, optimal_return=optimal, reward=traj.reward, solved=setup.task.solved))
+
+
+def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, frozen):
+    """The current policy's rollout on ``levels`` [B] for ``num_steps`` steps (with the tracker of
+    ``frozen`` beside the envs; None: none), nothing learnt: ``(traj [T, B], last_value f32[B])``.
+    :func:`collect`'s rollout, and SFL's learnability rollouts of candidate levels
+    (:mod:`remidi.engine.adversaries.sfl`), whose B and T are their own."""
+    task = setup.task
+    num_levels = jax.tree.leaves(levels)[0].shape[0]
+    if setup.cfg.reseed:  # a stochastic environment: each rollout draws the levels' own randomness afresh
+        levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.fold_in(rng, 17), num_levels), levels)
+    carry = setup.net.initialize_carry(num_levels)
+    return rollout(rng, Stepping(task.env, task.params, task.deterministic_reset),
+                   Policy(policy_apply(setup, learner), learner.train_state.params, carry), levels, num_steps, frozen,
+                   dist=for_task(task.continuous))
 
 
 #: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs'

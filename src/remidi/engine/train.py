@@ -8,7 +8,8 @@ and the learner (:mod:`remidi.engine.learner`):
 1. ``adversary.propose``: the N levels of this update (DR: fresh random levels; the PLR family: a
    replay from the active buffer with probability ``buffer.replay_prob``, else fresh levels;
    ACCEL: after a replay, edits of the replayed levels; ReMiDi with ``remidi.rehearsal``: a
-   frozen buffer's levels), and whether the learner trains on them.
+   frozen buffer's levels; SFL: its buffer refreshed if due, then a per-env mix of its levels
+   and fresh ones), and whether the learner trains on them.
 2. ``learner.collect``: roll the policy out once on them, with the tracker beside the
    environments against ``tracker.frozen`` (ReMiDi's earlier buffers), then
    ``learner.score_rollout``.
@@ -127,7 +128,7 @@ def step_metrics(setup: Setup, runner: Runner, chosen: Proposal, traj: Trajector
     mean_return, scores, overlap, inserted = outcome
     trained = chosen.train
     metrics = {
-        "replay": chosen.replay.astype(jnp.float32),
+        "replay": jnp.mean(chosen.replay.astype(jnp.float32)),  # per-env replay (SFL's mix): the share replayed
         "mean_return": jnp.mean(mean_return),
         "mean_score": jnp.mean(jnp.where(jnp.isfinite(scores), scores, 0.0)),
         "trained_fraction_masked": jnp.where(trained, jnp.mean(traj.indist.astype(jnp.float32)), 0.0),

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from remidi.engine.config import BufferConfig
 from remidi.engine.core.ppo import PPOConfig
-from remidi.engine.config import ReMiDiConfig, UEDConfig
+from remidi.engine.config import ReMiDiConfig, SFLConfig, UEDConfig
 from remidi.envs.lever import lever_task
 from remidi.envs.noisy import NOISE_BITS, noisy_lever_task
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
@@ -24,6 +24,16 @@ NUM_LEVERS = 64
 # minimax regret on hidden levels: the uniform lever choice, 20 × 63/64 (±10 rewards)
 MMR_HIDDEN = 20 * (1 - 1 / NUM_LEVERS)
 IGNORE_VISIBLE = 2 * (1 - 1 / NUM_LEVERS)  # regret on a visible level of the uniform lever choice (±1)
+
+
+#: SFL's published maze settings (engine/config.py, SFLConfig) scaled to the lever game: 1024
+#: candidates (4 batches of 256, 8 per distinct level of the 128) each played 32 one-step episodes,
+#: the 64 most learnable kept (PLR⊥'s buffer size here), refreshed every 25 updates (100 refreshes
+#: in the paper preset's 2500 updates, 12 in smoke's 300), half of each update's 32 envs from the
+#: buffer. A refresh plays 32,768 env steps forward only, against 25 updates × 512 env steps with
+#: PPO's 5 epochs: about a fifth more work (docs/performance.md, lever-sfl)
+SFL_CONFIG = SFLConfig(batch_size=256, num_batches=4, rollout_steps=32, buffer_size=64, refresh_every=25,
+                       sampled_envs_ratio=0.5)
 
 
 def paper_config() -> UEDConfig:
@@ -38,7 +48,9 @@ def paper_config() -> UEDConfig:
         buffer=BufferConfig(capacity=64, prioritization="topk", topk_k=32, temperature=1.0, staleness_coef=0.3,
                             replay_prob=0.8, min_fill=0.5, duplicate_check=True),
         remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=32, steps_per_buffer=1000, count="updates"),
+        sfl=SFL_CONFIG,
     )
+
 
 
 PRESETS = {

@@ -19,7 +19,8 @@ The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
 
 Implementations, each the one before plus what it adds: :class:`RandomLevels` (DR, here);
 :class:`~remidi.engine.adversaries.plr.LevelBuffers` (the PLR family and ReMiDi's sequence of
-buffers); :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL); and
+buffers); :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL);
+:class:`~remidi.engine.adversaries.sfl.LearnabilityBuffers` (SFL and ReMiDi over SFL); and
 :class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
 :class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED), built on this
 base directly.
@@ -55,7 +56,9 @@ class Proposal:
     """The levels of one update and where they came from.
 
     levels: leaves [N, ...]; replay: bool[], replayed from the active buffer (else fresh from the
-    generator, or edited); train: bool[], the learner trains on this update's rollout; buffer: the
+    generator, or edited), or bool[N], per env, for an adversary that mixes both in one update
+    (SFL: :mod:`~remidi.engine.adversaries.sfl`; the train step's stages broadcast it, and such an
+    adversary counts its own updates in :meth:`Adversary.advance`); train: bool[], the learner trains on this update's rollout; buffer: the
     active buffer as sampled (its replay counters advanced; as it was for an adversary without
     replay); slots: i32[N], the replayed levels' slots in it (None without replay); edit: bool[],
     the levels are edits of the last replay's (None for an adversary that does not edit);

@@ -13,8 +13,10 @@ import jax
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.paired import ESTIMATORS, GENERATOR_NETWORKS, OVERLAP_REGRETS, LevelGenerator
 from remidi.engine.adversaries.plr import LevelBuffers
+from remidi.engine.adversaries.sfl import LearnabilityBuffers
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
-from remidi.engine.config import POLICIES, UEDConfig, buffer_config, score_name, validate_buffer_config
+from remidi.engine.config import (POLICIES, UEDConfig, buffer_config, score_name, validate_buffer_config,
+                                  validate_sfl_config)
 from remidi.engine.core.ppo import validate_ppo_config
 from remidi.engine.run.task_checks import check_network_reads_observations, step_reads_its_key, validate_task
 from remidi.engine.setup import network_for
@@ -46,6 +48,10 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_ste
         out.append(f"score {score.name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) "
                    f"is shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not "
                    f"end {score.unfinished}; raise num_steps or use another score")
+    if isinstance(algo.adversary, LearnabilityBuffers) and cfg.sfl.rollout_steps < task.max_episode_steps:
+        out.append(f"sfl.rollout_steps ({cfg.sfl.rollout_steps}) is shorter than an episode can last "
+                   f"({task.max_episode_steps}): a candidate level none of whose episodes ends inside the refresh's "
+                   f"rollout is never kept; raise sfl.rollout_steps")
     if algo.buffer_sequence and cfg.remidi.num_buffers > 1 and not task.deterministic_reset:
         level = task.sample_level(jax.random.PRNGKey(0))
         obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
@@ -86,7 +92,26 @@ def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
     if isinstance(algo.adversary, LevelGenerator) and task.level_builder is None:
         return (f"{algo.name} learns a level generator, but this task has no level-building MDP "
                 f"(UEDTask.level_builder)")
+    if isinstance(algo.adversary, LearnabilityBuffers) and task.solved is None:
+        return (f"{algo.name} keeps the levels whose solve rate p maximises p(1 − p), but this task has no solve "
+                f"criterion (UEDTask.solved)")
     return None
+
+
+def validate_sfl(cfg: UEDConfig, algo: Algorithm, task: UEDTask) -> None:
+    """ConfigError (one line) for a run of SFL (``sfl``, ``remidi-sfl``) the task or the keys refuse."""
+    if task.solved is None:
+        raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
+    validate_section("sfl.", lambda: validate_sfl_config(cfg.sfl))
+    s, capacity = cfg.sfl, algo.adversary.capacity(cfg)
+    key = "remidi.buffer_capacity" if algo.buffer_sequence else "sfl.buffer_size"
+    require(capacity <= s.batch_size * s.num_batches, key, f"at most sfl.batch_size × sfl.num_batches = "
+            f"{s.batch_size} × {s.num_batches} (the candidates of a refresh)", capacity)
+    r = cfg.remidi
+    require(r.count == "updates", "remidi.count", "updates with SFL (every update trains on its buffer)", r.count)
+    require(r.tracker in ("prefix", "per_step") or not algo.buffer_sequence, "remidi.tracker", "prefix or per_step "
+            "with ReMiDi over SFL (a learned tracker learns from whole updates of the adversary's levels; SFL mixes "
+            "them with fresh ones in every update)", r.tracker)
 
 
 def supported_algorithms(task: UEDTask) -> list[str]:
@@ -111,6 +136,8 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
     require(isinstance(cfg.reseed, bool), "reseed", "true or false", cfg.reseed)
     require(not cfg.reseed or task.reseed_level is not None, "reseed", "false for a task without reseed_level (its "
             "levels carry no randomness of their own to draw afresh)", cfg.reseed)
+    if isinstance(algo.adversary, LearnabilityBuffers):
+        validate_sfl(cfg, algo, task)
     choice("score", cfg.score, sc.SCORES)
     score = sc.SCORES[score_name(cfg, algo)]
     for needed, what, has in (

@@ -56,6 +56,11 @@ compiled block, ``driver.run_steps``):
 * ``maze-env``: the maze environment alone (random actions, 32 envs × 256 steps, automatic
   restarts): the ceiling training cannot beat.
 * ``lever-plr``: PLR⊥ on the lever game's paper preset, every update replaying.
+* ``lever-sfl``: SFL (``sfl``) on the same preset, ``sfl.refresh_every`` = 25 updates per call,
+  the first of them refreshing the buffer (1024 candidate levels played 32 steps each by the
+  current policy, no gradient), each update training on 16 buffer and 16 fresh levels;
+  ``sfl_update_over_plr_update`` is its time per update (the refresh amortised) against
+  ``lever-plr``'s, both trained every update (not run by default).
 * ``lstm-matmul``: the maze LSTM's gate product alone, chained: the rate (``gflops_per_s``)
   this machine reaches on the shape that dominates maze training. Training workloads report
   their network's ``gflops_per_s`` too (XLA's operation count), so ``maze_plr_flops_over_matmul``

@@ -55,12 +55,14 @@ def _tiny() -> bool:
 
 
 def _shrink(cfg):
-    """``--tiny``: 4 envs × 16 steps, one epoch, small buffers (same code paths)."""
+    """``--tiny``: 4 envs × 16 steps, one epoch, small buffers and SFL refreshes (same code paths)."""
     if not _tiny():
         return cfg
     return dataclasses.replace(cfg, num_envs=4, num_steps=16, ppo=dataclasses.replace(cfg.ppo, epochs=1, minibatches=1),
                                buffer=dataclasses.replace(cfg.buffer, capacity=32, topk_k=8),
-                               remidi=dataclasses.replace(cfg.remidi, buffer_capacity=16))
+                               remidi=dataclasses.replace(cfg.remidi, buffer_capacity=16),
+                               sfl=dataclasses.replace(cfg.sfl, batch_size=16, num_batches=2, rollout_steps=4,
+                                                       buffer_size=8))
 
 
 @dataclass(frozen=True)

@@ -112,6 +112,7 @@ STEP_RATIOS = (
     ("maze-paired-reference", "maze-plr", "paired_reference_step_over_plr_step"),
     ("maze-accel", "maze-plr", "accel_step_over_plr_step"),
     ("maze-remidi-reference", "maze-plr", "remidi_reference_step_over_plr_step"),
+    ("lever-sfl", "lever-plr", "sfl_update_over_plr_update"),
 )
 
 

@@ -59,7 +59,10 @@ def _train_workload(task, cfg, algo: str, active: int, updates_per_call: int = 2
     # work and Combine the frozen policies' (no figure rather than a wrong one)
     from remidi.engine.adversaries.paired import LevelGenerator
 
-    flops = None if setup.algo.edits or isinstance(setup.algo.adversary, LevelGenerator) or \
+    from remidi.engine.adversaries.sfl import LearnabilityBuffers
+
+    # SFL's refreshes add forward passes the count leaves out
+    flops = None if setup.algo.edits or isinstance(setup.algo.adversary, (LevelGenerator, LearnabilityBuffers)) or \
         setup.algo.buffer_sequence and (setup.tracker.learns or cfg.remidi.policy == "combine") else \
         steps * network_flops_per_step(setup, jax.tree.map(lambda x: x[0], runner.learner.train_state.params))
     return Workload(block, (runner,), steps, extras, chain=True, flops_per_call=flops)
@@ -232,6 +235,16 @@ def _lever_plr():
     cfg = paper_config()
     cfg = dataclasses.replace(cfg, buffer=dataclasses.replace(cfg.buffer, replay_prob=1.0))
     return _train_workload(lever_task(), cfg, "plr", active=0, updates_per_call=20)
+
+
+@register("lever-sfl", "SFL on the lever game's paper preset: sfl.refresh_every (25) updates per call, the "
+                       "first refreshing the buffer (1024 candidates × 32 steps)")
+def _lever_sfl():
+    from remidi.envs.lever import lever_task
+    from remidi.experiments.lever import paper_config
+
+    cfg = paper_config()
+    return _train_workload(lever_task(), cfg, "sfl", active=0, updates_per_call=cfg.sfl.refresh_every)
 
 
 @register("lstm-matmul", "the maze LSTM's matrix product alone: [32, 406] × [406, 1024], 1280 in a loop")

@@ -642,8 +642,8 @@ def test_run_help_names_each_experiments_default_algorithms_from_the_registry(ca
         assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
         extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
         assert not extra or f"(all adds {', '.join(extra)})" in group
-    assert "module:function: dr, plr, minimax-return, remidi (all adds accel, remidi-accel, paired, remidi-paired " \
-           "that the task can run)" in line  # a user's task: those of its mutator and builder (task_refusal)
+    assert "module:function: dr, plr, minimax-return, remidi (all adds accel, remidi-accel, paired, remidi-paired, " \
+           "sfl, remidi-sfl that the task can run)" in line  # a user's task: its mutator, builder, solve criterion
 
 
 def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, finished_tabular):

@@ -301,12 +301,13 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
 
     task = corridor.make_task()
     exp = task_experiment("corridor", lambda: task)
-    assert parse_algos(exp, "all") == ["dr", "plr", "minimax-return", "remidi"]
+    assert parse_algos(exp, "all") == ["dr", "plr", "minimax-return", "remidi", "sfl", "remidi-sfl"]
     with pytest.raises(ConfigError, match=r"^--algo: accel cannot run on corridor: accel edits levels, but this task "
-                                          r"has no level mutator .*; allowed: dr, plr, minimax-return, remidi, all$"):
+                                          r"has no level mutator .*; allowed: dr, plr, minimax-return, remidi, sfl, "
+                                          r"remidi-sfl, all$"):
         parse_algos(exp, "accel")
     for algo in ("accel", "paired"):
-        with pytest.raises(ConfigError, match=r"; allowed: dr, plr, minimax-return, remidi$"):
+        with pytest.raises(ConfigError, match=r"; allowed: dr, plr, minimax-return, remidi, sfl, remidi-sfl$"):
             validate_ued_config(TINY, algo, task)
 
 

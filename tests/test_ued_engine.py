@@ -317,7 +317,9 @@ def test_an_algorithm_is_its_adversary_and_nonsense_is_refused_when_built():
                      "accel": ("EditingBuffers", True, False, True, False),
                      "remidi-accel": ("EditingBuffers", True, True, True, False),
                      "paired": ("LevelGenerator", False, False, False, True),
-                     "remidi-paired": ("GeneratorSequence", False, True, False, True)}
+                     "remidi-paired": ("GeneratorSequence", False, True, False, True),
+                     "sfl": ("LearnabilityBuffers", False, False, False, True),
+                     "remidi-sfl": ("LearnabilityBuffers", False, True, False, True)}
     with pytest.raises(ConfigError, match="would never train the agent"):
         RandomLevels(trains_on_fresh=False)
     from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator

@@ -23,7 +23,7 @@ def _algo_help() -> str:
     for exp in all_experiments().values():
         groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), tuple(exp.algorithms), ""),
                           []).append(exp.name)
-    # a user's task: what its level mutator and builder allow (custom.task_experiment's refusal)
+    # a user's task: what its level mutator, builder and solve criterion allow (custom.task_experiment's refusal)
     groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS), " that the task can run"), []).append("module:function")
     parts = []
     for (default, every, can), names in groups.items():

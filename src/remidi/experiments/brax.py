@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+from remidi.engine.adversaries.sfl import LearnabilityBuffers
 from remidi.engine.config import BufferConfig
 from remidi.engine.core.ppo import PPOConfig
 from remidi.engine.config import ReMiDiConfig, UEDConfig
@@ -169,7 +170,16 @@ def _experiment(morphology: str):
                           ("replay_fraction/type_b", "share of type B among replayed levels"),
                           ("buffer_fraction/type_b", "share of type B in the active buffer")),
         preset_reasons={"cpu": CPU_REASONS},
+        refusal=_refusal,
     ))
+
+
+def _refusal(algo) -> str | None:
+    """Why a Brax task cannot run ``algo``: SFL ranks levels by a solve rate, and a walker's
+    return has no solve criterion (``UEDTask.solved`` is None)."""
+    if isinstance(algo.adversary, LearnabilityBuffers):
+        return "a Brax walker's task has no solve criterion (UEDTask.solved), which SFL's learnability needs"
+    return None
 
 
 EXPERIMENTS = [_experiment(m) for m in MORPHOLOGIES]

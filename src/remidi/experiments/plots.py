@@ -38,6 +38,8 @@ ALGORITHM_STYLES = {
     "remidi-accel": ("#8c564b", "-", "X"),
     "paired": ("#bcbd22", "-.", "p"),
     "remidi-paired": ("#e377c2", "-", "*"),
+    "sfl": ("#17becf", "-.", "h"),
+    "remidi-sfl": ("#393b79", "-", "d"),
 }
 _SPARE = [("#e377c2", "--", "*"), ("#17becf", ":", "h")]
 # a variant of a buffer sequence (the results page's "remidi (combine)", "remidi (belief, margin 2)"):

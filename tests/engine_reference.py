@@ -40,6 +40,8 @@ MAZE_TINY = R(_M, num_updates=6, num_envs=4, num_steps=24, eval_every=6, eval_at
               lstm_size=8, ppo=R(_M.ppo, epochs=1),
               buffer=R(_M.buffer, capacity=8, min_fill=0.25),
               remidi=R(_M.remidi, num_buffers=2, buffer_capacity=4, steps_per_buffer=2))
+#: SFL's refresh at the lever TINY config's size: 32 candidates × 4 steps, 8 kept, every 10 updates
+SFL_TINY = R(TINY, sfl=R(TINY.sfl, batch_size=16, num_batches=2, rollout_steps=4, buffer_size=8, refresh_every=10))
 #: name: (task, algorithm, config)
 CASES = {
     "dr": (TASK, "dr", TINY),
@@ -49,6 +51,8 @@ CASES = {
     "remidi-combine": (TASK, "remidi", R(TINY, remidi=R(TINY.remidi, policy="combine"))),
     "accel": (TASK, "accel", TINY),
     "remidi-accel": (TASK, "remidi-accel", TINY),
+    "sfl": (TASK, "sfl", SFL_TINY),
+    "remidi-sfl": (TASK, "remidi-sfl", SFL_TINY),
     **{f"tmaze-{algo}": (MAZE, algo, MAZE_TINY)
        for algo in ("dr", "plr", "minimax-return", "remidi", "accel", "remidi-accel")},
     "tmaze-remidi-combine": (MAZE, "remidi", R(MAZE_TINY, remidi=R(MAZE_TINY.remidi, policy="combine"))),

@@ -45,6 +45,11 @@ def check_against_stored(name: str, stored: dict) -> None:
         np.testing.assert_allclose(got["runner"][leaf], sums, rtol=2e-5, atol=1e-5, err_msg=leaf)
 
 
-@pytest.mark.parametrize("name", [name for name in CASES if not name.startswith("tmaze-")])
+#: cases in the slow tier only (the quick tier's time is spent): SFL's, added after the others
+SLOW_CASES = ("sfl", "remidi-sfl")
+
+
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow) if name in SLOW_CASES else name
+                                  for name in CASES if not name.startswith("tmaze-")])
 def test_engine_results_match_the_stored_reference(name, stored):
     check_against_stored(name, stored)

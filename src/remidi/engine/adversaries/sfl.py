@@ -65,6 +65,17 @@ def learnability_of(setup, traj) -> tuple[jax.Array, jax.Array]:
     return jnp.where(jnp.all(traj.indist, axis=0), -jnp.inf, score), p
 
 
+def per_level(mask: jax.Array, x: jax.Array) -> jax.Array:
+    """``mask`` bool[K] shaped to broadcast over ``x`` [K, ...]."""
+    return mask.reshape(mask.shape + (1,) * (x.ndim - 1))
+
+
+def valid_mean(valid: jax.Array, x: jax.Array) -> jax.Array:
+    """f32[]: the mean of ``x`` f32[K] over ``valid`` bool[K]; NaN where none is."""
+    size = jnp.sum(valid)
+    return jnp.where(size > 0, jnp.sum(jnp.where(valid, x, 0.0)) / jnp.maximum(size, 1), jnp.nan)
+
+
 def mix_mask(num_envs: int, ratio: float) -> jax.Array:
     """bool[N]: the envs an update fills from the buffer, the last round(``ratio`` · N) (the
     published code puts the fresh levels first)."""
@@ -86,7 +97,8 @@ class LearnabilityBuffers(Adversary):
         return cfg.remidi.buffer_capacity if self.buffer_sequence else cfg.sfl.buffer_size
 
     def init(self, setup, example_level, example_obs, rng) -> AdversaryState:
-        one = buf.init_buffer(BufferConfig(capacity=self.capacity(setup.cfg)), example_level, extra_names=("solve_rate",))
+        one = buf.init_buffer(BufferConfig(capacity=self.capacity(setup.cfg)), example_level,
+                              extra_names=("solve_rate",))
         zero = jnp.zeros((), jnp.int32)
         return AdversaryState(buffers=buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo)), active=zero,
                               count=zero)
@@ -104,8 +116,8 @@ class LearnabilityBuffers(Adversary):
         slots = jax.random.choice(k_sample, active.valid.shape[0], (n,), replace=True,
                                   p=jnp.where(jnp.any(active.valid), weights, 1.0 / active.valid.shape[0]))
         replay = mix_mask(n, cfg.sfl.sampled_envs_ratio) & jnp.any(active.valid)
-        levels = jax.tree.map(lambda r, f: jnp.where(replay.reshape((n,) + (1,) * (r.ndim - 1)), r, f),
-                              buf.get_levels(active, slots), self._fresh(setup, k_levels))
+        levels = jax.tree.map(lambda r, f: jnp.where(per_level(replay, r), r, f), buf.get_levels(active, slots),
+                              self._fresh(setup, k_levels))
         return Proposal(replay=replay, levels=levels, buffer=active, slots=slots, train=jnp.asarray(True))
 
     def refresh(self, setup, runner, rng, old: buf.BufferState) -> buf.BufferState:
@@ -123,10 +135,12 @@ class LearnabilityBuffers(Adversary):
             return levels, score, p
 
         levels, scores, rates = jax.lax.map(one_batch, jax.random.split(rng, s.num_batches))
-        flat = lambda x: x.reshape((-1,) + x.shape[2:])  # noqa: E731  [num_batches, B, ...] -> [M, ...]
-        levels, scores, rates = jax.tree.map(flat, levels), flat(scores), flat(rates)
-        top, valid = select_top(scores, rates, old.valid.shape[0])
-        kept = lambda x: jnp.where(valid.reshape(valid.shape + (1,) * (x.ndim - 1)), x[top], jnp.zeros_like(x[top]))  # noqa: E731
+        levels, scores, rates = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), (levels, scores, rates))
+        top, valid = select_top(scores, rates, old.valid.shape[0])  # over the M = num_batches · B candidates
+
+        def kept(x):  # the chosen candidates' values; an empty slot's zeros where fewer can be kept
+            return jnp.where(per_level(valid, x), x[top], jnp.zeros_like(x[top]))
+
         return old.replace(levels=jax.tree.map(kept, levels), scores=kept(scores), valid=valid,
                            extras={"solve_rate": kept(rates)}, last_seen=jnp.zeros_like(old.last_seen),
                            time=old.time + 1)
@@ -140,10 +154,8 @@ class LearnabilityBuffers(Adversary):
         Reports the learnability and solve rate of its levels (``sfl/buffer_learnability``,
         ``sfl/buffer_solve_rate``; NaN while empty)."""
         state, active = runner.adversary, proposal.buffer
-        size = jnp.sum(active.valid)
-        mean = lambda x: jnp.where(size > 0, jnp.sum(jnp.where(active.valid, x, 0.0)) / jnp.maximum(size, 1), jnp.nan)  # noqa: E731
-        metrics = {"sfl/buffer_learnability": mean(active.scores),
-                   "sfl/buffer_solve_rate": mean(active.extras["solve_rate"])}
+        metrics = {"sfl/buffer_learnability": valid_mean(active.valid, active.scores),
+                   "sfl/buffer_solve_rate": valid_mean(active.valid, active.extras["solve_rate"])}
         state = state.replace(buffers=buf.replace_buffer(state.buffers, state.active, active))
         return state, jnp.zeros((setup.cfg.num_envs,), bool), metrics
 

@@ -59,6 +59,24 @@ SMOKE = {
     "num_updates": 120, "num_envs": 16, "num_steps": 64, "eval_every": 40, "eval_attempts": 2,
     "checkpoint_every": 40, "ppo.epochs": 2, "buffer.capacity": 64, "buffer.min_fill": 0.25,
     "remidi.num_buffers": 3, "remidi.buffer_capacity": 32, "remidi.steps_per_buffer": 30,
+    # SFL: 128 candidates played 256 steps (an episode ends by 250), 32 kept, refreshed every 20 updates
+    "sfl.batch_size": 64, "sfl.num_batches": 2, "sfl.rollout_steps": 256, "sfl.buffer_size": 32,
+    "sfl.refresh_every": 20,
+}
+# SFL at the cpu presets (--algo sfl, remidi-sfl; the paper preset keeps the published maze values,
+# engine/config.py SFLConfig): 1024 candidates, each played 512 steps (two episodes or more), the 64
+# most learnable kept, refreshed every 50 updates (30 refreshes in 1500 updates)
+SFL_CPU = {"sfl.batch_size": 512, "sfl.num_batches": 2, "sfl.rollout_steps": 512, "sfl.buffer_size": 64,
+           "sfl.refresh_every": 50}
+SFL_REASONS = {
+    "sfl.batch_size": "SFL's published maze refresh (5000 × 5 candidates played 2000 steps every 100 updates) is 50 M "
+                      "environment steps, 8× those trained in between: 512 per batch",
+    "sfl.num_batches": "2 batches: 1024 candidates per refresh (published: 25,000)",
+    "sfl.rollout_steps": "512 steps: two episodes or more of at most 250 (published: 2000, eight)",
+    "sfl.buffer_size": "the 64 most learnable of 1024 candidates kept (published: 1000 of 25,000)",
+    "sfl.refresh_every": "every 50 updates (30 refreshes in 1500): a refresh's 0.5 M forward steps against 50 "
+                         "updates × 8192 steps trained with PPO's 5 epochs (≈ 6.5 M forward passes' worth) add about "
+                         "a tenth (published: 100)",
 }
 # cpu: the paper's algorithm, agent and PPO at a size where the claims can appear on a 2-core CPU
 # (at most 20 minutes per seed and algorithm), each deviation with its reason (`remidi list`)
@@ -71,9 +89,10 @@ CPU_REASONS = {
     "eval_every": "the paper's 250 would give 6 points; 150 gives 10 points over the run",
     "checkpoint_every": "at every evaluation, so an interrupted run loses little",
     "remidi.steps_per_buffer": "the paper's proportion: each earlier buffer spans 1/30 of the run (1000 of 30000)",
+    **SFL_REASONS,
 }
 CPU = {"num_updates": 1500, "lstm_size": 64, "eval_every": 150, "checkpoint_every": 150,
-       "remidi.steps_per_buffer": 50}
+       "remidi.steps_per_buffer": 50, **SFL_CPU}
 # cpu4x: the scale study's second point, 4× the cpu preset's environment steps (1/5 of the
 # paper's), everything else as cpu: the same agent, and the learning rate annealed over the run
 CPU4X_REASONS = {
@@ -84,6 +103,7 @@ CPU4X_REASONS = {
     "eval_every": "as cpu: a point every 150 updates, the same block as cpu so the curves share their x-axis",
     "checkpoint_every": CPU_REASONS["checkpoint_every"],
     "remidi.steps_per_buffer": "the paper's proportion: each earlier buffer spans 1/30 of the run (1000 of 30000)",
+    **SFL_REASONS,
 }
 CPU4X = {**CPU, "num_updates": 6000, "remidi.steps_per_buffer": 200}
 PRESETS = {"paper": {}, "smoke": SMOKE, "cpu": CPU, "cpu4x": CPU4X}

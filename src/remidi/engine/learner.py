@@ -6,7 +6,8 @@ policy frozen with each earlier adversary. The train step (:mod:`remidi.engine.t
 :func:`collect` (roll out, GAE), :func:`score_rollout` (each level's score for the adversary),
 :func:`train` (masked PPO, then the statistics) and :func:`freeze_policy` (Combine's copy at an
 adversary switch); PAIRED's antagonist plays and learns through :func:`collect` and :func:`learn`
-with its own train state.
+with its own train state; SFL's adversary plays candidate levels with the current policy through
+:func:`play` (the rollout alone, of any number of levels and steps).
 """
 
 from __future__ import annotations

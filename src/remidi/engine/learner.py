@@ -71,7 +71,7 @@ def collect(setup: Setup, learner: LearnerState, rng, levels, frozen):
     carry = setup.net.initialize_carry(cfg.num_envs)
     traj, last_value = rollout(rng, Stepping(task.env, task.params, task.deterministic_reset),
                                Policy(policy_apply(setup, learner), learner.train_state.params, carry), levels,
-                               cfg.num_steps, frozen, dist=for_task(task.continuous))
+                               cfg.num_steps, frozen, dist=for_task(task))
     adv, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
                                cfg.ppo.gae_lambda)
     mean_return, best_return, _ = sc.episode_returns(traj.reward, traj.done)
@@ -112,7 +112,7 @@ def learn(setup: Setup, learner: LearnerState, rng, traj: Trajectory, adv, targe
                   values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
     train_state, metrics = ppo_update(learner.train_state, carry, batch, rng, setup.cfg.ppo,
-                                      policy_apply(setup, learner), for_task(setup.task.continuous))
+                                      policy_apply(setup, learner), for_task(setup.task))
     return train_state, {name: metrics[name].astype(jnp.float32) for name in PPO_METRICS}
 
 

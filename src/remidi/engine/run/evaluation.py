@@ -74,7 +74,7 @@ def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng)
     traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env),
                       Policy(policy_apply(setup, runner.learner), runner.learner.train_state.params,
                              setup.net.initialize_carry(n)),
-                      tiled, task.max_episode_steps, frozen, dist=for_task(task.continuous))
+                      tiled, task.max_episode_steps, frozen, dist=for_task(task))
     returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
     discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
     return returns, discounted

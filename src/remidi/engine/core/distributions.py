@@ -8,6 +8,8 @@ A network's policy output ``out`` (``f32[..., P]``) parameterises the distributi
 
 The rollout samples, PPO scores log-probabilities and entropies through the same three
 functions whichever the task's action space (:func:`for_task`), so there is one code path.
+An evaluation that acts with the policy's most likely action (``remidi evaluate --action mode``:
+the Gaussian's mean, the categorical's arg-max) plays the same rollout with :class:`Greedy`.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
+
+from remidi.errors import one_of
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -47,6 +51,11 @@ class Categorical:
     @staticmethod
     def mode(out: jax.Array) -> jax.Array:
         return jnp.argmax(out, axis=-1)
+
+    @staticmethod
+    def probs(out: jax.Array) -> jax.Array:
+        """f32[..., A]: the probability of each action."""
+        return jax.nn.softmax(out, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -92,3 +101,44 @@ GAUSSIAN = DiagGaussian()
 def for_task(continuous: bool):
     """The distribution of a task's policy: :data:`GAUSSIAN` if its actions are continuous."""
     return GAUSSIAN if continuous else CATEGORICAL
+
+
+@dataclass(frozen=True)
+class Greedy:
+    """``base``'s most likely action every time (its ``mode``), scored as ``base`` scores it: the
+    deterministic policy an evaluation reports beside the sampled one."""
+
+    base: object
+
+    @property
+    def continuous(self) -> bool:
+        return self.base.continuous
+
+    def sample(self, key: jax.Array, out: jax.Array) -> jax.Array:
+        del key  # nothing is drawn
+        return self.base.mode(out)
+
+    def log_prob(self, out: jax.Array, action: jax.Array) -> jax.Array:
+        return self.base.log_prob(out, action)
+
+    def entropy(self, out: jax.Array) -> jax.Array:
+        return self.base.entropy(out)
+
+    def mode(self, out: jax.Array) -> jax.Array:
+        return self.base.mode(out)
+
+    def probs(self, out: jax.Array) -> jax.Array:
+        """f32[..., A]: one-hot on the arg-max (a categorical base)."""
+        return jax.nn.one_hot(self.base.mode(out), out.shape[-1], dtype=out.dtype)
+
+
+#: how an evaluation chooses the agent's actions: drawn from the policy, or its most likely one
+ACTIONS = ("sample", "mode")
+
+
+def acting(dist, action: str):
+    """The distribution an evaluation acts with: ``dist`` itself (``"sample"``) or
+    :class:`Greedy` over it (``"mode"``). ConfigError naming ``--action`` otherwise."""
+    if action not in ACTIONS:
+        raise one_of("--action", action, ACTIONS)
+    return Greedy(dist) if action == "mode" else dist

@@ -14,6 +14,9 @@ The rollout samples, PPO scores log-probabilities and entropies through the same
 whichever the task's action space (:func:`for_task`, chosen once at set-up), so there is one code
 path. ``network_actions`` is what :func:`remidi.engine.core.networks.make_network` takes as
 ``num_actions`` for it (the discrete head's logits, or the Gaussian's dimensions).
+An evaluation that acts with the policy's most likely action (``remidi evaluate --action mode``:
+the Gaussian's mean, the categorical's arg-max, each component's arg-max) plays the same rollout
+with :class:`Greedy`.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from remidi.envs.actions import SUPPORTED, Box, Discrete, MultiDiscrete
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, one_of
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -62,6 +65,11 @@ class Categorical:
     @staticmethod
     def mode(out: jax.Array) -> jax.Array:
         return jnp.argmax(out, axis=-1)
+
+    @staticmethod
+    def probs(out: jax.Array) -> jax.Array:
+        """f32[..., A]: the probability of each action."""
+        return jax.nn.softmax(out, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -166,3 +174,44 @@ def for_task(task):
     if isinstance(task, bool):
         return GAUSSIAN if task else CATEGORICAL
     return for_space(task.actions)
+
+
+@dataclass(frozen=True)
+class Greedy:
+    """``base``'s most likely action every time (its ``mode``), scored as ``base`` scores it: the
+    deterministic policy an evaluation reports beside the sampled one."""
+
+    base: object
+
+    @property
+    def continuous(self) -> bool:
+        return self.base.continuous
+
+    def sample(self, key: jax.Array, out: jax.Array) -> jax.Array:
+        del key  # nothing is drawn
+        return self.base.mode(out)
+
+    def log_prob(self, out: jax.Array, action: jax.Array) -> jax.Array:
+        return self.base.log_prob(out, action)
+
+    def entropy(self, out: jax.Array) -> jax.Array:
+        return self.base.entropy(out)
+
+    def mode(self, out: jax.Array) -> jax.Array:
+        return self.base.mode(out)
+
+    def probs(self, out: jax.Array) -> jax.Array:
+        """f32[..., A]: one-hot on the arg-max (a categorical base)."""
+        return jax.nn.one_hot(self.base.mode(out), out.shape[-1], dtype=out.dtype)
+
+
+#: how an evaluation chooses the agent's actions: drawn from the policy, or its most likely one
+ACTIONS = ("sample", "mode")
+
+
+def acting(dist, action: str):
+    """The distribution an evaluation acts with: ``dist`` itself (``"sample"``) or
+    :class:`Greedy` over it (``"mode"``). ConfigError naming ``--action`` otherwise."""
+    if action not in ACTIONS:
+        raise one_of("--action", action, ACTIONS)
+    return Greedy(dist) if action == "mode" else dist

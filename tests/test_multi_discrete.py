@@ -282,3 +282,39 @@ def test_ppo_learns_a_task_whose_reward_needs_both_components():
     assert abs(float(before["solve_rate/all"]) - 1 / 6) < 0.1  # chance: 6 equally likely answers
     hist = driver.train_seeds(task, cfg, "dr", [0], progress=False).history
     assert float(hist["solve_rate/all"][0, -1]) > 0.95
+
+
+class CountingGears(GearsEnv):
+    """:class:`GearsEnv` with integer observations (the belief model reads categories) and a reward
+    for moving component 0 far enough."""
+
+    def reset_env_to_level(self, rng, level, params):
+        return jnp.zeros(2, jnp.int32), (level, jnp.zeros(2), jnp.zeros((), jnp.int32))
+
+    def step_env(self, rng, state, action, params):
+        pos, state, _, done, info = super().step_env(rng, state, action, params)
+        return jnp.clip(pos, 0, 15).astype(jnp.int32), state, (pos[0] > 3).astype(jnp.float32), done, info
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tracker", ["belief", "simulated"])
+def test_remidi_runs_the_learned_trackers_on_component_actions(tracker):
+    """ReMiDi over two buffers with a learned tracker: the models read the agent's component
+    actions (recorded i32[..., 2] for the reference and the noise model) and the run stays finite."""
+    from remidi.engine.config import BufferConfig, ReMiDiConfig, UEDConfig
+    from remidi.engine.core.ppo import PPOConfig
+    from remidi.engine.run import driver
+    from remidi.engine.run.validation import validate_ued_config
+
+    task = UEDTask(env=CountingGears(), params=None, max_episode_steps=8, deterministic_reset=True,
+                   sample_level=lambda rng: Gears(m=jax.random.randint(rng, (2,), 0, 2)),
+                   action_space=MultiDiscrete((3, 2)), eval_sets={"ones": Gears(m=jnp.ones((2, 2), jnp.int32))})
+    cfg = UEDConfig(num_updates=4, num_envs=4, num_steps=8, network="mlp", hidden_size=8, eval_every=4,
+                    eval_attempts=1, checkpoint_every=4, score="pvl", ppo=PPOConfig(epochs=1, minibatches=1),
+                    buffer=BufferConfig(capacity=4, min_fill=0.25),
+                    remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=4, steps_per_buffer=2, tracker=tracker,
+                                        belief_calibration=2, belief_reference=True))
+    validate_ued_config(cfg, "remidi", task)
+    result = driver.train_seeds(task, cfg, "remidi", [0], progress=False)
+    assert result.runner.tracker.actions.shape[-1] == 2  # [seeds, R, T, N, components]
+    assert np.isfinite(result.history["return/ones"]).all() and int(result.runner.adversary.active[0]) == 1

@@ -74,12 +74,13 @@ def _check_actions(task) -> None:
                           f"(from_env_space reads one off an environment's space), got a {type(declared).__name__}")
     elif declared.problem() is not None:
         raise ConfigError(f"task.action_space: {declared}: {declared.problem()}")
-    elif task.num_actions is not None or task.continuous:
-        shorthand = {k: v for k, v in declared.task_fields().items() if k != "action_space"}
-        given = {"num_actions": task.num_actions, **({"continuous": True} if task.continuous else {})}
-        if given != shorthand:
-            raise ConfigError(f"task.num_actions: {', '.join(f'{k}={v}' for k, v in given.items())} disagrees with "
-                              f"action_space={declared}; give action_space alone")
+    else:  # the shorthand given beside it must say the same
+        shorthand = declared.task_fields()
+        clash = [f"{key}={value}" for key, value in (("num_actions", task.num_actions), ("continuous", task.continuous))
+                 if value is not None and value is not False and shorthand.get(key) != value]
+        if clash:
+            raise ConfigError(f"task.num_actions: {', '.join(clash)} disagrees with action_space={declared}; give "
+                              f"action_space alone")
     try:
         env_space = acts.from_env_space(task.env.action_space(task.params))
     except Exception:  # noqa: BLE001 (an environment without a usable, supported action space: nothing to compare)
@@ -148,8 +149,9 @@ def _reads_key(fn, key, *args, kept=lambda out: True) -> bool:
 
 def validate_task(task: UEDTask) -> None:
     """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
-    train: field types and ranges (``num_actions`` ≥ 1, ``max_episode_steps`` ≥ 1, the functions
-    callable), then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
+    train: field types and ranges (``max_episode_steps`` ≥ 1, the functions callable), the action
+    space (``num_actions`` ≥ 1 or a valid ``action_space``, the environment's own where it says),
+    then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
     level, a reset to it and one step: the step's observation has the reset's shapes, its reward is
     a float scalar and its done a boolean scalar; the level tags are boolean scalars, the optimal
     returns float scalars, edited, easy and reseeded levels and a level the ``level_builder``

@@ -186,6 +186,12 @@ def test_a_level_mismatch_names_the_first_leaf_that_differs_and_counts_the_rest(
         validate_task(task)
     assert str(err.value) == ("task.reseed_level: must return a level with the sampled level's shapes and dtypes; "
                               "['w03'] (float32[4] sampled, float32[5] here) and 2 more")
+    batch = {"dials": ALL_DIALS, **{name: jnp.zeros((6, 4)) for name in wide}}
+    batch["w05"] = jnp.zeros((6,))  # a leaf without the level's axis
+    with pytest.raises(ConfigError) as err:
+        validate_task(dataclasses.replace(task, reseed_level=None, eval_sets={"wide": batch}))
+    assert str(err.value) == ("task.eval_sets: 'wide' must be a batch of levels, every leaf with the level's shape "
+                              "after one leading axis of the same length ≥ 1; ['w05'] ([6, rank 1] expected, [6] here)")
 
 
 # ------------------------------------------------------------------ the exact trackers replay the components

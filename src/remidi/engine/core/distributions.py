@@ -169,11 +169,15 @@ def for_space(space):
 
 
 def for_task(task):
-    """The distribution of ``task``'s policy, from its action space (``task.actions``). A bool
+    """The distribution of ``task``'s policy, from its action space (``task.actions``; for an
+    object without one, ``num_actions`` and ``continuous``, the shorthand). A bool
     (``continuous``, the earlier form) gives the size-free :data:`GAUSSIAN` or :data:`CATEGORICAL`."""
     if isinstance(task, bool):
         return GAUSSIAN if task else CATEGORICAL
-    return for_space(task.actions)
+    space = getattr(task, "actions", None)
+    if space is None:  # an object with the shorthand's fields only (num_actions, continuous)
+        space = Box(task.num_actions) if task.continuous else Discrete(task.num_actions)
+    return for_space(space)
 
 
 @dataclass(frozen=True)

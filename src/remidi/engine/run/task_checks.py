@@ -37,20 +37,19 @@ def _shapes(tree, most: int | None = None) -> str:
     return ", ".join(leaves[:len(leaves) - more]) + (f" and {more} more" if more else "")
 
 
-def _leaf(leaf, dtype: bool = True) -> str:
-    """``dtype[shape]`` of an array leaf (``[shape]`` without ``dtype``), the type's name of any
-    other (for messages)."""
-    if not hasattr(leaf, "shape") or (dtype and not hasattr(leaf, "dtype")):
+def _leaf(leaf) -> str:
+    """``dtype[shape]`` of an array leaf, the type's name of any other (for messages)."""
+    if not hasattr(leaf, "shape") or not hasattr(leaf, "dtype"):
         return type(leaf).__name__
-    return f"{leaf.dtype if dtype else ''}{list(leaf.shape)}"
+    return f"{leaf.dtype}{list(leaf.shape)}"
 
 
-def _difference(expected, given, what: str = "expected", dtypes: bool = True) -> str | None:
-    """Where pytree ``given`` differs from ``expected`` in its leaves' paths, shapes or (with
-    ``dtypes``) dtypes: the first such leaf, ``".path (f32[3] WHAT, i32[3] here)"``, and how many
-    more; None where they agree (leaves and structure)."""
+def _difference(expected, given, what: str = "expected") -> str | None:
+    """Where pytree ``given`` differs from ``expected`` in its leaves' paths, shapes or dtypes:
+    the first such leaf, ``".path (f32[3] WHAT, i32[3] here)"``, and how many more; None where
+    they agree (leaves and structure)."""
     def table(tree):
-        return {jax.tree_util.keystr(path): _leaf(x, dtypes) for path, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
+        return {jax.tree_util.keystr(path): _leaf(x) for path, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
 
     want, got = table(expected), table(given)
     differ = [f"{path or 'the whole'} ({want.get(path, 'no leaf')} {what}, {got.get(path, 'no leaf')} here)"
@@ -58,6 +57,27 @@ def _difference(expected, given, what: str = "expected", dtypes: bool = True) ->
     if not differ:
         return None if jax.tree.structure(expected) == jax.tree.structure(given) else \
             f"the containers differ ({jax.tree.structure(given)} here)"
+    return differ[0] + (f" and {len(differ) - 1} more" if len(differ) > 1 else "")
+
+
+def _batch_problem(level, levels) -> str | None:
+    """Where ``levels`` is no batch of levels like ``level`` (a leading axis of one length ≥ 1
+    on every leaf, then the leaf's rank; an evaluation environment may play larger levels): the
+    first leaf that is not, and how many more; None where it is."""
+    paths = jax.tree_util.keystr
+    rank = {paths(p): len(x.shape) for p, x in jax.tree_util.tree_flatten_with_path(level)[0]}
+    got = {paths(p): np.shape(x) for p, x in jax.tree_util.tree_flatten_with_path(levels)[0]}
+    if not got:
+        return "no arrays"
+    count = next(iter(got.values()))[:1] or (0,)
+    differ = [f"{path or 'the whole'} ({'no leaf' if path not in rank else f'[{count[0]}, rank {rank[path]}]'} "
+              f"expected, {list(got[path]) if path in got else 'no leaf'} here)"
+              for path in dict.fromkeys([*rank, *got])
+              if path not in rank or path not in got or len(got[path]) != rank[path] + 1 or got[path][:1] != count
+              or count == (0,)]
+    if not differ:
+        return None if jax.tree.structure(levels) == jax.tree.structure(level) else \
+            f"the containers differ ({jax.tree.structure(levels)} here)"
     return differ[0] + (f" and {len(differ) - 1} more" if len(differ) > 1 else "")
 
 
@@ -266,11 +286,7 @@ def validate_task(task: UEDTask) -> None:
 
     for name, levels in task.eval_sets.items():
         leaves = jax.tree.leaves(levels)
-        counts = sorted({np.shape(leaf)[0] if np.ndim(leaf) else 0 for leaf in leaves})
-        batch = jax.tree.map(lambda x: jax.ShapeDtypeStruct((counts[0] if counts else 1,) + x.shape, x.dtype), level)
-        problem = _difference(batch, levels, "expected", dtypes=False) if leaves else "no arrays"
-        if problem is None and (len(counts) != 1 or counts[0] == 0):
-            problem = f"leading axes of lengths {counts}"
+        problem = _batch_problem(level, levels)
         if problem is not None:
             raise ConfigError(f"task.eval_sets: {name!r} must be a batch of levels, every leaf with the level's "
                               f"shape after one leading axis of the same length ≥ 1; {problem}")

@@ -89,7 +89,8 @@ def register_network(name: str, cls: type, *, description: str = "") -> type:
     if not isinstance(description, str) or "\n" in description:
         raise ConfigError(f"{where}: description must be one line of text, got {description!r}")
     try:
-        jax.eval_shape(cls(num_actions=2, continuous=False).initialize_carry, 1)
+        net = cls(num_actions=2, continuous=False)
+        jax.eval_shape(lambda: net.initialize_carry(1))
     except Exception as err:  # the user's class: its own error, one line
         first = (str(err).strip().splitlines() or [""])[0]
         raise ConfigError(f"{where}: {cls.__name__}(num_actions=2, continuous=False).initialize_carry(1) failed "

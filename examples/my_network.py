@@ -68,7 +68,8 @@ class LayerNormMLP(nn.Module):
 
 
 # at import: the command line imports the module named by REMIDI_PLUGINS before it reads its arguments
-remidi.register_network("ln_mlp", LayerNormMLP, description="an MLP with LayerNorm before each tanh (examples/my_network.py)")
+remidi.register_network("ln_mlp", LayerNormMLP,
+                        description="an MLP with LayerNorm before each tanh (examples/my_network.py)")
 
 TINY = {"num_envs": 8, "num_steps": 4, "eval_every": 10, "checkpoint_every": 10, "eval_attempts": 2,
         "ppo.epochs": 1, "buffer.capacity": 16, "buffer.topk_k": 8, "buffer.min_fill": 0.25, "hidden_size": 32}

@@ -15,8 +15,8 @@ from remidi.engine.adversaries.accel import EditingBuffers
 from remidi.engine.adversaries.base import Adversary, RandomLevels
 from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
 from remidi.engine.adversaries.plr import LevelBuffers
-from remidi.engine.adversaries.scores import SCORES, check_name
-from remidi.errors import ConfigError, one_of
+from remidi.engine.adversaries.scores import SCORES
+from remidi.errors import ConfigError, check_name, one_of
 
 
 @dataclass(frozen=True)

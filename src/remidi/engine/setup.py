@@ -36,7 +36,9 @@ class Setup:
 def network_for(cfg: UEDConfig, task: UEDTask):
     """The network ``cfg.network`` for the task's actions (its policy output sized for the task's
     distribution, :func:`~remidi.engine.core.distributions.for_task`), with
-    ``hidden_size``/``lstm_size`` where set (ConfigError if that network has no such layer)."""
+    ``hidden_size``/``lstm_size`` where set (ConfigError if that network has no such layer):
+    ``hidden_size`` sets every layer of a ``hidden`` option that is a tuple of widths (its length
+    kept), or ``hidden`` itself if it is one width; ``lstm_size`` sets ``lstm_size``."""
     options = {}
     cls = NETWORKS.get(cfg.network)
     fields = {f.name: f.default for f in dataclasses.fields(cls)} if cls is not None else {}
@@ -46,7 +48,8 @@ def network_for(cfg: UEDConfig, task: UEDTask):
         if option not in fields:
             raise ConfigError(f"{key}: the network {cfg.network} has no such layer; leave it 0 or pick a network "
                               f"that has one")
-        options[option] = (value,) * len(fields[option]) if option == "hidden" else value
+        default = fields[option]
+        options[option] = (value,) * len(default) if isinstance(default, (tuple, list)) else value
     dist = for_task(task)
     return make_network(cfg.network, dist.network_actions, dist.continuous, **options)
 

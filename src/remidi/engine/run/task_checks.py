@@ -11,8 +11,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.engine.core.networks import NETWORKS, flatten_obs, make_network
 from remidi.engine.core.distributions import for_task
+from remidi.engine.core.networks import (NETWORKS, describe_observation, flatten_obs, make_network,
+                                         observation_problem, reads)
 from remidi.engine.setup import example_observation
 from remidi.envs import actions as acts
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
@@ -327,32 +328,44 @@ def _observation_batch(task: UEDTask, flat: bool):
                           f"jaxued UnderspecifiedEnv and sample_level must return one of its levels)") from None
 
 
-def _read_error(net, obs) -> Exception | None:
-    """None if ``net`` can be initialised on the observation batch ``obs`` (traced abstractly),
-    else the error it raised."""
+def _read_error(net, obs) -> str | None:
+    """None if ``net`` can read the observation batch ``obs`` (``[1, 1, ...]`` leaves), else why:
+    first by its own ``check_observation`` of one observation, then by initialising it on the
+    batch (traced abstractly: nothing is compiled or run)."""
+    problem = observation_problem(net, jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[2:], x.dtype), obs))
+    if problem is not None:
+        return problem
     try:
         jax.eval_shape(lambda o: net.init(jax.random.PRNGKey(0), net.initialize_carry(1), o, jnp.ones((1, 1), bool)),
                        obs)
         return None
     except Exception as err:  # any failure to read the observation is the choice of network
-        return err
+        return f"the network failed on it: {_user_error(err)}"
+
+
+def _fits(name: str, task: UEDTask, obs) -> bool:
+    """Whether the network ``name`` at its default options reads the observation batch ``obs``."""
+    try:
+        return _read_error(make_network(name, for_task(task).network_actions, for_task(task).continuous), obs) is None
+    except Exception:  # noqa: BLE001 (a registered network that cannot even be built fits nothing)
+        return False
 
 
 def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
-    """Raise ConfigError unless ``net`` can be applied to the task's observations (flattened to
-    one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
-    run). The error names the networks that can; an environment that fails to produce an
-    observation gets its own one-line error instead (:func:`_observation_batch`)."""
+    """Raise ConfigError unless ``net`` can read the task's observations (flattened to one vector
+    if ``flat``, as ``normalize_obs`` does): its ``check_observation``, then an abstract trace. The
+    one-line error names what the network reads, what the task gives, why, and the networks that
+    can read it; an environment that fails to produce an observation gets its own one-line error
+    instead (:func:`_observation_batch`)."""
     obs = _observation_batch(task, flat)
-    err = _read_error(net, obs)
-    if err is None:
+    problem = _read_error(net, obs)
+    if problem is None:
         return
-    fits = [other for other in sorted(NETWORKS)
-            if other != name and _read_error(make_network(other, for_task(task).network_actions,
-                                                          for_task(task).continuous), obs) is None]
-    what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
-    raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
-                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
+    fits = [other for other in NETWORKS if other != name and _fits(other, task, obs)]
+    one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[2:], x.dtype), obs)
+    what = "this task's observation" + (" (flattened by normalize_obs)" if flat else "")
+    raise ConfigError(f"network: {name} reads {reads(net)}; {what} is {describe_observation(one)} ({problem}); "
+                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(NETWORKS)}")
 
 
 def step_reads_its_key(task: UEDTask) -> bool:

@@ -284,13 +284,16 @@ if _REPORT:
 
 @pytest.fixture
 def restore_registries():
-    """Algorithms and scores registered by a test (remidi.register_algorithm / register_score, an
-    example loaded in-process) are removed again when it ends, so other tests see the library's."""
+    """Algorithms, scores and networks registered by a test (remidi.register_algorithm /
+    register_score / register_network, an example loaded in-process) are removed again when it
+    ends, so other tests see the library's."""
     from remidi.engine.algorithms import ALGORITHMS
     from remidi.engine.adversaries.scores import SCORES
+    from remidi.engine.core.networks import NETWORK_HELP, NETWORKS
 
-    saved = dict(ALGORITHMS), dict(SCORES)
+    registries = (ALGORITHMS, SCORES, NETWORKS, NETWORK_HELP)
+    saved = [dict(registry) for registry in registries]
     yield
-    for registry, before in zip((ALGORITHMS, SCORES), saved):
+    for registry, before in zip(registries, saved):
         registry.clear()
         registry.update(before)

@@ -299,7 +299,8 @@ def test_version(capsys):
 
 @pytest.mark.parametrize("argv, needle", [
     (["run", "lever", "--algo", "dr", "--set", "network=maze_lstm"],
-     "network: maze_lstm cannot read this task's observations (AttributeError); allowed: mlp"),
+     "network: maze_lstm reads image [H, W, C] (H, W ≥ 3; the mazes' 5×5×3 view) and agent_dir [] (an integer, "
+     "0..3); this task's observation is f32[65] (not a dict or object with a field image); allowed: mlp, mlp_lstm"),
     (["run", "lever", "--algo", "dr", "--out", "{file}/sub"], "is a file, not a folder"),
     (["run", "lever", "--algo", "dr", "--out", "/proc/remidi-no-such/run"], "cannot be made"),
 ])

@@ -16,7 +16,7 @@ from remidi.engine import learner as lrn
 from remidi.engine import train as tr
 from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.engine.run.validation import validate_ued_config
-from remidi.engine.core.distributions import CATEGORICAL, GAUSSIAN, for_task
+from remidi.engine.core.distributions import CATEGORICAL, GAUSSIAN, Greedy, acting, for_task
 from remidi.engine.core.networks import make_network
 from remidi.engine.core.ppo import Batch, PPOConfig, create_train_state, ppo_update
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
@@ -42,6 +42,24 @@ def test_categorical_log_prob_and_entropy_match_closed_forms():
     p = np.exp(logits) / np.exp(logits).sum(-1, keepdims=True)
     np.testing.assert_allclose(CATEGORICAL.log_prob(logits, jnp.asarray([2, 0])), np.log([p[0, 2], p[1, 0]]), rtol=1e-6)
     np.testing.assert_allclose(CATEGORICAL.entropy(logits), -(p * np.log(p)).sum(-1), rtol=1e-6)
+
+
+def test_greedy_acts_with_the_mean_or_the_arg_max_and_scores_as_its_base():
+    key = jax.random.PRNGKey(0)
+    out = jnp.array([[0.3, -1.0, 2.0, 0.5], [1.5, 0.0, -0.2, -3.0]])  # Gaussian: means [.3, -1], log-stds [2, .5]
+    mode = acting(GAUSSIAN, "mode")
+    assert isinstance(mode, Greedy) and mode.continuous and acting(GAUSSIAN, "sample") is GAUSSIAN
+    for k in jax.random.split(key, 3):  # the same action whatever the key: the mean
+        np.testing.assert_array_equal(mode.sample(k, out), out[:, :2])
+    action = jnp.array([[0.0, 0.0], [1.0, 1.0]])
+    np.testing.assert_array_equal(mode.log_prob(out, action), GAUSSIAN.log_prob(out, action))
+    logits = jnp.array([[0.1, 2.0, -1.0], [3.0, 0.0, 2.9]])
+    greedy = acting(CATEGORICAL, "mode")
+    np.testing.assert_array_equal(greedy.sample(key, logits), [1, 0])
+    np.testing.assert_array_equal(greedy.probs(logits), [[0, 1, 0], [1, 0, 0]])
+    np.testing.assert_allclose(CATEGORICAL.probs(logits), jax.nn.softmax(logits))
+    with pytest.raises(Exception, match="--action: unknown value 'mean'; allowed: sample, mode"):
+        acting(CATEGORICAL, "mean")
 
 
 def test_running_statistics_equal_numpy_over_all_batches():

@@ -107,11 +107,35 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
 
 
+def test_evaluate_with_the_most_likely_action_writes_its_own_files(lever_run, tmp_path):
+    """--action mode plays the deterministic policy: its files sit beside the sampled evaluation's,
+    the policy it scores has no entropy, and its evaluation-set metrics do not depend on the seed
+    that draws the episodes (the lever's levels and steps are deterministic)."""
+    run = tmp_path / "run"
+    shutil.copytree(lever_run, run)
+    small = ["--attempts", "2", "--cvar-levels", "8", "--cvar-attempts", "1"]
+    assert main(["evaluate", str(run), *small]) == 0
+    sampled = (run / "evaluate.json").read_bytes()
+    docs = []
+    for seed in ("0", "7"):
+        assert main(["evaluate", str(run), *small, "--action", "mode", "--seed", seed]) == 0
+        docs.append(json.loads((run / "evaluate-mode.json").read_text()))
+        assert (run / "evaluate-mode.csv").is_file() and (run / "evaluate-mode.png").is_file()
+    assert (run / "evaluate.json").read_bytes() == sampled  # the sampled evaluation is left as it was
+    assert docs[0]["args"]["action"] == "mode" and json.loads(sampled)["args"]["action"] == "sample"
+    for algo in ("plr", "remidi"):
+        first, again = (d["algorithms"][algo]["metrics"] for d in docs)
+        assert first["entropy/visible"]["per_seed"] == [0.0, 0.0]
+        for name in ("solve_rate/visible", "solve_rate/hidden", "regret/visible/mean"):
+            assert first[name]["per_seed"] == again[name]["per_seed"], (algo, name)
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--attempts", "0"], "--attempts: must be an integer ≥ 1, got 0"),
     (["--perfect-sizes", "20"], "--perfect-sizes: each must be an odd integer"),
     (["--perfect-sizes", "x"], "--perfect-sizes: must be comma-separated odd integers"),
     (["--seed", "-1"], "--seed: must be an integer in"),
+    (["--action", "mean"], "--action: unknown value 'mean'; allowed: sample, mode"),
 ])
 def test_bad_evaluate_arguments_are_one_line(lever_run, capsys, argv, needle):
     assert main(["evaluate", str(lever_run), *argv]) == 2

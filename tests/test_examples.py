@@ -1,5 +1,5 @@
 """The examples run, write their outputs and show the pattern they are about:
-bring_your_own_env.py, my_score.py and my_algorithm.py."""
+bring_your_own_env.py, my_score.py, my_algorithm.py and my_network.py."""
 
 import importlib.util
 import json
@@ -7,6 +7,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import optimizing
@@ -151,3 +152,43 @@ def test_my_algorithm_example_registers_two_algorithms_trains_them_and_resumes_w
     monkeypatch.setenv("REMIDI_PLUGINS", "my_algorithm")
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
     assert (out / "remidi-maxmc" / "summary.json").exists()
+
+
+@pytest.mark.usefixtures("no_png")
+def test_my_network_plugin_trains_through_the_command_line_and_resumes_with_it(tmp_path, capsys, monkeypatch,
+                                                                              restore_registries):
+    """examples/my_network.py as a plugin (REMIDI_PLUGINS=my_network): `remidi run lever --set
+    network=ln_mlp` trains the registered network for a few updates and writes the run's outputs;
+    a process without the plugin cannot resume it (one line saying so), one with it resumes it."""
+    from remidi import plugins
+    from remidi.cli import main
+    from remidi.engine.core.networks import NETWORKS
+
+    monkeypatch.setattr(plugins, "_loaded", set())
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    monkeypatch.setenv("REMIDI_PLUGINS", "my_network")
+    out = tmp_path / "net"
+    sets = {"network": "ln_mlp", "hidden_size": 16, "num_updates": 4, "eval_every": 2, "checkpoint_every": 2,
+            "num_envs": 8, "eval_attempts": 1, "ppo.epochs": 1}
+    argv = ["run", "lever", "--algo", "plr", "--preset", "smoke", "--seeds", "1", "--quiet", "--out", str(out),
+            *(item for key, value in sets.items() for item in ("--set", f"{key}={value}"))]
+    assert main(argv) == 0
+    assert NETWORKS["ln_mlp"].__name__ == "LayerNormMLP"
+    for name in ("config.json", "metrics.csv", "summary.json", "checkpoint.npz"):
+        assert (out / name).exists(), name
+    assert json.loads((out / "config.json").read_text())["config"]["network"] == "ln_mlp"
+    with np.load(out / "checkpoint.npz") as saved:  # the registered network's parameters were trained and saved
+        assert any("norm_1" in key for key in saved.files) and any("dense_0" in key for key in saved.files)
+
+    del NETWORKS["ln_mlp"], sys.modules["my_network"]  # a fresh process
+    plugins._loaded.clear()
+    monkeypatch.delenv("REMIDI_PLUGINS")
+    (out / "summary.json").unlink()  # left unfinished
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"remidi: error: --resume: {out / 'config.json'}: the run's network 'ln_mlp' is unknown "
+                          "here (registered by a plugin? load it again: REMIDI_PLUGINS") and err.count("\n") == 1
+    monkeypatch.setenv("REMIDI_PLUGINS", "my_network")
+    assert main(["run", "--resume", str(out), "--quiet"]) == 0
+    assert (out / "summary.json").exists() and "ln_mlp" in NETWORKS

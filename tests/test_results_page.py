@@ -329,6 +329,31 @@ def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_pat
         tables.floors_table(data.load_runs(tmp_path), {**floors, "config": {"backend": "spring"}})
 
 
+def test_the_mean_action_table_reads_the_seeds_evaluated_both_ways(tmp_path):
+    """evaluate-mode.json (``remidi evaluate --action mode``) is its own source, collected beside
+    evaluate.json; the table compares both on the seeds that have both, and an evaluation that
+    acted otherwise than its file says is refused."""
+    runs_dir = tmp_path / "runs"
+    write_run(runs_dir, "brax-ant", "plr", [0, 1], evaluate={"return/undisturbed": [-70.0, -80.0]})
+    folder = write_run(runs_dir, "brax-ant", "remidi", [5, 6, 7], evaluate={"return/undisturbed": [10.0, 20.0, 30.0]})
+    mode = json.loads((folder / "evaluate.json").read_text())
+    mode["args"]["action"] = "mode"
+    mode["algorithms"]["remidi"]["metrics"]["return/undisturbed"]["per_seed"] = [100.0, 110.0, 120.0]
+    (folder / "evaluate-mode.json").write_text(json.dumps(mode))
+    for run in ("brax-ant/plr-s0", "brax-ant/remidi-s5"):
+        (runs_dir / run / "metrics.csv").write_text("seed,step,metric,value\n")
+        data.collect(runs_dir / run, tmp_path / "data")
+    assert (tmp_path / "data" / "brax-ant" / "remidi-s5" / "evaluate-mode.json").is_file()
+    rows = tables.mode_table(data.load_runs(tmp_path / "data")).splitlines()[2:]
+    assert rows[:3] == ["| ant | plr | — | — | — |", "| ant | minimax-return | — | — | — |",
+                        "| ant | remidi | 5–7 | 20.0 | 110.0 |"]
+    mode["args"]["action"] = "sample"  # a sampled evaluation under the mode's name
+    (folder / "evaluate-mode.json").write_text(json.dumps(mode))
+    with pytest.raises(ConfigError, match="evaluate-mode.json: evaluated with --action sample"):
+        data.collect(folder, tmp_path / "again")
+    assert not (tmp_path / "again").exists()  # refused before anything is copied
+
+
 def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):
     from remidi.envs.maze_names import HELD_OUT_NAMES
 

@@ -68,6 +68,18 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
   exec {lock}>&-
 }
 
+evaluate_mode() {  # evaluate_mode EXPERIMENT NAME: a finished run's final checkpoint, acting with its most likely action
+  local exp=$1 name=$2 out=$R/$1/$2
+  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $exp/$name "* ]]; then return; fi
+  if [ -f "$HERE/docs/results/data/$exp/$name/evaluate-mode.json" ]; then echo "committed: $exp/$name (mode)"; return; fi
+  if [ ! -f "$out/summary.json" ] || [ ! -f "$out/checkpoint.npz" ] || [ -f "$out/evaluate-mode.json" ]; then return; fi
+  local lock; exec {lock}>"$out.lock"
+  if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi
+  checkout
+  $PY -m remidi evaluate "$out" --attempts 30 --action mode >> "$out.log" 2>&1; echo "$(date +%T) evaluated (mode) $? $out"
+  exec {lock}>&-
+}
+
 # issue #28: the paper's claims, every run at one commit
 at c32046b
 for e in tabular-shared tabular-distinct; do  # both algorithms, the preset's 50 seeds, seconds each
@@ -187,6 +199,13 @@ for e in tmaze blindfold; do for a in plr remidi; do run "$a-cpu4x-s0" $e $a 0 5
 at d071065
 for m in ant halfcheetah hopper walker2d; do
   for a in plr minimax-return remidi; do run "$a-s5" "brax-$m" "$a" 5 5 cpu; done
+done
+
+# The Brax runs whose final checkpoints are kept (seeds 5–9) evaluated again acting with the
+# policy's mean (remidi evaluate --action mode), at the commit that added it
+at 5d44609
+for m in ant halfcheetah hopper walker2d; do
+  for a in plr minimax-return remidi; do evaluate_mode "brax-$m" "$a-s5"; done
 done
 
 at 8214e56

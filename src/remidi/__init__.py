@@ -1,8 +1,9 @@
 """remidi: ReMiDi and Bayesian level-perfect minimax regret (BLP) for unsupervised environment design.
 
-``remidi.run_ued`` trains a task of your own (docs/extending.md); ``remidi.register_algorithm``
-and ``remidi.register_score`` add an algorithm made of existing components and a level score
-without editing the library (docs/extending.md, examples/my_algorithm.py, examples/my_score.py).
+``remidi.run_ued`` trains a task of your own (docs/extending.md); ``remidi.register_algorithm``,
+``remidi.register_score`` and ``remidi.register_network`` add an algorithm made of existing
+components, a level score and an agent network without editing the library (docs/extending.md,
+examples/my_algorithm.py, examples/my_score.py, examples/my_network.py).
 """
 
 __version__ = "0.1.0"
@@ -12,9 +13,10 @@ _LAZY = {
     "run_ued": ("remidi.experiments.custom", "run_ued"),
     "register_algorithm": ("remidi.engine.algorithms", "register_algorithm"),
     "register_score": ("remidi.engine.adversaries.scores", "register_score"),
+    "register_network": ("remidi.engine.core.networks.registry", "register_network"),
 }
 
-__all__ = ["__version__", "register_algorithm", "register_score", "run_ued"]
+__all__ = ["__version__", "register_algorithm", "register_network", "register_score", "run_ued"]
 
 
 def __getattr__(name):

@@ -9,6 +9,7 @@ The validation helpers below (:func:`require`, :func:`choice`, ...) raise those 
 the environments and the experiments all use them.
 """
 
+import re
 from typing import Any, Iterable
 
 
@@ -57,3 +58,12 @@ def choice(key: str, value: Any, allowed: Iterable[Any]) -> None:
     allowed = tuple(allowed)
     if value not in allowed:
         raise one_of(key, value, allowed)
+
+
+def check_name(kind: str, name) -> None:
+    """ConfigError unless ``name`` can be a registered ``kind``'s name: a non-empty string of
+    letters, digits, ``_``, ``-`` and ``.`` (it is written after ``--algo`` or ``--set score=``,
+    in comma-separated lists and in file names)."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name) or name == "all":
+        raise ConfigError(f"register_{kind}: name must be a non-empty string of letters, digits, _, - and . "
+                          f"(not 'all'), got {name!r}")

@@ -1,7 +1,8 @@
-"""Plugins: modules that register algorithms and scores (:func:`remidi.register_algorithm`,
-:func:`remidi.register_score`) for the command line, which imports them before it reads its
-arguments, so that ``--algo NAME``, ``--set score=NAME``, ``remidi list`` and ``--resume`` of a
-run that used them see the registered entries.
+"""Plugins: modules that register algorithms, scores and networks (:func:`remidi.register_algorithm`,
+:func:`remidi.register_score`, :func:`remidi.register_network`) for the command line, which
+imports them before it reads its arguments, so that ``--algo NAME``, ``--set score=NAME``,
+``--set network=NAME``, ``remidi list`` and ``--resume`` of a run that used them see the
+registered entries.
 
 Two ways to name them (both may be used):
 

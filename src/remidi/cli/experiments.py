@@ -56,6 +56,16 @@ def _format_value(value) -> str:
     return str(value)
 
 
+def _print_networks() -> None:
+    """The registered networks (``--set network=NAME``), one line each: what it reads and is."""
+    from remidi.engine.core.networks import NETWORK_HELP, NETWORKS, reads
+
+    print("  networks (--set network=NAME; what each reads, then what it is):")
+    width = max(len(name) for name in NETWORKS)
+    for name, cls in NETWORKS.items():
+        print(f"    {name:<{width}}  reads {reads(cls)}" + (f"; {NETWORK_HELP[name]}" if NETWORK_HELP.get(name) else ""))
+
+
 def _cmd_list(args) -> int:
     from remidi.experiments import all_experiments, get_experiment
     from remidi.experiments.base import default_preset, resolve_config
@@ -66,7 +76,7 @@ def _cmd_list(args) -> int:
         width = max(len(exp.name) for exp in experiments)
         for exp in experiments:
             print(f"{exp.name:<{width}}  {exp.description} (presets: {', '.join(exp.presets)})")
-        print("remidi list NAME: its algorithms, presets and --set keys", file=sys.stderr)
+        print("remidi list NAME: its algorithms, scores, networks (what each reads), presets and --set keys", file=sys.stderr)
         return 0
     exp = get_experiment(args.experiment)
     print(f"{exp.name}: {exp.description}")
@@ -76,6 +86,7 @@ def _cmd_list(args) -> int:
         from remidi.engine.adversaries.scores import SCORES
 
         print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
+        _print_networks()
     presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                         for p in exp.presets)
     print(f"  presets:    {presets}")

@@ -29,14 +29,15 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_evaluate(args) -> int:
-    from remidi.runs.evaluate import run_from_args
+    from remidi.runs.evaluate import files_stem, run_from_args
 
     doc = run_from_args(args)
     for algo, entry in doc["algorithms"].items():
         n = len(entry["seeds"])
         print(f"\n{algo} ({n} seed{'s' if n != 1 else ''}, checkpoint of update {entry['update']})")
         _print_metrics(entry["metrics"])
-    print(f"\nwrote {Path(args.run_dir) / 'evaluate.json'}, evaluate.csv, evaluate.png")
+    stem = files_stem(args.action)
+    print(f"\nwrote {Path(args.run_dir) / stem}.json, {stem}.csv, {stem}.png")
     return 0
 
 
@@ -122,7 +123,8 @@ def add_commands(sub) -> None:
     evaluate = sub.add_parser("evaluate", help="a UED run's agents on more levels: held-out sets, CVaR over the "
                                                "generator, larger perfect mazes",
                               description="Reload every seed and algorithm of a UED run from its checkpoint and "
-                                          "evaluate it; writes RUN_DIR/evaluate.json, evaluate.csv, evaluate.png.")
+                                          "evaluate it; writes RUN_DIR/evaluate.json, evaluate.csv, evaluate.png "
+                                          "(evaluate-mode.* with --action mode).")
     from remidi.runs.evaluate import main_args
 
     main_args(evaluate)

@@ -15,9 +15,9 @@ from remidi.engine.adversaries.accel import EditingBuffers
 from remidi.engine.adversaries.base import Adversary, RandomLevels
 from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
 from remidi.engine.adversaries.plr import LevelBuffers
-from remidi.engine.adversaries.scores import SCORES, check_name
+from remidi.engine.adversaries.scores import SCORES
 from remidi.engine.adversaries.sfl import LearnabilityBuffers
-from remidi.errors import ConfigError, one_of
+from remidi.errors import ConfigError, check_name, one_of
 
 
 @dataclass(frozen=True)

@@ -233,7 +233,9 @@ class UEDConfig:
     discounted_regret: bool = field(default=True, metadata={
         "help": "perfect_regret on the paper's discounted utility Σ γ^t r_t (γ = ppo.gamma), both the "
                 "optimum and the agent's return; false: undiscounted on both sides"})
-    network: str = field(default="mlp", metadata={"help": "actor-critic: mlp, maze_lstm or mlp_lstm"})
+    network: str = field(default="mlp", metadata={
+        "help": "actor-critic: a registered network (networks above: what each reads), e.g. mlp, maze_lstm, "
+                "mlp_lstm, entity, cnn"})
     hidden_size: int = field(default=0, metadata={
         "help": "width of each fully-connected trunk layer (0: the network's default)"})
     lstm_size: int = field(default=0, metadata={

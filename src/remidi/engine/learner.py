@@ -107,7 +107,7 @@ def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, froze
     carry = setup.net.initialize_carry(num_levels)
     return rollout(rng, Stepping(task.env, task.params, task.deterministic_reset),
                    Policy(policy_apply(setup, learner), learner.train_state.params, carry), levels, num_steps, frozen,
-                   dist=for_task(task.continuous))
+                   dist=for_task(task))
 
 
 #: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs'
@@ -123,7 +123,7 @@ def learn(setup: Setup, learner: LearnerState, rng, traj: Trajectory, adv, targe
                   values=traj.value, advantages=adv, targets=targets, mask=~traj.indist)
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
     train_state, metrics = ppo_update(learner.train_state, carry, batch, rng, setup.cfg.ppo,
-                                      policy_apply(setup, learner), for_task(setup.task.continuous))
+                                      policy_apply(setup, learner), for_task(setup.task))
     return train_state, {name: metrics[name].astype(jnp.float32) for name in PPO_METRICS}
 
 

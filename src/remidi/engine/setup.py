@@ -12,6 +12,7 @@ import jax
 
 from remidi.engine.config import UEDConfig
 from remidi.engine.core import normalize as nrm
+from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
@@ -33,8 +34,11 @@ class Setup:
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):
-    """The network ``cfg.network`` for the task's actions, with ``hidden_size``/``lstm_size``
-    where set (ConfigError if that network has no such layer)."""
+    """The network ``cfg.network`` for the task's actions (its policy output sized for the task's
+    distribution, :func:`~remidi.engine.core.distributions.for_task`), with
+    ``hidden_size``/``lstm_size`` where set (ConfigError if that network has no such layer):
+    ``hidden_size`` sets every layer of a ``hidden`` option that is a tuple of widths (its length
+    kept), or ``hidden`` itself if it is one width; ``lstm_size`` sets ``lstm_size``."""
     options = {}
     cls = NETWORKS.get(cfg.network)
     fields = {f.name: f.default for f in dataclasses.fields(cls)} if cls is not None else {}
@@ -44,8 +48,10 @@ def network_for(cfg: UEDConfig, task: UEDTask):
         if option not in fields:
             raise ConfigError(f"{key}: the network {cfg.network} has no such layer; leave it 0 or pick a network "
                               f"that has one")
-        options[option] = (value,) * len(fields[option]) if option == "hidden" else value
-    return make_network(cfg.network, task.num_actions, task.continuous, **options)
+        default = fields[option]
+        options[option] = (value,) * len(default) if isinstance(default, (tuple, list)) else value
+    dist = for_task(task)
+    return make_network(cfg.network, dist.network_actions, dist.continuous, **options)
 
 
 def policy_apply(setup: Setup, learner):

@@ -46,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from remidi.envs.actions import from_env_space
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.errors import ConfigError
 
@@ -229,20 +230,17 @@ def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed
     base = base.replace(**dict(params or {}))
     space = LevelSpace(dict(level), seed_in_level)
     ued = GymnaxUED(env, base, list(level), seed_in_level, derive if derive is not None else DERIVED.get(env_name))
-    space_kind = env.action_space(base)
-    continuous = not hasattr(space_kind, "n")
-    num_actions = int(jnp.prod(jnp.asarray(space_kind.shape))) if continuous else int(space_kind.n)
+    actions = from_env_space(env.action_space(base))  # ConfigError naming the supported spaces for another
     extra = dict(tags or {})
     return UEDTask(
         env=ued,
         params=base,
         sample_level=space.sample,
-        num_actions=num_actions,
         max_episode_steps=int(base.max_steps_in_episode),
         eval_sets=space.grid(eval_grid, base, eval_seeds, jax.random.PRNGKey(0)) if eval_grid else {},
         level_tags=lambda lv: {**space.tags(lv), **{name: jnp.asarray(f(lv)) for name, f in extra.items()}},
         solved=None if solved_at is None else (lambda ret: ret >= solved_at),
         mutate_level=lambda rng, lv, num_edits: space.mutate(rng, lv, num_edits, edit_size),
         deterministic_reset=seed_in_level,
-        continuous=continuous,
+        **actions.task_fields(),  # num_actions= (and continuous=) for Discrete and Box, else action_space=
     )

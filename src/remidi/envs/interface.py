@@ -20,6 +20,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.envs.actions import ActionSpace, Box, Discrete
+
 
 def _jaxued_interface():
     """``jaxued.environments.underspecified_env``, the module of the interface we share with
@@ -138,8 +140,12 @@ class UEDTask:
         env: the (non-resetting) environment.
         params: its ``EnvParams``.
         sample_level: ``rng -> level``, the random level generator (domain randomisation).
-        num_actions: size of the discrete action space, or with ``continuous`` the number of
-            action dimensions (actions ``f32[num_actions]``, unbounded: the environment clips).
+        action_space: the actions (:mod:`remidi.envs.actions`): ``Discrete(n)`` (``i32[]``),
+            ``MultiDiscrete(nvec)`` (``i32[k]``, one choice per component) or ``Box(dims)``
+            (``f32[dims]``, unbounded: the environment clips). Or the shorthand:
+        num_actions: ``Discrete(num_actions)``, or with ``continuous`` ``Box(num_actions)``. Given
+            beside ``action_space``, the two must agree (``Discrete``/``Box`` only). Read the
+            space as :attr:`actions` (set for either declaration).
         max_episode_steps: an upper bound on an episode's length (evaluation rolls this long).
         optimal_return: ``level -> f32[]`` best achievable (undiscounted) return, or None if
             unknown (then the perfect-regret score is unavailable).
@@ -155,7 +161,7 @@ class UEDTask:
             fractions (e.g. ``{"hidden": ...}``).
         solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved; None
             for a task without a notion of solving (no ``solve_rate`` metric, no learnability score).
-        expected_return: for a one-step task, ``(level, probs f32[num_actions]) -> f32[]``, the
+        expected_return: for a one-step task with ``Discrete(n)`` actions, ``(level, probs f32[n]) -> f32[]``, the
             exact expected return of a policy with those action probabilities; makes the
             evaluation's regret exact (instead of sampled) and adds the policy's entropy.
         mutate_level: ``(rng, level, num_edits: int) -> level``, ACCEL's level editor: at most
@@ -175,13 +181,15 @@ class UEDTask:
             as in every environment of this package). Lets ReMiDi use the candidate tracker,
             whose cost per step does not grow with the number of frozen levels; leave False for
             an environment that draws its start at random (the reference tracker then runs).
+        continuous: with ``num_actions``, the actions are ``Box(num_actions)``.
+        actions: (derived, not a constructor argument) the action space either declaration gives.
     """
 
     env: UnderspecifiedEnv
     params: Any
     sample_level: Callable[[jax.Array], Any]
-    num_actions: int
-    max_episode_steps: int
+    num_actions: int | None = None
+    max_episode_steps: int = None  # required: a missing one is a TypeError, as for sample_level
     optimal_return: Callable[[Any], jax.Array] | None = None
     optimal_discounted_return: Callable[[Any, float], jax.Array] | None = None
     eval_sets: dict[str, Any] = field(default_factory=dict)
@@ -195,6 +203,19 @@ class UEDTask:
     deterministic_reset: bool = False
     continuous: bool = False
     reseed_level: Callable[[jax.Array, Any], Any] | None = None
+    action_space: ActionSpace | None = None
+    actions: ActionSpace = field(init=False, repr=False)
+
+    def __post_init__(self):
+        if self.max_episode_steps is None:
+            raise TypeError("UEDTask.__init__() missing required argument: 'max_episode_steps'")
+        if self.action_space is None and self.num_actions is None:
+            raise TypeError("UEDTask.__init__() needs the actions: action_space= (remidi.envs.actions) or "
+                            "num_actions=")
+        declared = self.action_space
+        if declared is None:
+            declared = Box(self.num_actions) if self.continuous else Discrete(self.num_actions)
+        object.__setattr__(self, "actions", declared)  # checked by validate_task
 
 
 def one_step_discounted(optimal_return: Callable[[Any], jax.Array]) -> Callable[[Any, float], jax.Array]:

@@ -172,8 +172,9 @@ def saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
 
 
 def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
-    """ConfigError unless the saved run's algorithm and (UED) score are known to this process: one
-    registered by a plugin (remidi.register_algorithm / register_score) must be loaded again."""
+    """ConfigError unless the saved run's algorithm and (UED) score and network are known to this
+    process: one registered by a plugin (remidi.register_algorithm / register_score /
+    register_network) must be loaded again."""
     hint = "registered by a plugin? load it again: REMIDI_PLUGINS=module (docs/extending.md)"
     if algo not in exp.algorithms:
         raise ConfigError(f"{where}: the run's algorithm {algo!r} is unknown here ({hint}); "
@@ -185,6 +186,13 @@ def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
         if score not in SCORES:
             raise ConfigError(f"{where}: the run's score {score!r} is unknown here ({hint}); "
                               f"allowed: {', '.join(SCORES)}")
+    network = getattr(config, "network", None)
+    if exp.make_task is not None and isinstance(network, str):
+        from remidi.engine.core.networks import NETWORKS
+
+        if network not in NETWORKS:
+            raise ConfigError(f"{where}: the run's network {network!r} is unknown here ({hint}); "
+                              f"allowed: {', '.join(NETWORKS)}")
 
 
 def _saved_devices(folder: Path):

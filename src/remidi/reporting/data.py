@@ -66,16 +66,25 @@ def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder:
 EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final checkpoint" metrics are
 
 
-def _evaluation(folder: Path, algo: str, config: dict) -> dict:
-    """``algo``'s entry of the run's ``evaluate.json``, checked. The page states its ``evaluate:`` metrics as the final checkpoint's with
+#: the evaluations the page reads, by source: ``evaluate:`` (actions sampled from the policy, as it
+#: trained) and ``evaluate-mode:`` (its most likely action, ``remidi evaluate --action mode``)
+EVALUATIONS = {"evaluate": "sample", "evaluate-mode": "mode"}
+
+
+def _evaluation(folder: Path, algo: str, config: dict, source: str = "evaluate") -> dict:
+    """``algo``'s entry of the run's ``<source>.json``, checked. The page states its ``evaluate:`` metrics as the final checkpoint's with
     :data:`EVAL_ATTEMPTS` attempts, and its CVaR and perfect-maze metrics as ``remidi
-    evaluate``'s defaults give them: refuse (ConfigError naming the run) an ``evaluate.json`` of an
-    unfinished run's checkpoint or with other arguments, rather than mix it in."""
+    evaluate``'s defaults give them: refuse (ConfigError naming the run) an evaluation of an
+    unfinished run's checkpoint, with other arguments or acting otherwise than its source says,
+    rather than mix it in."""
     from remidi.runs.evaluate import DEFAULTS
 
-    where = folder / "evaluate.json"
+    where = folder / f"{source}.json"
     evaluated = outputs.read_json(where)
     entry, args = evaluated["algorithms"][algo], evaluated.get("args", {})
+    if args.get("action", "sample") != EVALUATIONS[source]:
+        raise ConfigError(f"{where}: evaluated with --action {args.get('action', 'sample')}; the page's {source}: "
+                          f"metrics act by {EVALUATIONS[source]}")
     if args.get("attempts") != EVAL_ATTEMPTS:
         raise ConfigError(f"{where}: evaluated with --attempts {args.get('attempts')}; the page's metrics are "
                           f"{EVAL_ATTEMPTS} attempts (remidi evaluate RUN --attempts {EVAL_ATTEMPTS})")
@@ -101,9 +110,10 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         run = runs.setdefault(key, Run(*key, preset=summary["preset"]))
         seeds = list(summary["seeds"])
         _merge_seeds(run, "summary", seeds, summary["metrics"], folder)
-        if (folder / "evaluate.json").is_file():
-            entry = _evaluation(folder, summary["algo"], config)
-            _merge_seeds(run, "evaluate", list(entry["seeds"]), entry["metrics"], folder)
+        for source in EVALUATIONS:
+            if (folder / f"{source}.json").is_file():
+                entry = _evaluation(folder, summary["algo"], config, source)
+                _merge_seeds(run, source, list(entry["seeds"]), entry["metrics"], folder)
         if (folder / "metrics.csv.gz").is_file():
             rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
             steps = np.array(sorted({step for _, step, _, _ in rows}))
@@ -165,7 +175,7 @@ MAX_POINTS = 100  # log points kept per curve in the committed metrics.csv.gz
 def collect(run: Path, data: Path = DATA) -> list[Path]:
     """Copy a finished run (one algorithm's folder, or a folder of them) into
     ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
-    ``evaluate.json`` and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~remidi.reporting.claims.SECTIONS`'
+    ``evaluate.json`` (and ``evaluate-mode.json``) and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~remidi.reporting.claims.SECTIONS`'
     curves, at most :data:`MAX_POINTS` evenly spaced log points). Returns the folders written."""
     run = Path(run)
     folders = [run] if (run / "summary.json").is_file() else sorted(p.parent for p in run.glob("*/summary.json"))
@@ -176,12 +186,13 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         summary = outputs.read_json(folder / "summary.json")
         exp, algo = summary["experiment"], summary["algo"]
         doc = outputs.read_json(folder / "config.json")
-        if (folder / "evaluate.json").is_file():  # refused before anything is copied
-            _evaluation(folder, algo, doc)
+        for source in EVALUATIONS:  # refused before anything is copied
+            if (folder / f"{source}.json").is_file():
+                _evaluation(folder, algo, doc, source)
         name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
         target.mkdir(parents=True, exist_ok=True)
-        for name in ("config.json", "summary.json", "evaluate.json"):  # each whole or not at all
+        for name in ("config.json", "summary.json", *(f"{source}.json" for source in EVALUATIONS)):  # each whole or not
             if (folder / name).is_file():
                 atomic_write(target / name, lambda f, src=folder / name: f.write(src.read_bytes()), binary=True)
         keep = set(SECTIONS.get(exp, ([], [], []))[2]) | {m.split(":", 1)[1] for e, _, metrics in EXTRA_TABLES.values()

@@ -33,23 +33,28 @@ OUT = Path(__file__).resolve().parents[3] / "docs" / "results" / "references" / 
 def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):
     """f32[L, attempts]: the first-episode return on each of the L levels of ``task.eval_sets[name]``
     of ``policy``: ``"zero"`` (every continuous action 0), ``"normal"`` (each continuous action
-    N(0, 1)) or ``"uniform"`` (each discrete action uniform over ``task.num_actions``)."""
+    N(0, 1)) or ``"uniform"`` (each discrete choice uniform: over ``n`` for ``Discrete(n)``, per component for
+    ``MultiDiscrete``)."""
     import jax
     import jax.numpy as jnp
 
     from remidi.engine.run.evaluation import first_episode_return
 
-    fits = ("zero", "normal") if task.continuous else ("uniform",)
+    from remidi.envs.actions import Box
+
+    continuous = isinstance(task.actions, Box)
+    fits = ("zero", "normal") if continuous else ("uniform",)
     if policy not in fits:
-        raise ValueError(f"policy: {policy!r} for a task with {'continuous' if task.continuous else 'discrete'} "
+        raise ValueError(f"policy: {policy!r} for a task with {'continuous' if continuous else 'discrete'} "
                          f"actions; allowed: {', '.join(fits)}")
     env, params, levels = task.eval_envs.get(name, task.env), task.params, task.eval_sets[name]
     num_levels = jax.tree.leaves(levels)[0].shape[0]
 
     def act(key):
-        if policy == "uniform":
-            return jax.random.randint(key, (), 0, task.num_actions)
-        return (policy == "normal") * jax.random.normal(key, (task.num_actions,))
+        if policy == "uniform":  # each component's choice uniform (Discrete: the one choice)
+            counts = getattr(task.actions, "nvec", getattr(task.actions, "n", None))
+            return jax.random.randint(key, task.actions.shape, 0, jnp.asarray(counts, jnp.int32))
+        return (policy == "normal") * jax.random.normal(key, task.actions.shape)
 
     def play(key, level):
         _, state = env.reset_to_level(key, level, params)

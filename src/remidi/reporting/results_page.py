@@ -49,7 +49,7 @@ from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
 from remidi.reporting.data import DATA, ROOT, collect, load_runs
 from remidi.reporting.figures import draw_figures
 from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
-from remidi.reporting.tables import (floors_table, maze_floors_table, metrics_table, per_seed_table,
+from remidi.reporting.tables import (floors_table, maze_floors_table, metrics_table, mode_table, per_seed_table,
                                      provenance_table, summary_lines, verdict_table)
 from remidi.reporting.verdicts import evaluate_claim
 
@@ -73,6 +73,7 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
     floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
     out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
+    out["brax-mode"] = mode_table(runs)
     out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
     return out, results
 

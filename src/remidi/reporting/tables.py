@@ -173,6 +173,34 @@ def floors_table(runs: dict, floors: dict) -> str:
     return "\n".join(lines)
 
 
+def mode_table(runs: dict) -> str:
+    """Per Brax morphology and algorithm, the undisturbed return of the same checkpoints acting two
+    ways: actions sampled from the policy (``evaluate:``, as it trained) and its most likely
+    action, the Gaussian's mean (``evaluate-mode:``, ``remidi evaluate --action mode``): means over
+    the seeds evaluated both ways, and which seeds those are ("—" for an algorithm with none)."""
+    algos = ("plr", "minimax-return", "remidi")
+    lines = ["| morphology | algorithm | seeds | sampled actions | mean action |", "| --- | --- | --- | --- | --- |"]
+    for exp in BRAX:
+        for algo in algos:
+            sampled = metric_values(runs, exp, algo, "evaluate:return/undisturbed")
+            mean = metric_values(runs, exp, algo, "evaluate-mode:return/undisturbed")
+            both = sorted(set(sampled) & set(mean))
+            if not both:
+                lines.append(f"| {exp.removeprefix('brax-')} | {algo} | — | — | — |")
+                continue
+            lines.append(f"| {exp.removeprefix('brax-')} | {algo} | {_seeds(both)} | "
+                         f"{_f(float(np.mean([sampled[s] for s in both])), 1)} | "
+                         f"{_f(float(np.mean([mean[s] for s in both])), 1)} |")
+    return "\n".join(lines)
+
+
+def _seeds(seeds: list[int]) -> str:
+    """``5–9`` for consecutive seeds, else the list."""
+    if seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2:
+        return f"{seeds[0]}–{seeds[-1]}"
+    return ", ".join(map(str, seeds))
+
+
 def maze_floors_table(runs: dict, floors: dict) -> str:
     """The held-out mazes' solve rate of uniform random actions (``floors["mazes"]``:
     :mod:`remidi.reporting.floors`) beside the T-maze and blindfold algorithms' means over seeds

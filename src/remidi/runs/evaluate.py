@@ -28,6 +28,11 @@ latest) and evaluated on
   whose optimum is positive). ``perfect<S>/solve_rate``, ``perfect<S>/return``,
   ``perfect<S>/regret`` (optimal minus mean return).
 
+The agent acts as it trained, its actions drawn from its policy; ``--action mode`` evaluates the
+deterministic policy instead (each step the most likely action: a Gaussian policy's mean, a
+categorical one's arg-max) and writes its files beside the sampled evaluation's, named
+``evaluate-mode.*``, so that both can be reported, labelled.
+
 Writes ``RUN_DIR/evaluate.json`` (the run, its experiment, the arguments, and per algorithm the
 update its checkpoint is from and every metric's mean, std and per-seed values),
 ``RUN_DIR/evaluate.csv`` (long format: algo, seed, metric, value) and ``RUN_DIR/evaluate.png``
@@ -68,6 +73,17 @@ class EvalSettings:
     perfect_sizes: tuple[int, ...] = DEFAULTS["perfect_sizes"]
     perfect_count: int = DEFAULTS["perfect_count"]
     seed: int = DEFAULTS["seed"]
+    action: str = "sample"
+
+    @property
+    def stem(self) -> str:
+        return files_stem(self.action)
+
+
+def files_stem(action: str) -> str:
+    """The name of the files an evaluation acting by ``action`` writes: ``evaluate`` (sampled
+    actions) or ``evaluate-mode``."""
+    return "evaluate" if action == "sample" else f"evaluate-{action}"
 
 
 # ------------------------------------------------------------------------------ pure pieces
@@ -182,11 +198,12 @@ def _solvable_levels(task, count: int, seed: int):
     return levels
 
 
-def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: dict):
+def _metrics_fn(setup, settings: EvalSettings, cvar_levels, perfect: dict):
     """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
     evaluation of one run: the task's evaluation sets as training evaluates them
     (:func:`remidi.engine.run.evaluation.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
-    the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``."""
+    the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``. The
+    agent acts by ``settings.action`` throughout."""
     import dataclasses
 
     import jax
@@ -195,19 +212,21 @@ def _metrics_fn(setup, attempts: int, cvar_levels, cvar_attempts: int, perfect: 
     from remidi.engine.run import evaluation
     from remidi.engine import train as tr
 
-    task = setup.task
+    task, attempts, cvar_attempts, action = setup.task, settings.attempts, settings.cvar_attempts, settings.action
     held_out = tr.make_setup(task, dataclasses.replace(setup.cfg, eval_attempts=attempts), setup.algo)
 
     def one_seed(runner, key):
-        out = dict(evaluation.evaluate(held_out, runner, key))
+        out = dict(evaluation.evaluate(held_out, runner, key, action))
         # CVaR: one set of rollouts ranks the levels, an independent one (other keys) scores them
         for part, salt in (("rank", 1000), ("score", 1001)):
-            ret, _ = evaluation.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts, jax.random.fold_in(key, salt))
+            ret, _ = evaluation.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts,
+                                              jax.random.fold_in(key, salt), action)
             out[f"cvar_raw/{part}/return"] = ret.mean(axis=1)
             if task.solved is not None:
                 out[f"cvar_raw/{part}/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
         for size, (env, levels) in perfect.items():
-            ret, _ = evaluation.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size))
+            ret, _ = evaluation.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size),
+                                              action)
             out[f"perfect_raw/{size}"] = ret  # [L, attempts]
         return out
 
@@ -247,7 +266,8 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
 def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Callable[[str], None] | None = None,
                  task=None) -> dict:
     """Evaluate every algorithm and seed in ``run_dir`` (module docstring) on ``settings`` and write
-    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there. Returns the JSON document.
+    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there (``evaluate-mode.*`` with
+    ``action="mode"``). Returns the JSON document.
 
     ``task``: the :class:`~remidi.envs.interface.UEDTask` the run trained on, for a run of a user's
     task that ``config.json`` cannot rebuild (``run_ued`` without ``task_ref``); by default the task
@@ -260,6 +280,9 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
     attempts, cvar_levels, cvar_attempts = settings.attempts, settings.cvar_levels, settings.cvar_attempts
     perfect_sizes, perfect_count, seed = settings.perfect_sizes, settings.perfect_count, settings.seed
     _check_args(attempts, cvar_levels, cvar_attempts, tuple(perfect_sizes), perfect_count, seed)
+    from remidi.engine.core.distributions import acting
+
+    acting(None, settings.action)  # a one-line error for an unknown --action, before anything is loaded
     run_dir = Path(run_dir)
     folders = _run_folders(run_dir)
     if not writable(run_dir):  # before minutes of evaluation whose results could not be written
@@ -267,7 +290,8 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
                           f"evaluate.png there; evaluate a writable copy of the run")
     loaded = [_load(folder, task) for folder in folders]  # every run checked before any is evaluated
     args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
-            "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed}
+            "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed,
+            "action": settings.action}
     doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args, "algorithms": {}}
     rows = []
     cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels and their tags: the algorithms of one run share them
@@ -291,7 +315,7 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
             log(f"evaluating {run.folder} ({run.algo}, {len(run.seeds)} seed{'s' if len(run.seeds) != 1 else ''}, "
                 f"checkpoint of update {run.update} of {total}{'' if run.update >= total else ': unfinished'})")
         keys = jax.vmap(jax.random.PRNGKey)(np.asarray(run.seeds, np.uint32) + np.uint32(seed))
-        raw = jax.device_get(_metrics_fn(run.setup, attempts, levels, cvar_attempts, perfect)(run.runner, keys))
+        raw = jax.device_get(_metrics_fn(run.setup, settings, levels, perfect)(run.runner, keys))
         metrics = _summarise(raw, run.setup, optimal, tags)
         doc["algorithms"][run.algo] = {"folder": str(run.folder), "seeds": run.seeds, "update": run.update,
                                        "num_updates": run.setup.cfg.num_updates,
@@ -300,7 +324,7 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
                                        "metrics": outputs.summarize(metrics)}
         rows += [(run.algo, s, name, float(values[i])) for name, values in metrics.items()
                  for i, s in enumerate(run.seeds)]
-    outputs.write_json(run_dir / "evaluate.json", doc)
+    outputs.write_json(run_dir / f"{settings.stem}.json", doc)
 
     def write_csv(fh):
         w = csv.writer(fh)
@@ -308,8 +332,8 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
         for row in rows:
             w.writerow([*row[:3], repr(row[3])])
 
-    outputs.atomic_write(run_dir / "evaluate.csv", write_csv)
-    _plot(run_dir / "evaluate.png", doc)
+    outputs.atomic_write(run_dir / f"{settings.stem}.csv", write_csv)
+    _plot(run_dir / f"{settings.stem}.png", doc)
     return doc
 
 
@@ -330,6 +354,8 @@ def _plot(path: Path, doc: dict) -> None:
     at = f", update {updates[0]}" if len(updates) == 1 else ""
     unfinished = any(entry["update"] < entry.get("num_updates", entry["update"]) for entry in algos.values())
     which = "last checkpoint (unfinished)" if unfinished else "final checkpoint"
+    if doc["args"].get("action", "sample") != "sample":
+        which += f", actions: the policy's {doc['args']['action']}"
     plot_bars(path, f"{doc.get('experiment') or 'run'}: {kind.replace('_', ' ')} of {name}'s {which}{at}",
               shown, series, kind, ylim=(0.0, 1.0) if kind == "solve_rate" else None)
 
@@ -348,6 +374,9 @@ def main_args(parser) -> None:
                         help="sides of the perfect mazes, comma-separated odd numbers (maze runs; default 21,51)")
     parser.add_argument("--perfect-count", type=int, default=DEFAULTS["perfect_count"],
                         help=f"perfect mazes per size (default {DEFAULTS['perfect_count']})")
+    parser.add_argument("--action", metavar="{sample,mode}", default="sample",
+                        help="sample: actions drawn from the policy (default, as it trained); mode: its most likely "
+                             "action each step (a Gaussian's mean), written to evaluate-mode.*")
     parser.add_argument("--seed", type=int, default=DEFAULTS["seed"],
                         help="draws the CVaR levels and perfect mazes (the same for every run) and the episodes")
 
@@ -360,5 +389,5 @@ def run_from_args(args) -> dict:
     import sys
 
     settings = EvalSettings(attempts=args.attempts, cvar_levels=args.cvar_levels, cvar_attempts=args.cvar_attempts,
-                            perfect_sizes=sizes, perfect_count=args.perfect_count, seed=args.seed)
+                            perfect_sizes=sizes, perfect_count=args.perfect_count, seed=args.seed, action=args.action)
     return evaluate_run(args.run_dir, settings, log=lambda line: print(line, file=sys.stderr, flush=True))

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, check_name
 
 
 def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
@@ -206,17 +206,6 @@ SCORES: dict[str, Score] = {score.name: score for score in (
 
 
 BUILTIN_SCORES = tuple(SCORES)  # the scores of the library itself, in order
-
-
-def check_name(kind: str, name) -> None:
-    """ConfigError unless ``name`` can be a registered ``kind``'s name: a non-empty string of
-    letters, digits, ``_``, ``-`` and ``.`` (it is written after ``--algo`` or ``--set score=``,
-    in comma-separated lists and in file names)."""
-    import re
-
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name) or name == "all":
-        raise ConfigError(f"register_{kind}: name must be a non-empty string of letters, digits, _, - and . "
-                          f"(not 'all'), got {name!r}")
 
 
 def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_optimum: bool = False,

@@ -14,8 +14,9 @@ leaves params, optimiser state and step count unchanged.
 
 Networks follow :mod:`remidi.engine.core.networks`:
 ``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``; a ``dist`` from
-:mod:`remidi.engine.core.distributions` reads ``logits`` (categorical logits, or a Gaussian's mean
-and log-std for continuous actions ``f32[T, N, A]``).
+:mod:`remidi.engine.core.distributions` reads ``logits`` (categorical logits, one categorical's per
+component for multi-discrete actions ``i32[T, N, k]``, or a Gaussian's mean and log-std for
+continuous actions ``f32[T, N, A]``).
 """
 
 from __future__ import annotations
@@ -145,7 +146,7 @@ class Batch:
     """A rollout for PPO; every field is ``[T, N, ...]``.
 
     ``obs`` pytree; ``reset`` bool (new episode starts at this step); ``actions`` i32 (or
-    ``f32[T, N, A]``, continuous);
+    ``i32[T, N, k]``, multi-discrete; ``f32[T, N, A]``, continuous);
     ``log_probs``, ``values``, ``advantages``, ``targets`` f32; ``mask`` bool (train on this step).
     """
 

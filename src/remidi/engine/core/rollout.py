@@ -26,7 +26,7 @@ class Trajectory:
 
     obs: Any  # observation pytree, leaves [T, N, ...]
     reset: jax.Array  # bool: step t is the first of an episode
-    action: jax.Array  # i32, or f32[T, N, A] for continuous actions
+    action: jax.Array  # i32 (Discrete), i32[T, N, k] (MultiDiscrete: one per component) or f32[T, N, A] (Box)
     log_prob: jax.Array  # f32
     value: jax.Array  # f32
     reward: jax.Array  # f32

@@ -6,7 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from remidi.engine.core.distributions import for_task
+from remidi.engine.core.distributions import acting, for_task
 from remidi.engine.core.rollout import Policy, Stepping, combine, rollout
 from remidi.engine.learner import combines
 from remidi.engine.setup import Setup, policy_apply
@@ -37,10 +37,11 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
     return groups
 
 
-def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
+def first_step_policy(setup: Setup, runner: Runner, env, levels, action: str = "sample") -> jax.Array:
     """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
     the policy that acts there (under ``remidi.policy=combine``, the combined policy:
-    :func:`~remidi.engine.core.rollout.combine`)."""
+    :func:`~remidi.engine.core.rollout.combine`); with ``action="mode"`` one-hot on its most
+    likely action."""
     task, net = setup.task, setup.net
     n = jax.tree.leaves(levels)[0].shape[0]
     keys = jax.random.split(jax.random.PRNGKey(0), n)
@@ -59,12 +60,14 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels) -> jax.Array:
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)
         _, logits = combine(frozen, tstate, apply_fn, frozen_carry, obs_in, reset, logits)
-    return jax.nn.softmax(logits, axis=-1)
+    return acting(for_task(task), action).probs(logits)
 
 
-def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng):
-    """The first-episode return of ``attempts`` sampled episodes on each of ``levels`` (leaves
-    [L, ...], played by ``env``; under ``remidi.policy=combine`` by the combined policy):
+def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng, action: str = "sample"):
+    """The first-episode return of ``attempts`` episodes on each of ``levels`` (leaves [L, ...],
+    played by ``env``; under ``remidi.policy=combine`` by the combined policy), the actions drawn
+    from the policy or, with ``action="mode"``, its most likely ones
+    (:func:`~remidi.engine.core.distributions.acting`):
     ``(returns f32[L, attempts], discounted f32[L, attempts])``, the latter Σ_t γ^t r_t with
     γ = ``ppo.gamma``. One rollout of ``task.max_episode_steps`` on L·attempts envs."""
     task = setup.task
@@ -74,15 +77,15 @@ def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng)
     traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env),
                       Policy(policy_apply(setup, runner.learner), runner.learner.train_state.params,
                              setup.net.initialize_carry(n)),
-                      tiled, task.max_episode_steps, frozen, dist=for_task(task.continuous))
+                      tiled, task.max_episode_steps, frozen, dist=acting(for_task(task), action))
     returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
     discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
     return returns, discounted
 
 
-def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
-    """Metrics on each evaluation set ``<set>``: ``eval_attempts`` sampled episodes per level (the
-    first episode of each; the sets one environment plays are rolled out together,
+def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[str, jax.Array]:
+    """Metrics on each evaluation set ``<set>``: ``eval_attempts`` episodes per level, acting by
+    ``action`` (:func:`level_returns`; the first episode of each; the sets one environment plays are rolled out together,
     :func:`level_returns`) give ``solve_rate/<set>``, ``return/<set>`` and
     ``discounted_return/<set>`` (Σ_t γ^t r_t, γ = ``ppo.gamma``). With the task's optimal return,
     the regret per level gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's
@@ -93,7 +96,8 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[name] for name in names))
-        returns, discounted = level_returns(setup, runner, env, levels, cfg.eval_attempts, jax.random.fold_in(rng, i))
+        returns, discounted = level_returns(setup, runner, env, levels, cfg.eval_attempts, jax.random.fold_in(rng, i),
+                                            action)
         optimal = None
         if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
             optimal = jax.vmap(task.optimal_return)(levels)
@@ -111,7 +115,7 @@ def evaluate(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
             if task.optimal_return is None:
                 continue
             if task.expected_return is not None:
-                probs = first_step_policy(setup, runner, env, set_levels)  # [L, A]
+                probs = first_step_policy(setup, runner, env, set_levels, action)  # [L, A]
                 expected = jax.vmap(task.expected_return)(set_levels, probs)
                 entropy = -jnp.sum(probs * jnp.log(jnp.maximum(probs, 1e-30)), axis=-1)
                 out[f"entropy/{name}"] = jnp.mean(entropy)

@@ -11,8 +11,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.engine.core.networks import NETWORKS, flatten_obs, make_network
+from remidi.engine.core.distributions import for_task
+from remidi.engine.core.networks import (NETWORKS, describe_observation, flatten_obs, make_network,
+                                         observation_problem, reads)
 from remidi.engine.setup import example_observation
+from remidi.envs import actions as acts
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.errors import ConfigError
 
@@ -27,36 +30,93 @@ def _user_error(err: Exception) -> str:
     return f"{type(err).__name__}{': ' + message if message else ''}"
 
 
-def _shapes(tree) -> str:
-    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages); a leaf that is no
-    array (a Python number) by its type's name."""
-    def one(leaf):
-        if not hasattr(leaf, "dtype") or not hasattr(leaf, "shape"):
-            return f"{type(leaf).__name__}"
-        return f"{leaf.dtype}{list(leaf.shape)}"
-    return ", ".join(one(leaf) for leaf in jax.tree.leaves(tree))
+def _shapes(tree, most: int | None = None) -> str:
+    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages), the first ``most``
+    (all if None) and how many more; a leaf that is no array (a Python number) by its type's name."""
+    leaves = [_leaf(leaf) for leaf in jax.tree.leaves(tree)]
+    more = len(leaves) - most if most is not None and len(leaves) > most else 0
+    return ", ".join(leaves[:len(leaves) - more]) + (f" and {more} more" if more else "")
 
 
-def _check_action_count(task) -> None:
-    """``task.num_actions`` against the environment's action space where it says (a gymnax
-    ``Discrete(n)``, or a ``Box`` of continuous actions): an action the environment does not
-    have would be taken silently (CartPole with 5 actions pushes 3, 5 and 7 times as hard)."""
-    import math
+def _leaf(leaf) -> str:
+    """``dtype[shape]`` of an array leaf, the type's name of any other (for messages)."""
+    if not hasattr(leaf, "shape") or not hasattr(leaf, "dtype"):
+        return type(leaf).__name__
+    return f"{leaf.dtype}{list(leaf.shape)}"
 
+
+def _difference(expected, given, what: str = "expected") -> str | None:
+    """Where pytree ``given`` differs from ``expected`` in its leaves' paths, shapes or dtypes:
+    the first such leaf, ``".path (f32[3] WHAT, i32[3] here)"``, and how many more; None where
+    they agree (leaves and structure)."""
+    def table(tree):
+        return {jax.tree_util.keystr(path): _leaf(x) for path, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
+
+    want, got = table(expected), table(given)
+    differ = [f"{path or 'the whole'} ({want.get(path, 'no leaf')} {what}, {got.get(path, 'no leaf')} here)"
+              for path in dict.fromkeys([*want, *got]) if want.get(path) != got.get(path)]
+    if not differ:
+        return None if jax.tree.structure(expected) == jax.tree.structure(given) else \
+            f"the containers differ ({jax.tree.structure(given)} here)"
+    return differ[0] + (f" and {len(differ) - 1} more" if len(differ) > 1 else "")
+
+
+def _batch_problem(level, levels) -> str | None:
+    """Where ``levels`` is no batch of levels like ``level`` (a leading axis of one length ≥ 1
+    on every leaf, then the leaf's rank; an evaluation environment may play larger levels): the
+    first leaf that is not, and how many more; None where it is."""
+    paths = jax.tree_util.keystr
+    rank = {paths(p): len(x.shape) for p, x in jax.tree_util.tree_flatten_with_path(level)[0]}
+    got = {paths(p): np.shape(x) for p, x in jax.tree_util.tree_flatten_with_path(levels)[0]}
+    if not got:
+        return "no arrays"
+    count = next(iter(got.values()))[:1] or (0,)
+    differ = [f"{path or 'the whole'} ({'no leaf' if path not in rank else f'[{count[0]}, rank {rank[path]}]'} "
+              f"expected, {list(got[path]) if path in got else 'no leaf'} here)"
+              for path in dict.fromkeys([*rank, *got])
+              if path not in rank or path not in got or len(got[path]) != rank[path] + 1 or got[path][:1] != count
+              or count == (0,)]
+    if not differ:
+        return None if jax.tree.structure(levels) == jax.tree.structure(level) else \
+            f"the containers differ ({jax.tree.structure(levels)} here)"
+    return differ[0] + (f" and {len(differ) - 1} more" if len(differ) > 1 else "")
+
+
+def _check_actions(task) -> None:
+    """The task's action declaration (:mod:`remidi.envs.actions`), then the space against the
+    environment's ``action_space(params)`` where that is one of the supported kinds: an action
+    the environment does not have would be taken silently (CartPole with 5 actions pushes 3, 5
+    and 7 times as hard)."""
+    declared = task.action_space
+    if declared is None:
+        _task_size("task.num_actions", task.num_actions)
+    elif not isinstance(declared, (acts.Discrete, acts.MultiDiscrete, acts.Box)):
+        raise ConfigError(f"task.action_space: must be one of remidi.envs.actions' {', '.join(acts.SUPPORTED)} "
+                          f"(from_env_space reads one off an environment's space), got a {type(declared).__name__}")
+    elif declared.problem() is not None:
+        raise ConfigError(f"task.action_space: {declared}: {declared.problem()}")
+    else:  # the shorthand given beside it must say the same
+        shorthand = declared.task_fields()
+        clash = [f"{key}={value}" for key, value in (("num_actions", task.num_actions), ("continuous", task.continuous))
+                 if value is not None and value is not False and shorthand.get(key) != value]
+        if clash:
+            raise ConfigError(f"task.num_actions: {', '.join(clash)} disagrees with action_space={declared}; give "
+                              f"action_space alone")
     try:
-        space = task.env.action_space(task.params)
-    except Exception:  # noqa: BLE001 (an environment without a usable action space: nothing to compare)
+        env_space = acts.from_env_space(task.env.action_space(task.params))
+    except Exception:  # noqa: BLE001 (an environment without a usable, supported action space: nothing to compare)
         return
-    if task.continuous:
-        shape = getattr(space, "shape", None)
-        count = math.prod(shape) if isinstance(shape, tuple) and shape else None
-    else:
-        n = getattr(space, "n", None)
-        count = int(n) if isinstance(n, (int, np.integer)) else None
-    if count is not None and count != task.num_actions:
+    mine = task.actions
+    if env_space == mine:
+        return
+    if declared is None and type(env_space) is type(mine):  # the shorthand's count is off
+        count = env_space.dims if isinstance(env_space, acts.Box) else env_space.n
         kind = "continuous action dimensions" if task.continuous else "actions"
         raise ConfigError(f"task.num_actions: must be the environment's {count} {kind} (its action_space), got "
                           f"{task.num_actions}")
+    field = "action_space" if declared is not None else "num_actions"
+    raise ConfigError(f"task.{field}: must be the environment's {env_space} (its action_space), got {mine}; declare "
+                      f"action_space={env_space} (remidi.envs.actions)")
 
 
 def _traced(field: str, what: str, fn, *args, hint: str = ""):
@@ -110,8 +170,9 @@ def _reads_key(fn, key, *args, kept=lambda out: True) -> bool:
 
 def validate_task(task: UEDTask) -> None:
     """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
-    train: field types and ranges (``num_actions`` ≥ 1, ``max_episode_steps`` ≥ 1, the functions
-    callable), then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
+    train: field types and ranges (``max_episode_steps`` ≥ 1, the functions callable), the action
+    space (``num_actions`` ≥ 1 or a valid ``action_space``, the environment's own where it says),
+    then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
     level, a reset to it and one step: the step's observation has the reset's shapes, its reward is
     a float scalar and its done a boolean scalar; the level tags are boolean scalars, the optimal
     returns float scalars, edited, easy and reseeded levels and a level the ``level_builder``
@@ -123,8 +184,7 @@ def validate_task(task: UEDTask) -> None:
         raise ConfigError(f"task: must be a remidi UEDTask, got a {type(task).__name__}")
     if task in _VALIDATED:
         return
-    for key in ("num_actions", "max_episode_steps"):
-        _task_size(f"task.{key}", getattr(task, key))
+    _task_size("task.max_episode_steps", task.max_episode_steps)
     for key in ("deterministic_reset", "continuous"):
         if not isinstance(getattr(task, key), bool):
             raise ConfigError(f"task.{key}: must be true or false, got {getattr(task, key)!r}")
@@ -148,7 +208,10 @@ def validate_task(task: UEDTask) -> None:
         if not isinstance(env, UnderspecifiedEnv):
             raise ConfigError(f"task.eval_envs: {name!r} must be a jaxued UnderspecifiedEnv, got a {type(env).__name__}")
 
-    _check_action_count(task)
+    _check_actions(task)
+    if task.expected_return is not None and not isinstance(task.actions, acts.Discrete):
+        raise ConfigError(f"task.expected_return: reads a Discrete policy's action probabilities, but the actions are "
+                          f"{task.actions}; allowed: None")
 
     rng = jax.random.PRNGKey(0)
     def first(k):
@@ -167,18 +230,19 @@ def validate_task(task: UEDTask) -> None:
         raise ConfigError("task.deterministic_reset: true promises that env.reset_to_level ignores its key, but what "
                           "it returns depends on the key (traced); set it false (the reference tracker then "
                           "replays every start), or put the start's randomness into the level")
-    action = (jax.ShapeDtypeStruct((task.num_actions,), jnp.float32) if task.continuous
-              else jax.ShapeDtypeStruct((), jnp.int32))
+    action = acts.example_action(task.actions)
     stepped = _traced("env", "a step of the environment", lambda k, s, a: task.env.step(k, s, a, task.params),
-                      rng, state, action, hint=f" (from a level of sample_level: {_shapes(level)})")
+                      rng, state, action, hint=f" (from a level of sample_level: {_shapes(level, 4)}) and an action "
+                                               f"{_leaf(action)} of {task.actions}")
     if not isinstance(stepped, tuple) or len(stepped) != 5:
         raise ConfigError("task.env: step must return (obs, state, reward, done, info)")
     next_obs, next_state, reward, done, _ = stepped
-    if jax.tree.structure(next_obs) != jax.tree.structure(obs) or _shapes(next_obs) != _shapes(obs):
-        raise ConfigError(f"task.env: a step's observation ({_shapes(next_obs)}) must have the reset's shapes "
-                          f"({_shapes(obs)})")
-    if jax.tree.structure(next_state) != jax.tree.structure(state) or _shapes(next_state) != _shapes(state):
-        raise ConfigError("task.env: a step's state must have the shapes and dtypes of the reset's state")
+    if _difference(obs, next_obs) is not None:
+        raise ConfigError(f"task.env: a step's observation must have the reset's shapes and dtypes; "
+                          f"{_difference(obs, next_obs, 'at the reset')}")
+    if _difference(state, next_state) is not None:
+        raise ConfigError(f"task.env: a step's state must have the shapes and dtypes of the reset's state; "
+                          f"{_difference(state, next_state, 'at the reset')}")
     if not _is_scalar(reward, "float"):
         raise ConfigError(f"task.env: a step's reward must be a float scalar (f32[]) per environment, got "
                           f"{_shapes(reward)}")
@@ -208,49 +272,42 @@ def validate_task(task: UEDTask) -> None:
                     ("reseed_level", lambda k, lv: task.reseed_level(k, lv))):
         if getattr(task, key) is not None:
             made = _traced(key, "making a level", fn, rng, level)
-            if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):
-                raise ConfigError(f"task.{key}: must return a level with the sampled level's shapes ({_shapes(level)}), "
-                                  f"got {_shapes(made)}")
+            if _difference(level, made) is not None:
+                raise ConfigError(f"task.{key}: must return a level with the sampled level's shapes and dtypes; "
+                                  f"{_difference(level, made, 'sampled')}")
     builder = task.level_builder
     if builder is not None:
         for key in ("num_steps", "num_actions"):
             _task_size(f"task.level_builder.{key}", getattr(builder, key, None))
         made = _traced("level_builder", "building a level from a whole design",
                        lambda k: builder.build(k, jnp.zeros((builder.num_steps,), jnp.int32)), rng)
-        if jax.tree.structure(made) != jax.tree.structure(level) or _shapes(made) != _shapes(level):
-            raise ConfigError(f"task.level_builder: must build a level with the sampled level's shapes "
-                              f"({_shapes(level)}), got {_shapes(made)}")
+        if _difference(level, made) is not None:
+            raise ConfigError(f"task.level_builder: must build a level with the sampled level's shapes and dtypes; "
+                              f"{_difference(level, made, 'sampled')}")
 
-    level_leaves = jax.tree.leaves(level)
     for name, levels in task.eval_sets.items():
         leaves = jax.tree.leaves(levels)
-        same_tree = jax.tree.structure(levels) == jax.tree.structure(level)
-        counts = {np.shape(leaf)[0] if np.ndim(leaf) else None for leaf in leaves}
-        if (not same_tree or any(np.ndim(a) != len(b.shape) + 1 for a, b in zip(leaves, level_leaves))
-                or len(counts) != 1 or None in counts or 0 in counts):
+        problem = _batch_problem(level, levels)
+        if problem is not None:
             raise ConfigError(f"task.eval_sets: {name!r} must be a batch of levels, every leaf with the level's "
-                              f"shape after one leading axis of the same length ≥ 1 (levels {_shapes(level)}; "
-                              f"got {_shapes(levels) or 'no arrays'})")
+                              f"shape after one leading axis of the same length ≥ 1; {problem}")
         if any(not hasattr(leaf, "dtype") or jax.dtypes.issubdtype(leaf.dtype, jax.dtypes.prng_key)
                for leaf in leaves):
             raise ConfigError(f"task.eval_sets: {name!r} must hold arrays (typed PRNG keys as jax.random.key_data), "
-                              f"got {_shapes(levels)}")
+                              f"got {_shapes(levels, 4)}")
         one = jax.tree.map(lambda x: np.asarray(x)[0], levels)
-        if name not in task.eval_envs and _shapes(one) != _shapes(level):
-            differ = [f"{jax.tree_util.keystr(path) or 'the level'} ({_shapes(a)} sampled, {_shapes(b)} here)"
-                      for (path, a), b in zip(jax.tree_util.tree_flatten_with_path(level)[0], jax.tree.leaves(one))
-                      if _shapes(a) != _shapes(b)]
+        if name not in task.eval_envs and _difference(level, one) is not None:
             raise ConfigError(f"task.eval_sets: the levels of {name!r} must have the sampled level's dtypes and "
-                              f"shapes; they differ in {'; '.join(differ)} (NumPy's int64 or float64: cast them, "
-                              f"e.g. with jnp.asarray)")
+                              f"shapes; they differ in {_difference(level, one, 'sampled')} (NumPy's int64 or "
+                              f"float64: cast them, e.g. with jnp.asarray)")
         env = task.eval_envs.get(name, task.env)
         first = _traced("eval_sets", f"resetting to a level of {name!r}",
                         lambda k, lvs, env=env: env.reset_to_level(k, jax.tree.map(lambda x: x[0], lvs),
                                                                    task.params)[0],
                         rng, levels)
-        if jax.tree.structure(first) != jax.tree.structure(obs) or _shapes(first) != _shapes(obs):
-            raise ConfigError(f"task.eval_sets: {name!r}'s levels give observations {_shapes(first)}, but the network "
-                              f"reads the training levels' {_shapes(obs)}")
+        if _difference(obs, first) is not None:
+            raise ConfigError(f"task.eval_sets: {name!r}'s levels give other observations than the training levels' "
+                              f"(which the network reads): {_difference(obs, first, 'in training')}")
     _VALIDATED.add(task)
 
 
@@ -271,31 +328,44 @@ def _observation_batch(task: UEDTask, flat: bool):
                           f"jaxued UnderspecifiedEnv and sample_level must return one of its levels)") from None
 
 
-def _read_error(net, obs) -> Exception | None:
-    """None if ``net`` can be initialised on the observation batch ``obs`` (traced abstractly),
-    else the error it raised."""
+def _read_error(net, obs) -> str | None:
+    """None if ``net`` can read the observation batch ``obs`` (``[1, 1, ...]`` leaves), else why:
+    first by its own ``check_observation`` of one observation, then by initialising it on the
+    batch (traced abstractly: nothing is compiled or run)."""
+    problem = observation_problem(net, jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[2:], x.dtype), obs))
+    if problem is not None:
+        return problem
     try:
         jax.eval_shape(lambda o: net.init(jax.random.PRNGKey(0), net.initialize_carry(1), o, jnp.ones((1, 1), bool)),
                        obs)
         return None
     except Exception as err:  # any failure to read the observation is the choice of network
-        return err
+        return f"the network failed on it: {_user_error(err)}"
+
+
+def _fits(name: str, task: UEDTask, obs) -> bool:
+    """Whether the network ``name`` at its default options reads the observation batch ``obs``."""
+    try:
+        return _read_error(make_network(name, for_task(task).network_actions, for_task(task).continuous), obs) is None
+    except Exception:  # noqa: BLE001 (a registered network that cannot even be built fits nothing)
+        return False
 
 
 def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
-    """Raise ConfigError unless ``net`` can be applied to the task's observations (flattened to
-    one vector if ``flat``, as ``normalize_obs`` does; traced abstractly: nothing is compiled or
-    run). The error names the networks that can; an environment that fails to produce an
-    observation gets its own one-line error instead (:func:`_observation_batch`)."""
+    """Raise ConfigError unless ``net`` can read the task's observations (flattened to one vector
+    if ``flat``, as ``normalize_obs`` does): its ``check_observation``, then an abstract trace. The
+    one-line error names what the network reads, what the task gives, why, and the networks that
+    can read it; an environment that fails to produce an observation gets its own one-line error
+    instead (:func:`_observation_batch`)."""
     obs = _observation_batch(task, flat)
-    err = _read_error(net, obs)
-    if err is None:
+    problem = _read_error(net, obs)
+    if problem is None:
         return
-    fits = [other for other in sorted(NETWORKS)
-            if other != name and _read_error(make_network(other, task.num_actions, task.continuous), obs) is None]
-    what = "this task's observations" + (" (flattened by normalize_obs)" if flat else "")
-    raise ConfigError(f"network: {name} cannot read {what} ({type(err).__name__}); "
-                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(sorted(NETWORKS))}")
+    fits = [other for other in NETWORKS if other != name and _fits(other, task, obs)]
+    one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[2:], x.dtype), obs)
+    what = "this task's observation" + (" (flattened by normalize_obs)" if flat else "")
+    raise ConfigError(f"network: {name} reads {reads(net)}; {what} is {describe_observation(one)} ({problem}); "
+                      f"allowed: {', '.join(fits) or 'none of ' + ', '.join(NETWORKS)}")
 
 
 def step_reads_its_key(task: UEDTask) -> bool:
@@ -315,7 +385,7 @@ def _trace_step_key_use(task: UEDTask) -> bool:
         _, state = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
     except Exception:  # noqa: BLE001 (validate_task reports a failing reset)
         return False
-    action = jnp.zeros((task.num_actions,), jnp.float32) if task.continuous else jnp.zeros((), jnp.int32)
+    action = acts.zero_action(task.actions)
 
     def kept(out):  # the tracker reads observations and ends (and the state carries them on), not reward or info
         obs, nstate, reward, done, info = out

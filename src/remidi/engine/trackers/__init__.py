@@ -22,6 +22,7 @@ from remidi.engine.trackers.belief import BeliefTracker
 from remidi.engine.trackers.belief_model import BeliefModel, LearnedSettings, coding_for, coding_problem
 from remidi.engine.trackers.exact import MODES, exact_budget, make_tracker
 from remidi.engine.trackers.simulated import Simulated
+from remidi.envs.actions import Box, MultiDiscrete
 from remidi.errors import ConfigError, positive_int, require
 
 #: every value of ``remidi.tracker``
@@ -32,7 +33,9 @@ TRACKERS = MODES + ("belief", "simulated")
 def model_for(task, hidden: int) -> BeliefModel:
     """The belief model of ``task`` (its observations' coding, its actions) with ``hidden`` GRU units."""
     obs = jax.eval_shape(lambda: example_observation(task)[0])
-    return BeliefModel(coding_for(obs), num_actions=task.num_actions, hidden=hidden)
+    actions = task.actions  # Discrete or MultiDiscrete (validate_tracker refuses a Box)
+    counts = actions.nvec if isinstance(actions, MultiDiscrete) else actions.n
+    return BeliefModel(coding_for(obs), num_actions=counts, hidden=hidden)
 
 
 def tracker_for(task, cfg, algo) -> Tracker:
@@ -81,8 +84,8 @@ def validate_tracker(cfg, algo, task) -> None:
         require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
                 "(the reference learns from the task generator's fresh levels, which a generator never plays)",
                 r.belief_reference)
-        require(not task.continuous, "remidi.tracker", "prefix or per_step for a task with continuous actions "
-                "(the belief model reads discrete actions)", r.tracker)
+        require(not isinstance(task.actions, Box), "remidi.tracker", "prefix or per_step for a task with continuous "
+                "actions (the belief model reads discrete actions: Discrete or MultiDiscrete)", r.tracker)
         obs = example_observation(task)[0]
         problem = coding_problem(coding_for(obs), obs)
         if problem is not None:

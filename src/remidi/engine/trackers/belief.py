@@ -202,7 +202,7 @@ class BeliefMemory:
     ref: Any = None
     ref_opt: Any = None
     ref_frozen: Any = None
-    # ... and the recorded rollouts themselves (coded observations i8[R, T, N, E], actions i32[R, T, N],
+    # ... and the recorded rollouts themselves (coded observations i8[R, T, N, E], actions i32[R, T, N(, k)],
     # resets bool[R, T, N]), so that at the freeze the reference's part of each recorded ratio is
     # computed by the frozen reference, the one that will judge (``scores`` then holds the model's part)
     codes: Any = None
@@ -223,7 +223,8 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batc
     if reference:
         ref, ref_opt, ref_frozen = init_reference(model, optimizer, num_buffers, rng)
         codes = jnp.zeros((rows,) + batch + (model.coding.num_entries,), jnp.int8)
-        actions, resets = jnp.zeros((rows,) + batch, jnp.int32), jnp.ones((rows,) + batch, bool)
+        actions = jnp.zeros((rows,) + batch + model.action_shape, jnp.int32)
+        resets = jnp.ones((rows,) + batch, bool)
     return BeliefMemory(ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen, codes=codes, actions=actions, resets=resets,
                         params=params, opt_state=optimizer.init(first),
                         threshold=jnp.full((num_buffers, num_length_buckets(min(num_steps, max_length or num_steps))),

@@ -133,16 +133,30 @@ def coding_problem(coding: ObsCoding, obs) -> str | None:
 # ---------------------------------------------------------------------------- the model
 @dataclass(frozen=True)
 class BeliefModel:
-    """A GRU next-observation model over ``coding``'s entries and ``num_actions`` discrete
-    actions with ``hidden`` units (static, hashable: pass it as a static argument)."""
+    """A GRU next-observation model over ``coding``'s entries and the actions with ``hidden``
+    units (static, hashable: pass it as a static argument). ``num_actions``: ``n`` for one
+    discrete choice (actions ``i32[...]``), or a tuple of choice counts, one per component
+    (``MultiDiscrete``, actions ``i32[..., k]``); each choice is one-hot coded."""
 
     coding: ObsCoding
-    num_actions: int
+    num_actions: int | tuple[int, ...]
     hidden: int = 64
 
     @property
+    def action_shape(self) -> tuple[int, ...]:
+        """An action's shape: ``()``, or ``(k,)`` for ``k`` components."""
+        return (len(self.num_actions),) if isinstance(self.num_actions, tuple) else ()
+
+    @property
     def input_size(self) -> int:
-        return self.coding.num_entries * self.coding.num_categories + self.num_actions
+        counts = self.num_actions if isinstance(self.num_actions, tuple) else (self.num_actions,)
+        return self.coding.num_entries * self.coding.num_categories + sum(counts)
+
+    def action_code(self, action) -> jax.Array:
+        """f32[..., Σ counts]: the action one-hot, component by component."""
+        if not isinstance(self.num_actions, tuple):
+            return jax.nn.one_hot(action, self.num_actions)
+        return jnp.concatenate([jax.nn.one_hot(action[..., i], n) for i, n in enumerate(self.num_actions)], axis=-1)
 
     def init(self, rng) -> dict:
         """The parameters: GRU kernels ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], biases ``b`` f32[3H],
@@ -174,10 +188,11 @@ class BeliefModel:
         return jnp.where(go_on, jax.nn.log_sigmoid(logit), jax.nn.log_sigmoid(-logit))
 
     def cell(self, params, hidden, cats, action) -> jax.Array:
-        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` i32[...]."""
+        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` (i32[...],
+        or i32[..., k] for components)."""
         k = self.coding.num_categories
-        x = jnp.concatenate([jax.nn.one_hot(cats, k).reshape(cats.shape[:-1] + (-1,)),
-                             jax.nn.one_hot(action, self.num_actions)], axis=-1)
+        x = jnp.concatenate([jax.nn.one_hot(cats, k).reshape(cats.shape[:-1] + (-1,)), self.action_code(action)],
+                            axis=-1)
         gx = x @ params["wx"] + params["b"]
         gh = hidden @ params["wh"]
         h = self.hidden

@@ -299,7 +299,7 @@ class Simulated(Tracker):
         threshold = jnp.full((num_buffers, buckets), jnp.inf, jnp.float32)  # strongly typed, as a checkpoint restores it
         return SimMemory(counts=init_counts(coding), threshold=threshold,
                          codes=jnp.zeros(batch + (coding.num_entries + 1,), jnp.int8),
-                         actions=jnp.zeros(batch, jnp.int32), resets=jnp.ones(batch, bool),
+                         actions=jnp.zeros(batch + self.model.action_shape, jnp.int32), resets=jnp.ones(batch, bool),
                          levels=jax.tree.map(lambda x: jnp.zeros(batch[:1] + (cfg.num_envs,) + x.shape, x.dtype), level),
                          written=jnp.zeros((), jnp.int32), ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen)
 

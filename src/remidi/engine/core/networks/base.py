@@ -1,0 +1,219 @@
+"""The pieces every network is built from: initialisers, activations, reading an observation's
+fields, the policy and value heads, the LSTM over a rollout and the patch convolution.
+
+Initialisation follows common PPO practice: orthogonal weights with gain ``sqrt(2)`` in hidden
+layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero biases.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from remidi.engine.core.lstm import lstm_over_time
+from remidi.errors import one_of
+
+ACTIVATIONS = {"tanh": nn.tanh, "relu": nn.relu}
+
+HIDDEN_INIT = nn.initializers.orthogonal(np.sqrt(2.0))
+POLICY_INIT = nn.initializers.orthogonal(0.01)
+VALUE_INIT = nn.initializers.orthogonal(1.0)
+ZEROS = nn.initializers.zeros
+
+
+def activation_fn(name: str):
+    """The activation function called ``name`` (``"tanh"`` or ``"relu"``)."""
+    if name not in ACTIVATIONS:
+        raise one_of("network.activation", name, sorted(ACTIVATIONS))
+    return ACTIVATIONS[name]
+
+
+def obs_field(obs: Any, name: str):
+    """Field ``name`` of an observation given as a dict or as any object with that attribute."""
+    return obs[name] if isinstance(obs, dict) else getattr(obs, name)
+
+
+def has_field(obs: Any, name: str) -> bool:
+    """Whether :func:`obs_field` finds ``name`` in ``obs`` (a dict key or an attribute of a
+    non-array object)."""
+    if isinstance(obs, dict):
+        return name in obs
+    return not hasattr(obs, "shape") and hasattr(obs, name)
+
+
+def flatten_obs(obs: Any) -> jax.Array:
+    """Flatten every leaf of ``obs`` (leaves ``[T, N, ...]``) after ``[T, N]`` and concatenate.
+
+    Returns ``f32[T, N, D]`` with leaves in ``jax.tree.leaves`` order.
+    """
+    leaves = jax.tree.leaves(obs)
+    return jnp.concatenate(
+        [jnp.reshape(x, x.shape[:2] + (-1,)).astype(jnp.float32) for x in leaves], axis=-1
+    )
+
+
+def dense(features: int, name: str) -> nn.Dense:
+    """A hidden ``nn.Dense`` layer with the hidden initialisation (orthogonal √2, zero bias)."""
+    return nn.Dense(features, kernel_init=HIDDEN_INIT, bias_init=ZEROS, name=name)
+
+
+class ActorCriticHeads(nn.Module):
+    """Separate policy and value heads: ``Dense(hidden) -> act -> Dense(out)`` each.
+
+    ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``; with
+    ``continuous`` the policy output is ``f32[..., 2·num_actions]``: the Gaussian mean (the
+    Dense output) then a state-independent log-std parameter ``log_std`` (zeros initially).
+
+    The parameters are those of ``nn.Dense`` layers named ``policy_hidden``, ``policy_out``,
+    ``value_hidden`` and ``value_out`` (same names, shapes, initialisers and so initial values);
+    the two hidden layers are computed as one product with their kernels side by side
+    (``[D, 2·hidden]``): one product forward and one backward instead of two each plus a sum.
+    """
+
+    num_actions: int
+    hidden: int = 32
+    activation: str = "relu"
+    continuous: bool = False
+
+    @nn.compact
+    def __call__(self, x):
+        act = activation_fn(self.activation)
+        d = x.shape[-1]
+        (pk, pb), (vk, vb) = (_Kernel((d, self.hidden), HIDDEN_INIT, True, name=f"{head}_hidden")()
+                              for head in ("policy", "value"))
+        both = act(x @ jnp.concatenate([pk, vk], axis=-1) + jnp.concatenate([pb, vb]))
+        pi, v = both[..., :self.hidden], both[..., self.hidden:]
+        logits = nn.Dense(self.num_actions, kernel_init=POLICY_INIT, bias_init=ZEROS, name="policy_out")(pi)
+        if self.continuous:
+            log_std = self.param("log_std", ZEROS, (self.num_actions,))
+            logits = jnp.concatenate([logits, jnp.broadcast_to(log_std, logits.shape)], axis=-1)
+        value = nn.Dense(1, kernel_init=VALUE_INIT, bias_init=ZEROS, name="value_out")(v)
+        return logits, jnp.squeeze(value, axis=-1)
+
+
+def zero_lstm_carry(batch_size: int, features: int) -> tuple[jax.Array, jax.Array]:
+    """The initial ``(c, h)`` of :class:`ResetLSTM`, each ``f32[batch_size, features]`` zeros."""
+    zeros = jnp.zeros((batch_size, features), jnp.float32)
+    return zeros, zeros
+
+
+class ResetLSTM(nn.Module):
+    """An LSTM scanned over time whose carry is zeroed at steps where ``reset`` is True.
+
+    ``carry``: ``(c, h)`` each ``f32[N, features]``; ``inputs``: ``(x f32[T, N, D], reset bool[T, N])``.
+    Returns ``(carry, y f32[T, N, features])``.
+
+    The parameters are those of :class:`flax.linen.OptimizedLSTMCell` (submodule ``cell``: input
+    kernels ``ii if ig io`` ``[D, features]``, recurrent kernels and biases ``hi hf hg ho``, the
+    same initialisers), and so is the arithmetic (:mod:`remidi.engine.core.lstm`). The kernels and
+    the bias are joined once, outside the loop over time, into one ``[D + 1 + features,
+    4·features]`` matrix that multiplies ``[x, 1, h]`` at each step, and the backward pass
+    computes the weight gradients after the loop, as single large products.
+    """
+
+    features: int
+
+    @nn.compact
+    def __call__(self, carry, inputs):
+        x, reset = inputs
+        kernel, bias = _LSTMParams(self.features, name="cell")(x.shape[-1])
+        return lstm_over_time(kernel, bias, x, reset, carry)
+
+
+class _LSTMParams(nn.Module):
+    """The parameters of :class:`flax.linen.OptimizedLSTMCell` (same names, shapes, initialisers
+    and so the same initial values), returned joined: ``(kernel f32[D + H, 4H], bias f32[4H])``,
+    gates in the order ``i f g o``."""
+
+    features: int
+
+    @nn.compact
+    def __call__(self, input_size: int):
+        h = self.features
+        inputs = [_Kernel((input_size, h), nn.initializers.lecun_normal(), False, name=f"i{gate}")()
+                  for gate in "ifgo"]
+        recurrent = [_Kernel((h, h), nn.initializers.orthogonal(), True, name=f"h{gate}")() for gate in "ifgo"]
+        kernel = jnp.concatenate([jnp.concatenate([k for k, _ in inputs], axis=-1),
+                                  jnp.concatenate([k for k, _ in recurrent], axis=-1)], axis=0)
+        return kernel, jnp.concatenate([b for _, b in recurrent])
+
+
+class _Kernel(nn.Module):
+    """One gate's ``kernel`` (and ``bias``, zeros) as flax's ``Dense`` names them."""
+
+    shape: tuple[int, int]
+    initializer: Any
+    use_bias: bool
+
+    @nn.compact
+    def __call__(self):
+        kernel = self.param("kernel", self.initializer, self.shape)
+        bias = self.param("bias", nn.initializers.zeros_init(), self.shape[-1:]) if self.use_bias else None
+        return kernel, bias
+
+
+class PatchConv(nn.Module):
+    """``nn.Conv(features, kernel_size, padding="VALID")`` with the same parameters (``kernel``
+    ``[kh, kw, C, features]``, ``bias``), initial values and outputs, computed as one matrix
+    product of the image's patches ``[..., kh·kw·C]`` with the kernel. ``x``: ``[..., H, W, C]``
+    (any leading axes); returns ``[..., H − kh + 1, W − kw + 1, features]``.
+
+    Why: on a CPU, XLA's convolution of the maze agent's 5×5 views ran at ≈ 3 GFLOP/s (its
+    weight gradient alone took 7% of a PPO update); the product runs at the machine's matrix rate.
+    """
+
+    features: int
+    kernel_size: tuple[int, int]
+
+    @nn.compact
+    def __call__(self, x):
+        (kh, kw), (height, width, c) = self.kernel_size, x.shape[-3:]
+        kernel = self.param("kernel", HIDDEN_INIT, (kh, kw, c, self.features))
+        bias = self.param("bias", ZEROS, (self.features,))
+        oh, ow = height - kh + 1, width - kw + 1
+        patches = jnp.stack([x[..., i:i + oh, j:j + ow, :] for i in range(kh) for j in range(kw)], axis=-2)
+        patches = patches.reshape(x.shape[:-3] + (oh, ow, kh * kw * c))  # (i, j, channel): the kernel's order
+        return patches @ kernel.reshape(kh * kw * c, self.features) + bias
+
+
+def lstm_carry_or_dummy(batch_size: int, lstm_size: int):
+    """The initial carry of a network whose LSTM is optional (:func:`lstm_and_heads`): zero
+    ``(c, h)``, each ``f32[batch_size, lstm_size]``, or with ``lstm_size`` 0 the feed-forward
+    dummy ``f32[batch_size]``."""
+    return zero_lstm_carry(batch_size, lstm_size) if lstm_size > 0 else jnp.zeros((batch_size,), jnp.float32)
+
+
+def lstm_and_heads(net: nn.Module, carry, x, reset):
+    """What follows an encoder, called inside ``net``'s compact ``__call__`` (its submodules
+    ``lstm`` and ``heads``): an LSTM of ``net.lstm_size`` units (none if 0: the carry passes
+    unchanged), then the policy and value heads (:class:`ActorCriticHeads`, ``net.head_hidden``
+    units, ``net.activation``). ``x``: ``f32[T, N, D]``; ``reset``: ``bool[T, N]``. Returns
+    ``(carry, (logits, value))``."""
+    if net.lstm_size > 0:
+        carry, x = ResetLSTM(net.lstm_size, name="lstm")(carry, (x, reset))
+    heads = ActorCriticHeads(net.num_actions, net.head_hidden, net.activation, net.continuous, name="heads")
+    return carry, heads(x)
+
+
+def shape_text(x) -> str:
+    """``f32[5, 5, 3]``: an array's (or ``jax.ShapeDtypeStruct``'s) dtype and shape, short."""
+    dtype = np.dtype(x.dtype)
+    kind = {"f": "f", "i": "i", "u": "u", "b": "bool", "c": "c"}.get(dtype.kind, dtype.kind)
+    name = kind if kind == "bool" else f"{kind}{dtype.itemsize * 8}"
+    return f"{name}[{', '.join(str(d) for d in x.shape)}]"
+
+
+def flat_problem(obs) -> str | None:
+    """Why ``obs`` cannot be flattened into one vector (:func:`flatten_obs`): no leaves, or a leaf
+    that is not a numeric or boolean array; None if it can."""
+    leaves = jax.tree.leaves(obs)
+    if not leaves:
+        return "it has no arrays"
+    for leaf in leaves:
+        if not hasattr(leaf, "shape") or np.dtype(leaf.dtype).kind not in "biuf":
+            return f"a leaf is {type(leaf).__name__}, not a numeric array"
+    return None

@@ -170,8 +170,8 @@ def kinetix_task(size: str = "s", observation: str = "symbolic_flat", actions: s
     static = static_env_params_from_size(size)
     kinetix_params = EnvParams().replace(dense_reward_scale=float(dense_reward_scale), max_timesteps=MAX_STEPS)
     ued_params = UEDParams()  # one instance: it compares by identity, and Kinetix's sampler jits on it
-    obs_kind = OBSERVATIONS[observation]
-    kinetix_env = make_kinetix_env(ActionType[ACTIONS[actions].kinetix_type], ObservationType[obs_kind.kinetix_type],
+    obs_kind, action_kind = OBSERVATIONS[observation], ACTIONS[actions]
+    kinetix_env = make_kinetix_env(ActionType[action_kind.kinetix_type], ObservationType[obs_kind.kinetix_type],
                                    None, kinetix_params, static, auto_reset=False)
     env = KinetixUED(kinetix_env, kinetix_params.replace(dense_reward_scale=0.0), obs_kind, dense_reward_scale)
     sample_one = make_reset_fn_sample_kinetix_level(kinetix_params, static, ued_params,
@@ -185,7 +185,7 @@ def kinetix_task(size: str = "s", observation: str = "symbolic_flat", actions: s
         params=env.params,
         sample_level=filtered_sampler(sample_one, kinetix_params, static, ued_params, filter_env, filter_ratio,
                                       filter_steps),
-        num_actions=int(kinetix_env.action_space(kinetix_params).n),
+        num_actions=action_kind.declare(kinetix_env.action_space(kinetix_params)),
         max_episode_steps=MAX_STEPS,
         eval_sets=held_out_sets(size, static) if held_out else {},
         level_tags=lambda level: level_tags(level, capacity),

@@ -67,14 +67,15 @@ class Observation:
 
 @dataclass(frozen=True)
 class Actions:
-    """An action component: Kinetix's ``ActionType`` (its name) and the task's action count
-    (``num_actions``, from Kinetix's action space)."""
+    """An action component: Kinetix's ``ActionType`` (its name) and ``declare``, Kinetix's action
+    space → the task's declaration of its actions (``UEDTask.num_actions``)."""
 
     kinetix_type: str
+    declare: Callable[[Any], Any]
 
 
 OBSERVATIONS = {
     "symbolic_flat": Observation("SYMBOLIC_FLAT", lambda obs: obs),
     "entity": Observation("SYMBOLIC_ENTITY", entity_observation),
 }
-ACTIONS = {"discrete": Actions("DISCRETE")}
+ACTIONS = {"discrete": Actions("DISCRETE", lambda space: int(space.n))}

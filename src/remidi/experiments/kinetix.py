@@ -74,7 +74,9 @@ def gpu_config() -> KinetixUEDConfig:
                       epochs=8, minibatches=32, lr=5e-5, anneal_lr=False, adam_eps=1e-5, max_grad_norm=1.0),
         buffer=BufferConfig(capacity=4000, prioritization="rank", temperature=1.0, staleness_coef=0.3,
                             replay_prob=0.5, min_fill=0.5, duplicate_check=False),
-        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=4000, steps_per_buffer=512),
+        # one tracker slot: two Kinetix levels rarely share a first observation (positions are drawn at
+        # random), and each slot steps the physics once more per env and step (tracker_overflow counts misses)
+        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=4000, steps_per_buffer=512, tracker_budget=1),
         accel=AccelConfig(num_edits=5),
     )
 
@@ -86,7 +88,6 @@ SMOKE = {
     "num_updates": 6, "num_envs": 8, "eval_every": 3, "eval_attempts": 1, "checkpoint_every": 3,
     "hidden_size": 64, "ppo.epochs": 1, "ppo.minibatches": 1, "ppo.lr": 3e-4, "buffer.capacity": 16,
     "buffer.min_fill": 0.25, "remidi.buffer_capacity": 16, "remidi.steps_per_buffer": 3,
-    "remidi.tracker_budget": 4,
 }
 CPU_REASONS = {
     "num_updates": "Kinetix's 2048 updates of 2048 envs × 256 steps are ≈ 2^30 environment steps, months on a "

@@ -7,10 +7,10 @@ from remidi.experiments.base import Experiment
 
 
 def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import brax, gymnax, lever, maze, tabular
+    from remidi.experiments import brax, gymnax, kinetix, lever, maze, tabular
 
     found: dict[str, Experiment] = {}
-    for module in (tabular, lever, maze, brax, gymnax):
+    for module in (tabular, lever, maze, brax, gymnax, kinetix):
         for exp in module.EXPERIMENTS:
             found[exp.name] = exp
     return found

@@ -182,3 +182,19 @@ def test_evaluate_plays_the_held_out_levels(run, tmp_path):
 def test_an_interrupted_run_resumes_to_the_uninterrupted_result(run, tmp_path, monkeypatch):
     assert_resumes_to_the_uninterrupted_result(
         monkeypatch, ["run", "kinetix-s", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path, at=2)
+
+
+def test_kinetix_own_agent_entity_observations_and_multi_discrete_actions_train(tmp_path):
+    """Kinetix's default interface: its multi-discrete actions (one choice per motor and per
+    thruster binding) declared as the task's action space, its entity observation read by remidi's
+    entity network; a ReMiDi run trains and writes its outputs."""
+    from remidi.envs.actions import MultiDiscrete
+
+    task = K.kinetix_task("s", "entity", "multi_discrete", held_out=False)
+    assert task.actions == MultiDiscrete((3, 3, 3, 3, 2, 2))
+    out = tmp_path / "run"
+    assert main(["run", "kinetix-s", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY, "--set", "network=entity", "--set", "hidden_size=0",
+                 "--set", "kinetix.observation=entity", "--set", "kinetix.actions=multi_discrete",
+                 "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["algo"] == "remidi" and "solve_rate/mean" in summary["metrics"]

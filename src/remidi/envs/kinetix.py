@@ -185,7 +185,7 @@ def kinetix_task(size: str = "s", observation: str = "symbolic_flat", actions: s
         params=env.params,
         sample_level=filtered_sampler(sample_one, kinetix_params, static, ued_params, filter_env, filter_ratio,
                                       filter_steps),
-        num_actions=action_kind.declare(kinetix_env.action_space(kinetix_params)),
+        action_space=action_kind.declare(kinetix_env.action_space(kinetix_params)),
         max_episode_steps=MAX_STEPS,
         eval_sets=held_out_sets(size, static) if held_out else {},
         level_tags=lambda level: level_tags(level, capacity),

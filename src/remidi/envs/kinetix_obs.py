@@ -9,9 +9,12 @@ reads; each is chosen once at set-up (``kinetix.observation``):
   entity convention, ``{"entities": {group: {"features": f32[n, F], "mask": bool[n]}}}``
   (:func:`entity_observation`), for a network over sets of entities.
 
-An *action* component names Kinetix's action type and the task's action count
-(``kinetix.actions``): ``discrete`` is Kinetix's ``DISCRETE`` (11 choices: a motor binding and
-direction, a thruster binding, or nothing: 2·4 + 2 + 1).
+An *action* component names Kinetix's action type and declares the task's action space
+(``kinetix.actions``, :mod:`remidi.envs.actions`): ``discrete`` is Kinetix's ``DISCRETE``
+(``Discrete(11)`` on size s: a motor binding and direction, a thruster binding, or nothing:
+2·4 + 2 + 1); ``multi_discrete`` is Kinetix's default ``MULTI_DISCRETE``, one choice per motor
+binding (forward, backward, off) and per thruster binding (on, off): ``MultiDiscrete((3, 3, 3,
+3, 2, 2))`` on size s, its all-zero action the no-op.
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
+
+from remidi.envs.actions import Discrete, from_env_space
 
 SHAPE_GROUPS = ("polygons", "circles")
 
@@ -68,7 +73,7 @@ class Observation:
 @dataclass(frozen=True)
 class Actions:
     """An action component: Kinetix's ``ActionType`` (its name) and ``declare``, Kinetix's action
-    space → the task's declaration of its actions (``UEDTask.num_actions``)."""
+    space → the task's action space (``UEDTask.action_space``)."""
 
     kinetix_type: str
     declare: Callable[[Any], Any]
@@ -78,4 +83,5 @@ OBSERVATIONS = {
     "symbolic_flat": Observation("SYMBOLIC_FLAT", lambda obs: obs),
     "entity": Observation("SYMBOLIC_ENTITY", entity_observation),
 }
-ACTIONS = {"discrete": Actions("DISCRETE", lambda space: int(space.n))}
+ACTIONS = {"discrete": Actions("DISCRETE", lambda space: Discrete(int(space.n))),
+           "multi_discrete": Actions("MULTI_DISCRETE", from_env_space)}

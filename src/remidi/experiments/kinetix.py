@@ -45,7 +45,8 @@ class KinetixLevelsConfig:
         "help": "what the agent observes: symbolic_flat (Kinetix's flat vector) or entity (its entities, remidi's "
                 "entity convention)"})
     actions: str = field(default="discrete", metadata={
-        "help": "Kinetix's action type: discrete (11 choices: a motor and direction, a thruster, or nothing)"})
+        "help": "Kinetix's action type: discrete (11 choices: a motor and direction, a thruster, or nothing) or "
+                "multi_discrete (Kinetix's default: one choice per motor and per thruster)"})
     dense_reward_scale: float = field(default=0.2, metadata={
         "help": "Kinetix's dense shaping per unit of green–blue distance closed (its configs: 0.2; the episode's "
                 "shaping sum is kept within ±0.45)"})

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from remidi.engine.config import AccelConfig, BufferConfig, ReMiDiConfig, UEDConfig
+from remidi.engine.config import AccelConfig, BufferConfig, ReMiDiConfig, SFLConfig, UEDConfig
 from remidi.engine.core.ppo import PPOConfig
 from remidi.envs.kinetix_names import HELD_OUT, SIZES, eval_set_names
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
@@ -79,6 +79,10 @@ def gpu_config() -> KinetixUEDConfig:
         # random), and each slot steps the physics once more per env and step (tracker_overflow counts misses)
         remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=4000, steps_per_buffer=512, tracker_budget=1),
         accel=AccelConfig(num_edits=5),
+        # Kinetix's SFL (configs/ued/sfl.yaml): 3 batches of 4096 candidates played 512 steps, the 1024
+        # most learnable kept, refreshed every 128 updates, half of each update's envs from the buffer
+        sfl=SFLConfig(batch_size=4096, num_batches=3, rollout_steps=512, buffer_size=1024, refresh_every=128,
+                      sampled_envs_ratio=0.5),
     )
 
 
@@ -89,6 +93,7 @@ SMOKE = {
     "num_updates": 6, "num_envs": 8, "eval_every": 3, "eval_attempts": 1, "checkpoint_every": 3,
     "hidden_size": 64, "ppo.epochs": 1, "ppo.minibatches": 1, "ppo.lr": 3e-4, "buffer.capacity": 16,
     "buffer.min_fill": 0.25, "remidi.buffer_capacity": 16, "remidi.steps_per_buffer": 3,
+    "sfl.batch_size": 16, "sfl.num_batches": 1, "sfl.rollout_steps": 512, "sfl.buffer_size": 8, "sfl.refresh_every": 3,
 }
 CPU_REASONS = {
     "num_updates": "Kinetix's 2048 updates of 2048 envs × 256 steps are ≈ 2^30 environment steps, months on a "
@@ -103,10 +108,17 @@ CPU_REASONS = {
     "buffer.capacity": "256 levels instead of 4000, in proportion to the fewer levels seen",
     "remidi.buffer_capacity": "256 levels, as buffer.capacity",
     "remidi.steps_per_buffer": "the gpu preset's proportion: the first buffer spans a quarter of the run",
+    "sfl.batch_size": "Kinetix's SFL refresh (4096 × 3 candidates played 512 steps) is 6.3 M physics steps, "
+                      "770 of this preset's updates; 256 candidates per refresh",
+    "sfl.num_batches": "one batch of 256 candidates (Kinetix: 3 of 4096)",
+    "sfl.buffer_size": "the 64 most learnable of 256 candidates kept (Kinetix: 1024 of 12,288)",
+    "sfl.refresh_every": "every 50 updates (4 refreshes in 200; Kinetix: 128 of 2048): a refresh's 131 k physics "
+                         "steps against 50 updates' 410 k",
 }
 CPU = {"num_updates": 200, "num_envs": 32, "eval_every": 20, "eval_attempts": 5,
        "checkpoint_every": 40, "ppo.minibatches": 4, "ppo.epochs": 4, "ppo.lr": 3e-4, "buffer.capacity": 256,
-       "remidi.buffer_capacity": 256, "remidi.steps_per_buffer": 50}
+       "remidi.buffer_capacity": 256, "remidi.steps_per_buffer": 50, "sfl.batch_size": 256, "sfl.num_batches": 1,
+       "sfl.buffer_size": 64, "sfl.refresh_every": 50}
 PRESETS = {"paper": {}, "gpu": {}, "cpu": CPU, "smoke": SMOKE}
 
 

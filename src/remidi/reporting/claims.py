@@ -180,6 +180,12 @@ CLAIMS = (
     *(Claim(f"{exp}-plr-learns-cpu4x", f"scale study ({what}, cpu4x: 4× cpu's steps)", "PLR⊥ solves more "
             "held-out mazes after 4× the cpu preset's environment steps than after cpu's", "evaluate:solve_rate/mean",
             (exp,), greater=(("plr @cpu4x", "plr"),), min_seeds=5) for exp, what in SCALE_TASKS),
+    Claim("kinetix-sfl-over-plr", "Kinetix (SFL's ordering)", "SFL solves more of Kinetix's hand-made held-out "
+          "levels of size s than PLR⊥", "evaluate:solve_rate/mean", ("kinetix-s",), greater=(("sfl", "plr"),),
+          min_seeds=5),
+    Claim("kinetix-remidi-masks-nothing", "Kinetix (fully observed levels)", "ReMiDi's tracker explains almost no "
+          "step where every level is fully observed (bound: the masked share of trained steps ≤ 0.01)",
+          "summary:trained_fraction_masked", ("kinetix-s",), bounds=(("remidi", 0.0, 0.01),), min_seeds=5),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=10),  # Table 1's caption: 10 seeds
@@ -257,6 +263,10 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                          "evaluate:generator/solve_rate/blind", "summary:belief/explained",
                          "summary:belief/exact_explained"],
                         ["solve_rate/mean", "replay_fraction/blind", "buffer_fraction/blind"]),
+    "kinetix-s": (["dr", "plr", "sfl", "remidi"],
+                  ["evaluate:solve_rate/mean", "evaluate:cvar/solve_rate/10%", "evaluate:cvar/solve_rate/100%",
+                   "summary:trained_fraction_masked", "summary:rejected"],
+                  ["solve_rate/mean"]),
     **{m: (["dr", "plr", "minimax-return", "remidi"],
            ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},

@@ -63,3 +63,32 @@ def test_a_short_run_evaluates_every_ten_updates_and_the_defaults_are_said_in_on
     # a configuration given in Python is used as it is
     given = task_experiment("given", lambda: task, UEDConfig(eval_every=50))
     assert given.config_factory() == UEDConfig(eval_every=50) and given.config_note is None
+
+
+def test_the_exact_trackers_cost_is_said_with_the_option_that_lowers_it():
+    """engine/trackers.tracker_cost_note: ReMiDi with a frozen adversary and at least 8 slots per env
+    (or the reference tracker) is said, naming remidi.tracker_budget and tracker_overflow; PLR⊥, a
+    single buffer, a learned tracker or few slots are not."""
+    from types import SimpleNamespace
+
+    from remidi.engine.algorithms import get_algorithm
+    from remidi.engine.config import ReMiDiConfig
+    from remidi.engine.trackers import tracker_cost_note
+
+    def note(deterministic=True, **remidi):
+        cfg = UEDConfig(remidi=ReMiDiConfig(**{"num_buffers": 2, "buffer_capacity": 512, **remidi}))
+        return tracker_cost_note(SimpleNamespace(deterministic_reset=deterministic), cfg, get_algorithm("remidi"))
+
+    line = note()
+    assert line.startswith("ReMiDi's exact tracker steps up to 64 frozen levels (remidi.tracker_budget=64) beside "
+                           "each rollout env once an adversary is frozen: a rollout steps this environment up to 65× ")
+    assert "--set remidi.tracker_budget=8 makes it 9×" in line and "tracker_overflow" in line and "\n" not in line
+    assert "up to 9×" in note(tracker_budget=8) and "remidi.buffer_capacity" in note(tracker_budget=8)
+    assert note(tracker_budget=4) is None  # 5 environment steps per env step: not said
+    assert note(buffer_capacity=4) is None  # 4 frozen levels: the candidate tracker follows 4 at most
+    reference = note(tracker_budget=0)
+    assert "every frozen level (512: the reference tracker)" in reference and "up to 513×" in reference
+    assert "remidi.tracker=belief" in note(deterministic=False)  # no slots where the reset draws its start
+    assert note(tracker="belief") is None and note(num_buffers=1) is None
+    cfg = UEDConfig(remidi=ReMiDiConfig(num_buffers=2))
+    assert tracker_cost_note(SimpleNamespace(deterministic_reset=True), cfg, get_algorithm("plr")) is None

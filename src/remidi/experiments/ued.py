@@ -142,7 +142,7 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
         cost = None if cheap_step or ctx.resume else tracker_cost_note(task, cfg, get_algorithm(ctx.algo))
         if cost is not None and jax.process_index() == 0:
-            print(f"remidi: note: {cost}", file=sys.stderr, flush=True)
+            print(f"remidi: {cost}", file=sys.stderr, flush=True)
         stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every)
 
         def on_block(done, metrics):

@@ -95,9 +95,10 @@ def validate_tracker(cfg, algo, task) -> None:
 
 
 # a rollout that steps the environment at least this many times per env step (the env and the
-# tracker's frozen levels) is said at the start of a run on an environment that is not cheap:
-# measured (docs/performance.md, "The tracker's cost"): on brax-hopper 8 slots already cost several
-# times PLR⊥'s rollout, on the maze even the 768 frozen levels of the reference tracker little
+# tracker's frozen levels) is said at the start of a run on an environment that is not cheap: the
+# slots multiply the environment's work, which on an expensive environment at a batch that fills
+# the machine is the rollout's cost (docs/performance.md, "The tracker's cost": on the maze 64
+# slots cost 0.3 of a rollout, on a small Brax batch 8 slots nothing measurable)
 COSTLY_STEPS = 9
 LOWER_BUDGET = 8  # the budget a note suggests (9 environment steps per env step)
 

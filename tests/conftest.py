@@ -103,6 +103,9 @@ def pytest_report_header(config):
 
 _add_fast_xla_flags()
 
+# the CLI's own default cache (remidi.compile_cache) stays off: the suite writes only its own, and
+# its subprocesses get that one from subprocess_env
+os.environ["REMIDI_JAX_CACHE"] = "off"
 if _CACHE:
     jax.config.update("jax_compilation_cache_dir", _CACHE)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)

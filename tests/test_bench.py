@@ -156,3 +156,18 @@ def test_lanes_beyond_the_cores_are_a_one_line_error(capsys):
     assert main(["bench", "maze-env", "--seeds", "0"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and "--seeds" in err
+
+
+def test_the_tracker_cost_workloads_have_a_ratio_per_budget():
+    """bench/tracker_cost.py: ReMiDi's fresh-level update per remidi.tracker_budget against PLR⊥'s,
+    on the maze and on Brax, each with its ratio (the time per env step over PLR⊥'s)."""
+    from remidi.bench.tracker_cost import RATIOS
+
+    names = {key for _, _, key in RATIOS}
+    assert names == {"tracker_maze_remidi_0_over_plr", "tracker_maze_remidi_8_over_plr",
+                     "tracker_maze_remidi_64_over_plr", "tracker_brax_remidi_8_over_plr",
+                     "tracker_brax_remidi_64_over_plr"}
+    one = {"seconds_per_call": 1.0, "env_steps_per_call": 100}
+    r = ratios({"tracker-brax-plr": one, "tracker-brax-remidi-64": {**one, "seconds_per_call": 30.0}})
+    assert r == {"tracker_brax_remidi_64_over_plr": 30.0}
+    assert not set(DEFAULT) & {w for w, _, _ in RATIOS}  # not run by default: Brax with 64 slots is slow

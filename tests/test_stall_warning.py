@@ -74,6 +74,7 @@ def test_training_prints_it_in_the_first_process(monkeypatch, capsys, process):
 
     monkeypatch.setattr(ued, "train_seeds", fake_train_seeds)
     monkeypatch.setattr(ued, "run_warnings", lambda *args: [])
+    monkeypatch.setattr(ued, "tracker_cost_note", lambda *args: None)
     monkeypatch.setattr(ued.jax, "process_index", lambda: process)
     cfg = UEDConfig(num_envs=ENVS, eval_every=BLOCK, num_updates=BLOCK)
     train = ued.make_train(lambda c: None, ())
@@ -112,6 +113,7 @@ def test_training_prints_the_separation_warning_once_the_run_ends(monkeypatch, c
 
     monkeypatch.setattr(ued, "train_seeds", fake_train_seeds)
     monkeypatch.setattr(ued, "run_warnings", lambda *args: [])
+    monkeypatch.setattr(ued, "tracker_cost_note", lambda *args: None)
     cfg = UEDConfig(num_envs=ENVS, eval_every=BLOCK, num_updates=2 * BLOCK)
     ued.make_train(lambda c: None, ())(RunContext(experiment="x", algo="remidi", preset="smoke", seeds=[3],
                                                   config=cfg, out=None))

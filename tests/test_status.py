@@ -43,10 +43,26 @@ def test_an_unfinished_run_shows_its_checkpoint_parts_time_left_and_stalled_seed
     assert lines == [
         f"{folder}: remidi on tmaze, preset cpu, seeds 0–1",
         f"  checkpoint at update 300 of 1500 (20 %), written 10 min ago (remidi run --resume {folder} continues it)",
-        "  part 0–300 on cpu: test, 2.0 s/update",
-        "  left: 1200 updates, about 40 min at the last part's rate (on cpu: test; a resume compiles first)",
+        "  part 0–300 on cpu: test, 2.0 s/update with compiling",
+        "  left: 1200 updates, about 40 min at the last part's rate (with its compiling: an overestimate; on cpu: "
+        "test; a resume compiles first)",
         "  stalled (trained on nothing while a frozen adversary rejected levels): seed 1 updates 151–300",
     ]
+
+
+def test_the_time_left_leaves_compiling_out_and_a_fresh_checkpoint_is_seconds_old(tmp_path):
+    """A part that timed its blocks after the first (driver.PartClock: 90 s of compiling, then 3
+    blocks of 100 updates in 6 s) gives the rate after compiling, 0.02 s/update: 1200 updates
+    left take about 24 s, not the 6 min its whole wall time per update would say; a checkpoint
+    written 5 s ago says so (not "1 min")."""
+    parts = [{"updates": [0, 400], "wall_s": 96.0, "train_s": 6.0, "train_updates": 300, "code": {"device": "cpu: t"}}]
+    folder = _unfinished(tmp_path / "run", parts=parts)
+    os.utime(folder / CHECKPOINT, (1000.0, 1000.0))
+    lines = run_status(folder, now=1005.0)
+    assert lines[1].endswith("written 5 s ago (remidi run --resume " + f"{folder} continues it)")
+    assert lines[2] == "  part 0–400 on cpu: t, 0.02 s/update after compiling (2 min in all)"
+    assert lines[3] == ("  left: 1200 updates, about 24 s at the last part's rate (after compiling; on cpu: t; a "
+                        "resume compiles first)")
 
 
 def test_parts_rates_from_the_last_part_and_seeds_that_are_not_a_range(tmp_path):
@@ -54,9 +70,10 @@ def test_parts_rates_from_the_last_part_and_seeds_that_are_not_a_range(tmp_path)
              {"updates": [150, 300], "wall_s": 1500.0, "code": {"device": "gpu: H100"}}]
     lines = run_status(_unfinished(tmp_path / "run", seeds=(2, 5), parts=parts))
     assert lines[0].endswith("preset cpu, seeds 2, 5")
-    assert lines[2:5] == ["  part 0–150 on device not recorded, 20.0 s/update", "  part 150–300 on gpu: H100, 10.0 s/update",
-                          "  left: 1200 updates, about 3 h 20 min at the last part's rate (on gpu: H100; a resume "
-                          "compiles first)"]
+    assert lines[2:5] == ["  part 0–150 on device not recorded, 20.0 s/update with compiling",
+                          "  part 150–300 on gpu: H100, 10.0 s/update with compiling",
+                          "  left: 1200 updates, about 3 h 20 min at the last part's rate (with its compiling: an "
+                          "overestimate; on gpu: H100; a resume compiles first)"]
     assert lines[5].endswith("seed 5 updates 151–300")
     older = run_status(_unfinished(tmp_path / "old", parts=[]))  # a checkpoint from before parts were recorded
     assert older[2].startswith("  stalled") and len(older) == 3
@@ -109,8 +126,8 @@ def test_a_finished_run_says_whether_it_was_evaluated(tmp_path):
     assert run_status(folder) == [
         f"{folder}: remidi on tmaze, preset cpu, seed 3",
         f"  finished (1500 updates), not evaluated (remidi evaluate {folder})",
-        "  part 0–750 on gpu: H100, 0.6 s/update",
-        "  part 750–1500 on device not recorded, 10.0 s/update",
+        "  part 0–750 on gpu: H100, 0.6 s/update with compiling",
+        "  part 750–1500 on device not recorded, 10.0 s/update with compiling",
         "  stalled (trained on nothing while a frozen adversary rejected levels): seed 3 updates 151–1500"]
     (folder / "evaluate.json").write_text("{}")
     assert run_status(folder)[1] == "  finished (1500 updates), evaluated"
@@ -132,3 +149,17 @@ def test_folders_of_several_algorithms_no_checkpoint_and_no_run(tmp_path, capsys
         run_folders([tmp_path / "empty"])
     assert main(["status", str(tmp_path / "empty")]) == 2
     assert "holds no run" in capsys.readouterr().err
+
+
+def test_a_part_times_the_blocks_after_its_first_of_the_same_length():
+    """driver.PartClock: the first block (it compiles) and a block of another length (a short last
+    block compiles again) are left out of ``train_s``; a part with one block records no rate."""
+    from remidi.engine.run.driver import PartClock
+
+    clock = PartClock(100)
+    assert "train_s" not in clock.record(100)
+    for length, seconds in ((40, 50.0), (40, 1.0), (40, 1.25), (20, 9.0)):
+        clock.block(length, seconds)
+    part = clock.record(240)
+    assert part["updates"] == [100, 240] and part["train_s"] == 2.25 and part["train_updates"] == 80
+    assert part["code"] is not None and part["wall_s"] >= 0

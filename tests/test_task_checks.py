@@ -193,7 +193,7 @@ def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(c
     slipping = dataclasses.replace(task, env=type("Slip", (_Slip, type(task.env)), {})())
     full = dataclasses.replace(TINY, num_steps=14, remidi=dataclasses.replace(TINY.remidi, num_buffers=2))
     (warning,) = run_warnings(full, "remidi", slipping, check_step=True)
-    assert warning.startswith("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact "
+    assert warning.startswith("this task's env.step_env draws from its random key, but ReMiDi's exact "
                               "tracker steps each frozen level with the agent's own draws"), warning
     assert run_warnings(full, "remidi", task, check_step=True) == []
     assert run_warnings(full, "plr", slipping, check_step=True) == []

@@ -68,12 +68,16 @@ compiled block, ``driver.run_steps``):
 * ``solve-onestep``: ``remidi solve``'s exact BLP of a random one-step game of 10,000 levels,
   100 observations and 3 actions (rewards uniform in [0, 1], seed 0); plain Python and HiGHS, no
   compilation (not run by default).
+* ``tracker-maze-plr``, ``tracker-maze-remidi-{0,8,64}``, ``tracker-brax-plr``,
+  ``tracker-brax-remidi-{8,64}``: the exact tracker's cost per environment step against
+  ``remidi.tracker_budget``, fresh-level updates only (:mod:`~remidi.bench.tracker_cost`; not run
+  by default).
 * ``brax-plr``: PLR⊥ on ``brax-hopper``'s paper preset (256 envs × 100 steps, PPO 4 epochs × 32
   minibatches, the 256-unit LSTM agent), every update replaying (not run by default: about 4 s
   per update on a 2-core CPU, docs/performance.md).
 """
 
-from remidi.bench import workloads  # noqa: F401  (registers every benchmark)
+from remidi.bench import tracker_cost, workloads  # noqa: F401  (registers every benchmark)
 from remidi.bench.registry import BENCHMARKS, DEFAULT, check_overrides
 from remidi.bench.runner import format_table, run_benchmarks
 

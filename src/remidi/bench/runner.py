@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 
+from remidi.bench import tracker_cost
 from remidi.bench.registry import (BARRIER_ENV, BENCHMARKS, CORE_ENV, SEEDS_ENV, SET_ENV, SINGLE_THREAD_XLA,
                                    TINY_ENV)
 
@@ -113,7 +114,7 @@ STEP_RATIOS = (
     ("maze-accel", "maze-plr", "accel_step_over_plr_step"),
     ("maze-remidi-reference", "maze-plr", "remidi_reference_step_over_plr_step"),
     ("lever-sfl", "lever-plr", "sfl_update_over_plr_update"),
-)
+) + tracker_cost.RATIOS  # the exact tracker's multiple of a rollout, per remidi.tracker_budget
 
 
 def ratios(results: dict[str, dict]) -> dict[str, float]:

@@ -48,6 +48,10 @@ def main(argv: list[str] | None = None) -> int:
     preemption.reset()
     try:
         args = parser.parse_args(argv)
+        if args.command in ("run", "evaluate", "render"):  # the commands that compile a run's programs
+            from remidi import compile_cache
+
+            compile_cache.enable()  # JAX's persistent cache, unless set otherwise (remidi.compile_cache)
         if args.command in ("run", "list", "evaluate", "render", "bench"):  # what may name a registered entry
             from remidi.plugins import load_plugins
 

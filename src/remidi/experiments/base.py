@@ -72,6 +72,12 @@ class Experiment:
     scaled_keys: dict[str, tuple[str, ...]] = field(default_factory=dict)
     # scaled keys that must divide their length (block lengths: a short last block compiles again)
     divisor_keys: tuple[str, ...] = ()
+    # scaled key → the least it is scaled to (never above the new length), e.g. {"eval_every": 10}: a
+    # short run still evaluates every 10 updates, not every one
+    scale_floors: dict[str, int] = field(default_factory=dict)
+    # (config, --set overrides) → one line a fresh run says first (None: nothing to say), e.g. the
+    # defaults an import-path task's run derived from what the task provides
+    config_note: Callable[[Any, dict], str | None] | None = None
     shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
@@ -120,9 +126,10 @@ def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], note
         raise one_of("--preset", preset, exp.presets)
     base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
     config, note = scale_dependents(apply_overrides(base, overrides), base, overrides, exp.scaled_keys,
-                                    exp.divisor_keys)
-    if note is not None and notes is not None:
-        notes.append(note)
+                                    exp.divisor_keys, exp.scale_floors)
+    said = exp.config_note(config, overrides) if exp.config_note is not None else None
+    if notes is not None:
+        notes.extend(line for line in (said, note) if line is not None)
     return config
 
 

@@ -11,8 +11,9 @@ Two entry points:
 
 * Command line: ``remidi run mypkg.tasks:make_task [--algo ...] [--set key=value ...]`` imports
   ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) as Python
-  does, from the current folder first, and runs it on the engine's default
-  :class:`~remidi.engine.config.UEDConfig` with your ``--set`` keys.
+  does, from the current folder first, and runs it on defaults chosen from what the task provides
+  (:func:`task_defaults`: the score, the rollout length, how often to evaluate; said in one line
+  at the start) with your ``--set`` keys.
 
 ``config.json`` records where the task comes from (``"task": {"import": "mypkg.tasks:make_task",
 "folder": the folder it was imported from}``), so ``remidi run --resume DIR`` and ``remidi evaluate
@@ -47,20 +48,24 @@ from remidi.experiments.running import run_experiment
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 PRESET = "default"
+EVALUATIONS = 20  # an import-path task's run evaluates this many times (eval_every = num_updates / 20) ...
+EVAL_FLOOR = 10  # ... but at most every 10 updates: --set num_updates=30 evaluates 3 times, not 30
+MAX_ROLLOUT = 256  # an import-path task's rollouts last its episode bound, at most this (the paper's maze: 256)
 _IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, name) → its experiment
 
 
 def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConfig | None = None,
                     description: str = "a user's UEDTask", task_ref: dict | None = None) -> Experiment:
     """An :class:`Experiment` named ``name`` that trains the task ``make_task()`` returns, with
-    ``config`` (default: ``UEDConfig()``) as its only preset, ``default``. ``task_ref``: where the
+    ``config`` (default: :func:`task_defaults`) as its only preset, ``default``. ``task_ref``: where the
     task comes from (:func:`task_source`), recorded in ``config.json``. The task is validated first
-    (:func:`~remidi.engine.run.validation.validate_task`)."""
+    (:func:`~remidi.engine.run.validation.validate_task`). Without ``config`` the defaults come
+    from the task (:func:`task_defaults`), said in one line at the start of a run."""
     task = make_task()
     if not isinstance(task, UEDTask):
         raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")
     validate_task(task)  # one line naming the field, before anything reads the task
-    base = config if config is not None else UEDConfig()
+    base, why = (config, {}) if config is not None else task_defaults(task)
     tags = sorted(jax.eval_shape(lambda k: task.level_tags(task.sample_level(k)), jax.random.PRNGKey(0)))  # names only
     sets = sorted(task.eval_sets)
     rates = tuple(f"solve_rate/{s}" for s in sets) if task.solved is not None else ()
@@ -76,7 +81,53 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
         refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
         check_step=True,  # warn of a step with randomness of its own under ReMiDi's exact tracker
     ))
-    return dataclasses.replace(exp, task_ref=task_ref)
+    return dataclasses.replace(exp, task_ref=task_ref, scale_floors={"eval_every": EVAL_FLOOR} if why else {},
+                               config_note=defaults_note(why) if why else None)
+
+
+def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
+    """The configuration a run of an import-path task starts from (``UEDConfig()`` otherwise), and
+    why each key differs from it (key → reason), from what the task provides:
+
+    * ``score``: perfect regret where the task gives its optimal return (on the discounted
+      utility where it gives the discounted optimum, else ``discounted_regret=false``), else
+      learnability (SFL's p(1 − p), p a level's solve rate) where it defines ``solved``, else
+      positive value loss (needs neither);
+    * ``num_steps``: the task's episode bound, at most :data:`MAX_ROLLOUT`, so that an episode can
+      end inside a rollout (every score reads finished episodes);
+    * ``eval_every``: ``num_updates`` / :data:`EVALUATIONS` (scaled with ``--set num_updates=N``,
+      but never below :data:`EVAL_FLOOR` updates)."""
+    base = UEDConfig()
+    why: dict[str, str] = {}
+    changes: dict[str, Any] = {}
+    if task.optimal_return is not None:
+        changes["score"], why["score"] = "perfect_regret", "the task gives its optimal return"
+        if task.optimal_discounted_return is None:
+            changes["discounted_regret"] = False
+            why["discounted_regret"] = "it gives no discounted optimum: undiscounted regret"
+    elif task.solved is not None:
+        changes["score"], why["score"] = "learnability", "the task defines solved but gives no optimal return"
+    else:
+        changes["score"], why["score"] = "pvl", "the task gives no optimal return and does not define solved"
+    steps = min(task.max_episode_steps, MAX_ROLLOUT)
+    changes["num_steps"] = steps
+    why["num_steps"] = ("the task's episode bound" if steps == task.max_episode_steps else
+                        f"the task's episodes last up to {task.max_episode_steps} steps; at most {MAX_ROLLOUT}")
+    changes["eval_every"] = max(base.num_updates // EVALUATIONS, 1)
+    why["eval_every"] = f"{EVALUATIONS} evaluations per run, at least {EVAL_FLOOR} updates apart"
+    return dataclasses.replace(base, **changes), why
+
+
+def defaults_note(why: dict[str, str]):
+    """``(config, overrides) -> line``: the one line a fresh run of an import-path task says first,
+    naming the defaults it derived from the task (:func:`task_defaults`) that ``--set`` left
+    alone (None where it set them all)."""
+    def note(config, overrides) -> str | None:
+        kept = [f"{key} {getattr(config, key)} ({reason})" for key, reason in why.items() if key not in overrides]
+        if not kept:
+            return None
+        return f"defaults for this task: {'; '.join(kept)}; --set KEY=VALUE chooses another"
+    return note
 
 
 def run_ued(task: UEDTask, config: UEDConfig, algos: list[str], seeds: list[int], out: str | Path, *,

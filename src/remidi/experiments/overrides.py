@@ -139,7 +139,7 @@ def nearest_divisor(length: int, target: float) -> int:
 
 
 def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]],
-                     divisors: tuple[str, ...] = ()):
+                     divisors: tuple[str, ...] = (), floors: dict[str, int] | None = None):
     """Scale the keys that depend on a length the user changed, in proportion.
 
     ``rules`` maps a length (``num_updates``) to the keys measured against it (``eval_every``,
@@ -149,7 +149,8 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
     run with the preset's proportions. Returns ``(config, note)``, ``note`` one line saying what
     was scaled (``None`` if nothing was). A key in ``divisors`` (a block length, e.g. ``eval_every``:
     a short last block would compile another program) becomes the divisor of the new length
-    nearest to that value instead.
+    nearest to that value instead. ``floors`` (key → least value): a scaled key is at least
+    ``min(floor, new length)`` before it is rounded.
     """
     scaled: dict[str, int] = {}
     parts = []
@@ -164,8 +165,8 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
             if key in overrides:
                 continue
             value = get_value(base, key)
-            target = (nearest_divisor(new, value * new / old) if key in divisors
-                      else max(1, int(math.floor(value * new / old + 0.5))))
+            wanted = max(value * new / old, min((floors or {}).get(key, 1), new))
+            target = nearest_divisor(new, wanted) if key in divisors else max(1, int(math.floor(wanted + 0.5)))
             if target != value:
                 scaled[key] = target
                 changes.append(f"{key} {value} → {target}")

@@ -16,10 +16,11 @@ import jax
 import numpy as np
 
 from remidi.engine.run.driver import RunFolder, replay_fractions, train_seeds
-from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames
+from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames, get_algorithm
 from remidi.engine.config import UEDConfig
 from remidi.engine.adversaries.paired import LevelGenerator
 from remidi.engine.run.validation import run_warnings, validate_ued_config
+from remidi.engine.trackers import tracker_cost_note
 from remidi.envs.interface import UEDTask
 from remidi.experiments.base import Experiment, RunContext, RunResult
 from remidi.experiments.plots import Panel, algorithm_curves, plot_bars, plot_panels, run_title
@@ -125,10 +126,12 @@ def separation_warning(seeds: list[int], final: dict[str, np.ndarray]) -> str | 
 
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
-               check_step: bool = False):
+               check_step: bool = False, cheap_step: bool = False):
     """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
     over evaluation sets), f[S, T] each. ``check_step``: warn of a step that draws from its key
-    (:func:`~remidi.engine.run.validation.run_warnings`; a user's task)."""
+    (:func:`~remidi.engine.run.validation.run_warnings`; a user's task). ``cheap_step``: the
+    environment's step costs little beside the agent's network, so the tracker's cost
+    (:func:`~remidi.engine.trackers.tracker_cost_note`) is not said."""
 
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
@@ -137,6 +140,9 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         # validate_ued_config; run_experiment calls the same function before it writes anything
         for warning in run_warnings(cfg, ctx.algo, task, check_step):
             print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
+        cost = None if cheap_step or ctx.resume else tracker_cost_note(task, cfg, get_algorithm(ctx.algo))
+        if cost is not None and jax.process_index() == 0:
+            print(f"remidi: {cost}", file=sys.stderr, flush=True)
         stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every)
 
         def on_block(done, metrics):
@@ -214,7 +220,9 @@ class UEDSpec:
     """A UED experiment's definition: its name and description, the task ``task_factory(cfg)``
     builds, the configuration (``config_factory``, ``presets``, ``preset_seeds``,
     ``preset_reasons``), what it logs and draws (``summary_metrics``, ``plot_panels_spec``,
-    ``derive``, ``bar_chart``: :func:`make_train`, :func:`make_plot`). ``builds_levels``: whether
+    ``derive``, ``bar_chart``: :func:`make_train`, :func:`make_plot`; ``cheap_step``: the
+    environment's step costs little beside the agent's network, measured, so the exact tracker's
+    cost is not said at the start of a run). ``builds_levels``: whether
     its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
     a learned level generator are not among its algorithms (``--algo all`` leaves them out).
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
@@ -237,6 +245,7 @@ class UEDSpec:
     refusal: Callable[[Any], str | None] | None = None
     check_step: bool = False
     notes: tuple[str, ...] = ()
+    cheap_step: bool = False
 
 
 def make_ued_experiment(spec: UEDSpec) -> Experiment:
@@ -269,7 +278,7 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_for, summary_metrics, derive, check_step),
+        train=make_train(task_for, summary_metrics, derive, check_step, spec.cheap_step),
         plot=make_plot(plot_panels_spec, bar_chart, name),
         scaled_keys=SCALED_KEYS,
         divisor_keys=("eval_every",),  # the length of a compiled block of updates

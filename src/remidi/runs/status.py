@@ -1,7 +1,8 @@
 """``remidi status RUN_DIR ...``: where runs stand, read from their folders without loading a
 model: finished (``summary.json``; evaluated when ``evaluate.json`` is there) or the update of the
-last checkpoint, each part's updates, device and seconds per update, the time left at the last
-part's rate, and the updates in which a seed trained on nothing while a frozen adversary rejected
+last checkpoint (and how long ago it was written), each part's updates, device and seconds per
+update (after compiling where the part timed its blocks), the time left at the last part's rate
+after compiling, and the updates in which a seed trained on nothing while a frozen adversary rejected
 levels (:func:`remidi.experiments.ued.stalled_updates`, from the checkpoint's metrics)."""
 
 from __future__ import annotations
@@ -33,15 +34,37 @@ def run_folders(folders: list[Path]) -> list[Path]:
 
 
 def _duration(seconds: float) -> str:
+    """``45 s`` under a minute, ``12 min``, ``3 h 05 min``."""
+    if seconds < 59.5:
+        return f"{max(round(seconds), 0)} s"
     minutes = round(seconds / 60)
-    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{max(minutes, 1)} min"
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
+
+
+def _per_update(seconds: float) -> str:
+    return f"{seconds:.1f}" if seconds >= 1 else f"{seconds:.2g}"
+
+
+def steady_rate(part: dict) -> float | None:
+    """Seconds per update of a part while it trained, compiling left out: its timed blocks'
+    (``train_s / train_updates``: every block after its first, :class:`~remidi.engine.run.driver.PartClock`);
+    None for a part without them (one block, or written before blocks were timed)."""
+    if part.get("train_updates") and part.get("train_s") is not None:
+        return part["train_s"] / part["train_updates"]
+    return None
 
 
 def _part(part: dict) -> str:
     first, last = part["updates"]
     code = part.get("code") or {}
     device = code.get("device") or "device not recorded"
-    rate = f", {part['wall_s'] / (last - first):.1f} s/update" if last > first and part.get("wall_s") else ""
+    steady = steady_rate(part)
+    if steady is not None:
+        rate = f", {_per_update(steady)} s/update after compiling" + \
+            (f" ({_duration(part['wall_s'])} in all)" if part.get("wall_s") else "")
+    else:
+        rate = f", {_per_update(part['wall_s'] / (last - first))} s/update with compiling" \
+            if last > first and part.get("wall_s") else ""
     return f"{first}–{last} on {device}{rate}"
 
 
@@ -98,11 +121,14 @@ def run_status(folder: Path, now: float | None = None) -> list[str]:
     parts = meta.get("parts") or []
     lines += [f"  part {_part(p)}" for p in parts]
     last = parts[-1] if parts else None
-    if total and last and last.get("wall_s") and last["updates"][1] > last["updates"][0]:
-        rate = last["wall_s"] / (last["updates"][1] - last["updates"][0])
+    if total and last:
+        rate, how = steady_rate(last), "after compiling"
+        if rate is None and last.get("wall_s") and last["updates"][1] > last["updates"][0]:
+            rate, how = last["wall_s"] / (last["updates"][1] - last["updates"][0]), "with its compiling: an overestimate"
         device = (last.get("code") or {}).get("device") or "its device"
-        lines.append(f"  left: {total - done} updates, about {_duration(rate * (total - done))} at the last "
-                     f"part's rate (on {device}; a resume compiles first)")
+        if rate is not None:
+            lines.append(f"  left: {total - done} updates, about {_duration(rate * (total - done))} at the last "
+                         f"part's rate ({how}; on {device}; a resume compiles first)")
     try:
         history, _ = load_history(ckpt.with_name(HISTORY), meta)
     except ConfigError as err:  # its message is for --resume: say what it means here

@@ -1,28 +1,25 @@
 """Driving a UED run: all seeds in one compiled program, evaluation, progress and checkpoints.
 
-:func:`train_seeds` is the entry point: it validates the config, builds the run's
-:class:`Programs` (init, run a block, evaluate) and hands them to :func:`drive`, which returns a
-:class:`TrainResult`. The run is cut into blocks of ``eval_every`` updates. One block is a single
-jit-compiled ``lax.scan`` of :func:`~remidi.engine.train.train_step`, vmapped over seeds
-(:func:`over_seeds`). After each block the driver evaluates, records the block's metrics
-(reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the progress bar and,
-every ``checkpoint_every`` updates, writes a checkpoint (:mod:`remidi.engine.run.checkpoint`)
-atomically, so a killed run never leaves a corrupt checkpoint. ``resume`` continues from the last
-checkpoint and ends in exactly the state an uninterrupted run reaches (same blocks, same keys).
+:func:`train_seeds` is the entry point: it validates the config, builds the run's compiled
+programs (:mod:`remidi.engine.run.programs`: init, run a block, evaluate; on one device or
+sharded over several) and hands them to :func:`drive`, which returns a :class:`TrainResult`. The
+run is cut into blocks of ``eval_every`` updates. After each block the driver evaluates, records
+the block's metrics (reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the
+progress bar and, every ``checkpoint_every`` updates, writes a checkpoint
+(:mod:`remidi.engine.run.checkpoint`) atomically, so a killed run never leaves a corrupt
+checkpoint. ``resume`` continues from the last checkpoint and ends in exactly the state an
+uninterrupted run reaches (same blocks, same keys). Each invocation records its part of the run
+(:class:`PartClock`): the updates it trained, its wall time and the time of its blocks after the
+first (which compiles), from which ``remidi status`` tells the time left.
 
-``devices=N`` shards the seeds over N devices: a 1-D :class:`~jax.sharding.Mesh` with axis
-``"seed"``, the runner's leading (seed) axis and the per-seed keys placed with
-``NamedSharding(mesh, P("seed"))``, and each compiled program run under :func:`jax.shard_map`,
-so every device runs the unchanged per-seed program on its own S/N seeds with no communication.
-
-Results match the one-device run's to floating-point rounding, not bit for bit, and only for a
-while: XLA compiles the vmapped program for S/N seeds per device instead of S, and the rounding
-of some reductions depends on that batch size (the same happens between CPU and GPU, or between
-jaxlib versions). Seeds, keys and programs are otherwise the same, so early updates agree to
-rounding (``tests/test_sharding.py``), but training turns a rounding difference into a different
-sampled action or buffer decision after a few updates, and from then on a seed's run differs as
-runs on different hardware do. A sharded run is itself deterministic and resumes exactly.
-``docs/devices.md`` has the multi-host set-up.
+A sharded run's results match the one-device run's to floating-point rounding, not bit for bit,
+and only for a while: XLA compiles the vmapped program for S/N seeds per device instead of S, and
+the rounding of some reductions depends on that batch size (the same happens between CPU and GPU,
+or between jaxlib versions). Seeds, keys and programs are otherwise the same, so early updates
+agree to rounding (``tests/test_sharding.py``), but training turns a rounding difference into a
+different sampled action or buffer decision after a few updates, and from then on a seed's run
+differs as runs on different hardware do. A sharded run is itself deterministic and resumes
+exactly. ``docs/devices.md`` has the multi-host set-up.
 """
 
 from __future__ import annotations
@@ -31,7 +28,6 @@ import dataclasses
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -42,20 +38,17 @@ from jax.sharding import NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from remidi import preemption
-from remidi.engine.run import evaluation
 from remidi.engine import train as tr
-from remidi.engine.setup import Setup
 from remidi.engine.algorithms import Algorithm
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.seeds import SEED_BATCH
 from remidi.engine.run.validation import validate_ued_config
 from remidi.engine.run.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
                                       remove_stale_temporaries, save_run)
+from remidi.engine.run.programs import (SEED_AXIS, Programs, _evaluate, _init, _put, _run_block,  # noqa: F401
+                                        check_devices, load_run_state, over_seeds, run_steps, ued_programs)
 from remidi.envs.interface import UEDTask
-from remidi.errors import ConfigError, RemidiError
+from remidi.errors import RemidiError
 from remidi.files import code_version
-
-SEED_AXIS = "seed"
 
 
 def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
@@ -84,116 +77,6 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
         if not name.startswith("replayed/"):
             out[name] = reduce[tr.BLOCK_REDUCTIONS.get(name, "mean")](values)
     return out
-
-
-def load_run_state(setup: Setup, seeds: list[int], path: Path, flag: str = "--resume"):
-    """``(runner, meta)``: the training state of every seed (leaves with the seed axis first) from
-    the checkpoint ``path`` of a run of ``setup``, checked against the structure :func:`_init`
-    gives (traced, not compiled); errors as :func:`load_checkpoint`'s."""
-    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
-    return load_checkpoint(path, jax.eval_shape(lambda k: _init(setup, k), keys), flag)
-
-
-@partial(jax.jit, static_argnums=0)
-def _init(setup: Setup, keys):
-    # lax.map, not vmap: several *batched* QR decompositions (orthogonal initialisers) in one
-    # program hang the CPU runtime of jaxlib 0.10.2 (reproduced with 2+ seeds); initialising
-    # one seed after another avoids them, and runs once per run.
-    # Every leaf strongly typed, as a checkpoint restores it: a weak-typed leaf (``jnp.full(shape,
-    # jnp.inf)``) would give a resumed run's runner other types, so its programs would be traced
-    # and compiled again, under other persistent-cache keys (a no-op on strongly typed leaves)
-    runner = jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
-    return jax.tree.map(lambda x: jax.lax.convert_element_type(x, x.dtype), runner)
-
-
-def over_seeds(fn):
-    """``fn`` (one seed's arguments -> its results) over the arguments' leading seed axis ``S``:
-    vmapped, or for ``S = 1`` called on the arguments without that axis (results given it back).
-
-    A vmapped axis of size 1 is not free: XLA keeps it in the network's matrix products and
-    turns the train step's ``lax.cond`` into selects (the measurements are in
-    ``docs/performance.md``, "A seed axis of size 1"; rare branches use
-    :func:`~remidi.engine.core.seeds.cond_per_seed`, which reads the axis name). ``S`` is the
-    axis's size where ``fn`` runs: under ``shard_map`` a device's share of the seeds."""
-
-    def mapped(*args):
-        if jax.tree.leaves(args)[0].shape[0] != 1:
-            return jax.vmap(fn, axis_name=SEED_BATCH)(*args)  # seeds.cond_per_seed reads the axis
-        out = fn(*jax.tree.map(lambda x: x[0], args))
-        return jax.tree.map(lambda x: x[None], out)
-
-    return mapped
-
-
-def run_steps(setup: Setup, runner, length: int):
-    """``length`` train steps for every seed of ``runner`` (leaves ``[S, ...]``):
-    ``(runner, per-step metrics f[S, length])``."""
-    return over_seeds(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
-
-
-@partial(jax.jit, static_argnums=(0, 2))
-def _run_block(setup: Setup, runner, length: int):
-    return run_steps(setup, runner, length)
-
-
-@partial(jax.jit, static_argnums=0)
-def _evaluate(setup: Setup, runner, keys):
-    return over_seeds(lambda r, k: {**evaluation.evaluate(setup, r, k), **tr.buffer_tag_fractions(setup, r),
-                                    **evaluation.tracker_audit(setup, r, jax.random.fold_in(k, 7))})(runner, keys)
-
-
-def check_devices(devices: int, num_seeds: int) -> None:
-    """Raise :class:`ConfigError` unless ``devices`` is ≥ 1, at most ``jax.device_count()`` (all
-    hosts' devices) and divides ``num_seeds``; the message names the allowed values."""
-    if devices == 1 and not isinstance(devices, bool):
-        return  # today's path: every machine has one device
-    available = jax.device_count()
-    allowed = ", ".join(str(d) for d in range(1, min(available, num_seeds) + 1) if num_seeds % d == 0)
-    if isinstance(devices, bool) or not isinstance(devices, (int, np.integer)) or devices < 1:
-        problem = f"must be an integer ≥ 1, got {devices!r}"
-    elif devices > available:
-        problem = f"{devices} is more than the {available} device{'s' if available != 1 else ''} JAX sees"
-    elif num_seeds % devices:
-        problem = f"{devices} does not divide the {num_seeds} seed{'s' if num_seeds != 1 else ''}"
-    else:
-        return
-    raise ConfigError(f"--devices: {problem}; allowed: {allowed}")
-
-
-def seed_mesh(devices: int) -> jax.sharding.Mesh:
-    """A 1-D mesh of the first ``devices`` of ``jax.devices()`` (every host's) with axis ``"seed"``."""
-    return jax.make_mesh((devices,), (SEED_AXIS,), axis_types=(jax.sharding.AxisType.Auto,),
-                         devices=jax.devices()[:devices])
-
-
-def _per_shard(mesh, fn):
-    # every input and output is split along its leading (seed) axis; the per-shard program is the
-    # unsharded one on S/N seeds and has no collectives, so replication checking is not needed
-    return jax.shard_map(fn, mesh=mesh, in_specs=P(SEED_AXIS), out_specs=P(SEED_AXIS), check_vma=False)
-
-
-@partial(jax.jit, static_argnums=(0, 1))
-def _init_sharded(mesh, setup: Setup, keys):
-    return _per_shard(mesh, lambda k: _init(setup, k))(keys)
-
-
-@partial(jax.jit, static_argnums=(0, 1, 3))
-def _run_block_sharded(mesh, setup: Setup, runner, length: int):
-    return _per_shard(mesh, lambda r: _run_block(setup, r, length))(runner)
-
-
-@partial(jax.jit, static_argnums=(0, 1))
-def _evaluate_sharded(mesh, setup: Setup, runner, keys):
-    return _per_shard(mesh, lambda r, k: _evaluate(setup, r, k))(runner, keys)
-
-
-def _put(tree, sharding):
-    """Place host (or single-device) arrays on ``sharding``; works across hosts, where every
-    process holds the same full values and supplies the shards of its own devices."""
-    def one(x):
-        host = np.asarray(x)
-        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
-    return jax.tree.map(one, tree)
 
 
 def _check_finite(runner, done: int) -> None:
@@ -227,30 +110,6 @@ def _to_host(tree):
 
     return jax.tree.map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
-
-@dataclass(frozen=True)
-class Programs:
-    """What the driver runs, for every seed at once (runner leaves ``[S, ...]``, keys ``[S, 2]``):
-
-    init(keys) -> runner; run_block(runner, length) -> (runner, per-step metrics {name: f[S,
-    length]}); evaluate(runner, keys) -> {name: f[S]}. :func:`ued_programs` builds them for the
-    shared UED train step, on one device or sharded over several.
-    """
-
-    init: Callable
-    run_block: Callable
-    evaluate: Callable
-    mesh: jax.sharding.Mesh | None = None  # set when the seeds are sharded over devices
-
-
-def ued_programs(setup: Setup, devices: int = 1) -> Programs:
-    """The compiled programs of a UED run of ``setup``, on ``devices`` devices."""
-    if devices == 1:
-        return Programs(init=partial(_init, setup), run_block=partial(_run_block, setup),
-                        evaluate=partial(_evaluate, setup))
-    mesh = seed_mesh(devices)
-    return Programs(init=partial(_init_sharded, mesh, setup), run_block=partial(_run_block_sharded, mesh, setup),
-                    evaluate=partial(_evaluate_sharded, mesh, setup), mesh=mesh)
 
 
 @dataclass(frozen=True)
@@ -332,7 +191,7 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
         earlier = list(meta.get("parts") or [{"updates": [0, done], "code": None}])  # older checkpoints: unrecorded
-    part, first = (new_part(done) if ckpt is not None else None), done
+    part, first = (PartClock(done) if ckpt is not None else None), done
 
     if ckpt is not None and _in_any_process(preemption.requested()):  # SIGTERM came as the previous algorithm finished
         raise preemption.Preempted(None)
@@ -341,6 +200,7 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
         armed = False  # once the first block is compiled and dispatched: a SIGTERM checkpoints, then stops
         while done < num_updates:
             length = min(eval_every, num_updates - done)
+            block_started = time.perf_counter()
             runner, step_metrics = programs.run_block(runner, length)
             if ckpt is not None and not armed:
                 # Python runs a signal handler only between bytecodes, so a SIGTERM that comes
@@ -360,13 +220,15 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
             per_step.append({k: v for k, v in step_metrics.items() if k == "replay" or k.startswith("replayed/")})
             if bar is not None:
                 bar.update(length)
+            if part is not None:  # training and evaluating the block; its checkpoint is not timed
+                part.block(length, time.perf_counter() - block_started)
             # SIGTERM (remidi.preemption): checkpoint this block whatever checkpoint_every says, then stop
             preempted = ckpt is not None and _in_any_process(preemption.requested())
             if ckpt is not None and (done % checkpoint_every < length or done == num_updates or preempted):
                 host_runner = runner if mesh is None else _to_host(runner)  # every process gathers,
                 _check_finite(host_runner, done)  # a diverged network never replaces the last good checkpoint
                 if writer:  # process 0 writes
-                    save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part(done)], run)
+                    save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part.record(done)], run)
             if on_block is not None:
                 on_block(done, history[-1])
             if preempted:
@@ -378,18 +240,37 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
     names = history[0].keys()
     hist = {name: np.stack([h[name] for h in history], axis=1) for name in names}
     raw = {name: np.concatenate([p[name] for p in per_step], axis=1) for name in per_step[0]}
-    trained = [part(done)] if part is not None and done > first else []  # a resume of a trained-out checkpoint adds no part
+    trained = [part.record(done)] if part is not None and done > first else []  # a resume of a trained-out checkpoint adds no part
     return TrainResult(np.asarray(steps), hist, raw, runner, earlier + trained)
 
 
-def new_part(start: int):
-    """This invocation's part of a run, from update ``start``: a function of the updates done so
-    far giving ``{"updates": [start, done], "wall_s": seconds since now, "code":
-    remidi.files.code_version()}`` (commit, device, JAX). A run resumed elsewhere (another
-    machine, device or commit) records each part, so its provenance needs no hand-written note;
-    ``code`` None: a part trained before parts were recorded."""
-    started, code = time.perf_counter(), code_version()
-    return lambda done: {"updates": [start, done], "wall_s": round(time.perf_counter() - started, 1), "code": code}
+class PartClock:
+    """This invocation's part of a run, from update ``start``: :meth:`record` gives ``{"updates":
+    [start, done], "wall_s": seconds since it began, "train_s": the seconds of its blocks after the
+    first, "train_updates": their updates, "code": remidi.files.code_version()}`` (commit, device,
+    JAX). The first block of an invocation compiles the programs (minutes for a large task) and a
+    block of another length compiles again, so only later blocks of the first block's length are
+    timed: ``train_s / train_updates`` is the steady rate ``remidi status`` tells the time left
+    at. A run resumed elsewhere (another machine, device or commit) records each part, so its
+    provenance needs no hand-written note; ``code`` None: a part trained before parts were
+    recorded."""
+
+    def __init__(self, start: int):
+        self.start, self.started, self.code = start, time.perf_counter(), code_version()
+        self.first_length: int | None = None
+        self.train_s, self.train_updates = 0.0, 0
+
+    def block(self, length: int, seconds: float) -> None:
+        """Count a block of ``length`` updates that took ``seconds`` (its evaluation included)."""
+        if self.first_length is None:
+            self.first_length = length
+        elif length == self.first_length:
+            self.train_s, self.train_updates = self.train_s + seconds, self.train_updates + length
+
+    def record(self, done: int) -> dict:
+        timed = {"train_s": round(self.train_s, 2), "train_updates": self.train_updates} if self.train_updates else {}
+        return {"updates": [self.start, done], "wall_s": round(time.perf_counter() - self.started, 1), **timed,
+                "code": self.code}
 
 
 def _progress(total: int, initial: int, desc: str, enabled: bool):

@@ -380,9 +380,9 @@ def step_reads_its_key(task: UEDTask) -> bool:
 
 
 def _trace_step_key_use(task: UEDTask) -> bool:
-    try:
-        level = task.sample_level(jax.random.PRNGKey(0))
-        _, state = task.env.reset_to_level(jax.random.PRNGKey(0), level, task.params)
+    try:  # shapes only: sampling and resetting eagerly would compile the generator and the reset (Kinetix: minutes)
+        state = jax.eval_shape(lambda k: task.env.reset_to_level(k, task.sample_level(k), task.params)[1],
+                               jax.random.PRNGKey(0))
     except Exception:  # noqa: BLE001 (validate_task reports a failing reset)
         return False
     action = acts.zero_action(task.actions)
@@ -392,4 +392,5 @@ def _trace_step_key_use(task: UEDTask) -> bool:
         return jax.tree.map(lambda _: True, (obs, nstate)), jax.tree.map(lambda _: False, reward), \
             jax.tree.map(lambda _: True, done), jax.tree.map(lambda _: False, info)
 
-    return _reads_key(lambda k: task.env.step_env(k, state, action, task.params), jax.random.PRNGKey(1), kept=kept)
+    return _reads_key(lambda k, st: task.env.step_env(k, st, action, task.params), jax.random.PRNGKey(1), state,
+                      kept=kept)

@@ -56,12 +56,12 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_ste
         level = task.sample_level(jax.random.PRNGKey(0))
         obs = [task.env.reset_to_level(jax.random.PRNGKey(k), level, task.params)[0] for k in (1, 2)]
         if not bool(tree_equal(obs[0], obs[1])):
-            out.append("remidi: this task's reset depends on its random key (one level, two keys, two first "
+            out.append("this task's reset depends on its random key (one level, two keys, two first "
                        "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
                        "actions; put the random seed into the level (UEDTask.deterministic_reset)")
     if check_step and algo.buffer_sequence and cfg.remidi.num_buffers > 1 \
             and not tracker_for(task, cfg, algo).learns and step_reads_its_key(task):
-        out.append("remidi: this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
+        out.append("this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
                    "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
                    "would give counts as distinguishable; draw the step's randomness from a seed the level holds "
                    "(remidi.envs.noisy does; UEDTask.reseed_level redraws it) or judge with remidi.tracker=belief "

@@ -97,4 +97,46 @@ def validate_tracker(cfg, algo, task) -> None:
                 r.tracker)
 
 
-__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "model_for"]
+# a rollout that steps the environment at least this many times per env step (the env and the
+# tracker's frozen levels) is said at the start of a run on an environment that is not cheap: the
+# slots multiply the environment's work, which on an expensive environment at a batch that fills
+# the machine is the rollout's cost (docs/performance.md, "The tracker's cost": on the maze 64
+# slots cost 0.3 of a rollout; on Brax hopper with 64 envs, 20.7 rollouts)
+COSTLY_STEPS = 9
+LOWER_BUDGET = 8  # the budget a note suggests (9 environment steps per env step)
+
+
+def tracker_cost_note(task, cfg, algo) -> str | None:
+    """One line for a run whose exact tracker will step the environment at least
+    :data:`COSTLY_STEPS` times per rollout env step once an adversary is frozen (``remidi.tracker``
+    prefix or per_step on a sequence of at least two buffers; ``tracker_budget`` slots per env, or
+    every frozen level for the reference tracker), naming the option that lowers it and what
+    lowering costs; None otherwise. The caller says it only where the environment's step is not
+    cheap beside the agent's network (``UEDSpec.cheap_step``)."""
+    r = cfg.remidi
+    if not (algo.buffer_sequence and r.num_buffers >= 2) or r.tracker not in MODES:
+        return None
+    slots = exact_budget(task, r, r.tracker)
+    frozen = (r.num_buffers - 1) * r.buffer_capacity
+    followed = slots or frozen
+    if followed + 1 < COSTLY_STEPS:
+        return None
+    what = (f"steps up to {followed} frozen levels (remidi.tracker_budget={r.tracker_budget}) beside each rollout env"
+            if slots else f"steps every frozen level ({frozen}: the reference tracker) beside each rollout env")
+    if slots and slots > LOWER_BUDGET:
+        fix = (f"--set remidi.tracker_budget={LOWER_BUDGET} makes it {LOWER_BUDGET + 1}×, at a cost where more than "
+               f"{LOWER_BUDGET} frozen levels share an env's first observation: those beyond the slots are not "
+               f"followed (counted by the tracker_overflow metric), so a prefix only they explain counts as "
+               f"distinguishable")
+    elif slots:
+        fix = "a smaller remidi.buffer_capacity or remidi.num_buffers freezes fewer levels"
+    else:
+        fix = ("remidi.tracker=belief judges with a learned model instead (docs/belief.md)" if r.tracker == "per_step"
+               or not task.deterministic_reset else f"--set remidi.tracker_budget={LOWER_BUDGET} follows at most "
+               f"{LOWER_BUDGET} per env (the tracker_overflow metric counts those it could not)")
+    return (f"ReMiDi's exact tracker {what} once an adversary is frozen: a rollout steps this environment up to "
+            f"{followed + 1}× as often as PLR⊥'s (docs/performance.md, \"The tracker's cost\"); {fix}")
+
+
+__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "model_for",
+           "tracker_cost_note"]

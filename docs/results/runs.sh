@@ -210,3 +210,16 @@ done
 
 at 8214e56
 for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5 cpu4x; done
+
+# Kinetix (beyond the paper): DR, PLR⊥, SFL and ReMiDi on kinetix-s, cpu preset, 5 seeds each, at a
+# commit after the one that stated their claims (55016af) with the same Kinetix code and faster
+# start-up. Kinetix needs its extra, which caps JAX at 0.9: KINETIX_PYTHON names the python of an
+# environment that has it (e.g. .ci/.venv-kinetix/bin/python); without it the block is skipped
+if [ -n "${KINETIX_PYTHON:-}" ]; then
+  at 254fe8c
+  CORE_PY=$PY; PY="${PY%"${PYTHON:-python}"}$KINETIX_PYTHON"
+  for a in dr plr sfl remidi; do run "$a-s0" kinetix-s "$a" 0 5 cpu; done
+  PY=$CORE_PY
+else
+  echo "skipped: the Kinetix runs (set KINETIX_PYTHON to a python with the kinetix extra)"
+fi

@@ -346,7 +346,7 @@ def test_the_mean_action_table_reads_the_seeds_evaluated_both_ways(tmp_path):
     assert (tmp_path / "data" / "brax-ant" / "remidi-s5" / "evaluate-mode.json").is_file()
     rows = tables.mode_table(data.load_runs(tmp_path / "data")).splitlines()[2:]
     assert rows[:3] == ["| ant | plr | — | — | — |", "| ant | minimax-return | — | — | — |",
-                        "| ant | remidi | 5–7 | 20.0 | 110.0 |"]
+                        "| ant | remidi | 3 seeds (5–7) | 20.0 | 110.0 |"]
     mode["args"]["action"] = "sample"  # a sampled evaluation under the mode's name
     (folder / "evaluate-mode.json").write_text(json.dumps(mode))
     with pytest.raises(ConfigError, match="evaluate-mode.json: evaluated with --action sample"):

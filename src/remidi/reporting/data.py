@@ -22,6 +22,7 @@ from remidi.errors import ConfigError
 from remidi.experiments import outputs
 from remidi.files import atomic_write
 from remidi.reporting.claims import EXTRA_TABLES, SCALE_PRESETS, SECTIONS
+from remidi.runs.evaluate import DEFAULTS, files_stem
 from remidi.runs.table import label  # how the page names an algorithm's runs
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -68,7 +69,7 @@ EVAL_ATTEMPTS = 30  # `remidi evaluate --attempts`: what the page's "final check
 
 #: the evaluations the page reads, by source: ``evaluate:`` (actions sampled from the policy, as it
 #: trained) and ``evaluate-mode:`` (its most likely action, ``remidi evaluate --action mode``)
-EVALUATIONS = {"evaluate": "sample", "evaluate-mode": "mode"}
+EVALUATIONS = {files_stem(action): action for action in ("sample", "mode")}
 
 
 def _evaluation(folder: Path, algo: str, config: dict, source: str = "evaluate") -> dict:
@@ -77,8 +78,6 @@ def _evaluation(folder: Path, algo: str, config: dict, source: str = "evaluate")
     evaluate``'s defaults give them: refuse (ConfigError naming the run) an evaluation of an
     unfinished run's checkpoint, with other arguments or acting otherwise than its source says,
     rather than mix it in."""
-    from remidi.runs.evaluate import DEFAULTS
-
     where = folder / f"{source}.json"
     evaluated = outputs.read_json(where)
     entry, args = evaluated["algorithms"][algo], evaluated.get("args", {})

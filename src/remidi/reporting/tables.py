@@ -10,6 +10,7 @@ import numpy as np
 
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
+from remidi.experiments.plots import seeds_text
 from remidi.reporting.claims import BRAX
 from remidi.reporting.data import EVAL_ATTEMPTS, metric_values
 from remidi.reporting.verdicts import verdict_words
@@ -146,12 +147,16 @@ def provenance_table(runs: dict) -> str:
 
 
 
+#: the Brax algorithms whose undisturbed return the floors and mean-action tables show
+BRAX_ALGOS = ("plr", "minimax-return", "remidi")
+
+
 def floors_table(runs: dict, floors: dict) -> str:
     """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
     policy (``floors``: :mod:`remidi.reporting.floors`' document) beside each algorithm's
     mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's
     ("—" without runs). ConfigError for a run on another Brax back end than the floors'."""
-    algos = ("plr", "minimax-return", "remidi")
+    algos = BRAX_ALGOS
     backend = floors.get("config", {}).get("backend")
     metric = "evaluate:return/undisturbed"
     lines = ["| morphology | zero action | N(0, 1) actions | " + " | ".join(algos) + " | above zero action |",
@@ -178,7 +183,7 @@ def mode_table(runs: dict) -> str:
     ways: actions sampled from the policy (``evaluate:``, as it trained) and its most likely
     action, the Gaussian's mean (``evaluate-mode:``, ``remidi evaluate --action mode``): means over
     the seeds evaluated both ways, and which seeds those are ("—" for an algorithm with none)."""
-    algos = ("plr", "minimax-return", "remidi")
+    algos = BRAX_ALGOS
     lines = ["| morphology | algorithm | seeds | sampled actions | mean action |", "| --- | --- | --- | --- | --- |"]
     for exp in BRAX:
         for algo in algos:
@@ -188,17 +193,10 @@ def mode_table(runs: dict) -> str:
             if not both:
                 lines.append(f"| {exp.removeprefix('brax-')} | {algo} | — | — | — |")
                 continue
-            lines.append(f"| {exp.removeprefix('brax-')} | {algo} | {_seeds(both)} | "
+            lines.append(f"| {exp.removeprefix('brax-')} | {algo} | {seeds_text(both)} | "
                          f"{_f(float(np.mean([sampled[s] for s in both])), 1)} | "
                          f"{_f(float(np.mean([mean[s] for s in both])), 1)} |")
     return "\n".join(lines)
-
-
-def _seeds(seeds: list[int]) -> str:
-    """``5–9`` for consecutive seeds, else the list."""
-    if seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2:
-        return f"{seeds[0]}–{seeds[-1]}"
-    return ", ".join(map(str, seeds))
 
 
 def maze_floors_table(runs: dict, floors: dict) -> str:

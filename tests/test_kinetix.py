@@ -7,6 +7,7 @@ persistent compilation cache (tests/conftest.py) keeps later runs of this file s
 
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -20,12 +21,14 @@ from test_cli import assert_resumes_to_the_uninterrupted_result  # noqa: E402
 from remidi.cli import main  # noqa: E402
 from remidi.engine.run.task_checks import validate_task  # noqa: E402
 from remidi.envs import kinetix as K  # noqa: E402
+from remidi.envs.actions import Discrete  # noqa: E402
 from remidi.envs.kinetix_levels import level_files  # noqa: E402
 from remidi.envs.kinetix_names import HELD_OUT  # noqa: E402
 from remidi.envs.kinetix_obs import entity_observation  # noqa: E402
 
 pytestmark = pytest.mark.slow  # compiles Kinetix's physics: `pytest -m "not slow"` skips it
 
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 NOOP = 8  # Kinetix's DISCRETE no-op: 2 · 4 motor bindings
 TINY = ["--set", "num_updates=4", "--set", "eval_every=2", "--set", "checkpoint_every=2", "--set", "num_envs=4",
         "--set", "num_steps=16", "--set", "eval_attempts=1", "--set", "hidden_size=16", "--set", "buffer.capacity=8",
@@ -72,7 +75,7 @@ def noop(task, levels):
 
 def test_the_task_passes_validation_and_names_its_held_out_levels(task):
     validate_task(task)
-    assert task.num_actions == 11 and task.max_episode_steps == 256 and task.deterministic_reset
+    assert task.actions == Discrete(11) and task.max_episode_steps == 256 and task.deterministic_reset
     for size in ("s", "m", "l"):  # the names the experiment knows without Kinetix are the package's files
         assert sorted(HELD_OUT[size]) == sorted(level_files(size))
     assert sorted(task.eval_sets) == sorted(f"s_{n}" for n in HELD_OUT["s"])
@@ -119,7 +122,9 @@ def test_accel_edits_are_valid_levels_of_the_same_shapes(task, levels):
     assert obs.shape == (140,) and bool(jnp.all(jnp.isfinite(obs)))
 
 
-def test_the_entity_observation_follows_the_convention():
+@pytest.fixture(scope="module")
+def entity_obs():
+    """Kinetix's own entity observation of a held-out level and remidi's: ``(static, raw, obs)``."""
     from kinetix.environment import EnvParams, ObservationType, make_kinetix_env, static_env_params_from_size
     from kinetix.environment import ActionType
 
@@ -128,7 +133,11 @@ def test_the_entity_observation_follows_the_convention():
                            auto_reset=False)
     level = jax.tree.map(lambda x: x[0], K.held_out_sets("s", static)["s_h2_one_wheel_car"])
     raw, _ = env.reset(jax.random.PRNGKey(0), EnvParams(), override_reset_state=level)
-    obs = entity_observation(raw)
+    return static, raw, entity_observation(raw)
+
+
+def test_the_entity_observation_follows_the_convention(entity_obs):
+    static, raw, obs = entity_obs
     assert set(obs) == {"entities"} and set(obs["entities"]) == {"polygons", "circles", "joints", "thrusters"}
     shapes = static.num_polygons + static.num_circles  # 7
     widths = {"polygons": 27 + 2 * shapes, "circles": 19 + 2 * shapes, "joints": 22 + 2 * shapes,
@@ -184,17 +193,50 @@ def test_an_interrupted_run_resumes_to_the_uninterrupted_result(run, tmp_path, m
         monkeypatch, ["run", "kinetix-s", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY], tmp_path, at=2)
 
 
-def test_kinetix_own_agent_entity_observations_and_multi_discrete_actions_train(tmp_path):
+def test_the_entity_network_reads_kinetix_entity_observations_in_any_row_order(entity_obs):
+    """The library's ``entity`` network (Kinetix's defaults) applies to a real Kinetix entity
+    observation: one logit per multi-discrete choice (16), and the same output when each group's
+    rows are permuted (padded rows included)."""
+    from remidi.engine.core.networks import make_network
+
+    obs = entity_obs[2]
+    net = make_network("entity", 16)
+    assert net.check_observation(obs) is None
+    batch = jax.tree.map(lambda x: x[None, None], obs)  # [T=1, N=1, ...]
+    reset = jnp.ones((1, 1), bool)
+    params = net.init(jax.random.PRNGKey(1), net.initialize_carry(1), batch, reset)
+    _, (logits, value) = net.apply(params, net.initialize_carry(1), batch, reset)
+    assert logits.shape == (1, 1, 16) and value.shape == (1, 1) and bool(jnp.all(jnp.isfinite(logits)))
+    rng = np.random.default_rng(0)
+    shuffled = {"entities": {name: jax.tree.map(lambda x, p=rng.permutation(group["mask"].shape[0]): x[p], group)
+                             for name, group in obs["entities"].items()},
+                **{k: v for k, v in obs.items() if k != "entities"}}
+    _, (logits2, value2) = net.apply(params, net.initialize_carry(1), jax.tree.map(lambda x: x[None, None], shuffled),
+                                     reset)
+    np.testing.assert_allclose(logits2, logits, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(value2, value, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.usefixtures("restore_registries")
+def test_a_user_network_trains_on_entity_observations_with_multi_discrete_actions(tmp_path, monkeypatch):
     """Kinetix's default interface: its multi-discrete actions (one choice per motor and per
-    thruster binding) declared as the task's action space, its entity observation read by remidi's
-    entity network; a ReMiDi run trains and writes its outputs."""
+    thruster binding) declared as the task's action space, its entity observation read by a network
+    registered from a user module (examples/my_entity_network.py through REMIDI_PLUGINS, as the
+    command line loads it); a ReMiDi run trains it and writes its outputs, with its parameters."""
+    from remidi import plugins
     from remidi.envs.actions import MultiDiscrete
 
     task = K.kinetix_task("s", "entity", "multi_discrete", held_out=False)
     assert task.actions == MultiDiscrete((3, 3, 3, 3, 2, 2))
+    monkeypatch.setattr(plugins, "_loaded", set())
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    monkeypatch.setenv("REMIDI_PLUGINS", "my_entity_network")
     out = tmp_path / "run"
-    assert main(["run", "kinetix-s", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY, "--set", "network=entity", "--set", "hidden_size=0",
-                 "--set", "kinetix.observation=entity", "--set", "kinetix.actions=multi_discrete",
-                 "--out", str(out)]) == 0
+    assert main(["run", "kinetix-s", "--algo", "remidi", "--seeds", "1", "--quiet", *TINY, "--set", "network=set_max",
+                 "--set", "hidden_size=0", "--set", "kinetix.observation=entity",
+                 "--set", "kinetix.actions=multi_discrete", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["algo"] == "remidi" and "solve_rate/mean" in summary["metrics"]
+    assert json.loads((out / "config.json").read_text())["config"]["network"] == "set_max"
+    with np.load(out / "checkpoint.npz") as saved:  # one embedding per entity type, trained and saved
+        assert any("polygons_1" in key for key in saved.files) and any("heads" in key for key in saved.files)

@@ -17,7 +17,7 @@ from remidi.runs import table as run_table
 
 
 def test_the_page_and_the_readme_match_the_committed_data():
-    generated, _ = rp.blocks(data.load_runs(data.DATA))
+    generated, _ = rp.blocks(data.load_runs(data.DATA), data.load_unfinished(data.DATA))
     for page in (rp.PAGE, rp.README):
         text = page.read_text()
         assert "<!-- generated:" in text, page
@@ -394,3 +394,44 @@ def test_the_scale_curves_put_each_preset_on_the_environment_steps_it_trained(tm
     assert figures.scale_curves(runs, "tmaze", "remidi") == []
     figures.scale_figure(tmp_path / "scale.png", runs, "tmaze", "T-maze")
     assert (tmp_path / "scale.png").stat().st_size > 10_000
+
+
+def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stands(tmp_path):
+    """collect_unfinished reads config.json and checkpoint.history.npz alone: each block ends at
+    eval_every × its number, the experiment's derived mean solve rate is added, progress.json says
+    the updates reached of the run's and the device it started on (no checkpoint beside it); the
+    scale curves and the table show it with those updates, its mean and the seeds above 0; a
+    finished run is refused."""
+    from remidi.envs.maze_names import HELD_OUT_NAMES
+    from remidi.engine.run.checkpoint import HISTORY
+
+    run = tmp_path / "runs" / "remidi-paper-s0"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({
+        "experiment": "tmaze", "algo": "remidi", "preset": "paper", "seeds": [3, 4],
+        "code": {"commit": "abc1234def", "device": "gpu: NVIDIA H200"},
+        "config": {"num_updates": 30000, "eval_every": 250, "num_envs": 32, "num_steps": 256}}))
+    # block b, seed s: every maze solved at rate 0.1 × b × s (seed 0 of the two never solves one)
+    arrays = {f"h{b}|solve_rate/{n}": np.array([0.0, 0.1 * b]) for b in range(3) for n in HELD_OUT_NAMES}
+    arrays.update({f"p{b}|replay": np.zeros((2, 250)) for b in range(3)})
+    np.savez(run / HISTORY, **arrays)
+    target = data.collect_unfinished(run, tmp_path / "data")
+    assert target == tmp_path / "data" / "tmaze" / "remidi-paper-s3"  # named by its first seed
+    progress = json.loads((target / data.PROGRESS).read_text())
+    assert (progress["updates"], progress["num_updates"]) == (750, 30000)
+    assert progress["devices"] == ["gpu: NVIDIA H200 (at its start)"] and progress["seeds"] == [3, 4]
+    assert data.load_runs(tmp_path / "data") == {}  # no claim reads it
+    unfinished = data.load_unfinished(tmp_path / "data")
+    found, _ = unfinished["tmaze", "remidi @paper"]
+    steps, values = found.curves["solve_rate/mean"]
+    np.testing.assert_array_equal(steps, [250, 500, 750])
+    np.testing.assert_allclose(values, [[0.0, 0.0, 0.0], [0.0, 0.1, 0.2]])
+    (curve,) = figures.scale_curves({}, "tmaze", "remidi", unfinished)
+    assert curve["updates"] == (750, 30000) and curve["preset"] == "paper"
+    np.testing.assert_array_equal(curve["x"], np.array([250, 500, 750]) * 32 * 256)
+    row = tables.unfinished_table(unfinished).splitlines()[2]
+    assert "| 750 of 30,000 | 6.1M of 245.8M |" in row and "| 0.100 [" in row and "| 1 / 2 |" in row
+    figures.scale_figure(tmp_path / "scale.png", {}, "tmaze", "T-maze", unfinished)
+    (run / "summary.json").write_text("{}")
+    with pytest.raises(ConfigError, match="finished run"):
+        data.collect_unfinished(run, tmp_path / "data")

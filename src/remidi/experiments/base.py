@@ -88,6 +88,9 @@ class Experiment:
     # config → the UEDTask a run of this experiment trains on (UED experiments; None for the tabular
     # games): for tools that reload a run's agent (remidi evaluate)
     make_task: Callable[[Any], Any] | None = None
+    # history → more history: the metrics a run derives from those it logs (f[S, T] each, e.g. the
+    # mean solve rate over held-out sets), for tools that read a run's history (the results page)
+    derive: Callable[[dict], dict] | None = None
     # what `remidi run` trains without --algo (None: every algorithm); --algo all trains every one
     default_algorithms: tuple[str, ...] | None = None
     # a user's task given by import path: {"import": "module:function", "folder": the folder it is

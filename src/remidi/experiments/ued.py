@@ -286,4 +286,5 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         preset_reasons=preset_reasons or {},
         notes=tuple(spec.notes),
         make_task=task_for,
+        derive=derive,
     )

@@ -113,23 +113,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
             if (folder / f"{source}.json").is_file():
                 entry = _evaluation(folder, summary["algo"], config, source)
                 _merge_seeds(run, source, list(entry["seeds"]), entry["metrics"], folder)
-        if (folder / "metrics.csv.gz").is_file():
-            rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
-            steps = np.array(sorted({step for _, step, _, _ in rows}))
-            index = {s: i for i, s in enumerate(steps)}
-            part: dict[str, np.ndarray] = {}
-            for seed, step, name, value in rows:
-                part.setdefault(name, np.full((len(seeds), len(steps)), np.nan))[seeds.index(seed), index[step]] = value
-            for name, values in part.items():
-                if name in run.curves and not np.array_equal(run.curves[name][0], steps):
-                    raise ConfigError(f"data: {folder} logs {name} at other steps than the other parts")
-                old = run.curves.get(name, (steps, np.zeros((0, len(steps)))))[1]
-                run.curves[name] = (steps, np.concatenate([old, values]))
-        run.seeds += seeds
-        run.config = run.config or config.get("config", {})
-        page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
-        run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
-                           else str(folder))
+        _add_part(run, folder, seeds, config, data)
         started = config.get("code") or {}  # what the run recorded when it started
         parts = summary.get("parts")  # each invocation that trained it
         if parts is None:  # a run before parts were recorded: the start's record, the last part's time
@@ -150,6 +134,95 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
                 means = np.nanmean(values, axis=1)
             run.values.setdefault("run", {})[name] = dict(zip(run.seeds, map(float, means)))
     return runs
+
+
+def _add_part(run: Run, folder: Path, seeds: list[int], config: dict, data: Path) -> None:
+    """Merge one run folder's curves (``metrics.csv.gz``), seeds, config and folder into ``run``."""
+    if (folder / "metrics.csv.gz").is_file():
+        rows = outputs.read_metrics_csv(folder / "metrics.csv.gz")
+        steps = np.array(sorted({step for _, step, _, _ in rows}))
+        index = {s: i for i, s in enumerate(steps)}
+        part: dict[str, np.ndarray] = {}
+        for seed, step, name, value in rows:
+            part.setdefault(name, np.full((len(seeds), len(steps)), np.nan))[seeds.index(seed), index[step]] = value
+        for name, values in part.items():
+            if name in run.curves and not np.array_equal(run.curves[name][0], steps):
+                raise ConfigError(f"data: {folder} logs {name} at other steps than the other parts")
+            old = run.curves.get(name, (steps, np.zeros((0, len(steps)))))[1]
+            run.curves[name] = (steps, np.concatenate([old, values]))
+    run.seeds += seeds
+    run.config = run.config or config.get("config", {})
+    page_dir = Path(data).resolve().parents[1]  # docs/: the page's links are relative to it
+    run.folders.append(str(folder.resolve().relative_to(page_dir)) if folder.resolve().is_relative_to(page_dir)
+                       else str(folder))
+
+
+PROGRESS = "progress.json"  # an unfinished run's committed folder: how far it trained
+
+
+def load_unfinished(data: Path = DATA) -> dict[tuple[str, str], tuple[Run, dict]]:
+    """``{(experiment, "algo @preset"): (run, progress)}`` of the unfinished runs under ``data``
+    (folders with ``progress.json``, :func:`collect_unfinished`): their training evaluations so far
+    (``run.curves``) and ``progress`` (``updates`` reached of ``num_updates``, the ``devices`` and
+    ``commit`` they trained on). The page draws them beside the scale study's curves; no claim
+    reads them."""
+    out = {}
+    for folder in sorted(p.parent for p in Path(data).glob(f"*/*/{PROGRESS}")):
+        progress = outputs.read_json(folder / PROGRESS)
+        config = outputs.read_json(folder / "config.json")
+        key = (progress["experiment"], f"{progress['algo']} @{progress['preset']}")
+        if key in out:
+            raise ConfigError(f"data: {key[0]} / {key[1]} has two unfinished runs ({folder})")
+        run = Run(*key, preset=progress["preset"], commits={progress["commit"]}, devices=set(progress["devices"]))
+        _add_part(run, folder, list(progress["seeds"]), config, data)
+        out[key] = (run, progress)
+    return out
+
+
+def collect_unfinished(run: Path, data: Path = DATA) -> Path:
+    """Copy an unfinished run's training evaluations so far (its ``config.json`` and
+    ``checkpoint.history.npz``, the metrics logged up to its last checkpoint) into
+    ``data/<experiment>/<algo>-<preset>-s<first seed>/``: ``config.json``, :data:`PROGRESS` and,
+    gzipped, the curves the page draws with the metrics the experiment derives. The devices are its
+    checkpoint's record of every part when ``checkpoint.npz`` lies beside the history at the same
+    update, else the one the run started on. Returns the folder written."""
+    from remidi.engine.run.checkpoint import CHECKPOINT, HISTORY, read_meta
+    from remidi.experiments import get_experiment
+
+    folder = Path(run)
+    if (folder / "summary.json").is_file():
+        raise ConfigError(f"collect-unfinished: {folder} is a finished run (summary.json): collect it with --collect")
+    doc = outputs.read_json_object(folder / "config.json", "collect-unfinished",
+                                      "; give a folder remidi run wrote")
+    if not (folder / HISTORY).is_file():
+        raise ConfigError(f"collect-unfinished: {folder} holds no {HISTORY} (no checkpoint written yet)")
+    with np.load(folder / HISTORY) as saved:
+        blocks = sorted({int(k.split("|", 1)[0][1:]) for k in saved.files if k.startswith("h")})
+        if blocks != list(range(len(blocks))) or not blocks:
+            raise ConfigError(f"collect-unfinished: {folder / HISTORY} lacks blocks (it holds {blocks})")
+        names = [k.split("|", 1)[1] for k in saved.files if k.startswith("h0|")]
+        history = {n: np.stack([saved[f"h{b}|{n}"] for b in blocks], axis=1) for n in names}
+    cfg = doc["config"]
+    steps = np.minimum(cfg["eval_every"] * np.arange(1, len(blocks) + 1), cfg["num_updates"])  # every block's end
+    derive = get_experiment(doc["experiment"]).derive
+    if derive is not None:
+        history.update(derive(history))
+    devices = [doc["code"]["device"] + " (at its start)"]
+    if (folder / CHECKPOINT).is_file():
+        meta = read_meta(folder / CHECKPOINT, "collect-unfinished")
+        if meta.get("done") == int(steps[-1]) and meta.get("parts"):
+            devices = sorted({(p.get("code") or {}).get("device", "not recorded") for p in meta["parts"]})
+    keep = set(SECTIONS.get(doc["experiment"], ([], [], []))[2])
+    target = Path(data) / doc["experiment"] / f"{doc['algo']}-{doc['preset']}-s{doc['seeds'][0]}"
+    target.mkdir(parents=True, exist_ok=True)
+    atomic_write(target / "config.json", lambda f: f.write((folder / "config.json").read_bytes()), binary=True)
+    outputs.write_metrics_csv(target / "metrics.csv.gz", outputs.metric_rows(
+        steps, {n: v for n, v in history.items() if n in keep}, doc["seeds"]))
+    outputs.write_json(target / PROGRESS, {
+        "experiment": doc["experiment"], "algo": doc["algo"], "preset": doc["preset"], "seeds": doc["seeds"],
+        "updates": int(steps[-1]), "num_updates": int(cfg["num_updates"]), "devices": devices,
+        "commit": doc["code"]["commit"]})
+    return target
 
 
 def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[int, float]:

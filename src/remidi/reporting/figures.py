@@ -15,7 +15,7 @@ from remidi.reporting.data import ROOT, metric_values
 FIGURES = ROOT / "docs" / "results"
 
 
-def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> list[Path]:
+def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES, unfinished: dict | None = None) -> list[Path]:
     """Per experiment its training curves (mean ± std over seeds) and per claim an interval plot."""
     from remidi.experiments.plots import Curve, Panel, distinct_styles, plot_panels
 
@@ -35,7 +35,7 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
         written.append(path)
     for exp, what in SCALE_TASKS:
         path = folder / f"scale-{exp}.png"
-        scale_figure(path, runs, exp, what)
+        scale_figure(path, runs, exp, what, unfinished)
         written.append(path)
     for r in results:
         path = folder / f"claim-{r['claim'].key}.png"
@@ -48,45 +48,63 @@ def draw_figures(runs: dict, results: list[dict], folder: Path = FIGURES) -> lis
 
 
 SCALE_ALGOS = ("plr", "minimax-return", "remidi")
-SCALE_LINES = {"cpu": "-", "cpu4x": "--"}  # the scale study's presets, each in its line style
+# the scale study's presets, each in its line style; `paper`: an unfinished run (collect_unfinished)
+SCALE_LINES = {"cpu": "-", "cpu4x": "--", "paper": ":"}
 
 
-def scale_curves(runs: dict, experiment: str, algo: str) -> list[dict]:
-    """``algo``'s held-out solve rate at each scale of the study: per preset with runs, the
-    environment steps x [T] (update × num_envs × num_steps) of its training evaluations, their
-    mean over seeds [T] and its 95% bootstrap interval [T, 2], and its final checkpoint's
-    (``remidi evaluate``, 30 attempts) mean and interval at the last x."""
+def _curve(run, preset: str) -> dict | None:
+    """``run``'s held-out solve rate: environment steps x [T] (update × num_envs × num_steps) of
+    its training evaluations, their mean over seeds [T] and its 95% bootstrap interval [T, 2]."""
+    if run is None or "solve_rate/mean" not in run.curves:
+        return None
+    steps, values = run.curves["solve_rate/mean"]
+    x = np.asarray(steps, float) * run.config["num_envs"] * run.config["num_steps"]
+    keep = np.isfinite(values).all(axis=0)
+    band = np.array([stats.bootstrap_ci(values[:, t]) for t in np.flatnonzero(keep)])
+    return {"preset": preset, "x": x[keep], "mean": values[:, keep].mean(axis=0), "band": band,
+            "seeds": len(run.seeds), "final": None, "updates": None}
+
+
+def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None = None) -> list[dict]:
+    """``algo``'s held-out solve rate at each scale of the study (:func:`_curve`): per preset with
+    finished runs, with ``final``, its final checkpoint's (``remidi evaluate``, 30 attempts) mean and
+    interval at the last x; then an unfinished run of another preset (``unfinished``:
+    :func:`~remidi.reporting.data.load_unfinished`), with ``updates``: (reached, of)."""
     found = []
-    for preset in SCALE_LINES:
-        run = runs.get((experiment, algo if preset == "cpu" else f"{algo} @{preset}"))
-        if run is None or "solve_rate/mean" not in run.curves:
-            continue
-        steps, values = run.curves["solve_rate/mean"]
-        x = np.asarray(steps, float) * run.config["num_envs"] * run.config["num_steps"]
-        keep = np.isfinite(values).all(axis=0)
-        mean = values[:, keep].mean(axis=0)
-        band = np.array([stats.bootstrap_ci(values[:, t]) for t in np.flatnonzero(keep)])
-        final = list(metric_values(runs, experiment, run.algo, "evaluate:solve_rate/mean").values())
-        found.append({"preset": preset, "x": x[keep], "mean": mean, "band": band, "seeds": len(run.seeds),
-                      "final": (float(np.mean(final)), stats.bootstrap_ci(final)) if final else None})
+    for preset in ("cpu", "cpu4x"):
+        name = algo if preset == "cpu" else f"{algo} @{preset}"
+        c = _curve(runs.get((experiment, name)), preset)
+        if c is not None:
+            final = list(metric_values(runs, experiment, name, "evaluate:solve_rate/mean").values())
+            c["final"] = (float(np.mean(final)), stats.bootstrap_ci(final)) if final else None
+            found.append(c)
+    for (exp, name), (run, progress) in (unfinished or {}).items():
+        if exp == experiment and name.split(" @")[0] == algo:
+            c = _curve(run, progress["preset"])
+            if c is not None:
+                c["updates"] = (progress["updates"], progress["num_updates"])
+                found.append(c)
     return found
 
 
-def scale_figure(path: Path, runs: dict, experiment: str, what: str) -> None:
+def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished: dict | None = None) -> None:
     """Held-out solve rate against environment steps for PLR⊥, minimax return and ReMiDi at every
     scale of the study (line style: the preset), means over seeds with their 95% bootstrap
-    bands; a diamond with its interval: the final checkpoint's evaluation (30 attempts)."""
+    bands; a diamond with its interval: the final checkpoint's evaluation (30 attempts); an
+    unfinished run's last evaluation: a square, labelled with the updates it reached."""
     import matplotlib.pyplot as plt
 
     from remidi.experiments.plots import algorithm_style, padded
 
-    fig, ax = plt.subplots(figsize=(8.5, 5.2), layout="constrained")
+    fig, ax = plt.subplots(figsize=(10, 5.2), layout="constrained")
     low, high, right = [0.0], [0.0], [0.0]
     for algo in SCALE_ALGOS:
         color = algorithm_style(algo)["color"]
-        for c in scale_curves(runs, experiment, algo):
-            ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6,
-                    label=f"{algo} ({c['preset']}, {c['seeds']} seeds)")
+        for c in scale_curves(runs, experiment, algo, unfinished):
+            label = f"{algo} ({c['preset']}, {c['seeds']} seeds)"
+            if c["updates"] is not None:
+                label = f"{algo} ({c['preset']}, {c['seeds']} seeds, {c['updates'][0]:,} of {c['updates'][1]:,} updates)"
+            ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6, label=label)
             ax.fill_between(c["x"], c["band"][:, 0], c["band"][:, 1], color=color, alpha=0.15, linewidth=0)
             low.append(float(c["band"][:, 0].min()))
             high.append(float(c["band"][:, 1].max()))
@@ -97,8 +115,13 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str) -> None:
                             markerfacecolor="white", capsize=3, linestyle="none")
                 low.append(lo)
                 high.append(hi)
+            if c["updates"] is not None:  # where the unfinished run stands
+                ax.plot([c["x"][-1]], [c["mean"][-1]], color=color, marker="s", linestyle="none")
+                ax.annotate(f"{c['updates'][0]:,} updates", (c["x"][-1], c["mean"][-1]), textcoords="offset points",
+                            xytext=(4, 4), fontsize=7, color=color)
     ax.set_ylim(*padded(min(low), max(high), (0.0, None)))
     ax.set_xlim(*padded(0.0, max(right)))
+    ax.xaxis.set_major_formatter(lambda x, _: f"{x / 1e6:g}M" if x else "0")
     ax.set_xlabel("environment steps (update × envs × steps per rollout)")
     ax.set_ylabel("held-out solve rate (mean of the ten mazes)")
     ax.set_title(f"scale study, {what}: held-out solve rate against training")
@@ -107,7 +130,8 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str) -> None:
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.supxlabel("line: mean over seeds of training's evaluations (10 attempts per maze); band: its 95% bootstrap "
                   "interval; diamond: the final checkpoint's mean (30 attempts) with its 95% interval; solid: cpu "
-                  "preset, dashed: cpu4x", fontsize=8, wrap=True)
+                  "preset, dashed: cpu4x, dotted: the paper preset (LSTM 256) so far, its square the last evaluation",
+                  fontsize=8, wrap=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -46,19 +46,20 @@ from pathlib import Path
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
 from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
-from remidi.reporting.data import DATA, ROOT, collect, load_runs
+from remidi.reporting.data import DATA, ROOT, collect, collect_unfinished, load_runs, load_unfinished
 from remidi.reporting.figures import draw_figures
 from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
 from remidi.reporting.tables import (floors_table, maze_floors_table, metrics_table, mode_table, per_seed_table,
-                                     provenance_table, summary_lines, verdict_table)
+                                     provenance_table, summary_lines, unfinished_table, verdict_table)
 from remidi.reporting.verdicts import evaluate_claim
 
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 
 
-def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
-    """``{block name: Markdown}`` of every generated block, and the claims' results."""
+def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], list[dict]]:
+    """``{block name: Markdown}`` of every generated block, and the claims' results (``unfinished``:
+    :func:`~remidi.reporting.data.load_unfinished`, drawn beside the scale study, in no claim)."""
     results = [evaluate_claim(c, runs) for c in CLAIMS]
     out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
            "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
@@ -74,6 +75,7 @@ def blocks(runs: dict) -> tuple[dict[str, str], list[dict]]:
     floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
     out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
     out["brax-mode"] = mode_table(runs)
+    out["scale-unfinished"] = unfinished_table(unfinished or {})
     out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
     return out, results
 
@@ -106,12 +108,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-figures", action="store_true")
     parser.add_argument("--collect", nargs="+", type=Path, metavar="RUN",
                         help="first copy these finished runs' small outputs into --data")
+    parser.add_argument("--collect-unfinished", nargs="+", type=Path, metavar="RUN",
+                        help="first copy these unfinished runs' training evaluations so far into --data (drawn "
+                             "beside the scale study, read by no claim)")
     args = parser.parse_args(argv)
     for run in args.collect or []:
         for target in collect(run, args.data):
             print(f"collected {target}", file=sys.stderr)
-    runs = load_runs(args.data)
-    generated, results = blocks(runs)
+    for run in args.collect_unfinished or []:
+        print(f"collected {collect_unfinished(run, args.data)} (unfinished)", file=sys.stderr)
+    runs, unfinished = load_runs(args.data), load_unfinished(args.data)
+    generated, results = blocks(runs, unfinished)
     pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's summary
     if args.check:
         stale = [f"{p.name}:{name}" for p in pages for name in stale_blocks(p.read_text(), generated)]
@@ -119,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1 if stale else 0
     for page in pages:
         page.write_text(render(page.read_text(), generated))
-    figures = [] if args.no_figures else draw_figures(runs, results, args.page.parent / "results")
+    figures = [] if args.no_figures else draw_figures(runs, results, args.page.parent / "results", unfinished)
     for r in results:
         print(f"{r['claim'].key:28s} {r['verdict']}")
     print(f"wrote {args.page}" + (f" and {len(figures)} figures" if figures else ""), file=sys.stderr)

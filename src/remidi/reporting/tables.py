@@ -146,6 +146,30 @@ def provenance_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def unfinished_table(unfinished: dict) -> str:
+    """One row per unfinished run (:func:`~remidi.reporting.data.load_unfinished`): its preset,
+    seeds, the updates and environment steps reached of the run's, devices and commit, and its
+    held-out solve rate at its last training evaluation (mean over seeds with its 95% bootstrap
+    interval, and the seeds above 0)."""
+    from remidi import stats
+
+    if not unfinished:
+        return "_No committed data yet._"
+    lines = ["| experiment | algorithm | preset | seeds | updates reached | environment steps reached | device | commit | "
+             "held-out solve rate, last evaluation (mean [95% CI]) | seeds above 0 | data |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for (exp, algo), (run, progress) in sorted(unfinished.items()):
+        steps, values = run.curves["solve_rate/mean"]
+        last = values[:, -1]
+        lo, hi = stats.bootstrap_ci(last)
+        per_update = run.config["num_envs"] * run.config["num_steps"]
+        lines.append(f"| {exp} | {algo} | {progress['preset']} | {len(run.seeds)} | {progress['updates']:,} of "
+                     f"{progress['num_updates']:,} | {progress['updates'] * per_update / 1e6:.1f}M of "
+                     f"{progress['num_updates'] * per_update / 1e6:.1f}M | {', '.join(sorted(run.devices))} | "
+                     f"{str(progress['commit'])[:7]} | {_f(float(last.mean()), 3)} [{_f(lo, 3)}, {_f(hi, 3)}] | "
+                     f"{int((last > 0).sum())} / {len(last)} | " + ", ".join(f"`{f}`" for f in run.folders) + " |")
+    return "\n".join(lines)
+
 
 #: the Brax algorithms whose undisturbed return the floors and mean-action tables show
 BRAX_ALGOS = ("plr", "minimax-return", "remidi")

@@ -6,7 +6,9 @@ there.
 ``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its seeds):
 ``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``) and
 ``metrics.csv.gz``. Parts of one experiment × algorithm are merged by seed (a seed twice is an
-error), so seeds can be run in parts."""
+error), so seeds can be run in parts. An unfinished run's folder holds ``progress.json`` in
+place of ``summary.json`` (:func:`collect_unfinished`): its training evaluations so far, which
+the page draws beside the scale study and no claim reads."""
 
 from __future__ import annotations
 

@@ -66,16 +66,38 @@ def test_entity_outputs_have_the_interfaces_shapes(entity_net):
     assert all(np.isfinite(x).all() for x in (logits, value))
 
 
-def test_shuffling_entities_within_a_group_leaves_the_outputs_unchanged(entity_net):
-    net, params, obs, apply, grad = entity_net
+def _shuffled(obs):
+    """``obs`` with the rows of every entity group in another order (features and mask alike)."""
     shuffled = jax.tree.map(lambda x: x, obs)
     for i, (name, group) in enumerate(sorted(obs["entities"].items())):
         order = jax.random.permutation(jax.random.PRNGKey(10 + i), group["mask"].shape[-1])
         shuffled["entities"][name] = {"features": group["features"][:, :, order], "mask": group["mask"][:, :, order]}
     assert all(not np.array_equal(shuffled["entities"][name]["mask"], obs["entities"][name]["mask"])
                for name in obs["entities"])  # valid and padded rows trade places in every group
+    return shuffled
+
+
+def test_shuffling_entities_within_a_group_leaves_the_outputs_unchanged(entity_net):
+    net, params, obs, apply, grad = entity_net
+    shuffled = _shuffled(obs)
     for a, b in zip(apply(params, obs)[:2], apply(params, shuffled)[:2]):
         np.testing.assert_allclose(a, b, atol=1e-5, rtol=1e-5)
+
+
+def test_the_shuffle_changes_what_a_network_reading_row_positions_outputs():
+    """The control of the test above: a dense layer over the groups' rows laid side by side (a
+    network that reads where each entity sits) answers the shuffled observation differently."""
+    class Positional(nn.Module):
+        @nn.compact
+        def __call__(self, obs):
+            rows = [jnp.where(g["mask"][..., None], g["features"], 0.0).reshape(T, N, -1)
+                    for _, g in sorted(obs["entities"].items())]
+            return nn.Dense(A)(jnp.concatenate(rows, axis=-1))
+
+    obs = entity_obs(jax.random.PRNGKey(0))
+    net = Positional()
+    params = net.init(jax.random.PRNGKey(1), obs)
+    assert not np.allclose(net.apply(params, obs), net.apply(params, _shuffled(obs)), atol=1e-3)
 
 
 def test_a_masked_entitys_features_do_not_reach_the_output(entity_net):

@@ -432,6 +432,9 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
     row = tables.unfinished_table(unfinished).splitlines()[2]
     assert "| 750 of 30,000 | 6.1M of 245.8M |" in row and "| 0.100 [" in row and "| 1 / 2 |" in row
     figures.scale_figure(tmp_path / "scale.png", {}, "tmaze", "T-maze", unfinished)
+    np.savez(run / HISTORY, **{k: v for k, v in arrays.items() if not k.startswith("h1|")})  # block 1 lost
+    with pytest.raises(ConfigError, match="holds 2 of 3"):
+        data.collect_unfinished(run, tmp_path / "data")
     (run / "summary.json").write_text("{}")
     with pytest.raises(ConfigError, match="finished run"):
         data.collect_unfinished(run, tmp_path / "data")

@@ -188,7 +188,7 @@ def collect_unfinished(run: Path, data: Path = DATA) -> Path:
     gzipped, the curves the page draws with the metrics the experiment derives. The devices are its
     checkpoint's record of every part when ``checkpoint.npz`` lies beside the history at the same
     update, else the one the run started on. Returns the folder written."""
-    from remidi.engine.run.checkpoint import CHECKPOINT, HISTORY, read_meta
+    from remidi.engine.run.checkpoint import CHECKPOINT, HISTORY, history_blocks, read_meta
     from remidi.experiments import get_experiment
 
     folder = Path(run)
@@ -198,12 +198,8 @@ def collect_unfinished(run: Path, data: Path = DATA) -> Path:
                                       "; give a folder remidi run wrote")
     if not (folder / HISTORY).is_file():
         raise ConfigError(f"collect-unfinished: {folder} holds no {HISTORY} (no checkpoint written yet)")
-    with np.load(folder / HISTORY) as saved:
-        blocks = sorted({int(k.split("|", 1)[0][1:]) for k in saved.files if k.startswith("h")})
-        if blocks != list(range(len(blocks))) or not blocks:
-            raise ConfigError(f"collect-unfinished: {folder / HISTORY} lacks blocks (it holds {blocks})")
-        names = [k.split("|", 1)[1] for k in saved.files if k.startswith("h0|")]
-        history = {n: np.stack([saved[f"h{b}|{n}"] for b in blocks], axis=1) for n in names}
+    blocks = history_blocks(folder / HISTORY)
+    history = {n: np.stack([b[n] for b in blocks], axis=1) for n in blocks[0]}  # f[S, T], as a finished run's
     cfg = doc["config"]
     steps = np.minimum(cfg["eval_every"] * np.arange(1, len(blocks) + 1), cfg["num_updates"])  # every block's end
     derive = get_experiment(doc["experiment"]).derive

@@ -78,8 +78,8 @@ def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None
             final = list(metric_values(runs, experiment, name, "evaluate:solve_rate/mean").values())
             c["final"] = (float(np.mean(final)), stats.bootstrap_ci(final)) if final else None
             found.append(c)
-    for (exp, name), (run, progress) in (unfinished or {}).items():
-        if exp == experiment and name.split(" @")[0] == algo:
+    for (exp, _), (run, progress) in (unfinished or {}).items():
+        if exp == experiment and progress["algo"] == algo:
             c = _curve(run, progress["preset"])
             if c is not None:
                 c["updates"] = (progress["updates"], progress["num_updates"])
@@ -101,10 +101,9 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
     for algo in SCALE_ALGOS:
         color = algorithm_style(algo)["color"]
         for c in scale_curves(runs, experiment, algo, unfinished):
-            label = f"{algo} ({c['preset']}, {c['seeds']} seeds)"
-            if c["updates"] is not None:
-                label = f"{algo} ({c['preset']}, {c['seeds']} seeds, {c['updates'][0]:,} of {c['updates'][1]:,} updates)"
-            ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6, label=label)
+            reached = "" if c["updates"] is None else f", {c['updates'][0]:,} of {c['updates'][1]:,} updates"
+            ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6,
+                    label=f"{algo} ({c['preset']}, {c['seeds']} seeds{reached})")
             ax.fill_between(c["x"], c["band"][:, 0], c["band"][:, 1], color=color, alpha=0.15, linewidth=0)
             low.append(float(c["band"][:, 0].min()))
             high.append(float(c["band"][:, 1].max()))

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from remidi import stats
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
 from remidi.experiments.plots import seeds_text
@@ -151,8 +152,6 @@ def unfinished_table(unfinished: dict) -> str:
     seeds, the updates and environment steps reached of the run's, devices and commit, and its
     held-out solve rate at its last training evaluation (mean over seeds with its 95% bootstrap
     interval, and the seeds above 0)."""
-    from remidi import stats
-
     if not unfinished:
         return "_No committed data yet._"
     lines = ["| experiment | algorithm | preset | seeds | updates reached | environment steps reached | device | commit | "

@@ -221,6 +221,21 @@ def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run
     save_checkpoint(ckpt, runner, meta)
 
 
+def history_blocks(path: Path) -> list[dict[str, np.ndarray]]:
+    """Every block's metrics (``{name: f[S]}``, in block order) that a ``checkpoint.history.npz``
+    holds, read without its checkpoint (an unfinished run whose checkpoint stayed elsewhere);
+    ConfigError (one line) when it cannot be read or a block is missing."""
+    try:
+        with np.load(path) as saved:
+            count = 1 + max((int(k.split("|", 1)[0][1:]) for k in saved.files if k.startswith("h")), default=-1)
+            blocks = _unstack(saved, "h", count)
+    except _UNREADABLE as err:
+        raise unreadable(path, err) from None
+    if not blocks or not all(blocks):
+        raise ConfigError(f"{path} lacks blocks: it holds {sum(map(bool, blocks))} of {len(blocks)}")
+    return blocks
+
+
 def _unstack(saved, prefix: str, count: int) -> list[dict[str, np.ndarray]]:
     out = [dict() for _ in range(count)]
     for key in saved.files:

@@ -6,7 +6,7 @@
 # the runs' histories, configs and logs come back as $OUT/EXP-PRESET.tgz; their checkpoints come
 # back too, xz-compressed, as many as fit beside it (a call brings back at most 8 files, 64 MiB in
 # all) in $OUT/checkpoints.tar.part-* (15 MiB parts), in the order CKPT_ORDER (default ALGOS).
-# The defaults are issue 48's scale-study point: T-maze PLR⊥ and ReMiDi, 10 seeds each.
+# The defaults are the scale study's paper point: T-maze PLR⊥ and ReMiDi, 10 seeds each.
 #
 #   device run: SRC=.gpu/<commit>/src bash docs/results/device/paper_preset.sh
 #     (carry: .whl, the wheels the image lacks, and .gpu/<commit>, a depth-1 clone of the commit to

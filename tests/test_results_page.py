@@ -438,3 +438,13 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
     (run / "summary.json").write_text("{}")
     with pytest.raises(ConfigError, match="finished run"):
         data.collect_unfinished(run, tmp_path / "data")
+
+
+@pytest.mark.parametrize("flag", ["--collect", "--collect-unfinished"])
+def test_a_folder_that_holds_no_run_is_one_line_and_exit_2_with_nothing_written(flag, tmp_path, capsys):
+    page = tmp_path / "results.md"
+    page.write_text("untouched\n")
+    assert rp.main([flag, str(tmp_path / "nothing"), "--data", str(tmp_path / "data"), "--page", str(page)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("python -m remidi.reporting.results_page: error: collect") and err.count("\n") == 1
+    assert page.read_text() == "untouched\n" and not (tmp_path / "data").exists()

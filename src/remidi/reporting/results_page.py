@@ -43,7 +43,7 @@ import re
 import sys
 from pathlib import Path
 
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, RemidiError
 from remidi.experiments import outputs
 from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
 from remidi.reporting.data import DATA, ROOT, collect, collect_unfinished, load_runs, load_unfinished
@@ -112,6 +112,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="first copy these unfinished runs' training evaluations so far into --data (drawn "
                              "beside the scale study, read by no claim)")
     args = parser.parse_args(argv)
+    try:
+        return _run(args)
+    except RemidiError as err:  # bad input (a run to collect, the data): one line, nothing written
+        print(f"{parser.prog}: error: {err}", file=sys.stderr)
+        return 2
+
+
+def _run(args: argparse.Namespace) -> int:
     for run in args.collect or []:
         for target in collect(run, args.data):
             print(f"collected {target}", file=sys.stderr)

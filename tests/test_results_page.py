@@ -448,3 +448,19 @@ def test_a_folder_that_holds_no_run_is_one_line_and_exit_2_with_nothing_written(
     err = capsys.readouterr().err
     assert err.startswith("python -m remidi.reporting.results_page: error: collect") and err.count("\n") == 1
     assert page.read_text() == "untouched\n" and not (tmp_path / "data").exists()
+
+
+def test_a_bound_claims_figure_shades_the_interval_it_allows(tmp_path, monkeypatch):
+    """A bound claim's figure shows the bound its verdict is judged by (the Kinetix claim's
+    [0, 0.01] was once drawn as a lone point at 0 on an axis of ±0.04, the bound nowhere)."""
+    from remidi.experiments import plots
+
+    claim = next(c for c in claims.CLAIMS if c.key == "kinetix-remidi-masks-nothing")
+    drawn = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: drawn.append(fig))
+    figures._interval_figure(tmp_path / "claim.png", {"claim": claim, "verdict": "reproduced"}, {})
+    (ax,) = drawn[0].axes
+    (band,) = ax.collections
+    xs = band.get_paths()[0].vertices[:, 0]
+    assert (xs.min(), xs.max()) == (0.0, 0.01)
+    assert ax.get_xlabel() == "shaded: the claimed bound [0, 0.01]"

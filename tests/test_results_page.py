@@ -440,6 +440,36 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
         data.collect_unfinished(run, tmp_path / "data")
 
 
+def test_a_run_collected_while_it_trained_is_drawn_once_when_it_has_finished(tmp_path):
+    """The unfinished run's folder is the finished run's (``<algo>-<preset>-s<seed>``): collecting
+    the finished run removes progress.json, so the run is no longer drawn as unfinished beside
+    itself, and collecting it as unfinished again is refused with its finished data untouched."""
+    from remidi.engine.run.checkpoint import HISTORY
+    from remidi.envs.maze_names import HELD_OUT_NAMES
+    from remidi.experiments import outputs
+
+    run = tmp_path / "runs" / "plr-cpu4x-s0"
+    run.mkdir(parents=True)
+    doc = {"experiment": "tmaze", "algo": "plr", "preset": "cpu4x", "seeds": [0, 1],
+           "code": {"commit": "abc1234def", "device": "cpu: cpu"},
+           "config": {"num_updates": 600, "eval_every": 150, "num_envs": 32, "num_steps": 256}}
+    (run / "config.json").write_text(json.dumps(doc))
+    np.savez(run / HISTORY, **{f"h{b}|solve_rate/{n}": np.array([0.1, 0.2]) for b in range(2) for n in HELD_OUT_NAMES})
+    target = data.collect_unfinished(run, tmp_path / "data")
+    assert list(data.load_unfinished(tmp_path / "data")) == [("tmaze", "plr @cpu4x")]
+    (run / "summary.json").write_text(json.dumps({"experiment": "tmaze", "algo": "plr", "preset": "cpu4x",
+                                                  "seeds": [0, 1], "metrics": {}}))
+    outputs.write_metrics_csv(run / "metrics.csv", [(0, 600, "solve_rate/mean", 0.3)])
+    assert data.collect(run, tmp_path / "data") == [target]
+    assert data.load_unfinished(tmp_path / "data") == {}
+    assert list(data.load_runs(tmp_path / "data")) == [("tmaze", "plr @cpu4x")]
+    (run / "summary.json").unlink()
+    before = {p.name: p.read_bytes() for p in target.iterdir()}
+    with pytest.raises(ConfigError, match="finished run's data"):
+        data.collect_unfinished(run, tmp_path / "data")
+    assert {p.name: p.read_bytes() for p in target.iterdir()} == before
+
+
 @pytest.mark.parametrize("flag", ["--collect", "--collect-unfinished"])
 def test_a_folder_that_holds_no_run_is_one_line_and_exit_2_with_nothing_written(flag, tmp_path, capsys):
     page = tmp_path / "results.md"

@@ -212,6 +212,9 @@ def collect_unfinished(run: Path, data: Path = DATA) -> Path:
             devices = sorted({(p.get("code") or {}).get("device", "not recorded") for p in meta["parts"]})
     keep = set(SECTIONS.get(doc["experiment"], ([], [], []))[2])
     target = Path(data) / doc["experiment"] / f"{doc['algo']}-{doc['preset']}-s{doc['seeds'][0]}"
+    if (target / "summary.json").is_file():  # the same run, finished and collected: its data stay
+        raise ConfigError(f"collect-unfinished: {target} holds the finished run's data (summary.json); "
+                          "nothing written")
     target.mkdir(parents=True, exist_ok=True)
     atomic_write(target / "config.json", lambda f: f.write((folder / "config.json").read_bytes()), binary=True)
     outputs.write_metrics_csv(target / "metrics.csv.gz", outputs.metric_rows(
@@ -272,5 +275,6 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         kept = {steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(len(steps), MAX_POINTS)).round()
                                             .astype(int))} if steps else set()
         outputs.write_metrics_csv(target / "metrics.csv.gz", (r for r in rows if r[1] in kept))
+        (target / PROGRESS).unlink(missing_ok=True)  # collected while it trained: it is finished now
         written.append(target)
     return written

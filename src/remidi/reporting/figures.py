@@ -91,7 +91,7 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
     """Held-out solve rate against environment steps for PLR⊥, minimax return and ReMiDi at every
     scale of the study (line style: the preset), means over seeds with their 95% bootstrap
     bands; a diamond with its interval: the final checkpoint's evaluation (30 attempts); an
-    unfinished run's last evaluation: a square, labelled with the updates it reached."""
+    unfinished run's last evaluation: a square, the updates it reached in its legend entry."""
     import matplotlib.pyplot as plt
 
     from remidi.experiments.plots import algorithm_style, padded
@@ -114,10 +114,8 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
                             markerfacecolor="white", capsize=3, linestyle="none")
                 low.append(lo)
                 high.append(hi)
-            if c["updates"] is not None:  # where the unfinished run stands
+            if c["updates"] is not None:  # where the unfinished run stands (its updates: in the legend)
                 ax.plot([c["x"][-1]], [c["mean"][-1]], color=color, marker="s", linestyle="none")
-                ax.annotate(f"{c['updates'][0]:,} updates", (c["x"][-1], c["mean"][-1]), textcoords="offset points",
-                            xytext=(4, 4), fontsize=7, color=color)
     ax.set_ylim(*padded(min(low), max(high), (0.0, None)))
     ax.set_xlim(*padded(0.0, max(right)))
     ax.xaxis.set_major_formatter(lambda x, _: f"{x / 1e6:g}M" if x else "0")
@@ -129,7 +127,8 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.supxlabel("line: mean over seeds of training's evaluations (10 attempts per maze); band: its 95% bootstrap "
                   "interval; diamond: the final checkpoint's mean (30 attempts) with its 95% interval; solid: cpu "
-                  "preset, dashed: cpu4x, dotted: the paper preset (LSTM 256) so far, its square the last evaluation",
+                  "preset, dashed: cpu4x, dotted: the paper preset (LSTM 256); square: a run still training, at its "
+                  "last evaluation (its updates in the legend)",
                   fontsize=8, wrap=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

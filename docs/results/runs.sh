@@ -42,11 +42,15 @@ checkout() {  # the code of commit $AT on PYTHONPATH (a worktree beside RUNS_DIR
   if [ ! -d "$frozen" ]; then git -C "$HERE" worktree add --detach "$frozen" "$AT" || [ -d "$frozen" ] || exit 1; fi
   export PYTHONPATH="$frozen/src${RUNS_PYTHONPATH:+:$RUNS_PYTHONPATH}"  # RUNS_PYTHONPATH: e.g. a device's wheels
 }
+collected() {  # collected EXPERIMENT NAME: the finished run's data are committed (a folder with its
+  # config.json and a summary.json; a run collected while it trains has no summary.json there)
+  local f; for f in $(grep -ls -- "/$1/$2\"" "$HERE"/docs/results/data/"$1"/*/config.json); do
+    [ -f "${f%/config.json}/summary.json" ] && return 0; done; return 1; }
 run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into RUNS_DIR/EXPERIMENT/NAME
   local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
   local out=$R/$exp/$name
   if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $exp/$name "* ]]; then return; fi  # ONLY="EXP/NAME ...": just those
-  if grep -qs -- "/$exp/$name\"" "$HERE"/docs/results/data/"$exp"/*/config.json ||
+  if collected "$exp" "$name" ||
      { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
     echo "committed: $exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi

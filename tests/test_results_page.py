@@ -494,3 +494,21 @@ def test_a_bound_claims_figure_shades_the_interval_it_allows(tmp_path, monkeypat
     xs = band.get_paths()[0].vertices[:, 0]
     assert (xs.min(), xs.max()) == (0.0, 0.01)
     assert ax.get_xlabel() == "shaded: the claimed bound [0, 0.01]"
+
+
+def test_each_claims_seeds_are_listed_with_their_commits_machines_and_jax_versions():
+    """The per-claim provenance names every run folder's seeds with what trained them and counts
+    what the claim's seeds span: T-maze PLR⊥'s CPU seeds (device not recorded) against its H100
+    ones are two machines and two JAX versions, one commit."""
+    claim = next(c for c in claims.CLAIMS if c.key == "tmaze-replay")
+    plr = data.Run("tmaze", "plr", groups=[((0, 1, 2, 3, 4), {"c32046bfff"}, {"not recorded"}, {"0.10.2"}),
+                                           ((5, 6, 7, 8, 9), {"c32046bfff"}, {"gpu: NVIDIA H100 80GB HBM3"}, {"0.11.2"})])
+    remidi = data.Run("tmaze", "remidi", groups=[(tuple(range(10)), {"c32046bfff"},
+                                                  {"gpu: NVIDIA H100 80GB HBM3 (updates 1-300), then cpu"}, {"0.11.2"})])
+    lines = tables.claim_provenance_table([{"claim": claim}], {("tmaze", "plr"): plr, ("tmaze", "remidi"): remidi})
+    rows = {line.split(" | ")[1]: line for line in lines.splitlines()[2:]}
+    assert "5 seeds (0–4): c32046b · cpu (not recorded) · 0.10.2; 5 seeds (5–9): c32046b · H100 · 0.11.2" in rows["plr"]
+    assert "10 seeds (0–9): c32046b · H100 + cpu · 0.11.2" in rows["remidi"]
+    first = lines.splitlines()[2]
+    assert f"(`{claim.key}`)" in first and first.endswith("| 1 commit, 2 machines, 2 JAX versions |")
+    assert tables.device_kinds("cpu: cpu") == ["cpu"]

@@ -55,6 +55,8 @@ class Run:
     config: dict = field(default_factory=dict)  # the first part's config.json "config"
     devices: set = field(default_factory=set)
     preset: str = ""
+    # per run folder, in ``folders`` order: (its seeds, commits, devices, JAX versions) of its parts
+    groups: list = field(default_factory=list)
 
 
 def _merge_seeds(run: Run, source: str, seeds: list[int], metrics: dict, folder: Path) -> None:
@@ -121,12 +123,17 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         if parts is None:  # a run before parts were recorded: the start's record, the last part's time
             parts = [{"code": started, "wall_s": summary.get("wall_s", 0.0)}]
             run.resumed |= bool(summary.get("resumed"))
+        group = (tuple(seeds), set(), set(), set())
         for part in parts:
             code = part.get("code") or started  # None: a part before parts were recorded
-            run.commits.add(code.get("commit") or started.get("commit"))
-            run.devices.add(code.get("device") or "not recorded")
+            group[1].add(code.get("commit") or started.get("commit"))
+            group[2].add(code.get("device") or "not recorded")
+            group[3].add(code.get("jax") or started.get("jax") or "not recorded")
             run.wall_s += float(part.get("wall_s") or 0.0)
             run.resumed |= part.get("code") is None  # that part's time is unknown
+        run.commits |= group[1]
+        run.devices |= group[2]
+        run.groups.append(group)
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
             if values.shape[0] != len(run.seeds):  # logged by some parts only: no per-seed alignment

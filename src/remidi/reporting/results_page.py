@@ -49,8 +49,8 @@ from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
 from remidi.reporting.data import DATA, ROOT, collect, collect_unfinished, load_runs, load_unfinished
 from remidi.reporting.figures import draw_figures
 from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
-from remidi.reporting.tables import (floors_table, maze_floors_table, metrics_table, mode_table, per_seed_table,
-                                     provenance_table, summary_lines, unfinished_table, verdict_table)
+from remidi.reporting.tables import (claim_provenance_table, floors_table, maze_floors_table, metrics_table, mode_table,
+                                     per_seed_table, provenance_table, summary_lines, unfinished_table, verdict_table)
 from remidi.reporting.verdicts import evaluate_claim
 
 PAGE = ROOT / "docs" / "results.md"
@@ -62,6 +62,7 @@ def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], 
     :func:`~remidi.reporting.data.load_unfinished`, drawn beside the scale study, in no claim)."""
     results = [evaluate_claim(c, runs) for c in CLAIMS]
     out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
+           "claim-provenance": claim_provenance_table(results, runs),
            "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
                                        for r in results if r["verdict"] != "pending") or "_No verdict yet._"}
     for exp, (algos, metrics, _) in SECTIONS.items():

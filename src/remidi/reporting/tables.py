@@ -147,6 +147,54 @@ def provenance_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def device_kinds(device: str) -> list[str]:
+    """The machines a run's recorded device names, in the order it names them: ``"gpu: NVIDIA H100
+    80GB HBM3 (updates 1-300), then cpu"`` → ``["H100", "cpu"]``; ``"not recorded"`` → ``["cpu (not
+    recorded)"]``: the code recorded no device before it ran anywhere but the 2-core CPU."""
+    import re
+
+    if device == "not recorded":  # runs from before devices were recorded: the 2-core CPU (the page's provenance)
+        return ["cpu (not recorded)"]
+    found = re.findall(r"\bcpu\b|NVIDIA ([A-Z]\d{2,4})", device)
+    kinds = [m or "cpu" for m in found] or [device]
+    return list(dict.fromkeys(kinds))
+
+
+def claim_provenance_table(results: list[dict], runs: dict) -> str:
+    """Per claim with data, per algorithm it reads: each run folder's seeds with the commits,
+    machines and JAX versions their parts trained with; the claim's first row says how many of
+    each its seeds span (a claim over more than one can differ by more than its algorithms)."""
+    lines = ["| claim | algorithm | seeds: commit · machine · JAX | the claim's seeds span |",
+             "| --- | --- | --- | --- |"]
+    for r in results:
+        claim = r["claim"]
+        algos = list(dict.fromkeys([a for pair in claim.greater for a in pair] + [b[0] for b in claim.bounds]))
+        rows, commits, machines, jaxes = [], set(), set(), set()
+        for exp in claim.experiments:
+            for algo in algos:
+                run = runs.get((exp, algo))
+                if run is None:
+                    continue
+                cells = []
+                for seeds, c, d, j in run.groups:
+                    kinds = list(dict.fromkeys(k for dev in sorted(d) for k in device_kinds(dev)))
+                    cells.append(f"{seeds_text(seeds)}: {', '.join(sorted(str(x)[:7] for x in c))} · "
+                                 f"{' + '.join(kinds)} · {', '.join(sorted(j))}")
+                    commits |= {str(x)[:7] for x in c}
+                    machines |= {k.removesuffix(" (not recorded)") for k in kinds}
+                    jaxes |= set(j)
+                where = f" ({exp})" if len(claim.experiments) > 1 else ""
+                rows.append((f"{algo}{where}", "; ".join(cells)))
+        if not rows:
+            continue
+        span = ", ".join(f"{len(x)} {name}{'s' if len(x) > 1 else ''}" for x, name in
+                         ((commits, "commit"), (machines, "machine"), (jaxes, "JAX version")))
+        for i, (algo, cell) in enumerate(rows):
+            head = f"{claim.title} (`{claim.key}`)" if i == 0 else ""
+            lines.append(f"| {head} | {algo} | {cell} | {span if i == 0 else ''} |")
+    return "\n".join(lines)
+
+
 def unfinished_table(unfinished: dict) -> str:
     """One row per unfinished run (:func:`~remidi.reporting.data.load_unfinished`): its preset,
     seeds, the updates and environment steps reached of the run's, devices and commit, and its

@@ -117,6 +117,9 @@ def test_each_verdict_names_the_scale_of_its_runs(tmp_path):
     assert verdicts.claim_scale(brax, {}) == "`cpu` preset: 15% of the paper's environment steps"  # 120 × 64 × 100
     tab = claims.Claim("t", "x", "stagnates", "summary:regret/h1", ("tabular-shared",), greater=(("mmr @paper", "remidi"),))
     assert verdicts.claim_scale(tab, {}) == "`paper` preset"
+    kinetix = next(c for c in claims.CLAIMS if c.key == "kinetix-sfl-over-plr")
+    kinetix_runs = {("kinetix-s", "plr"): data.Run("kinetix-s", "plr", preset="cpu")}  # Kinetix's sizes, not ReMiDi's
+    assert verdicts.claim_scale(kinetix, kinetix_runs) == "`cpu` preset: 0.153% of Kinetix's environment steps"
 
 
 def test_a_claim_on_runs_older_than_a_fix_it_needs_is_stale(tmp_path, monkeypatch):

@@ -4,6 +4,7 @@ its verdict (:func:`verdict`), and the scale its runs trained at (:func:`claim_s
 from __future__ import annotations
 
 import math
+import re
 from functools import lru_cache
 
 import numpy as np
@@ -35,11 +36,21 @@ def preset_steps(experiment: str, preset: str) -> tuple[int, ...] | None:
     return sizes if all(isinstance(v, int) for v in sizes) else None
 
 
+#: experiments whose `paper` preset follows another paper than ReMiDi's: whose sizes it takes
+PAPER_OF = {"kinetix": "Kinetix's"}
+
+
+def paper_of(experiment: str) -> str:
+    """Whose configuration the experiment's `paper` preset takes: ``"the paper's"`` (ReMiDi's), or
+    e.g. ``"Kinetix's"`` for the Kinetix experiments."""
+    return next((v for k, v in PAPER_OF.items() if experiment.startswith(k)), "the paper's")
+
+
 def run_scale(experiment: str, preset: str, config: dict | None = None) -> str:
     """At which scale a run trained: ``"`paper` preset"``, or its preset and its environment steps
     (num_updates × num_envs × num_steps: as the run's ``config`` records them, else as the preset
     sets them) as a share of the paper preset's, e.g. ``"`cpu` preset: 5% of the paper's
-    environment steps"``."""
+    environment steps"`` (Kinetix: ``"… of Kinetix's environment steps"``)."""
     if preset == "paper":
         return "`paper` preset"
     recorded = tuple((config or {}).get(k) for k in STEP_KEYS)
@@ -47,7 +58,8 @@ def run_scale(experiment: str, preset: str, config: dict | None = None) -> str:
     paper = preset_steps(experiment, "paper")
     if ours is None or paper is None:
         return f"`{preset}` preset"
-    return f"`{preset}` preset: {100 * math.prod(ours) / math.prod(paper):.3g}% of the paper's environment steps"
+    share = 100 * math.prod(ours) / math.prod(paper)
+    return f"`{preset}` preset: {share:.3g}% of {paper_of(experiment)} environment steps"
 
 
 def claim_scale(claim: Claim, runs: dict) -> str:
@@ -63,7 +75,7 @@ def claim_scale(claim: Claim, runs: dict) -> str:
         elif " @" in algo:
             scales.append(run_scale(exp, algo.rsplit(" @", 1)[1]))
     scales = list(dict.fromkeys(scales))
-    return "; ".join([*scales[:1], *(s.replace(" of the paper's environment steps", "") for s in scales[1:])])
+    return "; ".join([*scales[:1], *(re.sub(r" of .*'s? environment steps$", "", s) for s in scales[1:])])
 
 
 def _holds(value: float, low: float) -> bool:

@@ -444,9 +444,11 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
 
 
 def test_a_run_collected_while_it_trained_is_drawn_once_when_it_has_finished(tmp_path):
-    """The unfinished run's folder is the finished run's (``<algo>-<preset>-s<seed>``): collecting
-    the finished run removes progress.json, so the run is no longer drawn as unfinished beside
-    itself, and collecting it as unfinished again is refused with its finished data untouched."""
+    """A scale-study run's unfinished folder is its finished one (``<algo>-<preset>-s<seed>``, the
+    page labelling the preset): collecting the finished run removes progress.json, so the run is
+    no longer drawn as unfinished beside itself, and collecting it as unfinished again is refused
+    with its finished data untouched. A finished run of a preset the page does not label (the
+    paper's) is refused where another preset's run of the algorithm lies, nothing written."""
     from remidi.engine.run.checkpoint import HISTORY
     from remidi.envs.maze_names import HELD_OUT_NAMES
     from remidi.experiments import outputs
@@ -471,6 +473,40 @@ def test_a_run_collected_while_it_trained_is_drawn_once_when_it_has_finished(tmp
     with pytest.raises(ConfigError, match="finished run's data"):
         data.collect_unfinished(run, tmp_path / "data")
     assert {p.name: p.read_bytes() for p in target.iterdir()} == before
+    cpu = tmp_path / "data" / "tmaze" / "plr-s0"  # the cpu preset's committed seeds
+    cpu.mkdir()
+    (cpu / "summary.json").write_text(json.dumps({"preset": "cpu"}))
+    paper = tmp_path / "runs" / "plr-paper-s0"
+    paper.mkdir()
+    (paper / "config.json").write_text(json.dumps({**doc, "preset": "paper"}))
+    (paper / "summary.json").write_text(json.dumps({"experiment": "tmaze", "algo": "plr", "preset": "paper",
+                                                    "seeds": [0, 1], "metrics": {}}))
+    outputs.write_metrics_csv(paper / "metrics.csv", [(0, 600, "solve_rate/mean", 0.3)])
+    with pytest.raises(ConfigError, match="holds the 'cpu' preset's run"):
+        data.collect(paper, tmp_path / "data")
+    assert [p.name for p in cpu.iterdir()] == ["summary.json"]
+
+
+def test_the_seeds_of_a_run_resumed_elsewhere_before_parts_were_recorded_name_every_jax_version(tmp_path):
+    """A run from before parts were recorded whose device was written by hand as two machines
+    counts the JAX versions its note names (else 'not recorded'), not only its start's, and keeps
+    its machines in the order they trained."""
+    folder = tmp_path / "tmaze" / "remidi-masked-s0"
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"experiment": "tmaze", "algo": "remidi", "preset": "cpu",
+                                                     "seeds": [0, 1], "metrics": {}}))
+    code = {"commit": "ab55b8c0", "jax": "0.11.2", "device": "gpu: NVIDIA H200 (updates 1-1050), then cpu",
+            "note": "trained on a lent H200 (JAX 0.11.2), resumed on the CPU (JAX 0.10.2)"}
+    (folder / "config.json").write_text(json.dumps({"code": code, "config": {}}))
+    (run,) = data.load_runs(tmp_path).values()
+    (group,) = run.groups
+    assert list(group[2]) == [code["device"]] and list(group[3]) == ["0.11.2", "0.10.2"]
+    claim = claims.Claim("k", "t", "s", "summary:x", ("tmaze",), bounds=(("remidi", 0.0, 1.0),))
+    row = tables.claim_provenance_table([{"claim": claim}], {("tmaze", "remidi"): run}).splitlines()[2]
+    assert "2 seeds (0, 1): ab55b8c · H200 + cpu · 0.11.2, 0.10.2 | 1 commit, 2 machines, 2 JAX versions |" in row
+    (folder / "config.json").write_text(json.dumps({"code": {**code, "note": ""}, "config": {}}))
+    (run,) = data.load_runs(tmp_path).values()
+    assert list(run.groups[0][3]) == ["0.11.2", "not recorded"]
 
 
 @pytest.mark.parametrize("flag", ["--collect", "--collect-unfinished"])
@@ -504,10 +540,13 @@ def test_each_claims_seeds_are_listed_with_their_commits_machines_and_jax_versio
     what the claim's seeds span: T-maze PLR⊥'s CPU seeds (device not recorded) against its H100
     ones are two machines and two JAX versions, one commit."""
     claim = next(c for c in claims.CLAIMS if c.key == "tmaze-replay")
-    plr = data.Run("tmaze", "plr", groups=[((0, 1, 2, 3, 4), {"c32046bfff"}, {"not recorded"}, {"0.10.2"}),
-                                           ((5, 6, 7, 8, 9), {"c32046bfff"}, {"gpu: NVIDIA H100 80GB HBM3"}, {"0.11.2"})])
-    remidi = data.Run("tmaze", "remidi", groups=[(tuple(range(10)), {"c32046bfff"},
-                                                  {"gpu: NVIDIA H100 80GB HBM3 (updates 1-300), then cpu"}, {"0.11.2"})])
+    one = dict.fromkeys  # an ordered set, as load_runs builds them
+    plr = data.Run("tmaze", "plr", groups=[((0, 1, 2, 3, 4), one(["c32046bfff"]), one(["not recorded"]), one(["0.10.2"])),
+                                           ((5, 6, 7, 8, 9), one(["c32046bfff"]), one(["gpu: NVIDIA H100 80GB HBM3"]),
+                                            one(["0.11.2"]))])
+    remidi = data.Run("tmaze", "remidi", groups=[(tuple(range(10)), one(["c32046bfff"]),
+                                                  one(["gpu: NVIDIA H100 80GB HBM3 (updates 1-300), then cpu"]),
+                                                  one(["0.11.2"]))])
     lines = tables.claim_provenance_table([{"claim": claim}], {("tmaze", "plr"): plr, ("tmaze", "remidi"): remidi})
     rows = {line.split(" | ")[1]: line for line in lines.splitlines()[2:]}
     assert "5 seeds (0–4): c32046b · cpu (not recorded) · 0.10.2; 5 seeds (5–9): c32046b · H100 · 0.11.2" in rows["plr"]
@@ -515,3 +554,4 @@ def test_each_claims_seeds_are_listed_with_their_commits_machines_and_jax_versio
     first = lines.splitlines()[2]
     assert f"(`{claim.key}`)" in first and first.endswith("| 1 commit, 2 machines, 2 JAX versions |")
     assert tables.device_kinds("cpu: cpu") == ["cpu"]
+    assert tables.device_kinds("gpu: NVIDIA GeForce RTX 4090 (updates 1-300), then cpu") == ["GeForce RTX 4090", "cpu"]

@@ -55,7 +55,8 @@ class Run:
     config: dict = field(default_factory=dict)  # the first part's config.json "config"
     devices: set = field(default_factory=set)
     preset: str = ""
-    # per run folder, in ``folders`` order: (its seeds, commits, devices, JAX versions) of its parts
+    # per run folder, in ``folders`` order: (its seeds, then the commits, devices and JAX versions of
+    # its parts, each an ordered set: dict keys in the order the parts trained)
     groups: list = field(default_factory=list)
 
 
@@ -103,6 +104,15 @@ def _evaluation(folder: Path, algo: str, config: dict, source: str = "evaluate")
     return entry
 
 
+def _later_jax(code: dict) -> list[str]:
+    """The JAX versions of a run's later parts, for a run from before parts were recorded whose
+    device was written by hand as several machines (``"gpu: … (updates 1-900), then cpu"``): those
+    its ``note`` names (``"… (JAX 0.11.2) …"``), else ``["not recorded"]``; [] for one machine."""
+    if ", then " not in code.get("device", ""):
+        return []
+    return re.findall(r"JAX (\d+(?:\.\d+)+)", code.get("note", "")) or ["not recorded"]
+
+
 def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
     """``{(experiment, algo): Run}`` of every run folder under ``data``."""
     runs: dict[tuple[str, str], Run] = {}
@@ -120,19 +130,23 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         _add_part(run, folder, seeds, config, data)
         started = config.get("code") or {}  # what the run recorded when it started
         parts = summary.get("parts")  # each invocation that trained it
-        if parts is None:  # a run before parts were recorded: the start's record, the last part's time
+        jaxes = []
+        if not parts:  # a run before parts were recorded: the start's record, the last part's time
             parts = [{"code": started, "wall_s": summary.get("wall_s", 0.0)}]
             run.resumed |= bool(summary.get("resumed"))
-        group = (tuple(seeds), set(), set(), set())
+            jaxes = _later_jax(started)
+        # ordered sets (dicts): the parts in the order they trained
+        group = (tuple(seeds), {}, {}, {})
         for part in parts:
             code = part.get("code") or started  # None: a part before parts were recorded
-            group[1].add(code.get("commit") or started.get("commit"))
-            group[2].add(code.get("device") or "not recorded")
-            group[3].add(code.get("jax") or started.get("jax") or "not recorded")
+            group[1][code.get("commit") or started.get("commit")] = None
+            group[2][code.get("device") or "not recorded"] = None
+            group[3][code.get("jax") or started.get("jax") or "not recorded"] = None
             run.wall_s += float(part.get("wall_s") or 0.0)
             run.resumed |= part.get("code") is None  # that part's time is unknown
-        run.commits |= group[1]
-        run.devices |= group[2]
+        group[3].update(dict.fromkeys(jaxes))
+        run.commits |= set(group[1])
+        run.devices |= set(group[2])
         run.groups.append(group)
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
@@ -271,6 +285,11 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
                 _evaluation(folder, algo, doc, source)
         name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
+        held = outputs.read_json(target / "summary.json").get("preset") if (target / "summary.json").is_file() else None
+        if held not in (None, summary["preset"]):  # the page labels only some presets (SCALE_PRESETS)
+            raise ConfigError(f"collect: {target} holds the {held!r} preset's run and {folder} is the "
+                              f"{summary['preset']!r} preset's; nothing written (a preset the page compares "
+                              f"with its claims' runs needs its own label: reporting.claims.SCALE_PRESETS)")
         target.mkdir(parents=True, exist_ok=True)
         for name in ("config.json", "summary.json", *(f"{source}.json" for source in EVALUATIONS)):  # each whole or not
             if (folder / name).is_file():

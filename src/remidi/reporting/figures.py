@@ -163,12 +163,13 @@ def _interval_figure(path: Path, result: dict, runs: dict) -> None:
         if x:
             _interval(ax, y, float(np.mean(x)), stats.bootstrap_ci(x, np.mean), algorithm_style(a)["color"])
             ax.plot(x, [y] * len(x), "k.", markersize=3, alpha=0.5)
-    for name, lo, hi in claim.bounds:  # the interval the claim allows, across its algorithm's rows
-        ys = [y for y, (_, a) in enumerate(rows) if a == name]
-        ax.fill_betweenx([min(ys) - 0.4, max(ys) + 0.4], lo, hi, color="tab:green", alpha=0.15, linewidth=0)
+    for name, lo, hi in claim.bounds:  # the interval the claim allows, on each of its algorithm's rows
+        for y in [y for y, (_, a) in enumerate(rows) if a == name]:
+            ax.fill_betweenx([y - 0.4, y + 0.4], lo, hi, color="tab:green", alpha=0.15, linewidth=0)
     if claim.bounds:  # said under the axis, where no legend covers a point
-        ax.set_xlabel("shaded: the claimed bound " + ", ".join(f"[{lo:g}, {hi:g}]" for _, lo, hi in claim.bounds),
-                      fontsize=7)
+        named = len({b[0] for b in claim.bounds}) > 1
+        ax.set_xlabel("shaded: the claimed bound " + ", ".join(
+            f"{name} [{lo:g}, {hi:g}]" if named else f"[{lo:g}, {hi:g}]" for name, lo, hi in claim.bounds), fontsize=7)
     ax.set_yticks(range(len(rows)), [f"{e} / {a}" if len(claim.experiments) > 1 else a for e, a in rows], fontsize=8)
     ax.invert_yaxis()
     fig.suptitle("\n".join(title), fontsize=8)  # centred on the figure, not on the narrower axes

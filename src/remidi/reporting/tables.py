@@ -148,22 +148,31 @@ def provenance_table(runs: dict) -> str:
 
 
 def device_kinds(device: str) -> list[str]:
-    """The machines a run's recorded device names, in the order it names them: ``"gpu: NVIDIA H100
-    80GB HBM3 (updates 1-300), then cpu"`` → ``["H100", "cpu"]``; ``"not recorded"`` → ``["cpu (not
-    recorded)"]``: the code recorded no device before it ran anywhere but the 2-core CPU."""
+    """The machines a run's recorded device names, in its order: ``"gpu: NVIDIA H100 80GB HBM3
+    (updates 1-300), then cpu"`` → ``["H100", "cpu"]``; a GPU without a model number keeps its
+    name (``"gpu: NVIDIA GeForce RTX 4090"`` → ``["GeForce RTX 4090"]``); ``"not recorded"`` →
+    ``["cpu (not recorded)"]``: the code recorded no device before it ran anywhere but the 2-core CPU."""
     import re
 
-    if device == "not recorded":  # runs from before devices were recorded: the 2-core CPU (the page's provenance)
+    if device == "not recorded":
         return ["cpu (not recorded)"]
-    found = re.findall(r"\bcpu\b|NVIDIA ([A-Z]\d{2,4})", device)
-    kinds = [m or "cpu" for m in found] or [device]
+    kinds = []
+    for part in device.split(", then "):
+        name = re.sub(r"\s*\(updates [^)]*\)$", "", part.strip())  # "gpu: NVIDIA H200 (updates 1-900)"
+        if name.split(":")[0].strip() == "cpu":
+            kinds.append("cpu")
+            continue
+        name = name.split(":", 1)[-1].strip().removeprefix("NVIDIA ")
+        model = re.match(r"([A-Z]\d{2,4})\b", name)  # H100 80GB HBM3 → H100
+        kinds.append(model.group(1) if model else name)
     return list(dict.fromkeys(kinds))
 
 
 def claim_provenance_table(results: list[dict], runs: dict) -> str:
     """Per claim with data, per algorithm it reads: each run folder's seeds with the commits,
-    machines and JAX versions their parts trained with; the claim's first row says how many of
-    each its seeds span (a claim over more than one can differ by more than its algorithms)."""
+    machines and JAX versions their parts trained with, in the order they trained; the claim's
+    first row says how many of each its seeds span (a claim over more than one can differ by
+    more than its algorithms; a version "not recorded" is counted apart)."""
     lines = ["| claim | algorithm | seeds: commit · machine · JAX | the claim's seeds span |",
              "| --- | --- | --- | --- |"]
     for r in results:
@@ -177,9 +186,9 @@ def claim_provenance_table(results: list[dict], runs: dict) -> str:
                     continue
                 cells = []
                 for seeds, c, d, j in run.groups:
-                    kinds = list(dict.fromkeys(k for dev in sorted(d) for k in device_kinds(dev)))
-                    cells.append(f"{seeds_text(seeds)}: {', '.join(sorted(str(x)[:7] for x in c))} · "
-                                 f"{' + '.join(kinds)} · {', '.join(sorted(j))}")
+                    kinds = list(dict.fromkeys(k for dev in d for k in device_kinds(dev)))
+                    cells.append(f"{seeds_text(seeds)}: {', '.join(str(x)[:7] for x in c)} · "
+                                 f"{' + '.join(kinds)} · {', '.join(j)}")
                     commits |= {str(x)[:7] for x in c}
                     machines |= {k.removesuffix(" (not recorded)") for k in kinds}
                     jaxes |= set(j)
@@ -187,8 +196,10 @@ def claim_provenance_table(results: list[dict], runs: dict) -> str:
                 rows.append((f"{algo}{where}", "; ".join(cells)))
         if not rows:
             continue
+        known = jaxes - {"not recorded"}
         span = ", ".join(f"{len(x)} {name}{'s' if len(x) > 1 else ''}" for x, name in
-                         ((commits, "commit"), (machines, "machine"), (jaxes, "JAX version")))
+                         ((commits, "commit"), (machines, "machine"), (known, "JAX version")))
+        span += " (and parts whose JAX version is not recorded)" if "not recorded" in jaxes else ""
         for i, (algo, cell) in enumerate(rows):
             head = f"{claim.title} (`{claim.key}`)" if i == 0 else ""
             lines.append(f"| {head} | {algo} | {cell} | {span if i == 0 else ''} |")

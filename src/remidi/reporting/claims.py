@@ -267,7 +267,7 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
     "kinetix-s": (["dr", "plr", "sfl", "remidi"],
                   ["evaluate:solve_rate/mean", "evaluate:cvar/solve_rate/10%", "evaluate:cvar/solve_rate/100%",
                    "summary:trained_fraction_masked", "summary:rejected"],
-                  ["solve_rate/mean"]),
+                  ["solve_rate/mean", "trained_fraction_masked"]),
     **{m: (["dr", "plr", "minimax-return", "remidi"],
            ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},

@@ -555,3 +555,15 @@ def test_each_claims_seeds_are_listed_with_their_commits_machines_and_jax_versio
     assert f"(`{claim.key}`)" in first and first.endswith("| 1 commit, 2 machines, 2 JAX versions |")
     assert tables.device_kinds("cpu: cpu") == ["cpu"]
     assert tables.device_kinds("gpu: NVIDIA GeForce RTX 4090 (updates 1-300), then cpu") == ["GeForce RTX 4090", "cpu"]
+
+
+def test_every_figure_the_page_draws_is_on_the_page():
+    """A figure drawn but not shown is a reader's loss (Kinetix's curves and five others once were):
+    each experiment's curves with data, the scale figures and each claim figure appear on the page."""
+    page = rp.PAGE.read_text()
+    runs = data.load_runs(data.DATA)
+    drawn = [f"{exp}-curves.png" for exp, (algos, _, curves) in claims.SECTIONS.items()
+             if curves and any((exp, a) in runs for a in algos)]
+    drawn += [f"scale-{exp}.png" for exp, _ in claims.SCALE_TASKS]
+    missing = [name for name in drawn if f"(results/{name})" not in page]
+    assert not missing, missing

@@ -14,6 +14,10 @@
 #   Brax (carry .whl-brax too): EXP=brax-ant ALGOS="plr minimax-return remidi" BENCH=brax-plr \
 #     WHEELS=".whl .whl-brax" CHECKPOINT_EVERY=10 SRC=... bash docs/results/device/paper_preset.sh
 #
+#   Brax references at the paper's agent and envs (one DR seed, SETS: `--set` pairs of a fresh run):
+#     EXP=brax-ant ALGOS=dr PRESET=reference SEEDS=1 BENCH= WHEELS=".whl .whl-brax" CHECKPOINT_EVERY=50 \
+#     SETS="num_envs=256 hidden_size=0 lstm_size=0 ppo.minibatches=32" SRC=... bash docs/results/device/paper_preset.sh
+#
 # A run folder left in RUNS (default /tmp/gpu-runs) on a still-warm machine is resumed by a second call.
 # The runs checkpoint every CHECKPOINT_EVERY updates (default 250, the maze paper preset's
 # eval_every; it must be a multiple of the preset's eval_every), so a block cut off by the call's
@@ -28,6 +32,7 @@ EXP=${EXP:-tmaze}
 ALGOS=${ALGOS:-plr remidi}
 CKPT_ORDER=${CKPT_ORDER:-$ALGOS}
 CHECKPOINT_EVERY=${CHECKPOINT_EVERY:-250}
+SETS=${SETS:-}                       # more KEY=VALUE overrides of a fresh run, e.g. "num_envs=256"
 BENCH=${BENCH-maze-plr maze-remidi}  # BENCH= : no bench
 WHEELS=${WHEELS:-.whl}               # folders of wheels to install (the image lacks them)
 RUNS=${RUNS:-/tmp/gpu-runs}
@@ -59,7 +64,7 @@ for algo in $ALGOS; do
     python3 -m remidi run --resume "$out" --quiet > "$OUT/$algo.log" 2>&1 &
   else
     python3 -m remidi run "$EXP" --algo "$algo" --preset "$PRESET" --seeds "$SEEDS" --out "$out" --quiet \
-      --set checkpoint_every="$CHECKPOINT_EVERY" > "$OUT/$algo.log" 2>&1 &
+      --set checkpoint_every="$CHECKPOINT_EVERY" $(for kv in $SETS; do echo --set "$kv"; done) > "$OUT/$algo.log" 2>&1 &
   fi
   pids+=($!)
 done

@@ -23,6 +23,11 @@ class Claim:
     bounds: tuple[tuple[str, float, float], ...] = ()
     min_seeds: int = 10
 
+    @property
+    def algorithms(self) -> list[str]:
+        """The algorithms the claim reads, each once: those it compares, then those it bounds."""
+        return list(dict.fromkeys([a for pair in self.greater for a in pair] + [b[0] for b in self.bounds]))
+
 
 BRAX = ("brax-ant", "brax-halfcheetah", "brax-hopper", "brax-walker2d")
 SCALE_TASKS = (("tmaze", "T-maze"), ("blindfold", "blindfold"))
@@ -219,8 +224,7 @@ FIXES = (
 def stale_fix(claim: Claim, runs: dict, fixes: tuple[Fix, ...] | None = None) -> Fix | None:
     """The first of ``fixes`` (:data:`FIXES`) that a run read by ``claim`` predates (None if none)."""
     fixes = FIXES if fixes is None else fixes
-    read = {(exp, a) for exp in claim.experiments for pair in claim.greater for a in pair} | \
-        {(exp, b[0]) for exp in claim.experiments for b in claim.bounds}
+    read = {(exp, a) for exp in claim.experiments for a in claim.algorithms}
     for fix in fixes:
         for key in read & set(fix.runs):
             commits = runs[key].commits if key in runs else set()

@@ -152,7 +152,7 @@ def _interval_figure(path: Path, result: dict, runs: dict) -> None:
     from remidi.experiments.plots import _save, algorithm_style
 
     claim = result["claim"]
-    algos = list(dict.fromkeys([a for pair in claim.greater for a in pair] + [b[0] for b in claim.bounds]))
+    algos = claim.algorithms
     rows = [(exp, a) for exp in claim.experiments for a in algos]
     # wrapped, so that a long claim title never cuts off the verdict (its own last line)
     title = textwrap.wrap(f"{claim.title}: {claim.metric.split(':', 1)[1]} (mean, 95% CI, seeds)", 95)

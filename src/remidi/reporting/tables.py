@@ -5,6 +5,7 @@ algorithms."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -152,8 +153,6 @@ def device_kinds(device: str) -> list[str]:
     (updates 1-300), then cpu"`` → ``["H100", "cpu"]``; a GPU without a model number keeps its
     name (``"gpu: NVIDIA GeForce RTX 4090"`` → ``["GeForce RTX 4090"]``); ``"not recorded"`` →
     ``["cpu (not recorded)"]``: the code recorded no device before it ran anywhere but the 2-core CPU."""
-    import re
-
     if device == "not recorded":
         return ["cpu (not recorded)"]
     kinds = []
@@ -177,10 +176,9 @@ def claim_provenance_table(results: list[dict], runs: dict) -> str:
              "| --- | --- | --- | --- |"]
     for r in results:
         claim = r["claim"]
-        algos = list(dict.fromkeys([a for pair in claim.greater for a in pair] + [b[0] for b in claim.bounds]))
         rows, commits, machines, jaxes = [], set(), set(), set()
         for exp in claim.experiments:
-            for algo in algos:
+            for algo in claim.algorithms:
                 run = runs.get((exp, algo))
                 if run is None:
                     continue

@@ -66,10 +66,8 @@ def claim_scale(claim: Claim, runs: dict) -> str:
     """The scales (:func:`run_scale`) of the runs ``claim`` reads, each once, in the claim's order
     ("" if none is known); a second scale's share is written short (``"`cpu` preset: 5%"``). An
     algorithm without runs yet counts where its name says its preset (``plr @cpu4x``)."""
-    names = [(exp, a) for pair in claim.greater for a in pair for exp in claim.experiments] + \
-        [(exp, b[0]) for b in claim.bounds for exp in claim.experiments]
     scales = []
-    for exp, algo in names:
+    for exp, algo in [(exp, a) for a in claim.algorithms for exp in claim.experiments]:
         if (exp, algo) in runs:
             scales.append(run_scale(exp, runs[exp, algo].preset, runs[exp, algo].config))
         elif " @" in algo:

@@ -567,3 +567,42 @@ def test_every_figure_the_page_draws_is_on_the_page():
     drawn += [f"scale-{exp}.png" for exp, _ in claims.SCALE_TASKS]
     missing = [name for name in drawn if f"(results/{name})" not in page]
     assert not missing, missing
+
+
+def _held(verdict, remidi=None, plr=None):
+    test = {"kind": "greater", "n": (5, 5)} if remidi is None else {"kind": "greater", "n": (5, 5), "mean": (remidi, plr)}
+    return {"verdict": verdict, "rule_verdict": verdict.split(":", 1)[0], "tests": [test]}
+
+
+@pytest.mark.parametrize("held, learns, reading", [
+    (_held("pending"), _held("pending"), "pending"),
+    (_held("reproduced", 0.3, 0.1), _held("not reproduced", 0.0, 0.1), "persists"),
+    (_held("reproduced", 0.3, 0.1), _held("reproduced", 0.1, 0.0), "persists where the baseline learns"),
+    (_held("partly (no test passes)", 0.3, 0.25), _held("reproduced", 0.25, 0.0), "narrows, undecided"),
+    (_held("not reproduced", 0.2, 0.2), _held("reproduced", 0.2, 0.0), "closes"),  # a tie closes it
+    (_held("not reproduced", 0.1, 0.3), _held("reproduced", 0.3, 0.0), "closes"),
+    (_held("stale: its runs predate abc (x); rerun"), _held("pending"), "stale")])
+def test_the_scale_studys_gap_reads_by_the_rule_stated_before_its_runs(held, learns, reading):
+    assert verdicts.scale_gap(held, learns) == reading
+
+
+def test_the_scale_gap_table_puts_each_scale_of_a_task_beside_the_other(tmp_path):
+    """T-maze at cpu (the paper's held-out claim's test against PLR⊥) and at cpu4x, where ReMiDi's
+    lead passes and PLR⊥ solves more than at cpu: the gap persists where the baseline learns; the
+    blindfold, without runs, reads pending at both scales."""
+    runs = {}
+    for preset, algo, values in (("cpu", "remidi", [0.3, 0.31, 0.32, 0.33, 0.34]), ("cpu", "plr", [0.0] * 5),
+                                 ("cpu", "minimax-return", [0.0] * 5),
+                                 ("cpu4x", "remidi", [0.5, 0.51, 0.52, 0.53, 0.54]),
+                                 ("cpu4x", "plr", [0.1, 0.11, 0.12, 0.13, 0.14])):
+        folder = write_run(tmp_path / preset, "tmaze", algo, range(5), evaluate={"solve_rate/mean": values})
+        doc = json.loads((folder / "summary.json").read_text())
+        (folder / "summary.json").write_text(json.dumps({**doc, "preset": preset}))
+    runs = {**data.load_runs(tmp_path / "cpu"), **data.load_runs(tmp_path / "cpu4x")}
+    results = [verdicts.evaluate_claim(c, runs) for c in claims.CLAIMS]
+    rows = tables.scale_gap_table(results).splitlines()[2:]
+    assert rows[0].startswith("| T-maze | `cpu` preset") and "| 0.320 [" in rows[0] and "| 0.000 [" in rows[0]
+    assert "| pending | 5 / 5 |" in rows[0]  # the paper's claim needs 10 seeds
+    assert rows[1].startswith("| T-maze | `cpu4x` preset: 20% of the paper's")
+    assert rows[1].endswith("| passes | 5 / 5 | **reproduced** | **persists where the baseline learns** |")
+    assert all(r.endswith("| **pending** | **pending** |") for r in rows[3:]) and len(rows) == 4

@@ -50,7 +50,8 @@ from remidi.reporting.data import DATA, ROOT, collect, collect_unfinished, load_
 from remidi.reporting.figures import draw_figures
 from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
 from remidi.reporting.tables import (claim_provenance_table, floors_table, maze_floors_table, metrics_table, mode_table,
-                                     per_seed_table, provenance_table, summary_lines, unfinished_table, verdict_table)
+                                     per_seed_table, provenance_table, scale_gap_table, summary_lines, unfinished_table,
+                                     verdict_table)
 from remidi.reporting.verdicts import evaluate_claim
 
 PAGE = ROOT / "docs" / "results.md"
@@ -76,6 +77,7 @@ def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], 
     floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
     out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
     out["brax-mode"] = mode_table(runs)
+    out["scale-gap"] = scale_gap_table(results)
     out["scale-unfinished"] = unfinished_table(unfinished or {})
     out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
     return out, results

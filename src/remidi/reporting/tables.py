@@ -13,9 +13,9 @@ from remidi import stats
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
 from remidi.experiments.plots import seeds_text
-from remidi.reporting.claims import BRAX
+from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS
 from remidi.reporting.data import EVAL_ATTEMPTS, metric_values
-from remidi.reporting.verdicts import verdict_words
+from remidi.reporting.verdicts import scale_gap, verdict_words
 from remidi.runs.table import _cells as table_cells
 from remidi.runs.table import _digits as table_digits
 
@@ -201,6 +201,35 @@ def claim_provenance_table(results: list[dict], runs: dict) -> str:
         for i, (algo, cell) in enumerate(rows):
             head = f"{claim.title} (`{claim.key}`)" if i == 0 else ""
             lines.append(f"| {head} | {algo} | {cell} | {span if i == 0 else ''} |")
+    return "\n".join(lines)
+
+
+def _test_words(test: dict, result: dict) -> str:
+    """A comparison of ``result``'s claim in words: passes, holds in the mean only, reversed, or
+    pending (too few seeds for the claim)."""
+    if "mean" not in test or result["rule_verdict"] == "pending":
+        return "pending"
+    return "passes" if test["passes"] else "holds in the mean only" if test["in_mean"] else "reversed"
+
+
+def scale_gap_table(results: list[dict]) -> str:
+    """The scale study per task and scale: ReMiDi's and PLR⊥'s held-out solve rates, the
+    comparison ReMiDi > PLR⊥ (at `cpu`: that test of the paper's held-out claim), whether PLR⊥
+    learns with more steps, and the gap's reading (:func:`~remidi.reporting.verdicts.scale_gap`)."""
+    by_key = {r["claim"].key: r for r in results}
+    lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi > PLR⊥ | seeds | "
+             "PLR⊥ solves more than at `cpu` | the gap |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for exp, what in SCALE_TASKS:
+        base = by_key[f"{exp}-heldout"]
+        rows = [(base, next(t for t in base["tests"] if t["baseline"] == "plr"), "—", "(the first scale)")]
+        for preset in SCALE_PRESETS:
+            held, learns = by_key[f"{exp}-heldout-{preset}"], by_key[f"{exp}-plr-learns-{preset}"]
+            rows.append((held, held["tests"][0], f"**{learns['verdict']}**", f"**{scale_gap(held, learns)}**"))
+        for r, t, learns_words, gap in rows:
+            cells = [f"{_f(t['mean'][i], 3)} [{_f(t['ci'][i][0], 3)}, {_f(t['ci'][i][1], 3)}]" if "mean" in t else "—"
+                     for i in (0, 1)]
+            lines.append(f"| {what} | {r['scale']} | {cells[0]} | {cells[1]} | {_test_words(t, r)} | "
+                         f"{t['n'][0]} / {t['n'][1]} | {learns_words} | {gap} |")
     return "\n".join(lines)
 
 

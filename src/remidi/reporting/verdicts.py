@@ -134,3 +134,20 @@ def verdict_words(result: dict) -> str:
     """A claim's verdict as the page prints it: bold, then the scale its runs trained at."""
     return f"**{result['verdict']}**" + (f" ({result['scale']})" if result.get("scale") else "")
 
+
+
+def scale_gap(held: dict, learns: dict) -> str:
+    """The scale study's reading of ReMiDi's lead over PLR⊥ at a second scale, by the rule its
+    section states before the runs. ``held``: the claim "ReMiDi > PLR⊥ on held-out mazes" at that
+    scale (one comparison); ``learns``: "PLR⊥ at that scale > PLR⊥ at `cpu`". The gap
+    **persists** where ``held`` is reproduced ("persists where the baseline learns" where
+    ``learns`` is too), **closes** where PLR⊥'s mean is at least ReMiDi's, and **narrows,
+    undecided** otherwise (ReMiDi ahead in the mean, its test not passing); "pending" or "stale"
+    while ``held`` has no verdict by the rule."""
+    if held["verdict"] == "pending" or held["verdict"].startswith("stale"):
+        return held["verdict"].split(":", 1)[0]
+    if held["verdict"] == "reproduced":
+        return "persists where the baseline learns" if learns["verdict"] == "reproduced" else "persists"
+    (test,) = held["tests"]
+    remidi, plr = test["mean"]
+    return "closes" if plr >= remidi else "narrows, undecided"

@@ -600,7 +600,7 @@ def test_the_scale_gap_table_puts_each_scale_of_a_task_beside_the_other(tmp_path
         (folder / "summary.json").write_text(json.dumps({**doc, "preset": preset}))
     runs = {**data.load_runs(tmp_path / "cpu"), **data.load_runs(tmp_path / "cpu4x")}
     results = [verdicts.evaluate_claim(c, runs) for c in claims.CLAIMS]
-    rows = tables.scale_gap_table(results).splitlines()[2:]
+    rows = tables.scale_gap_table(results, runs).splitlines()[2:]
     assert rows[0].startswith("| T-maze | `cpu` preset") and "| 0.320 [" in rows[0] and "| 0.000 [" in rows[0]
     assert "| pending | 5 / 5 |" in rows[0]  # the paper's claim needs 10 seeds
     assert rows[1].startswith("| T-maze | `cpu4x` preset: 20% of the paper's")

@@ -77,7 +77,7 @@ def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], 
     floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
     out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
     out["brax-mode"] = mode_table(runs)
-    out["scale-gap"] = scale_gap_table(results)
+    out["scale-gap"] = scale_gap_table(results, runs)
     out["scale-unfinished"] = unfinished_table(unfinished or {})
     out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
     return out, results

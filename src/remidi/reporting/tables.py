@@ -212,10 +212,13 @@ def _test_words(test: dict, result: dict) -> str:
     return "passes" if test["passes"] else "holds in the mean only" if test["in_mean"] else "reversed"
 
 
-def scale_gap_table(results: list[dict]) -> str:
-    """The scale study per task and scale: ReMiDi's and PLR⊥'s held-out solve rates, the
-    comparison ReMiDi > PLR⊥ (at `cpu`: that test of the paper's held-out claim), whether PLR⊥
-    learns with more steps, and the gap's reading (:func:`~remidi.reporting.verdicts.scale_gap`)."""
+def scale_gap_table(results: list[dict], runs: dict) -> str:
+    """The scale study per task and scale: ReMiDi's and PLR⊥'s held-out solve rates (each as soon
+    as its runs are committed), the comparison ReMiDi > PLR⊥ (at `cpu`: that test of the paper's
+    held-out claim), whether PLR⊥ learns with more steps, and the gap's reading
+    (:func:`~remidi.reporting.verdicts.scale_gap`)."""
+    from remidi.runs.compare import describe
+
     by_key = {r["claim"].key: r for r in results}
     lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi > PLR⊥ | seeds | "
              "PLR⊥ solves more than at `cpu` | the gap |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
@@ -226,8 +229,11 @@ def scale_gap_table(results: list[dict]) -> str:
             held, learns = by_key[f"{exp}-heldout-{preset}"], by_key[f"{exp}-plr-learns-{preset}"]
             rows.append((held, held["tests"][0], f"**{learns['verdict']}**", f"**{scale_gap(held, learns)}**"))
         for r, t, learns_words, gap in rows:
-            cells = [f"{_f(t['mean'][i], 3)} [{_f(t['ci'][i][0], 3)}, {_f(t['ci'][i][1], 3)}]" if "mean" in t else "—"
-                     for i in (0, 1)]
+            cells = []
+            for algo in (t["algo"], t["baseline"]):
+                values = metric_values(runs, exp, algo, r["claim"].metric)
+                d = describe(values) if values else None
+                cells.append(f"{_f(d['mean'], 3)} [{_f(d['mean_ci'][0], 3)}, {_f(d['mean_ci'][1], 3)}]" if d else "—")
             lines.append(f"| {what} | {r['scale']} | {cells[0]} | {cells[1]} | {_test_words(t, r)} | "
                          f"{t['n'][0]} / {t['n'][1]} | {learns_words} | {gap} |")
     return "\n".join(lines)

@@ -32,7 +32,7 @@ from remidi.runs.table import CI_SEED, _digits, per_seed, windowed
 CONFIDENCE = 0.95
 
 
-def _describe(values: Mapping[int, float]) -> dict:
+def describe(values: Mapping[int, float]) -> dict:
     """``{"seeds", "n", "mean", "std", "iqm", "mean_ci", "iqm_ci"}`` of one algorithm's
     ``{seed: value}`` (std ddof 1; intervals: percentile bootstrap over seeds)."""
     x = np.array(list(values.values()), dtype=float)
@@ -70,7 +70,7 @@ def compare(algo: Mapping[str, Mapping[int, float]], baseline: Mapping[str, Mapp
         x = np.array(list(a.values()), float)
         y = np.array([b[s] for s in a] if paired else list(b.values()), float)  # paired: in x's seed order
         poi = stats.probability_of_improvement(x, y, confidence=CONFIDENCE, seed=CI_SEED)
-        rows[exp] = {"algo": _describe(a), "baseline": _describe(b),
+        rows[exp] = {"algo": describe(a), "baseline": describe(b),
                      "difference": float(np.mean(x) - np.mean(y)) if len(x) and len(y) else math.nan,
                      "probability_of_improvement": poi.value, "poi_ci": [poi.low, poi.high],
                      "p_value": stats.permutation_pvalue(x, y, paired=paired, alternative="greater"),

@@ -318,6 +318,8 @@ def test_the_verdict_table_names_where_each_metric_comes_from():
         "final checkpoint, the tag's levels among 256 generated, 4 attempts each"
     assert tables.metric_source("evaluate:cvar/solve_rate/10%").endswith("256 generated levels, 4 attempts each")
     assert tables.metric_source("summary:buffer_fraction/blind") == "last logged point"
+    # the replay share is summed over the last 10% of the updates (experiments.ued.final_replay_fractions)
+    assert tables.metric_source("summary:replay_fraction/tmaze") == "last 10% of training"
 
 
 def test_the_brax_floors_table_names_the_algorithms_above_standing_still(tmp_path):
@@ -581,28 +583,47 @@ def _held(verdict, remidi=None, plr=None):
     (_held("partly (no test passes)", 0.3, 0.25), _held("reproduced", 0.25, 0.0), "narrows, undecided"),
     (_held("not reproduced", 0.2, 0.2), _held("reproduced", 0.2, 0.0), "closes"),  # a tie closes it
     (_held("not reproduced", 0.1, 0.3), _held("reproduced", 0.3, 0.0), "closes"),
+    (_held("reproduced", 0.3, 0.1), _held("pending"), "persists"),
+    (_held("not reproduced", math.nan, 0.1), _held("reproduced", 0.1, 0.0), "undefined (a mean is not finite)"),
     (_held("stale: its runs predate abc (x); rerun"), _held("pending"), "stale")])
 def test_the_scale_studys_gap_reads_by_the_rule_stated_before_its_runs(held, learns, reading):
     assert verdicts.scale_gap(held, learns) == reading
+
+
+def _scale_runs(root, cpu4x: dict) -> dict:
+    """T-maze runs at cpu (ReMiDi 0.30–0.34, PLR⊥ and minimax return 0, 5 seeds each) and at cpu4x
+    (``cpu4x``: algorithm -> 5 held-out solve rates), loaded as the page loads them."""
+    for preset, algos in (("cpu", {"remidi": [0.3, 0.31, 0.32, 0.33, 0.34], "plr": [0.0] * 5,
+                                   "minimax-return": [0.0] * 5}), ("cpu4x", cpu4x)):
+        for algo, values in algos.items():
+            folder = write_run(root / preset, "tmaze", algo, range(5), evaluate={"solve_rate/mean": values})
+            doc = json.loads((folder / "summary.json").read_text())
+            (folder / "summary.json").write_text(json.dumps({**doc, "preset": preset}))
+    return {**data.load_runs(root / "cpu"), **data.load_runs(root / "cpu4x")}
+
+
+def _scale_rows(runs: dict) -> list[list[str]]:
+    table = tables.scale_gap_table([verdicts.evaluate_claim(c, runs) for c in claims.CLAIMS], runs)
+    return [[c.strip() for c in row.split("|")[1:-1]] for row in table.splitlines()[2:]]
 
 
 def test_the_scale_gap_table_puts_each_scale_of_a_task_beside_the_other(tmp_path):
     """T-maze at cpu (the paper's held-out claim's test against PLR⊥) and at cpu4x, where ReMiDi's
     lead passes and PLR⊥ solves more than at cpu: the gap persists where the baseline learns; the
     blindfold, without runs, reads pending at both scales."""
-    runs = {}
-    for preset, algo, values in (("cpu", "remidi", [0.3, 0.31, 0.32, 0.33, 0.34]), ("cpu", "plr", [0.0] * 5),
-                                 ("cpu", "minimax-return", [0.0] * 5),
-                                 ("cpu4x", "remidi", [0.5, 0.51, 0.52, 0.53, 0.54]),
-                                 ("cpu4x", "plr", [0.1, 0.11, 0.12, 0.13, 0.14])):
-        folder = write_run(tmp_path / preset, "tmaze", algo, range(5), evaluate={"solve_rate/mean": values})
-        doc = json.loads((folder / "summary.json").read_text())
-        (folder / "summary.json").write_text(json.dumps({**doc, "preset": preset}))
-    runs = {**data.load_runs(tmp_path / "cpu"), **data.load_runs(tmp_path / "cpu4x")}
-    results = [verdicts.evaluate_claim(c, runs) for c in claims.CLAIMS]
-    rows = tables.scale_gap_table(results, runs).splitlines()[2:]
-    assert rows[0].startswith("| T-maze | `cpu` preset") and "| 0.320 [" in rows[0] and "| 0.000 [" in rows[0]
-    assert "| pending | 5 / 5 |" in rows[0]  # the paper's claim needs 10 seeds
-    assert rows[1].startswith("| T-maze | `cpu4x` preset: 20% of the paper's")
-    assert rows[1].endswith("| passes | 5 / 5 | **reproduced** | **persists where the baseline learns** |")
-    assert all(r.endswith("| **pending** | **pending** |") for r in rows[3:]) and len(rows) == 4
+    rows = _scale_rows(_scale_runs(tmp_path, {"remidi": [0.5, 0.51, 0.52, 0.53, 0.54],
+                                              "plr": [0.1, 0.11, 0.12, 0.13, 0.14]}))
+    assert rows[0][:2] == ["T-maze", "`cpu` preset: 5% of the paper's environment steps"]
+    assert rows[0][2].startswith("0.320 [") and rows[0][3] == "0.000 [0.000, 0.000]" and rows[0][4] == "+0.320"
+    assert rows[0][5:7] == ["pending", "5 / 5"]  # the paper's claim needs 10 seeds
+    assert rows[1][1].startswith("`cpu4x` preset: 20% of the paper's")
+    assert rows[1][4:] == ["+0.400", "passes", "5 / 5", "**reproduced** (passes)", "**persists where the baseline learns**"]
+    assert len(rows) == 4 and all(r[-2:] == ["**pending** (pending)", "**pending**"] for r in rows[3:])
+
+
+def test_the_scale_gap_table_shows_one_side_before_the_other_has_finished(tmp_path):
+    """PLR⊥ alone at cpu4x, below its cpu mean: its mean shows, ReMiDi's and the difference do
+    not, and the learns column says the claim's comparison does not hold in the mean (a tie)."""
+    row = _scale_rows(_scale_runs(tmp_path, {"plr": [0.0] * 5}))[1]
+    assert row[2:] == ["—", "0.000 [0.000, 0.000]", "—", "pending", "0 / 5", "**not reproduced** (does not hold in the mean)",
+                       "**pending**"]

@@ -41,7 +41,7 @@ def metric_source(metric: str) -> str:
 
     kind, name = metric.split(":", 1)
     if kind != "evaluate":
-        return "last logged point"
+        return "last 10% of training" if name.startswith("replay_fraction/") else "last logged point"
     levels, attempts = DEFAULTS["cvar_levels"], DEFAULTS["cvar_attempts"]
     if name.startswith("generator/"):
         return f"final checkpoint, the tag's levels among {levels} generated, {attempts} attempts each"
@@ -205,36 +205,43 @@ def claim_provenance_table(results: list[dict], runs: dict) -> str:
 
 
 def _test_words(test: dict, result: dict) -> str:
-    """A comparison of ``result``'s claim in words: passes, holds in the mean only, reversed, or
-    pending (too few seeds for the claim)."""
+    """A comparison of ``result``'s claim in words: passes, holds in the mean only, does not
+    hold in the mean, pending (too few seeds for the claim) or stale (its runs predate a correction)."""
+    if result["verdict"].startswith("stale"):
+        return "stale"
     if "mean" not in test or result["rule_verdict"] == "pending":
         return "pending"
-    return "passes" if test["passes"] else "holds in the mean only" if test["in_mean"] else "reversed"
+    return "passes" if test["passes"] else "holds in the mean only" if test["in_mean"] else "does not hold in the mean"
 
 
 def scale_gap_table(results: list[dict], runs: dict) -> str:
     """The scale study per task and scale: ReMiDi's and PLR⊥'s held-out solve rates (each as soon
-    as its runs are committed), the comparison ReMiDi > PLR⊥ (at `cpu`: that test of the paper's
-    held-out claim), whether PLR⊥ learns with more steps, and the gap's reading
+    as its runs are committed) and the difference of their means, the comparison ReMiDi > PLR⊥
+    (at `cpu`: that test of the paper's held-out claim) with the seeds of each side, whether PLR⊥
+    solves more than at `cpu` (the claim's verdict and its test), and the gap's reading
     (:func:`~remidi.reporting.verdicts.scale_gap`)."""
     from remidi.runs.compare import describe
 
     by_key = {r["claim"].key: r for r in results}
-    lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi > PLR⊥ | seeds | "
-             "PLR⊥ solves more than at `cpu` | the gap |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi − PLR⊥ (means) | "
+             "ReMiDi > PLR⊥ | seeds (ReMiDi / PLR⊥) | PLR⊥ solves more than at `cpu` | the gap |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for exp, what in SCALE_TASKS:
         base = by_key[f"{exp}-heldout"]
         rows = [(base, next(t for t in base["tests"] if t["baseline"] == "plr"), "—", "(the first scale)")]
         for preset in SCALE_PRESETS:
             held, learns = by_key[f"{exp}-heldout-{preset}"], by_key[f"{exp}-plr-learns-{preset}"]
-            rows.append((held, held["tests"][0], f"**{learns['verdict']}**", f"**{scale_gap(held, learns)}**"))
+            learns_words = f"**{learns['verdict'].split(':', 1)[0]}** ({_test_words(learns['tests'][0], learns)})"
+            rows.append((held, held["tests"][0], learns_words, f"**{scale_gap(held, learns)}**"))
         for r, t, learns_words, gap in rows:
-            cells = []
+            means = []
             for algo in (t["algo"], t["baseline"]):
                 values = metric_values(runs, exp, algo, r["claim"].metric)
-                d = describe(values) if values else None
-                cells.append(f"{_f(d['mean'], 3)} [{_f(d['mean_ci'][0], 3)}, {_f(d['mean_ci'][1], 3)}]" if d else "—")
-            lines.append(f"| {what} | {r['scale']} | {cells[0]} | {cells[1]} | {_test_words(t, r)} | "
+                means.append(describe(values) if values else None)
+            cells = [f"{_f(d['mean'], 3)} [{_f(d['mean_ci'][0], 3)}, {_f(d['mean_ci'][1], 3)}]" if d else "—"
+                     for d in means]
+            diff = f"{means[0]['mean'] - means[1]['mean']:+.3f}" if all(means) else "—"
+            lines.append(f"| {what} | {r['scale']} | {cells[0]} | {cells[1]} | {diff} | {_test_words(t, r)} | "
                          f"{t['n'][0]} / {t['n'][1]} | {learns_words} | {gap} |")
     return "\n".join(lines)
 

@@ -142,12 +142,15 @@ def scale_gap(held: dict, learns: dict) -> str:
     scale (one comparison); ``learns``: "PLR⊥ at that scale > PLR⊥ at `cpu`". The gap
     **persists** where ``held`` is reproduced ("persists where the baseline learns" where
     ``learns`` is too), **closes** where PLR⊥'s mean is at least ReMiDi's, and **narrows,
-    undecided** otherwise (ReMiDi ahead in the mean, its test not passing); "pending" or "stale"
-    while ``held`` has no verdict by the rule."""
+    undecided** otherwise (ReMiDi ahead in the mean, its test not passing: "narrows" does not
+    compare the gap with the first scale's, the table's difference column shows both); "pending"
+    or "stale" while ``held`` has no verdict by the rule."""
     if held["verdict"] == "pending" or held["verdict"].startswith("stale"):
         return held["verdict"].split(":", 1)[0]
     if held["verdict"] == "reproduced":
         return "persists where the baseline learns" if learns["verdict"] == "reproduced" else "persists"
     (test,) = held["tests"]
     remidi, plr = test["mean"]
+    if not (math.isfinite(remidi) and math.isfinite(plr)):
+        return "undefined (a mean is not finite)"
     return "closes" if plr >= remidi else "narrows, undecided"

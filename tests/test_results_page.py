@@ -622,7 +622,7 @@ def test_the_scale_gap_table_puts_each_scale_of_a_task_beside_the_other(tmp_path
 
 
 def test_the_scale_gap_table_shows_one_side_before_the_other_has_finished(tmp_path):
-    """PLR⊥ alone at cpu4x, below its cpu mean: its mean shows, ReMiDi's and the difference do
+    """PLR⊥ alone at cpu4x, no higher than its cpu mean: its mean shows, ReMiDi's and the difference do
     not, and the learns column says the claim's comparison does not hold in the mean (a tie)."""
     row = _scale_rows(_scale_runs(tmp_path, {"plr": [0.0] * 5}))[1]
     assert row[2:] == ["—", "0.000 [0.000, 0.000]", "—", "pending", "0 / 5", "**not reproduced** (does not hold in the mean)",

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Claim:
     """One claim of the paper: ``metric`` (``"evaluate:NAME"``: the final checkpoint's
-    ``remidi evaluate``; ``"summary:NAME"``: the run's last logged point) on ``experiments``;
+    ``remidi evaluate``; ``"summary:NAME"``: the run's last logged point, for ``replay_fraction/*``
+    its last 10% of training) on ``experiments``;
     ``greater``: pairs (A, B) claiming A's mean > B's on every experiment; ``bounds``: (A, lo,
     hi) claiming A's mean in [lo, hi]; ``min_seeds``: seeds per algorithm a verdict needs."""
 

@@ -16,6 +16,7 @@ from remidi.experiments.plots import seeds_text
 from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS
 from remidi.reporting.data import EVAL_ATTEMPTS, metric_values
 from remidi.reporting.verdicts import scale_gap, verdict_words
+from remidi.runs.compare import describe
 from remidi.runs.table import _cells as table_cells
 from remidi.runs.table import _digits as table_digits
 
@@ -36,7 +37,9 @@ def _p(p: float) -> str:
 def metric_source(metric: str) -> str:
     """Where a claim's metric (``evaluate:NAME`` or ``summary:NAME``) comes from, as the verdict
     table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`~remidi.reporting.data.EVAL_ATTEMPTS`
-    attempts per level, its CVaR and generator metrics its default generated levels and attempts."""
+    attempts per level, its CVaR and generator metrics its default generated levels and attempts;
+    ``summary.json`` holds each metric's last logged point, the replay shares summed over the last
+    10% of training."""
     from remidi.runs.evaluate import DEFAULTS
 
     kind, name = metric.split(":", 1)
@@ -220,8 +223,6 @@ def scale_gap_table(results: list[dict], runs: dict) -> str:
     (at `cpu`: that test of the paper's held-out claim) with the seeds of each side, whether PLR⊥
     solves more than at `cpu` (the claim's verdict and its test), and the gap's reading
     (:func:`~remidi.reporting.verdicts.scale_gap`)."""
-    from remidi.runs.compare import describe
-
     by_key = {r["claim"].key: r for r in results}
     lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi − PLR⊥ (means) | "
              "ReMiDi > PLR⊥ | seeds (ReMiDi / PLR⊥) | PLR⊥ solves more than at `cpu` | the gap |",

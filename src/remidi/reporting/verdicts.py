@@ -135,7 +135,6 @@ def verdict_words(result: dict) -> str:
     return f"**{result['verdict']}**" + (f" ({result['scale']})" if result.get("scale") else "")
 
 
-
 def scale_gap(held: dict, learns: dict) -> str:
     """The scale study's reading of ReMiDi's lead over PLR⊥ at a second scale, by the rule its
     section states before the runs. ``held``: the claim "ReMiDi > PLR⊥ on held-out mazes" at that

@@ -3,6 +3,7 @@ what the data give, the verdict rule says what it states, and collecting a run k
 page needs."""
 
 import csv
+import dataclasses
 import gzip
 import json
 import math
@@ -141,13 +142,17 @@ def test_a_claim_on_runs_older_than_a_fix_it_needs_is_stale(tmp_path, monkeypatc
     assert claims.stale_fix(claims.CLAIMS[0], runs, (fix,)) is None  # a claim that reads none of those runs
 
 
-def test_the_t_maze_remidi_over_paired_claims_wait_for_their_rerun():
-    """Their committed runs (569c639) predate ab3ea79's reservoir fix; PAIRED's own claim does not
-    read them."""
+def test_the_t_maze_remidi_over_paired_claims_read_their_rerun():
+    """Their committed runs are the rerun at ab3ea79, after the reservoir fix, so no claim reads
+    stale; the same claims over runs from before it (569c639) would."""
     runs = data.load_runs(data.DATA)
     by_key = {c.key: c for c in claims.CLAIMS}
-    for key in ("tmaze-remidi-paired-generated", "tmaze-remidi-paired-heldout"):
-        assert claims.stale_fix(by_key[key], runs).commit == "ab3ea79"
+    key = ("tmaze", "remidi-paired (perfect)")
+    assert {str(c)[:7] for c in runs[key].commits} == {"ab3ea79"}
+    for claim in ("tmaze-remidi-paired-generated", "tmaze-remidi-paired-heldout"):
+        assert claims.stale_fix(by_key[claim], runs) is None
+        before = {**runs, key: dataclasses.replace(runs[key], commits={"569c639" + "0" * 33})}
+        assert claims.stale_fix(by_key[claim], before).commit == "ab3ea79"
     assert claims.stale_fix(by_key["tmaze-paired"], runs) is None
     assert claims.stale_fix(by_key["lever-remidi-paired"], runs) is None  # remade at ab3ea79
 

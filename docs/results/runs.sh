@@ -184,8 +184,8 @@ run remidi-paired-perfect-belief-s0 lever-noisy remidi-paired 0 10 paper --set p
 
 # ReMiDi over PAIRED on the T-maze again, at ab3ea79, where a generator's reservoir keeps a repeated
 # level's highest key (the runs above, at 569c639, froze supports in which a T-maze made in every
-# update had one uniform key, like a maze made once). When both land, their data replace
-# remidi-paired-perfect-s0 and -s5 on the page (PAIRED's runs stay at 569c639: the reservoir is ReMiDi over
+# update had one uniform key, like a maze made once). Their data replaced remidi-paired-perfect-s0
+# and -s5 on the page on 2026-11-29 (PAIRED's runs stay at 569c639: the reservoir is ReMiDi over
 # PAIRED's alone)
 at ab3ea79
 for s in 0 5; do

@@ -215,10 +215,11 @@ class Fix:
 FIXES = (
     # ReMiDi over PAIRED's frozen support is its generators' reservoirs (PAIRED alone keeps none);
     # the T-maze runs at 569c639 froze supports in which a repeated level took its newest key.
-    # Their rerun at ab3ea79 (docs/results/runs.sh, `remidi-paired-perfect-keephigh-s*`) is under way.
+    # Their rerun at ab3ea79 (docs/results/runs.sh, `remidi-paired-perfect-keephigh-s*`) replaced
+    # them on the page; the entry stays so that collecting a run from before the fix reads stale.
     Fix("ab3ea79", "a generator's reservoir keeps a repeated level's highest key",
         runs=(("tmaze", "remidi-paired (perfect)"),), before=("569c639",),
-        rerun="rerun at ab3ea79 under way, not yet finished"),
+        rerun="rerun at ab3ea79: `remidi-paired-perfect-keephigh-s*` in docs/results/runs.sh"),
 )
 
 

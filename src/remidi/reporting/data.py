@@ -38,6 +38,13 @@ def run_label(summary: dict, config: dict) -> str:
     return f"{name} @{summary['preset']}" if summary.get("preset") in SCALE_PRESETS else name
 
 
+def _add_device(devices: list, device: str) -> None:
+    """Append the device of a run's next part to ``devices`` (the run's devices in training order),
+    unless the part before trained there too."""
+    if not devices or devices[-1] != device:
+        devices.append(device)
+
+
 @dataclass
 class Run:
     """One experiment × algorithm, its parts merged: per source (``summary``, ``evaluate``) and
@@ -53,10 +60,11 @@ class Run:
     wall_s: float = 0.0
     resumed: bool = False  # some part was resumed: its summary's wall time is its last part's alone
     config: dict = field(default_factory=dict)  # the first part's config.json "config"
-    devices: set = field(default_factory=set)
+    devices: dict = field(default_factory=dict)  # an ordered set: the devices in the order they trained
     preset: str = ""
     # per run folder, in ``folders`` order: (its seeds, then the commits, devices and JAX versions of
-    # its parts, each an ordered set: dict keys in the order the parts trained)
+    # its parts in the order they trained: commits and JAX versions ordered sets (dict keys), devices
+    # a list naming a device again where a later part returned to it)
     groups: list = field(default_factory=list)
 
 
@@ -135,18 +143,19 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
             parts = [{"code": started, "wall_s": summary.get("wall_s", 0.0)}]
             run.resumed |= bool(summary.get("resumed"))
             jaxes = _later_jax(started)
-        # ordered sets (dicts): the parts in the order they trained
-        group = (tuple(seeds), {}, {}, {})
+        # the parts in the order they trained: commits and JAX versions as ordered sets (dicts), the
+        # devices as a sequence that names a device again when a later part returns to it
+        group = (tuple(seeds), {}, [], {})
         for part in parts:
             code = part.get("code") or started  # None: a part before parts were recorded
             group[1][code.get("commit") or started.get("commit")] = None
-            group[2][code.get("device") or "not recorded"] = None
+            _add_device(group[2], code.get("device") or "not recorded")
             group[3][code.get("jax") or started.get("jax") or "not recorded"] = None
             run.wall_s += float(part.get("wall_s") or 0.0)
             run.resumed |= part.get("code") is None  # that part's time is unknown
         group[3].update(dict.fromkeys(jaxes))
         run.commits |= set(group[1])
-        run.devices |= set(group[2])
+        run.devices.update(dict.fromkeys(group[2]))
         run.groups.append(group)
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
@@ -196,7 +205,7 @@ def load_unfinished(data: Path = DATA) -> dict[tuple[str, str], tuple[Run, dict]
         key = (progress["experiment"], f"{progress['algo']} @{progress['preset']}")
         if key in out:
             raise ConfigError(f"data: {key[0]} / {key[1]} has two unfinished runs ({folder})")
-        run = Run(*key, preset=progress["preset"], commits={progress["commit"]}, devices=set(progress["devices"]))
+        run = Run(*key, preset=progress["preset"], commits={progress["commit"]}, devices=dict.fromkeys(progress["devices"]))
         _add_part(run, folder, list(progress["seeds"]), config, data)
         out[key] = (run, progress)
     return out
@@ -230,7 +239,9 @@ def collect_unfinished(run: Path, data: Path = DATA) -> Path:
     if (folder / CHECKPOINT).is_file():
         meta = read_meta(folder / CHECKPOINT, "collect-unfinished")
         if meta.get("done") == int(steps[-1]) and meta.get("parts"):
-            devices = sorted({(p.get("code") or {}).get("device", "not recorded") for p in meta["parts"]})
+            devices = []
+            for part in meta["parts"]:
+                _add_device(devices, (part.get("code") or {}).get("device", "not recorded"))
     keep = set(SECTIONS.get(doc["experiment"], ([], [], []))[2])
     target = Path(data) / doc["experiment"] / f"{doc['algo']}-{doc['preset']}-s{doc['seeds'][0]}"
     if (target / "summary.json").is_file():  # the same run, finished and collected: its data stay

@@ -134,14 +134,15 @@ def summary_lines(results: list[dict]) -> str:
 
 def provenance_table(runs: dict) -> str:
     """One row per experiment and algorithm: preset, seeds, commits and devices (of every part
-    that trained it, where its summary records ``parts``), the training wall time summed over its
+    that trained it, where its summary records ``parts``, per run folder in the order its parts trained), the training wall time summed over its
     parts (marked † where some part's time is unknown: a run resumed before parts were recorded
     holds the time of its last part alone) and its data folders."""
     lines = ["| experiment | algorithm | preset | seeds | commit | device | training wall time (all parts) | data |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for (exp, algo), run in sorted(runs.items()):
         commits = ", ".join(sorted(str(c)[:7] for c in run.commits))
-        devices = ", ".join(sorted(run.devices))
+        # per run folder, its devices in the order its parts trained (folders alike shown once)
+        devices = "; ".join(dict.fromkeys(" then ".join(group[2]) for group in run.groups))
         wall = f"{run.wall_s / 60:.1f} min" + (" †" if run.resumed else "")
         lines.append(f"| {exp} | {algo} | {run.preset} | {len(run.seeds)} | {commits} | {devices} | {wall} | "
                      + ", ".join(f"`{f}`" for f in run.folders) + " |")
@@ -264,7 +265,7 @@ def unfinished_table(unfinished: dict) -> str:
         per_update = run.config["num_envs"] * run.config["num_steps"]
         lines.append(f"| {exp} | {algo} | {progress['preset']} | {len(run.seeds)} | {progress['updates']:,} of "
                      f"{progress['num_updates']:,} | {progress['updates'] * per_update / 1e6:.1f}M of "
-                     f"{progress['num_updates'] * per_update / 1e6:.1f}M | {', '.join(sorted(run.devices))} | "
+                     f"{progress['num_updates'] * per_update / 1e6:.1f}M | {' then '.join(run.devices)} | "
                      f"{str(progress['commit'])[:7]} | {_f(float(last.mean()), 3)} [{_f(lo, 3)}, {_f(hi, 3)}] | "
                      f"{int((last > 0).sum())} / {len(last)} | " + ", ".join(f"`{f}`" for f in run.folders) + " |")
     return "\n".join(lines)

@@ -60,7 +60,6 @@ class Run:
     wall_s: float = 0.0
     resumed: bool = False  # some part was resumed: its summary's wall time is its last part's alone
     config: dict = field(default_factory=dict)  # the first part's config.json "config"
-    devices: dict = field(default_factory=dict)  # an ordered set: the devices in the order they trained
     preset: str = ""
     # per run folder, in ``folders`` order: (its seeds, then the commits, devices and JAX versions of
     # its parts in the order they trained: commits and JAX versions ordered sets (dict keys), devices
@@ -155,7 +154,6 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
             run.resumed |= part.get("code") is None  # that part's time is unknown
         group[3].update(dict.fromkeys(jaxes))
         run.commits |= set(group[1])
-        run.devices.update(dict.fromkeys(group[2]))
         run.groups.append(group)
     for run in runs.values():  # "run:<metric>": per seed, the mean of its logged points over the whole run
         for name, (_, values) in run.curves.items():
@@ -205,7 +203,7 @@ def load_unfinished(data: Path = DATA) -> dict[tuple[str, str], tuple[Run, dict]
         key = (progress["experiment"], f"{progress['algo']} @{progress['preset']}")
         if key in out:
             raise ConfigError(f"data: {key[0]} / {key[1]} has two unfinished runs ({folder})")
-        run = Run(*key, preset=progress["preset"], commits={progress["commit"]}, devices=dict.fromkeys(progress["devices"]))
+        run = Run(*key, preset=progress["preset"], commits={progress["commit"]})
         _add_part(run, folder, list(progress["seeds"]), config, data)
         out[key] = (run, progress)
     return out

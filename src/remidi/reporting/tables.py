@@ -134,9 +134,10 @@ def summary_lines(results: list[dict]) -> str:
 
 def provenance_table(runs: dict) -> str:
     """One row per experiment and algorithm: preset, seeds, commits and devices (of every part
-    that trained it, where its summary records ``parts``, per run folder in the order its parts trained), the training wall time summed over its
-    parts (marked † where some part's time is unknown: a run resumed before parts were recorded
-    holds the time of its last part alone) and its data folders."""
+    that trained it, where its summary records ``parts``; per run folder in the order its parts
+    trained), the training wall time summed over its parts (marked † where some part's time is
+    unknown: a run resumed before parts were recorded holds the time of its last part alone) and
+    its data folders."""
     lines = ["| experiment | algorithm | preset | seeds | commit | device | training wall time (all parts) | data |",
              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for (exp, algo), run in sorted(runs.items()):
@@ -265,7 +266,7 @@ def unfinished_table(unfinished: dict) -> str:
         per_update = run.config["num_envs"] * run.config["num_steps"]
         lines.append(f"| {exp} | {algo} | {progress['preset']} | {len(run.seeds)} | {progress['updates']:,} of "
                      f"{progress['num_updates']:,} | {progress['updates'] * per_update / 1e6:.1f}M of "
-                     f"{progress['num_updates'] * per_update / 1e6:.1f}M | {' then '.join(run.devices)} | "
+                     f"{progress['num_updates'] * per_update / 1e6:.1f}M | {' then '.join(progress['devices'])} | "
                      f"{str(progress['commit'])[:7]} | {_f(float(last.mean()), 3)} [{_f(lo, 3)}, {_f(hi, 3)}] | "
                      f"{int((last > 0).sum())} / {len(last)} | " + ", ".join(f"`{f}`" for f in run.folders) + " |")
     return "\n".join(lines)

@@ -457,7 +457,8 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
 def test_a_run_collected_while_it_trained_is_drawn_once_when_it_has_finished(tmp_path):
     """A scale-study run's unfinished folder is its finished one (``<algo>-<preset>-s<seed>``, the
     page labelling the preset): collecting the finished run removes progress.json, so the run is
-    no longer drawn as unfinished beside itself, and collecting it as unfinished again is refused
+    no longer drawn as unfinished beside itself (its archive carried between machines deleted),
+    and collecting it as unfinished again is refused
     with its finished data untouched. A finished run of a preset the page does not label (the
     paper's) is refused where another preset's run of the algorithm lies, nothing written."""
     from remidi.engine.run.checkpoint import HISTORY
@@ -476,7 +477,13 @@ def test_a_run_collected_while_it_trained_is_drawn_once_when_it_has_finished(tmp
     (run / "summary.json").write_text(json.dumps({"experiment": "tmaze", "algo": "plr", "preset": "cpu4x",
                                                   "seeds": [0, 1], "metrics": {}}))
     outputs.write_metrics_csv(run / "metrics.csv", [(0, 600, "solve_rate/mean", 0.3)])
+    carried = data.inflight(tmp_path / "data", "tmaze", "plr-cpu4x-s0")  # docs/results/carry.sh's archive
+    other = data.inflight(tmp_path / "data", "tmaze", "remidi-cpu4x-s0")
+    for archive in (carried, other):
+        archive.parent.mkdir(parents=True, exist_ok=True)
+        archive.write_bytes(b"xz")
     assert data.collect(run, tmp_path / "data") == [target]
+    assert not carried.exists() and other.exists()  # the finished run's archive alone is deleted
     assert data.load_unfinished(tmp_path / "data") == {}
     assert list(data.load_runs(tmp_path / "data")) == [("tmaze", "plr @cpu4x")]
     (run / "summary.json").unlink()

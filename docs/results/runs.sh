@@ -7,8 +7,11 @@
 # what the runs execute), then `remidi evaluate --attempts 30` scores each run's final
 # checkpoint. Rerunning the script skips finished runs (and those whose data are already
 # committed under docs/results/data/ or references/, so a fresh machine starts where the page
-# stands) and resumes an interrupted one from its last checkpoint (`remidi run --resume`). When a
-# run has finished, copy its small outputs into the page's data and regenerate the page:
+# stands) and resumes an interrupted one from its last checkpoint (`remidi run --resume`), on a
+# fresh machine from the archive docs/results/carry.sh committed under docs/results/inflight/
+# (a machine of this project keeps nothing outside the checkout between sessions: carry the
+# unfinished runs before one ends). When a run has finished, copy its small outputs into the
+# page's data and regenerate the page (which deletes its archive):
 #
 #   python -m remidi.reporting.results_page --collect RUNS_DIR/<experiment>/<run>
 #
@@ -57,6 +60,10 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
   mkdir -p "$R/$exp"; local lock; exec {lock}>"$out.lock"
   if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi  # another lane is on it
   checkout
+  local carried=$HERE/docs/results/inflight/$exp/$name.txz  # carried from an earlier machine (carry.sh)
+  if [ ! -f "$out/checkpoint.npz" ] && [ -f "$carried" ]; then
+    echo "$(date +%T) unpack $carried"; rm -rf "$out"; tar -C "$R" -xJf "$carried" || exit 1
+  fi
   if [ -f "$out/summary.json" ]; then :
   elif [ -f "$out/config.json" ]; then
     echo "$(date +%T) resume $out"; $PY -m remidi run --resume "$out" --quiet >> "$out.log" 2>&1

@@ -275,11 +275,18 @@ def metric_values(runs: dict, experiment: str, algo: str, metric: str) -> dict[i
 MAX_POINTS = 100  # log points kept per curve in the committed metrics.csv.gz
 
 
+def inflight(data: Path, experiment: str, name: str) -> Path:
+    """Where ``docs/results/carry.sh`` keeps an unfinished run's folder between machines, beside
+    ``data``: ``inflight/<experiment>/<run folder>.txz``."""
+    return Path(data).parent / "inflight" / experiment / f"{name}.txz"
+
+
 def collect(run: Path, data: Path = DATA) -> list[Path]:
     """Copy a finished run (one algorithm's folder, or a folder of them) into
     ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
     ``evaluate.json`` (and ``evaluate-mode.json``) and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~remidi.reporting.claims.SECTIONS`'
-    curves, at most :data:`MAX_POINTS` evenly spaced log points). Returns the folders written."""
+    curves, at most :data:`MAX_POINTS` evenly spaced log points), and deletes the run's
+    :func:`inflight` archive. Returns the folders written."""
     run = Path(run)
     folders = [run] if (run / "summary.json").is_file() else sorted(p.parent for p in run.glob("*/summary.json"))
     if not folders:
@@ -311,5 +318,6 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
                                             .astype(int))} if steps else set()
         outputs.write_metrics_csv(target / "metrics.csv.gz", (r for r in rows if r[1] in kept))
         (target / PROGRESS).unlink(missing_ok=True)  # collected while it trained: it is finished now
+        inflight(data, exp, folder.name).unlink(missing_ok=True)  # carried across machines: no longer needed
         written.append(target)
     return written

@@ -8,10 +8,20 @@ it changed no result.
 training results, and say so in its commit. Write them as the suite computes them: without
 XLA's optimisations (the script sets that) and with the suite's XLA flags in ``XLA_FLAGS``
 (``tests/conftest.py``'s ``FAST_XLA_FLAGS``: older fusion emitters, LLVM level 1 and, on
-x86-64, ``--xla_cpu_max_isa=AVX2``). Without those flags
-some cases (``plr``, ``minimax-return``, ``accel``, ``remidi-accel``) drift beyond the tolerance
-in ``ppo/policy_loss`` (a sum that nearly cancels) and, through the sampled actions, in a few
-evaluation episodes.
+x86-64, ``--xla_cpu_max_isa=AVX2``).
+
+``plr``, ``minimax-return``, ``accel`` and ``remidi-accel`` play an 8-lever game
+(:data:`LEVER8`), the other lever cases the 64-lever :data:`TASK`. On 64 levers those four drifted
+beyond the tolerance between CPUs (values written on an AVX2 machine, read on an AVX-512 one with
+the same flags, 2026-11-29) and between ``--xla_cpu_max_isa`` settings on one machine: their
+replayed batches are at times one outcome throughout (every pull of a few replayed levels
+fails), so the advantages are nearly constant and normalising them by their standard deviation
+turns rounding into the update's direction (a floor of 1e-2 under that deviation removed the
+drift; so did 8 levers, where a batch of 32 pulls is rarely one outcome). On 8 levers the same
+cases agree to the tolerance with ``--xla_cpu_max_isa`` at AVX2, at SSE4_2 and uncapped, as every
+other case does on 64 levers, and c32046b's code (the results page's) computes the stored values
+on them: every metric it logged and every runner leaf within the tolerance. (The learner keeps the
+field's normalisation, ``std + 1e-8``, as JaxUED's and minimax's PPO do.)
 """
 
 import dataclasses
@@ -26,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from test_ued_engine import TASK, TINY  # noqa: E402
 
 from remidi.engine.run import driver  # noqa: E402
+from remidi.envs.lever import lever_task  # noqa: E402
 from remidi.envs.maze import maze_task  # noqa: E402
 from remidi.experiments.maze import paper_config as maze_paper_config  # noqa: E402
 
@@ -42,15 +53,17 @@ MAZE_TINY = R(_M, num_updates=6, num_envs=4, num_steps=24, eval_every=6, eval_at
               remidi=R(_M.remidi, num_buffers=2, buffer_capacity=4, steps_per_buffer=2))
 #: SFL's refresh at the lever TINY config's size: 32 candidates × 4 steps, 8 kept, every 10 updates
 SFL_TINY = R(TINY, sfl=R(TINY.sfl, batch_size=16, num_batches=2, rollout_steps=4, buffer_size=8, refresh_every=10))
+#: the lever game for the cases whose 64-lever batches are at times one outcome (module docstring)
+LEVER8 = lever_task(8)
 #: name: (task, algorithm, config)
 CASES = {
     "dr": (TASK, "dr", TINY),
-    "plr": (TASK, "plr", TINY),
-    "minimax-return": (TASK, "minimax-return", TINY),
+    "plr": (LEVER8, "plr", TINY),
+    "minimax-return": (LEVER8, "minimax-return", TINY),
     "remidi": (TASK, "remidi", TINY),
     "remidi-combine": (TASK, "remidi", R(TINY, remidi=R(TINY.remidi, policy="combine"))),
-    "accel": (TASK, "accel", TINY),
-    "remidi-accel": (TASK, "remidi-accel", TINY),
+    "accel": (LEVER8, "accel", TINY),
+    "remidi-accel": (LEVER8, "remidi-accel", TINY),
     "sfl": (TASK, "sfl", SFL_TINY),
     "remidi-sfl": (TASK, "remidi-sfl", SFL_TINY),
     **{f"tmaze-{algo}": (MAZE, algo, MAZE_TINY)

@@ -564,6 +564,12 @@ def test_code_version_names_no_commit_for_an_untracked_copy_of_the_sources(tmp_p
     assert version["device"] == "cpu: cpu" and version["jax"]
     assert version["xla_flags"] == "--xla_cpu_multi_thread_eigen=false"  # threading changes rounding: recorded
     assert version["cpu_cores"] == len(os.sched_getaffinity(0))
+    # the CPU's model and instruction set: XLA's CPU kernels round differently on AVX2 and AVX-512
+    flags = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").is_file() else ""
+    if "avx512f" in flags:
+        assert version["cpu"].endswith(", AVX-512")
+    elif " avx2" in flags:
+        assert version["cpu"].endswith(", AVX2")
 
 
 @pytest.mark.parametrize("argv, needle", [

@@ -123,6 +123,7 @@ def test_evaluate_with_the_most_likely_action_writes_its_own_files(lever_run, tm
         assert (run / "evaluate-mode.csv").is_file() and (run / "evaluate-mode.png").is_file()
     assert (run / "evaluate.json").read_bytes() == sampled  # the sampled evaluation is left as it was
     assert docs[0]["args"]["action"] == "mode" and json.loads(sampled)["args"]["action"] == "sample"
+    assert docs[0]["code"]["device"] == "cpu: cpu" and "commit" in docs[0]["code"]  # what it ran on
     for algo in ("plr", "remidi"):
         first, again = (d["algorithms"][algo]["metrics"] for d in docs)
         assert first["entropy/visible"]["per_seed"] == [0.0, 0.0]

@@ -410,6 +410,16 @@ def test_the_scale_curves_put_each_preset_on_the_environment_steps_it_trained(tm
     assert (tmp_path / "scale.png").stat().st_size > 10_000
 
 
+def test_a_cpu_part_is_named_with_the_cpu_it_recorded():
+    """A CPU part names the model and instruction set it recorded (XLA rounds differently per
+    instruction set); a GPU part and a CPU part from before the field was recorded keep their name."""
+    assert data.device_name({"device": "cpu: cpu", "cpu": "Intel(R) Xeon(R) Processor, AVX-512"}) \
+        == "cpu: cpu (Intel(R) Xeon(R) Processor, AVX-512)"
+    assert data.device_name({"device": "cpu: cpu"}) == "cpu: cpu"
+    assert data.device_name({"device": "gpu: NVIDIA H200", "cpu": "AMD EPYC, AVX2"}) == "gpu: NVIDIA H200"
+    assert data.device_name({}) == "not recorded"
+
+
 def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stands(tmp_path):
     """collect_unfinished reads config.json and checkpoint.history.npz alone: each block ends at
     eval_every × its number, the experiment's derived mean solve rate is added, progress.json says

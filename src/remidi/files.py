@@ -92,5 +92,21 @@ def code_version() -> dict:
     device = jax.devices()[0]
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {"commit": commit, "dirty": dirty, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
-            "device": f"{device.platform}: {device.device_kind}", "cpu_cores": cores,
+            "device": f"{device.platform}: {device.device_kind}", "cpu": cpu_model(), "cpu_cores": cores,
             "xla_flags": os.environ.get("XLA_FLAGS") or None}
+
+
+def cpu_model() -> str | None:
+    """The host CPU's model and widest vector instruction set XLA can use on it, e.g. ``"Intel(R)
+    Xeon(R) Processor, AVX-512"``: XLA's CPU kernels round differently per instruction set, so a run
+    resumed on another CPU need not repeat bit for bit. ``None`` where ``/proc/cpuinfo`` is absent."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return None
+    fields = dict(line.split(":", 1) for line in info.splitlines()[:40] if ":" in line)
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    flags = set(fields.get("flags", "").split())
+    isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "AVX" if "avx" in flags else None
+    model = fields.get("model name") or fields.get("Model") or None
+    return ", ".join(x for x in (model, isa) if x) or None

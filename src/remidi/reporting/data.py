@@ -38,6 +38,14 @@ def run_label(summary: dict, config: dict) -> str:
     return f"{name} @{summary['preset']}" if summary.get("preset") in SCALE_PRESETS else name
 
 
+def device_name(code: dict) -> str:
+    """A part's device as the tables name it: ``code["device"]``, and for a CPU the model and vector
+    instruction set it recorded (``code["cpu"]``, recorded by runs from the commit that added it),
+    e.g. ``"cpu: cpu (Intel(R) Xeon(R) Processor, AVX-512)"``; ``"not recorded"`` without one."""
+    device = code.get("device") or "not recorded"
+    return f"{device} ({code['cpu']})" if device.startswith("cpu") and code.get("cpu") else device
+
+
 def _add_device(devices: list, device: str) -> None:
     """Append the device of a run's next part to ``devices`` (the run's devices in training order),
     unless the part before trained there too."""
@@ -148,7 +156,7 @@ def load_runs(data: Path = DATA) -> dict[tuple[str, str], Run]:
         for part in parts:
             code = part.get("code") or started  # None: a part before parts were recorded
             group[1][code.get("commit") or started.get("commit")] = None
-            _add_device(group[2], code.get("device") or "not recorded")
+            _add_device(group[2], device_name(code))
             group[3][code.get("jax") or started.get("jax") or "not recorded"] = None
             run.wall_s += float(part.get("wall_s") or 0.0)
             run.resumed |= part.get("code") is None  # that part's time is unknown
@@ -233,13 +241,13 @@ def collect_unfinished(run: Path, data: Path = DATA) -> Path:
     derive = get_experiment(doc["experiment"]).derive
     if derive is not None:
         history.update(derive(history))
-    devices = [doc["code"]["device"] + " (at its start)"]
+    devices = [device_name(doc["code"]) + " (at its start)"]
     if (folder / CHECKPOINT).is_file():
         meta = read_meta(folder / CHECKPOINT, "collect-unfinished")
         if meta.get("done") == int(steps[-1]) and meta.get("parts"):
             devices = []
             for part in meta["parts"]:
-                _add_device(devices, (part.get("code") or {}).get("device", "not recorded"))
+                _add_device(devices, device_name(part.get("code") or {}))
     keep = set(SECTIONS.get(doc["experiment"], ([], [], []))[2])
     target = Path(data) / doc["experiment"] / f"{doc['algo']}-{doc['preset']}-s{doc['seeds'][0]}"
     if (target / "summary.json").is_file():  # the same run, finished and collected: its data stay

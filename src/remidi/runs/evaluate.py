@@ -33,7 +33,8 @@ deterministic policy instead (each step the most likely action: a Gaussian polic
 categorical one's arg-max) and writes its files beside the sampled evaluation's, named
 ``evaluate-mode.*``, so that both can be reported, labelled.
 
-Writes ``RUN_DIR/evaluate.json`` (the run, its experiment, the arguments, and per algorithm the
+Writes ``RUN_DIR/evaluate.json`` (the run, its experiment, the arguments, the code and device it ran
+on (:func:`remidi.files.code_version`), and per algorithm the
 update its checkpoint is from and every metric's mean, std and per-seed values),
 ``RUN_DIR/evaluate.csv`` (long format: algo, seed, metric, value) and ``RUN_DIR/evaluate.png``
 (the main metrics per algorithm, titled with the experiment and the run).
@@ -53,7 +54,7 @@ import numpy as np
 
 from remidi.errors import ConfigError, RemidiError
 from remidi.envs.perfect_mazes import perfect_mazes
-from remidi.files import writable
+from remidi.files import code_version, writable
 
 ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
 DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
@@ -292,7 +293,8 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
     args = {"attempts": attempts, "cvar_levels": cvar_levels, "cvar_attempts": cvar_attempts,
             "perfect_sizes": list(perfect_sizes), "perfect_count": perfect_count, "seed": seed,
             "action": settings.action}
-    doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args, "algorithms": {}}
+    doc: dict[str, Any] = {"run": str(run_dir), "experiment": loaded[0].experiment, "args": args,
+                           "code": code_version(), "algorithms": {}}  # code: the commit and device it ran on
     rows = []
     cvar_sets: dict[Any, Any] = {}  # task → its CVaR levels and their tags: the algorithms of one run share them
     mazes: dict[int, tuple] = {}  # size → (env, perfect mazes, their optimal returns), built once

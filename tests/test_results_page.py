@@ -117,7 +117,7 @@ def test_each_verdict_names_the_scale_of_its_runs(tmp_path):
     brax = claims.Claim("b", "x", "walks", "evaluate:return/undisturbed", ("brax-ant",), greater=(("remidi @cpu", "plr"),))
     assert verdicts.claim_scale(brax, {}) == "`cpu` preset: 15% of the paper's environment steps"  # 120 × 64 × 100
     tab = claims.Claim("t", "x", "stagnates", "summary:regret/h1", ("tabular-shared",), greater=(("mmr @paper", "remidi"),))
-    assert verdicts.claim_scale(tab, {}) == "`paper` preset"
+    assert verdicts.claim_scale(tab, {}) == "`paper` preset: the paper's stated settings"
     kinetix = next(c for c in claims.CLAIMS if c.key == "kinetix-sfl-over-plr")
     kinetix_runs = {("kinetix-s", "plr"): data.Run("kinetix-s", "plr", preset="cpu")}  # Kinetix's sizes, not ReMiDi's
     assert verdicts.claim_scale(kinetix, kinetix_runs) == "`cpu` preset: 0.153% of Kinetix's environment steps"
@@ -455,6 +455,9 @@ def test_an_unfinished_run_is_collected_from_its_history_and_drawn_where_it_stan
     np.testing.assert_array_equal(curve["x"], np.array([250, 500, 750]) * 32 * 256)
     row = tables.unfinished_table(unfinished).splitlines()[2]
     assert "| 750 of 30,000 | 6.1M of 245.8M |" in row and "| 0.100 [" in row and "| 1 / 2 |" in row
+    progress = {**progress, "lost": "2026-11-29"}  # its machine went before it finished: marked so
+    row = tables.unfinished_table({("tmaze", "remidi @paper"): (found, progress)}).splitlines()[2]
+    assert "| 750 of 30,000 (first attempt, lost 2026-11-29) |" in row
     figures.scale_figure(tmp_path / "scale.png", {}, "tmaze", "T-maze", unfinished)
     np.savez(run / HISTORY, **{k: v for k, v in arrays.items() if not k.startswith("h1|")})  # block 1 lost
     with pytest.raises(ConfigError, match="holds 2 of 3"):

@@ -81,7 +81,8 @@ SFL_REASONS = {
 # cpu: the paper's algorithm, agent and PPO at a size where the claims can appear on a 2-core CPU
 # (at most 20 minutes per seed and algorithm), each deviation with its reason (`remidi list`)
 CPU_REASONS = {
-    "num_updates": "30000 updates take ≈ 8 h per seed and algorithm on a 2-core CPU; 1500 fit the 20-minute "
+    "num_updates": "30000 updates would take ≈ 8 h per seed and algorithm on a 2-core CPU (extrapolated from "
+                   "remidi bench, not a measured run); 1500 fit the 20-minute "
                    "budget (measured, 2 seeds trained together: DR 17, PLR⊥ 20, minimax return 24, ReMiDi 33 "
                    "minutes, i.e. 8–17 per seed)",
     "lstm_size": "the paper's 256-unit LSTM is most of an update's cost; 64 units learn to navigate in 1500 "
@@ -98,7 +99,9 @@ CPU = {"num_updates": 1500, "lstm_size": 64, "eval_every": 150, "checkpoint_ever
 CPU4X_REASONS = {
     "num_updates": "6000 updates, 4× the cpu preset's (1/5 of the paper's environment steps): the scale study "
                    "asks whether the claims judged at cpu survive where the baselines have trained longer; "
-                   "5 seeds take ≈ 5 (PLR⊥), 6 (minimax return) and 8 (ReMiDi) hours on one CPU lane",
+                   "5 seeds were estimated before the runs at ≈ 5 (PLR⊥), 6 (minimax return) and 8 (ReMiDi) "
+                   "hours on one CPU lane from cpu's measured times (the runs' measured times: the results "
+                   "page's provenance table)",
     "lstm_size": CPU_REASONS["lstm_size"] + "; kept at cpu's 64 so that only the training length differs",
     "eval_every": "as cpu: a point every 150 updates, the same block as cpu so the curves share their x-axis",
     "checkpoint_every": CPU_REASONS["checkpoint_every"],

@@ -202,8 +202,10 @@ def load_unfinished(data: Path = DATA) -> dict[tuple[str, str], tuple[Run, dict]
     """``{(experiment, "algo @preset"): (run, progress)}`` of the unfinished runs under ``data``
     (folders with ``progress.json``, :func:`collect_unfinished`): their training evaluations so far
     (``run.curves``) and ``progress`` (``updates`` reached of ``num_updates``, the ``devices`` and
-    ``commit`` they trained on). The page draws them beside the scale study's curves; no claim
-    reads them."""
+    ``commit`` they trained on, and ``lost``: the date the run's folder was lost, written by hand
+    into the progress of a run whose machine went before it finished, until a restarted run's
+    collection replaces it). The page draws them beside the scale study's curves; no claim reads
+    them."""
     out = {}
     for folder in sorted(p.parent for p in Path(data).glob(f"*/*/{PROGRESS}")):
         progress = outputs.read_json(folder / PROGRESS)

@@ -83,6 +83,7 @@ def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None
             c = _curve(run, progress["preset"])
             if c is not None:
                 c["updates"] = (progress["updates"], progress["num_updates"])
+                c["lost"] = progress.get("lost")  # the date its run folder was lost, if it was
                 found.append(c)
     return found
 
@@ -102,6 +103,7 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
         color = algorithm_style(algo)["color"]
         for c in scale_curves(runs, experiment, algo, unfinished):
             reached = "" if c["updates"] is None else f", {c['updates'][0]:,} of {c['updates'][1]:,} updates"
+            reached += f"; first attempt, lost {c['lost']}" if c.get("lost") else ""
             ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6,
                     label=f"{algo} ({c['preset']}, {c['seeds']} seeds{reached})")
             ax.fill_between(c["x"], c["band"][:, 0], c["band"][:, 1], color=color, alpha=0.15, linewidth=0)

@@ -253,7 +253,8 @@ def unfinished_table(unfinished: dict) -> str:
     """One row per unfinished run (:func:`~remidi.reporting.data.load_unfinished`): its preset,
     seeds, the updates and environment steps reached of the run's, devices and commit, and its
     held-out solve rate at its last training evaluation (mean over seeds with its 95% bootstrap
-    interval, and the seeds above 0)."""
+    interval, and the seeds above 0). A run whose folder was lost before it finished (``lost`` in its
+    progress: the date) is marked so: a restarted run's collection replaces it."""
     if not unfinished:
         return "_No committed data yet._"
     lines = ["| experiment | algorithm | preset | seeds | updates reached | environment steps reached | device | commit | "
@@ -264,8 +265,9 @@ def unfinished_table(unfinished: dict) -> str:
         last = values[:, -1]
         lo, hi = stats.bootstrap_ci(last)
         per_update = run.config["num_envs"] * run.config["num_steps"]
+        lost = f" (first attempt, lost {progress['lost']})" if progress.get("lost") else ""
         lines.append(f"| {exp} | {algo} | {progress['preset']} | {len(run.seeds)} | {progress['updates']:,} of "
-                     f"{progress['num_updates']:,} | {progress['updates'] * per_update / 1e6:.1f}M of "
+                     f"{progress['num_updates']:,}{lost} | {progress['updates'] * per_update / 1e6:.1f}M of "
                      f"{progress['num_updates'] * per_update / 1e6:.1f}M | {' then '.join(progress['devices'])} | "
                      f"{str(progress['commit'])[:7]} | {_f(float(last.mean()), 3)} [{_f(lo, 3)}, {_f(hi, 3)}] | "
                      f"{int((last > 0).sum())} / {len(last)} | " + ", ".join(f"`{f}`" for f in run.folders) + " |")

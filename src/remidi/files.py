@@ -104,8 +104,8 @@ def cpu_model() -> str | None:
         info = Path("/proc/cpuinfo").read_text()
     except OSError:
         return None
-    fields = dict(line.split(":", 1) for line in info.splitlines()[:40] if ":" in line)
-    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    first = info.split("\n\n", 1)[0]  # the first processor's block: every core reports the same
+    fields = {k.strip(): v.strip() for k, v in (line.split(":", 1) for line in first.splitlines() if ":" in line)}
     flags = set(fields.get("flags", "").split())
     isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "AVX" if "avx" in flags else None
     model = fields.get("model name") or fields.get("Model") or None

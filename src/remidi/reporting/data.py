@@ -46,6 +46,12 @@ def device_name(code: dict) -> str:
     return f"{device} ({code['cpu']})" if device.startswith("cpu") and code.get("cpu") else device
 
 
+def lost_note(progress: dict) -> str:
+    """``"first attempt, lost <date>"`` for an unfinished run whose folder was lost before it
+    finished (``lost`` in its progress, :func:`load_unfinished`), else ``""``."""
+    return f"first attempt, lost {progress['lost']}" if progress.get("lost") else ""
+
+
 def _add_device(devices: list, device: str) -> None:
     """Append the device of a run's next part to ``devices`` (the run's devices in training order),
     unless the part before trained there too."""

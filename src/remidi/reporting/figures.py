@@ -10,7 +10,7 @@ import numpy as np
 
 from remidi import stats
 from remidi.reporting.claims import SCALE_TASKS, SECTIONS
-from remidi.reporting.data import ROOT, metric_values
+from remidi.reporting.data import ROOT, lost_note, metric_values
 
 FIGURES = ROOT / "docs" / "results"
 
@@ -62,7 +62,7 @@ def _curve(run, preset: str) -> dict | None:
     keep = np.isfinite(values).all(axis=0)
     band = np.array([stats.bootstrap_ci(values[:, t]) for t in np.flatnonzero(keep)])
     return {"preset": preset, "x": x[keep], "mean": values[:, keep].mean(axis=0), "band": band,
-            "seeds": len(run.seeds), "final": None, "updates": None}
+            "seeds": len(run.seeds), "final": None, "updates": None, "lost": ""}
 
 
 def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None = None) -> list[dict]:
@@ -83,7 +83,7 @@ def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None
             c = _curve(run, progress["preset"])
             if c is not None:
                 c["updates"] = (progress["updates"], progress["num_updates"])
-                c["lost"] = progress.get("lost")  # the date its run folder was lost, if it was
+                c["lost"] = lost_note(progress)
                 found.append(c)
     return found
 
@@ -103,7 +103,7 @@ def scale_figure(path: Path, runs: dict, experiment: str, what: str, unfinished:
         color = algorithm_style(algo)["color"]
         for c in scale_curves(runs, experiment, algo, unfinished):
             reached = "" if c["updates"] is None else f", {c['updates'][0]:,} of {c['updates'][1]:,} updates"
-            reached += f"; first attempt, lost {c['lost']}" if c.get("lost") else ""
+            reached += f"; {c['lost']}" if c["lost"] else ""
             ax.plot(c["x"], c["mean"], color=color, linestyle=SCALE_LINES[c["preset"]], linewidth=1.6,
                     label=f"{algo} ({c['preset']}, {c['seeds']} seeds{reached})")
             ax.fill_between(c["x"], c["band"][:, 0], c["band"][:, 1], color=color, alpha=0.15, linewidth=0)

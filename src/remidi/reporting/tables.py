@@ -14,7 +14,7 @@ from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
 from remidi.experiments.plots import seeds_text
 from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS
-from remidi.reporting.data import EVAL_ATTEMPTS, metric_values
+from remidi.reporting.data import EVAL_ATTEMPTS, lost_note, metric_values
 from remidi.reporting.verdicts import scale_gap, verdict_words
 from remidi.runs.compare import describe
 from remidi.runs.table import _cells as table_cells
@@ -265,7 +265,7 @@ def unfinished_table(unfinished: dict) -> str:
         last = values[:, -1]
         lo, hi = stats.bootstrap_ci(last)
         per_update = run.config["num_envs"] * run.config["num_steps"]
-        lost = f" (first attempt, lost {progress['lost']})" if progress.get("lost") else ""
+        lost = f" ({note})" if (note := lost_note(progress)) else ""
         lines.append(f"| {exp} | {algo} | {progress['preset']} | {len(run.seeds)} | {progress['updates']:,} of "
                      f"{progress['num_updates']:,}{lost} | {progress['updates'] * per_update / 1e6:.1f}M of "
                      f"{progress['num_updates'] * per_update / 1e6:.1f}M | {' then '.join(progress['devices'])} | "

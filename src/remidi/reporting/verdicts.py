@@ -48,9 +48,9 @@ def paper_of(experiment: str) -> str:
 
 def run_scale(experiment: str, preset: str, config: dict | None = None) -> str:
     """At which scale a run trained: ``"`paper` preset: the paper's stated settings"`` (what the paper
-    leaves unstated, such as the lever's steps per rollout, is ours: the deviations table), or its preset and its environment steps
-    (num_updates × num_envs × num_steps: as the run's ``config`` records them, else as the preset
-    sets them) as a share of the paper preset's, e.g. ``"`cpu` preset: 5% of the paper's
+    leaves unstated, such as the lever's steps per rollout, is ours: the deviations table), or its
+    preset and its environment steps (num_updates × num_envs × num_steps: as the run's ``config``
+    records them, else as the preset sets them) as a share of the paper preset's, e.g. ``"`cpu` preset: 5% of the paper's
     environment steps"`` (Kinetix: ``"… of Kinetix's environment steps"``)."""
     if preset == "paper":
         return "`paper` preset: the paper's stated settings"

@@ -18,7 +18,7 @@ from remidi.runs import table as run_table
 
 
 def test_the_page_and_the_readme_match_the_committed_data():
-    generated, _ = rp.blocks(data.load_runs(data.DATA), data.load_unfinished(data.DATA))
+    generated, _ = rp.blocks(data.load_runs(data.DATA), data.load_unfinished(data.DATA), data.load_runs(data.REPEATS))
     for page in (rp.PAGE, rp.README):
         text = page.read_text()
         assert "<!-- generated:" in text, page
@@ -366,6 +366,39 @@ def test_the_mean_action_table_reads_the_seeds_evaluated_both_ways(tmp_path):
     with pytest.raises(ConfigError, match="evaluate-mode.json: evaluated with --action sample"):
         data.collect(folder, tmp_path / "again")
     assert not (tmp_path / "again").exists()  # refused before anything is copied
+
+
+def test_a_run_trained_again_is_set_beside_its_original_and_counted_in_no_claim(tmp_path):
+    """A committed run trained again (its seeds, commit and preset) to keep what its folder did not:
+    collected into the repeats folder (its carried archive under inflight/repeats deleted), its
+    mean-action row marked "trained again" under the original's, its sampled evaluation compared
+    seed by seed with the original's, and never merged into the runs the claims read."""
+    write_run(tmp_path / "data", "brax-ant", "remidi", [0, 1, 2], evaluate={"return/undisturbed": [10.0, 20.0, 30.0]})
+    again = write_run(tmp_path / "runs", "brax-ant", "remidi", [0, 1, 2],
+                      evaluate={"return/undisturbed": [10.0, 26.0, 30.0]})
+    mode = json.loads((again / "evaluate.json").read_text())
+    mode["args"]["action"] = "mode"
+    mode["algorithms"]["remidi"]["metrics"]["return/undisturbed"]["per_seed"] = [40.0, 50.0, 60.0]
+    (again / "evaluate-mode.json").write_text(json.dumps(mode))
+    (again / "metrics.csv").write_text("seed,step,metric,value\n")
+    carried = tmp_path / "inflight" / "repeats" / "brax-ant" / "remidi-s0.txz"
+    carried.parent.mkdir(parents=True)
+    carried.write_bytes(b"archive")
+    (tmp_path / "inflight" / "brax-ant").mkdir()
+    original_archive = tmp_path / "inflight" / "brax-ant" / "remidi-s0.txz"  # a data run's, left alone
+    original_archive.write_bytes(b"archive")
+    assert data.collect(again, tmp_path / "repeats") == [tmp_path / "repeats" / "brax-ant" / "remidi-s0"]
+    assert not carried.exists() and original_archive.exists()
+    runs, repeats = data.load_runs(tmp_path / "data"), data.load_runs(tmp_path / "repeats")
+    original = data.metric_values(runs, "brax-ant", "remidi", "evaluate:return/undisturbed")
+    assert original == {0: 10.0, 1: 20.0, 2: 30.0}  # the original's values alone
+    rows = tables.mode_table(runs, repeats).splitlines()[2:]
+    assert rows[2] == "| ant | remidi | 3 seeds (0–2), trained again | 22.0 | 50.0 |"
+    assert tables.mode_table(runs, {}) == tables.mode_table(runs)  # no repeats: the table as before
+    row = tables.repeat_table(runs, repeats).splitlines()[2]
+    assert row == ("| brax-ant | remidi | 3 seeds (0–2) | `return/undisturbed` | 20.0 | 22.0 | 6.0 | 2 / 3 | "
+                   "abc1234, on not recorded |")
+    assert tables.repeat_table(runs, {}) == "_No committed data yet._"
 
 
 def test_the_maze_floor_table_puts_random_actions_beside_the_agents(tmp_path):

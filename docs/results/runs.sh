@@ -15,6 +15,8 @@
 #
 #   python -m remidi.reporting.results_page --collect RUNS_DIR/<experiment>/<run>
 #
+# (a committed run trained again, under RUNS_DIR/repeats/: --collect-repeat instead of --collect).
+#
 # On a CPU, two lanes (one process per core, XLA on one thread) train 1.36× faster in total than
 # one process on both cores (`remidi bench maze-plr --lanes 2`, docs/performance.md). Each lane
 # takes the next run that no other lane holds (a `flock` on RUNS_DIR/EXPERIMENT/NAME.lock, released
@@ -40,6 +42,7 @@ if [ "$LANES" -gt 1 ]; then  # pin this lane to its core, XLA on one thread
   PY="taskset -c $LANE $PY"
 fi
 at() { AT=$1; }  # at COMMIT: the runs that follow train with that commit's code
+SUB=  # "repeats/" while the runs that follow are committed runs trained again (RUNS_DIR/repeats/...)
 checkout() {  # the code of commit $AT on PYTHONPATH (a worktree beside RUNS_DIR, made when a run first needs it)
   local frozen=$(dirname "$R")/frozen-$AT
   if [ ! -d "$frozen" ]; then git -C "$HERE" worktree add --detach "$frozen" "$AT" || [ -d "$frozen" ] || exit 1; fi
@@ -47,20 +50,20 @@ checkout() {  # the code of commit $AT on PYTHONPATH (a worktree beside RUNS_DIR
 }
 collected() {  # collected EXPERIMENT NAME: the finished run's data are committed (a folder with its
   # config.json and a summary.json; a run collected while it trains has no summary.json there)
-  local f; for f in $(grep -ls -- "/$1/$2\"" "$HERE"/docs/results/data/"$1"/*/config.json); do
+  local f; for f in $(grep -ls -- "/$SUB$1/$2\"" "$HERE"/docs/results/${SUB:-data/}"$1"/*/config.json); do
     [ -f "${f%/config.json}/summary.json" ] && return 0; done; return 1; }
 run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into RUNS_DIR/EXPERIMENT/NAME
   local name=$1 exp=$2 algo=$3 s=$4 n=$5 preset=$6; shift 6
-  local out=$R/$exp/$name
-  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $exp/$name "* ]]; then return; fi  # ONLY="EXP/NAME ...": just those
+  local out=$R/$SUB$exp/$name
+  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $SUB$exp/$name "* ]]; then return; fi  # ONLY="EXP/NAME ...": just those
   if collected "$exp" "$name" ||
      { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
     echo "committed: $exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
-  mkdir -p "$R/$exp"; local lock; exec {lock}>"$out.lock"
+  mkdir -p "$R/$SUB$exp"; local lock; exec {lock}>"$out.lock"
   if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi  # another lane is on it
   checkout
-  local carried=$HERE/docs/results/inflight/$exp/$name.txz  # carried from an earlier machine (carry.sh)
+  local carried=$HERE/docs/results/inflight/$SUB$exp/$name.txz  # carried from an earlier machine (carry.sh)
   if [ ! -f "$out/checkpoint.npz" ] && [ -f "$carried" ]; then
     echo "$(date +%T) unpack $carried"; rm -rf "$out"; tar -C "$R" -xJf "$carried" || exit 1
   fi
@@ -80,9 +83,9 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
 }
 
 evaluate_mode() {  # evaluate_mode EXPERIMENT NAME: a finished run's final checkpoint, acting with its most likely action
-  local exp=$1 name=$2 out=$R/$1/$2
-  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $exp/$name "* ]]; then return; fi
-  if [ -f "$HERE/docs/results/data/$exp/$name/evaluate-mode.json" ]; then echo "committed: $exp/$name (mode)"; return; fi
+  local exp=$1 name=$2 out=$R/$SUB$1/$2
+  if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $SUB$exp/$name "* ]]; then return; fi
+  if [ -f "$HERE/docs/results/${SUB:-data/}$exp/$name/evaluate-mode.json" ]; then echo "committed: $SUB$exp/$name (mode)"; return; fi
   if [ ! -f "$out/summary.json" ] || [ ! -f "$out/checkpoint.npz" ] || [ -f "$out/evaluate-mode.json" ]; then return; fi
   local lock; exec {lock}>"$out.lock"
   if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi
@@ -219,6 +222,21 @@ done
 
 at 8214e56
 for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5 cpu4x; done
+
+# Table 1's seeds 0–4 trained again at their commit, because their final checkpoints were not kept:
+# evaluated acting with the policy's mean as seeds 5–9 are, and their sampled evaluation set beside
+# Table 1's on the same seeds (does a run trained again on another machine give the same agent?).
+# RUNS_DIR/repeats/..., collected with --collect-repeat into docs/results/repeats (no claim reads it)
+SUB=repeats/
+at d071065
+for m in ant halfcheetah hopper walker2d; do
+  for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
+done
+at 5d44609
+for m in ant halfcheetah hopper walker2d; do
+  for a in plr minimax-return remidi; do evaluate_mode "brax-$m" "$a-s0"; done
+done
+SUB=
 
 # Kinetix (beyond the paper): DR, PLR⊥, SFL and ReMiDi on kinetix-s, cpu preset, 5 seeds each, at a
 # commit after the one that stated their claims (55016af) with the same Kinetix code and faster

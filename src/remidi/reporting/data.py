@@ -29,6 +29,11 @@ from remidi.runs.table import label  # how the page names an algorithm's runs
 
 ROOT = Path(__file__).resolve().parents[3]
 DATA = ROOT / "docs" / "results" / "data"
+#: committed runs trained again (same experiment, algorithm, preset, seeds and commit) to measure
+#: what the first run's folder did not keep, e.g. its final checkpoint for ``remidi evaluate
+#: --action mode``: laid out as :data:`DATA`, read only by the tables that set them beside their
+#: originals (so a seed is never counted twice)
+REPEATS = ROOT / "docs" / "results" / "repeats"
 
 
 def run_label(summary: dict, config: dict) -> str:
@@ -293,8 +298,10 @@ MAX_POINTS = 100  # log points kept per curve in the committed metrics.csv.gz
 
 def inflight(data: Path, experiment: str, name: str) -> Path:
     """Where ``docs/results/carry.sh`` keeps an unfinished run's folder between machines, beside
-    ``data``: ``inflight/<experiment>/<run folder>.txz``."""
-    return Path(data).parent / "inflight" / experiment / f"{name}.txz"
+    ``data``: ``inflight/<experiment>/<run folder>.txz``, and for a repeat (``data`` named like
+    :data:`REPEATS`) ``inflight/repeats/<experiment>/<run folder>.txz``."""
+    under = Path(REPEATS.name) if Path(data).name == REPEATS.name else Path()
+    return Path(data).parent / "inflight" / under / experiment / f"{name}.txz"
 
 
 def collect(run: Path, data: Path = DATA) -> list[Path]:

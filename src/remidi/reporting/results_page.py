@@ -8,7 +8,9 @@ which blocks differ from what the data give (exit 1), as ``tests/test_results_pa
 **Data.** ``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its
 seeds): ``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``)
 and ``metrics.csv.gz``. Parts of one experiment × algorithm are merged by seed (a seed twice is
-an error), so seeds can be run in parts.
+an error), so seeds can be run in parts. ``REPEATS`` (``docs/results/repeats``, ``--collect-repeat``)
+is laid out alike and holds committed runs trained again, to measure what their folders did not
+keep; only the tables that set them beside their originals read it.
 
 **Claims and the verdict rule** (:data:`~remidi.reporting.claims.CLAIMS`,
 :func:`~remidi.reporting.verdicts.verdict`), stated before the runs: each
@@ -46,21 +48,23 @@ from pathlib import Path
 from remidi.errors import ConfigError, RemidiError
 from remidi.experiments import outputs
 from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
-from remidi.reporting.data import DATA, ROOT, collect, collect_unfinished, load_runs, load_unfinished
+from remidi.reporting.data import DATA, REPEATS, ROOT, collect, collect_unfinished, load_runs, load_unfinished
 from remidi.reporting.figures import draw_figures
 from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
 from remidi.reporting.tables import (claim_provenance_table, floors_table, maze_floors_table, metrics_table, mode_table,
-                                     per_seed_table, provenance_table, scale_gap_table, summary_lines, unfinished_table,
-                                     verdict_table)
+                                     per_seed_table, provenance_table, repeat_table, scale_gap_table, summary_lines,
+                                     unfinished_table, verdict_table)
 from remidi.reporting.verdicts import evaluate_claim
 
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 
 
-def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], list[dict]]:
+def blocks(runs: dict, unfinished: dict | None = None, repeats: dict | None = None) -> tuple[dict[str, str], list[dict]]:
     """``{block name: Markdown}`` of every generated block, and the claims' results (``unfinished``:
-    :func:`~remidi.reporting.data.load_unfinished`, drawn beside the scale study, in no claim)."""
+    :func:`~remidi.reporting.data.load_unfinished`, drawn beside the scale study, in no claim;
+    ``repeats``: :func:`~remidi.reporting.data.load_runs` of :data:`~remidi.reporting.data.REPEATS`,
+    set beside their originals, in no claim)."""
     results = [evaluate_claim(c, runs) for c in CLAIMS]
     out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
            "claim-provenance": claim_provenance_table(results, runs),
@@ -76,7 +80,8 @@ def blocks(runs: dict, unfinished: dict | None = None) -> tuple[dict[str, str], 
         out[f"table:{name}"] = metrics_table(runs, exp, metrics, present) if present else "_No committed data yet._"
     floors = outputs.read_json(FLOORS) if FLOORS.is_file() else None
     out["brax-floors"] = floors_table(runs, floors) if floors else "_No committed data yet._"
-    out["brax-mode"] = mode_table(runs)
+    out["brax-mode"] = mode_table(runs, repeats)
+    out["repeats"] = repeat_table(runs, repeats or {})
     out["scale-gap"] = scale_gap_table(results, runs)
     out["scale-unfinished"] = unfinished_table(unfinished or {})
     out["maze-floors"] = maze_floors_table(runs, floors) if floors and "mazes" in floors else "_No committed data yet._"
@@ -111,6 +116,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-figures", action="store_true")
     parser.add_argument("--collect", nargs="+", type=Path, metavar="RUN",
                         help="first copy these finished runs' small outputs into --data")
+    parser.add_argument("--collect-repeat", nargs="+", type=Path, metavar="RUN",
+                        help="first copy these finished runs, trained again to measure what a committed run did "
+                             "not keep, into --repeats (set beside their originals, read by no claim)")
+    parser.add_argument("--repeats", type=Path, default=REPEATS)
     parser.add_argument("--collect-unfinished", nargs="+", type=Path, metavar="RUN",
                         help="first copy these unfinished runs' training evaluations so far into --data (drawn "
                              "beside the scale study, read by no claim)")
@@ -126,10 +135,13 @@ def _run(args: argparse.Namespace) -> int:
     for run in args.collect or []:
         for target in collect(run, args.data):
             print(f"collected {target}", file=sys.stderr)
+    for run in args.collect_repeat or []:
+        for target in collect(run, args.repeats):
+            print(f"collected {target} (trained again)", file=sys.stderr)
     for run in args.collect_unfinished or []:
         print(f"collected {collect_unfinished(run, args.data)} (unfinished)", file=sys.stderr)
     runs, unfinished = load_runs(args.data), load_unfinished(args.data)
-    generated, results = blocks(runs, unfinished)
+    generated, results = blocks(runs, unfinished, load_runs(args.repeats))
     pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's summary
     if args.check:
         stale = [f"{p.name}:{name}" for p in pages for name in stale_blocks(p.read_text(), generated)]

@@ -13,7 +13,7 @@ from remidi import stats
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
 from remidi.experiments.plots import seeds_text
-from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS
+from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS, SECTIONS
 from remidi.reporting.data import EVAL_ATTEMPTS, lost_note, metric_values
 from remidi.reporting.verdicts import scale_gap, verdict_words
 from remidi.runs.compare import describe
@@ -305,25 +305,53 @@ def floors_table(runs: dict, floors: dict) -> str:
     return "\n".join(lines)
 
 
-def mode_table(runs: dict) -> str:
+def mode_table(runs: dict, repeats: dict | None = None) -> str:
     """Per Brax morphology and algorithm, the undisturbed return of the same checkpoints acting two
     ways: actions sampled from the policy (``evaluate:``, as it trained) and its most likely
     action, the Gaussian's mean (``evaluate-mode:``, ``remidi evaluate --action mode``): means over
-    the seeds evaluated both ways, and which seeds those are ("—" for an algorithm with none)."""
-    algos = BRAX_ALGOS
+    the seeds evaluated both ways, and which seeds those are ("—" for an algorithm with none). The
+    seeds of ``repeats`` (:data:`~remidi.reporting.data.REPEATS`, runs trained again) get a row of
+    their own, marked "trained again", under their algorithm's."""
     lines = ["| morphology | algorithm | seeds | sampled actions | mean action |", "| --- | --- | --- | --- | --- |"]
     for exp in BRAX:
-        for algo in algos:
-            sampled = metric_values(runs, exp, algo, "evaluate:return/undisturbed")
-            mean = metric_values(runs, exp, algo, "evaluate-mode:return/undisturbed")
-            both = sorted(set(sampled) & set(mean))
-            if not both:
-                lines.append(f"| {exp.removeprefix('brax-')} | {algo} | — | — | — |")
-                continue
-            lines.append(f"| {exp.removeprefix('brax-')} | {algo} | {seeds_text(both)} | "
-                         f"{_f(float(np.mean([sampled[s] for s in both])), 1)} | "
-                         f"{_f(float(np.mean([mean[s] for s in both])), 1)} |")
+        for algo in BRAX_ALGOS:
+            rows = []
+            for source, mark in ((runs, ""), (repeats or {}, ", trained again")):
+                sampled = metric_values(source, exp, algo, "evaluate:return/undisturbed")
+                mean = metric_values(source, exp, algo, "evaluate-mode:return/undisturbed")
+                both = sorted(set(sampled) & set(mean))
+                if both:
+                    rows.append(f"| {exp.removeprefix('brax-')} | {algo} | {seeds_text(both)}{mark} | "
+                                f"{_f(float(np.mean([sampled[s] for s in both])), 1)} | "
+                                f"{_f(float(np.mean([mean[s] for s in both])), 1)} |")
+            lines += rows or [f"| {exp.removeprefix('brax-')} | {algo} | — | — | — |"]
     return "\n".join(lines)
+
+
+def repeat_table(runs: dict, repeats: dict) -> str:
+    """Per experiment and algorithm of ``repeats`` (runs trained again with the same experiment,
+    algorithm, preset, seeds and commit as committed ones), how far the trained-again seeds' final
+    evaluation (``evaluate:``, the first metric of the experiment's :data:`~remidi.reporting.claims.SECTIONS`
+    entry) lies from the committed run's on the same seeds: both means, the largest difference of
+    one seed, how many seeds give the same value to the last digit JSON keeps, and the commit and
+    devices the repeat trained at (the committed run's are in the provenance table)."""
+    lines = ["| experiment | algorithm | seeds | metric | committed run | trained again | largest difference of a seed "
+             "| seeds identical | trained again at, on |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for (exp, algo) in sorted(repeats):
+        metric = "evaluate:" + SECTIONS[exp][1][0].split(":", 1)[1]
+        first, again = metric_values(runs, exp, algo, metric), metric_values(repeats, exp, algo, metric)
+        both = sorted(set(first) & set(again))
+        if not both:
+            continue
+        digits = _digits(metric)
+        diffs = [abs(again[s] - first[s]) for s in both]
+        lines.append(f"| {exp} | {algo} | {seeds_text(both)} | `{metric.split(':', 1)[1]}` | "
+                     f"{_f(float(np.mean([first[s] for s in both])), digits)} | "
+                     f"{_f(float(np.mean([again[s] for s in both])), digits)} | {_f(max(diffs), digits)} | "
+                     f"{sum(again[s] == first[s] for s in both)} / {len(both)} | "
+                     f"{', '.join(sorted(c[:7] for c in repeats[exp, algo].commits))}, on "
+                     f"{', '.join(dict.fromkeys(d for g in repeats[exp, algo].groups for d in g[2]))} |")
+    return "\n".join(lines) if len(lines) > 2 else "_No committed data yet._"
 
 
 def maze_floors_table(runs: dict, floors: dict) -> str:

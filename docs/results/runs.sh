@@ -206,19 +206,22 @@ done
 at 8214e56
 for e in tmaze blindfold; do for a in plr remidi; do run "$a-cpu4x-s0" $e $a 0 5 cpu4x; done; done
 
-# Table 1 at the paper's 10 seeds: seeds 5–9 of PLR⊥, minimax return and ReMiDi on every
-# morphology, at the commit of seeds 0–4
-at d071065
-for m in ant halfcheetah hopper walker2d; do
-  for a in plr minimax-return remidi; do run "$a-s5" "brax-$m" "$a" 5 5 cpu; done
-done
+brax_seeds() {  # brax_seeds FIRST_SEED: PLR⊥, minimax return and ReMiDi on every morphology, 5 seeds
+  # of the cpu preset at the commit of Table 1's seeds 0–4, then each final checkpoint evaluated
+  # again acting with the policy's mean (remidi evaluate --action mode) at the commit that added it
+  local m a
+  at d071065
+  for m in ant halfcheetah hopper walker2d; do
+    for a in plr minimax-return remidi; do run "$a-s$1" "brax-$m" "$a" "$1" 5 cpu; done
+  done
+  at 5d44609
+  for m in ant halfcheetah hopper walker2d; do
+    for a in plr minimax-return remidi; do evaluate_mode "brax-$m" "$a-s$1"; done
+  done
+}
 
-# The Brax runs whose final checkpoints are kept (seeds 5–9) evaluated again acting with the
-# policy's mean (remidi evaluate --action mode), at the commit that added it
-at 5d44609
-for m in ant halfcheetah hopper walker2d; do
-  for a in plr minimax-return remidi; do evaluate_mode "brax-$m" "$a-s5"; done
-done
+# Table 1 at the paper's 10 seeds: seeds 5–9 (their final checkpoints kept, so evaluated both ways)
+brax_seeds 5
 
 at 8214e56
 for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5 cpu4x; done
@@ -228,14 +231,7 @@ for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5
 # Table 1's on the same seeds (does a run trained again on another machine give the same agent?).
 # RUNS_DIR/repeats/..., collected with --collect-repeat into docs/results/repeats (no claim reads it)
 SUB=repeats/
-at d071065
-for m in ant halfcheetah hopper walker2d; do
-  for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
-done
-at 5d44609
-for m in ant halfcheetah hopper walker2d; do
-  for a in plr minimax-return remidi; do evaluate_mode "brax-$m" "$a-s0"; done
-done
+brax_seeds 0
 SUB=
 
 # Kinetix (beyond the paper): DR, PLR⊥, SFL and ReMiDi on kinetix-s, cpu preset, 5 seeds each, at a

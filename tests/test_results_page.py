@@ -387,6 +387,14 @@ def test_a_run_trained_again_is_set_beside_its_original_and_counted_in_no_claim(
     (tmp_path / "inflight" / "brax-ant").mkdir()
     original_archive = tmp_path / "inflight" / "brax-ant" / "remidi-s0.txz"  # a data run's, left alone
     original_archive.write_bytes(b"archive")
+    for folder, out in ((tmp_path / "data" / "brax-ant" / "remidi-s0", "/runs/brax-ant/remidi-s0"),
+                        (again, "/runs/repeats/brax-ant/remidi-s0")):
+        doc = json.loads((folder / "config.json").read_text())
+        (folder / "config.json").write_text(json.dumps({**doc, "command": ["remidi", "run", "--out", out]}))
+    kept = (tmp_path / "data" / "brax-ant" / "remidi-s0" / "evaluate.json").read_bytes()
+    with pytest.raises(ConfigError, match="--collect-repeat"):  # collected as a run of its own: refused
+        data.collect(again, tmp_path / "data")
+    assert (tmp_path / "data" / "brax-ant" / "remidi-s0" / "evaluate.json").read_bytes() == kept
     assert data.collect(again, tmp_path / "repeats") == [tmp_path / "repeats" / "brax-ant" / "remidi-s0"]
     assert not carried.exists() and original_archive.exists()
     runs, repeats = data.load_runs(tmp_path / "data"), data.load_runs(tmp_path / "repeats")

@@ -58,7 +58,7 @@ run() {  # run NAME EXPERIMENT ALGO FIRST_SEED N_SEEDS PRESET [--set ...]: into 
   if [ -n "${ONLY:-}" ] && [[ " $ONLY " != *" $SUB$exp/$name "* ]]; then return; fi  # ONLY="EXP/NAME ...": just those
   if collected "$exp" "$name" ||
      { [ "$preset" = reference ] && [ -f "$HERE/docs/results/references/$exp.csv" ]; }; then  # collected already
-    echo "committed: $exp/$name"; return; fi
+    echo "committed: $SUB$exp/$name"; return; fi
   if [ -f "$out/evaluate.json" ]; then echo "done: $out"; return; fi
   mkdir -p "$R/$SUB$exp"; local lock; exec {lock}>"$out.lock"
   if ! flock -n "$lock"; then exec {lock}>&-; return 0; fi  # another lane is on it

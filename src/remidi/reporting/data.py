@@ -304,6 +304,13 @@ def inflight(data: Path, experiment: str, name: str) -> Path:
     return Path(data).parent / "inflight" / under / experiment / f"{name}.txz"
 
 
+def _out(doc: dict) -> str | None:
+    """The ``--out`` folder a run's ``config.json`` says it was started with (None if it names none):
+    the same for every part of one run, wherever it was resumed."""
+    command = doc.get("command") or []
+    return next((command[i + 1] for i, arg in enumerate(command[:-1]) if arg == "--out"), None)
+
+
 def collect(run: Path, data: Path = DATA) -> list[Path]:
     """Copy a finished run (one algorithm's folder, or a folder of them) into
     ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
@@ -324,6 +331,12 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
                 _evaluation(folder, algo, doc, source)
         name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
+        finished = (target / "summary.json").is_file() and (target / "config.json").is_file()
+        held_out = _out(outputs.read_json(target / "config.json")) if finished else None
+        if held_out not in (None, _out(doc)):  # a finished run's data are replaced by the same run's alone
+            raise ConfigError(f"collect: {target} holds the finished run trained into {held_out} and {folder} is "
+                              f"another ({_out(doc)}); nothing written (a committed run trained again goes into "
+                              "the repeats folder: --collect-repeat)")
         held = outputs.read_json(target / "summary.json").get("preset") if (target / "summary.json").is_file() else None
         if held not in (None, summary["preset"]):  # the page labels only some presets (SCALE_PRESETS)
             raise ConfigError(f"collect: {target} holds the {held!r} preset's run and {folder} is the "

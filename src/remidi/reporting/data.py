@@ -331,13 +331,14 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
                 _evaluation(folder, algo, doc, source)
         name = re.sub(r"[^a-z0-9]+", "-", run_label(summary, doc)).strip("-")
         target = Path(data) / exp / f"{name}-s{summary['seeds'][0]}"
-        finished = (target / "summary.json").is_file() and (target / "config.json").is_file()
-        held_out = _out(outputs.read_json(target / "config.json")) if finished else None
+        finished = (target / "summary.json").is_file()  # the target holds a finished run's data
+        config = target / "config.json"
+        held_out = _out(outputs.read_json(config)) if finished and config.is_file() else None
         if held_out not in (None, _out(doc)):  # a finished run's data are replaced by the same run's alone
             raise ConfigError(f"collect: {target} holds the finished run trained into {held_out} and {folder} is "
                               f"another ({_out(doc)}); nothing written (a committed run trained again goes into "
                               "the repeats folder: --collect-repeat)")
-        held = outputs.read_json(target / "summary.json").get("preset") if (target / "summary.json").is_file() else None
+        held = outputs.read_json(target / "summary.json").get("preset") if finished else None
         if held not in (None, summary["preset"]):  # the page labels only some presets (SCALE_PRESETS)
             raise ConfigError(f"collect: {target} holds the {held!r} preset's run and {folder} is the "
                               f"{summary['preset']!r} preset's; nothing written (a preset the page compares "

@@ -330,15 +330,15 @@ def mode_table(runs: dict, repeats: dict | None = None) -> str:
 
 def repeat_table(runs: dict, repeats: dict) -> str:
     """Per experiment and algorithm of ``repeats`` (runs trained again with the same experiment,
-    algorithm, preset, seeds and commit as committed ones), how far the trained-again seeds' final
-    evaluation (``evaluate:``, the first metric of the experiment's :data:`~remidi.reporting.claims.SECTIONS`
-    entry) lies from the committed run's on the same seeds: both means, the largest difference of
+    algorithm, preset, seeds and commit as committed ones), how far the trained-again seeds' value
+    of the experiment's first :data:`~remidi.reporting.claims.SECTIONS` metric (Brax: the final
+    evaluation's undisturbed return) lies from the committed run's on the same seeds: both means, the largest difference of
     one seed, how many seeds give the same value to the last digit JSON keeps, and the commit and
     devices the repeat trained at (the committed run's are in the provenance table)."""
     lines = ["| experiment | algorithm | seeds | metric | committed run | trained again | largest difference of a seed "
              "| seeds identical | trained again at, on |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for (exp, algo) in sorted(repeats):
-        metric = "evaluate:" + SECTIONS[exp][1][0].split(":", 1)[1]
+        metric = SECTIONS[exp][1][0]
         first, again = metric_values(runs, exp, algo, metric), metric_values(repeats, exp, algo, metric)
         both = sorted(set(first) & set(again))
         if not both:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import sys
 from pathlib import Path
 
 ENV = "REMIDI_JAX_CACHE"
@@ -54,10 +55,11 @@ def default_folder(environ=os.environ) -> Path:
 
 def enable(environ=os.environ) -> Path | None:
     """Turn the persistent cache on as the module's docstring says; returns its folder, or None
-    where it is left as it was (the user's own setting) or off."""
-    import jax
-
-    if environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
+    where it is left as it was (the user's own setting) or off. JAX is not imported here (that
+    takes seconds, and a command may yet stop at a bad argument): before JAX is imported the
+    folder goes into ``JAX_COMPILATION_CACHE_DIR``, which JAX reads when it is."""
+    jax = sys.modules.get("jax")
+    if environ.get("JAX_COMPILATION_CACHE_DIR") or (jax is not None and jax.config.jax_compilation_cache_dir):
         return None
     value = environ.get(ENV, "").strip()
     if value.lower() in OFF:
@@ -67,5 +69,8 @@ def enable(environ=os.environ) -> Path | None:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:  # a read-only home: compile as without the cache
         return None
-    jax.config.update("jax_compilation_cache_dir", str(folder))
+    if jax is None:
+        environ["JAX_COMPILATION_CACHE_DIR"] = str(folder)
+    else:
+        jax.config.update("jax_compilation_cache_dir", str(folder))
     return folder

@@ -9,22 +9,34 @@ import time
 from pathlib import Path
 
 from remidi.cli.common import _RUN_DIR
-from remidi.errors import RemidiError
+from remidi.errors import RemidiError, one_of
+
+
+def _algorithms(entry: dict) -> tuple[list[str], list[str]]:
+    """A built-in experiment's (default, every) algorithms: from its catalog entry, unless this
+    process has imported the algorithm registry, where :func:`remidi.register_algorithm` may have
+    added some (a plugin, or a Python caller of :func:`remidi.cli.main`)."""
+    if "remidi.engine.algorithms" not in sys.modules:
+        return entry["default_algorithms"], entry["algorithms"]
+    from remidi.experiments import get_experiment
+
+    exp = get_experiment(entry["name"])
+    return list(exp.default_algorithms or exp.algorithms), list(exp.algorithms)
 
 
 def _algo_help() -> str:
-    """``remidi run --algo``'s help, read from the registry when the help is printed (importing the
-    experiments takes seconds, too long for every command): each experiment's default algorithms
-    and what ``all`` adds."""
-    from remidi.experiments import all_experiments
-    from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
+    """``remidi run --algo``'s help, read from the catalog when the help is printed: each
+    experiment's default algorithms and what ``all`` adds."""
+    from remidi.experiments import catalog
 
     groups: dict[tuple, list[str]] = {}  # (default algorithms, every algorithm, qualifier) → experiments
-    for exp in all_experiments().values():
-        groups.setdefault((tuple(exp.default_algorithms or exp.algorithms), tuple(exp.algorithms), ""),
-                          []).append(exp.name)
+    for name, entry in catalog().items():
+        default, every = _algorithms({**entry, "name": name})
+        groups.setdefault((tuple(default), tuple(every), ""), []).append(name)
     # a user's task: what its level mutator, builder and solve criterion allow (custom.task_experiment's refusal)
-    groups.setdefault((tuple(PAPER_ALGORITHMS), tuple(ALGORITHMS), " that the task can run"), []).append("module:function")
+    lever = catalog()["lever"]  # every algorithm of the library, as a task with a level builder has
+    default, every = _algorithms({**lever, "name": "lever"})
+    groups.setdefault((tuple(default), tuple(every), " that the task can run"), []).append("module:function")
     parts = []
     for (default, every, can), names in groups.items():
         extra = [a for a in every if a not in default]
@@ -67,18 +79,18 @@ def _print_networks() -> None:
 
 
 def _cmd_list(args) -> int:
-    from remidi.experiments import all_experiments, get_experiment
-    from remidi.experiments.base import default_preset, resolve_config
-    from remidi.experiments.overrides import field_names, get_value, key_help
+    from remidi.experiments import catalog, get_experiment
 
     if not args.experiment:  # an overview, one line per experiment; the details of one: remidi list NAME
-        experiments = list(all_experiments().values())
-        width = max(len(exp.name) for exp in experiments)
-        for exp in experiments:
-            print(f"{exp.name:<{width}}  {exp.description} (presets: {', '.join(exp.presets)})")
+        width = max(len(name) for name in catalog())
+        for name, entry in catalog().items():
+            print(f"{name:<{width}}  {entry['description']} (presets: {', '.join(entry['presets'])})")
         print("remidi list NAME: its algorithms, scores, networks (what each reads), presets and --set keys", file=sys.stderr)
         return 0
     exp = get_experiment(args.experiment)
+    from remidi.experiments.base import default_preset, resolve_config
+    from remidi.experiments.overrides import field_names, get_value, key_help
+
     print(f"{exp.name}: {exp.description}")
     print(f"  algorithms: {', '.join(exp.algorithms)}"
           + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
@@ -142,6 +154,21 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
     print(f"\nwrote {out}")
 
 
+def _reject_unknown_algos(name: str, text: str | None) -> None:
+    """``--algo``'s names that no built-in experiment has, refused from the catalog as
+    :func:`~remidi.experiments.base.parse_algos` refuses them, before JAX is imported; the rest
+    (an algorithm this experiment leaves out says why) :func:`parse_algos` decides. Only while no
+    algorithm can have been registered (:func:`_algorithms`)."""
+    from remidi.experiments import catalog
+
+    if text is None or "remidi.engine.algorithms" in sys.modules:
+        return
+    known = {algo for entry in catalog().values() for algo in entry["algorithms"]}
+    for algo in (part.strip() for part in text.split(",")):
+        if algo and algo != "all" and algo not in known:
+            raise one_of("--algo", algo, catalog()[name]["algorithms"] + ["all"])
+
+
 def _cmd_run(args) -> int:
     from remidi.experiments import get_experiment, saved_experiment
     from remidi.experiments.base import RunSpec, default_preset, parse_algos
@@ -170,20 +197,24 @@ def _cmd_run(args) -> int:
         return 0
     if args.experiment is None:
         raise RemidiError("remidi run: name an experiment (see remidi list) or pass --resume DIR")
+    if ":" not in args.experiment:  # a built-in experiment: its name and preset checked before JAX is imported
+        from remidi.experiments import entry
+
+        presets = entry(args.experiment)["presets"]
+        if args.preset is not None and args.preset not in presets:
+            raise one_of("--preset", args.preset, presets)
+        _reject_unknown_algos(args.experiment, args.algo)
+    for flag, value, least in (("--seeds", args.seeds, 1), ("--seed", args.seed, 0)):
+        if value is not None and value < least:
+            raise RemidiError(f"{flag}: must be an integer ≥ {least}, got {value}")
     exp = get_experiment(args.experiment)
     algos = parse_algos(exp, args.algo)
     if args.preset is None:
         args.preset = default_preset(exp)
     if args.preset not in exp.presets:
-        from remidi.errors import one_of
-
         raise one_of("--preset", args.preset, exp.presets)
     num_seeds = args.seeds if args.seeds is not None else exp.preset_seeds[args.preset]
-    if num_seeds < 1:
-        raise RemidiError(f"--seeds: must be an integer ≥ 1, got {num_seeds}")
     first = 0 if args.seed is None else args.seed
-    if first < 0:
-        raise RemidiError(f"--seed: must be an integer ≥ 0, got {first}")
     seeds = list(range(first, first + num_seeds))
     out = Path(args.out) if args.out is not None else Path("runs") / exp.name / time.strftime("%Y%m%d-%H%M%S")
     _RUN_DIR.append(out)

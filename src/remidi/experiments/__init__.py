@@ -1,35 +1,69 @@
-"""Registry of the reproducible experiments: ``remidi run NAME``."""
+"""Registry of the reproducible experiments: ``remidi run NAME``.
+
+The built-in experiments are described in ``catalog.json`` (each one's module, description,
+presets and algorithms), generated from the modules by ``python -m remidi.experiments`` and
+checked to be current by ``tests/test_catalog.py``: the command line answers ``remidi list``,
+``remidi run --help`` and a mistyped name or preset from it without importing JAX (which takes
+seconds), and :func:`get_experiment` imports only the module of the experiment asked for.
+"""
 
 from __future__ import annotations
 
+import importlib
+import json
+from functools import cache
+from pathlib import Path
+
 from remidi.errors import ConfigError, one_of
-from remidi.experiments.base import Experiment
+
+CATALOG = Path(__file__).with_name("catalog.json")
+MODULES = ("tabular", "lever", "maze", "brax", "gymnax", "kinetix")  # remidi.experiments.<module>
 
 
-def all_experiments() -> dict[str, Experiment]:
-    from remidi.experiments import brax, gymnax, kinetix, lever, maze, tabular
-
-    found: dict[str, Experiment] = {}
-    for module in (tabular, lever, maze, brax, gymnax, kinetix):
-        for exp in module.EXPERIMENTS:
-            found[exp.name] = exp
-    return found
+@cache
+def catalog() -> dict[str, dict]:
+    """{name: {"module", "description", "presets", "preset_seeds", "algorithms",
+    "default_algorithms"}} of the built-in experiments, in ``remidi list``'s order; the algorithms
+    are those of the library itself (:func:`remidi.register_algorithm` adds more at run time)."""
+    return json.loads(CATALOG.read_text())
 
 
-def get_experiment(name: str) -> Experiment:
+def catalog_entries() -> dict[str, dict]:
+    """What :func:`catalog` holds, computed from the experiment modules (imports them all)."""
+    entries = {}
+    for module in MODULES:
+        for exp in importlib.import_module(f"remidi.experiments.{module}").EXPERIMENTS:
+            entries[exp.name] = {"module": module, "description": exp.description, "presets": list(exp.presets),
+                                 "preset_seeds": dict(exp.preset_seeds), "algorithms": list(exp.algorithms),
+                                 "default_algorithms": list(exp.default_algorithms or exp.algorithms)}
+    return entries
+
+
+def all_experiments() -> dict:
+    """{name: Experiment} of every built-in experiment (imports every module: seconds)."""
+    return {name: get_experiment(name) for name in catalog()}
+
+
+def entry(name: str) -> dict:
+    """The catalog entry of the built-in experiment ``name``; ConfigError (one line naming the
+    experiments) for any other name."""
+    if name not in catalog():
+        raise one_of("experiment", name, catalog())
+    return catalog()[name]
+
+
+def get_experiment(name: str):
     """A registered experiment, or for ``module:function`` the user's task it names
     (:func:`remidi.experiments.custom.import_experiment`)."""
     if ":" in name:
         from remidi.experiments.custom import import_experiment
 
         return import_experiment(name)
-    experiments = all_experiments()
-    if name not in experiments:
-        raise one_of("experiment", name, experiments)
-    return experiments[name]
+    module = importlib.import_module(f"remidi.experiments.{entry(name)['module']}")
+    return next(exp for exp in module.EXPERIMENTS if exp.name == name)
 
 
-def saved_experiment(name: str, task: dict | None = None) -> Experiment:
+def saved_experiment(name: str, task: dict | None = None):
     """The experiment of a run's ``config.json``: ``name`` (its ``experiment``) and ``task`` (its
     ``task`` record, ``{"import": "module:function", "folder": ...}``, written for a user's task
     given by import path): the task rebuilt from its import path, looked up in the recorded folder
@@ -44,7 +78,7 @@ def saved_experiment(name: str, task: dict | None = None) -> Experiment:
             raise ConfigError(f"task: must be a record {{\"import\": \"module:function\", \"folder\": ...}}, "
                               f"got {task!r:.120}")
         return import_experiment(task["import"], folder=task.get("folder"), name=name)
-    if ":" in name or name in all_experiments():
+    if ":" in name or name in catalog():
         return get_experiment(name)
     raise ConfigError(f"experiment: {name!r} is a task given to run_ued without task_ref, so this run records no import "
                       f"path to rebuild it from; in Python pass the task: evaluate_run(RUN_DIR, task=...) or "

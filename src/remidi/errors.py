@@ -67,3 +67,59 @@ def check_name(kind: str, name) -> None:
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name) or name == "all":
         raise ConfigError(f"register_{kind}: name must be a non-empty string of letters, digits, _, - and . "
                           f"(not 'all'), got {name!r}")
+
+
+# ------------------------------------------------------------------------------ the user's code
+DEBUG_ENV = "REMIDI_DEBUG"  # REMIDI_DEBUG=1: an error in the user's code shows its whole traceback
+
+
+def debugging() -> bool:
+    """Whether ``REMIDI_DEBUG`` asks for the whole traceback of an error in the user's code."""
+    import os
+
+    return os.environ.get(DEBUG_ENV, "").strip().lower() not in ("", "0", "off", "false", "no")
+
+
+def _innermost(tb) -> str:
+    """``file.py:LINE`` of the last frame of traceback ``tb`` outside this package (the user's
+    code, where it failed); "" where there is none."""
+    import traceback
+
+    frames = [f for f in traceback.extract_tb(tb) if "/remidi/" not in f.filename.replace("\\", "/")]
+    return f"{frames[-1].filename.rsplit('/', 1)[-1]}:{frames[-1].lineno}" if frames else ""
+
+
+def user_code_error(what: str, err: BaseException) -> RemidiError:
+    """One line for an exception ``err`` raised by the user's code while doing ``what``: its type,
+    the first line of its message, where it was raised, and how to see the whole traceback."""
+    detail = (str(err).strip().splitlines() or [""])[0]
+    where = _innermost(err.__traceback__)
+    return RemidiError(f"{what} failed ({type(err).__name__}{': ' + detail if detail else ''}"
+                       f"{', at ' + where if where else ''}; {DEBUG_ENV}=1 shows the traceback)")
+
+
+_RAISED = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Interrupt|Exit|Warning)|[A-Z]\w*): (.*)$")
+_FRAME = re.compile(r'^\s*File "([^"]+)", line (\d+)')
+
+
+def callback_failure(err: BaseException) -> RemidiError | None:
+    """One line for an exception that the user's code raised inside a JAX callback (``jax.debug.callback``,
+    ``jax.pure_callback``) while a compiled program ran: JAX reports it as a ``JaxRuntimeError``
+    whose message holds the Python traceback as text. None for any other exception."""
+    text = str(err)
+    if type(err).__name__ != "JaxRuntimeError" or "allback" not in text.split("\n", 1)[0]:
+        return None
+    lines = text.split("--------------------", 1)[0].strip().splitlines()
+    raised = next((m for m in map(_RAISED.match, reversed(lines)) if m), None)
+    frames = [m for m in map(_FRAME.match, lines) if m and "/jax/" not in m.group(1) and "/jaxlib/" not in m.group(1)]
+    where = f", at {frames[-1].group(1).rsplit('/', 1)[-1]}:{frames[-1].group(2)}" if frames else ""
+    what = f"{raised.group(1)}: {raised.group(2)}" if raised else lines[-1] if lines else type(err).__name__
+    return RemidiError(f"the environment (or other code of yours in a JAX callback) raised {what} "
+                       f"({where.removeprefix(', at ') + '; ' if where else ''}{DEBUG_ENV}=1 shows the traceback)")
+
+
+def missing_extra(err: ModuleNotFoundError, what: str, extra: str, note: str = "") -> RemidiError:
+    """One line for ``what`` needing an optional dependency that is not installed (``err``): the
+    ``pip install`` of the package's ``extra`` to run."""
+    return RemidiError(f"{what} needs the {err.name or 'missing'} package, which is not installed: "
+                       f"pip install \"remidi[{extra}]\"{note}")

@@ -10,14 +10,15 @@ Bad input never reaches JAX: every argument is validated first and reported as o
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import signal
 import sys
 
 from remidi.cli import bench, experiments, runs
-from remidi.cli.common import (_RUN_DIR, _install_sigint_handler, _interrupted_message, _Parser,
+from remidi.cli.common import (_RUN_DIR, _install_sigint_handler, _interrupted_message, _Parser, _say,
                                _terminated_message, _write_failed_message)
-from remidi.errors import RemidiError
+from remidi.errors import RemidiError, callback_failure, debugging
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,6 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     from remidi import preemption
 
     previous = _install_sigint_handler() if argv is None else {}
+    if not debugging():  # JAX logs a failing callback's traceback itself; the error's one line says it
+        logging.getLogger("jax._src.debugging").setLevel(logging.CRITICAL)
     parser = build_parser()
     _RUN_DIR.clear()
     preemption.reset()
@@ -61,20 +64,26 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return args.func(args)
     except RemidiError as err:
-        print(f"remidi: error: {err}", file=sys.stderr)
+        _say(f"remidi: error: {err}")
         return 2
     except KeyboardInterrupt:
-        print(_interrupted_message(), file=sys.stderr)
+        _say(_interrupted_message())
         return 130
     except preemption.Preempted as stopped:  # SIGTERM while training: checkpointed at the end of a block
-        print(_terminated_message(stopped.done), file=sys.stderr)
+        _say(_terminated_message(stopped.done))
         return preemption.EXIT_STATUS
     except BrokenPipeError:  # `remidi list | head`: the reader has gone, which is no error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 0
     except OSError as err:  # a full disk, a folder made read-only meanwhile: writes are atomic, nothing is lost
-        print(_write_failed_message(err), file=sys.stderr)
+        _say(_write_failed_message(err))
         return 1
+    except Exception as err:  # the user's code raised inside a compiled program (a JAX callback)
+        failure = callback_failure(err)
+        if failure is None or debugging():
+            raise
+        _say(f"remidi: error: {failure}")
+        return 2
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)

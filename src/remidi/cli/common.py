@@ -57,6 +57,20 @@ def _terminated_message(checkpointed_at: int | None = None) -> str:
     return _interrupted_message(f"terminated (SIGTERM){written}")
 
 
+def _open_bars() -> list:
+    """The progress bars (tqdm) still open in this process: a run that stopped leaves its own."""
+    tqdm = sys.modules.get("tqdm")
+    return list(getattr(getattr(tqdm, "tqdm", None), "_instances", None) or [])
+
+
+def _say(line: str) -> None:
+    """Print ``line`` on stderr, on a line of its own: an open progress bar is closed first (it
+    is not drawn again below the line, and its last fragment does not run into it)."""
+    for bar in _open_bars():
+        bar.close()
+    print(line, file=sys.stderr)
+
+
 def _exit_at_once(message: str, status: int) -> None:  # pragma: no cover - runs in a subprocess
     """Print ``message`` (on a line of its own after a progress bar) and end the process with
     ``status`` without unwinding: see :func:`_exit_on_sigint` for why that is safe."""
@@ -64,7 +78,7 @@ def _exit_at_once(message: str, status: int) -> None:  # pragma: no cover - runs
         sys.stdout.flush()
     except Exception:  # a print the signal cut short
         pass
-    os.write(2, (("\n" if sys.stderr.isatty() else "") + message + "\n").encode())
+    os.write(2, (("\n" if sys.stderr.isatty() or _open_bars() else "") + message + "\n").encode())
     os._exit(status)
 
 

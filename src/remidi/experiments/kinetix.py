@@ -33,6 +33,7 @@ import numpy as np
 
 from remidi.engine.config import AccelConfig, BufferConfig, ReMiDiConfig, SFLConfig, UEDConfig
 from remidi.engine.core.ppo import PPOConfig
+from remidi.errors import missing_extra
 from remidi.envs.kinetix_names import HELD_OUT, SIZES, eval_set_names
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
@@ -143,7 +144,11 @@ def make_derive(size: str):
 
 def task_factory(size: str):
     def factory(cfg: KinetixUEDConfig):
-        from remidi.envs.kinetix import kinetix_task  # Kinetix itself: the optional extra
+        try:
+            from remidi.envs.kinetix import kinetix_task  # Kinetix itself: the optional extra
+        except ModuleNotFoundError as err:
+            raise missing_extra(err, f"kinetix-{size}", "kinetix", " in a virtual environment of its own (kinetix-env "
+                                "caps JAX at 0.9; README, Installation)") from None
 
         k = cfg.kinetix
         return kinetix_task(size, k.observation, k.actions, k.dense_reward_scale, k.filter_steps, k.filter_ratio)

@@ -99,6 +99,29 @@ def test_tabular_plot_reference_in_legend_and_coinciding_curves_once(figures, tm
         "mmr: adversary level probabilities", "remidi: adversary level probabilities"]
 
 
+def test_the_caption_names_the_colour_reference_lines_are_drawn_in(figures, tmp_path):
+    """The footer of a figure with reference lines names their colour as drawn (an opaque grey, not
+    black), in the lever's training plot and the tabular game's regret plot."""
+    import matplotlib.colors as mcolors
+
+    lever = get_experiment("lever")
+    lever.plot(tmp_path, {"plr": lever_result("plr", 1.0)}, lever.config_factory())
+    tabular = get_experiment("tabular-shared")
+    history = {"regret/h1": np.tile(np.linspace(0.1, 0.5, len(STEPS)), (2, 1))}
+    tabular.plot(tmp_path, {"mmr": RunResult(steps=STEPS, history=history,
+                                             extra={"reference": {"blp_regret": {"h1": 0.175}}})},
+                 tabular.config_factory())
+    for name, reference in (("training.png", "chance (1/64)"), ("regret.png", "exact BLP: 0.175 (h1)")):
+        fig = figures[name]
+        caption = fig._supxlabel.get_text().replace("\n", " ")
+        assert "dashed grey" in caption and "black" not in caption, caption
+        lines = [line for ax in fig.axes for line in ax.get_lines() if line.get_label() == reference]
+        assert lines, name
+        for line in lines:
+            r, g, b, a = mcolors.to_rgba(line.get_color(), line.get_alpha())
+            assert r == g == b and 0.25 < r < 0.75 and a == 1.0, (name, r, a)  # opaque grey, as the words say
+
+
 def test_several_algorithm_run_records_and_keeps_the_given_order(tmp_path):
     lever = get_experiment("lever")
     for algo in ("remidi", "dr", "plr"):

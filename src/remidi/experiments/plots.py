@@ -128,7 +128,10 @@ class Panel:
 
 # what a panel figure draws, said in its caption
 MEAN_STD = "line: mean over seeds; band: ± 1 standard deviation over seeds"
-REFERENCE_LINES = "dashed black: the reference value its legend names"
+# a reference line's colour (drawn opaque) and the words the captions name it by: one place for both
+REFERENCE_COLOR = "dimgray"
+REFERENCE_STYLE = "dashed grey"
+REFERENCE_LINES = f"{REFERENCE_STYLE}: the reference value its legend names"
 BARS_STD = "bar: mean over seeds; error bar: ± 1 standard deviation over seeds"
 MARGIN = 0.08  # of a value axis' shown range, left free beyond the data at each end
 DASH = 3.0  # a shared line's dash per curve, in line widths
@@ -261,7 +264,7 @@ def _draw_panel(ax, panel: Panel, colors: list[str]) -> list[tuple[object, str]]
         entries.append((_draw_group(ax, members, first, count), ", ".join(c.label for c in members)))
         first += len(members)
     for y, label in panel.references:
-        line = ax.axhline(y, linestyle=(0, (4, 3)), color="black", linewidth=1, alpha=0.6, label=label)
+        line = ax.axhline(y, linestyle=(0, (4, 3)), color=REFERENCE_COLOR, linewidth=1, label=label)
         if label not in {text for _, text in entries}:
             entries.append((line, label))
     found = _data_range(panel)

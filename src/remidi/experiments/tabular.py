@@ -14,7 +14,7 @@ import numpy as np
 
 from remidi.errors import ConfigError, choice, non_negative, positive, positive_int, probability, require
 from remidi.experiments.base import Experiment, RunContext, RunResult
-from remidi.experiments.plots import MEAN_STD, Curve, Panel, plot_panels, run_title, series_style
+from remidi.experiments.plots import MEAN_STD, REFERENCE_STYLE, Curve, Panel, plot_panels, run_title, series_style
 from remidi.solvers.onestep import OneStepGame, solve_blp
 from remidi.tabular.games import paper_game
 from remidi.tabular.learner import TabularUEDConfig, train
@@ -120,7 +120,7 @@ def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig, pre
                                       ylim=(0.0, 1.0), merge_coinciding=True))
     title = run_title(experiment, preset, seeds)
     plot_panels(folder / "regret.png", regret_panels, title=title,
-                caption=f"{MEAN_STD}; dashed black: the exact BLP solution's greatest regret per observation")
+                caption=f"{MEAN_STD}; {REFERENCE_STYLE}: the exact BLP solution's greatest regret per observation")
     plot_panels(folder / "adversary.png", adversary_panels, title=title,
                 caption=f"{MEAN_STD}; a line for several levels is dashed in each level's colour")
 

@@ -191,6 +191,8 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, monkeypat
 
 def test_resume_errors_are_one_line(tmp_path, capsys):
     code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path / "nothing"))
+    assert code == 2 and "does not exist" in err and err.count("\n") == 1
+    code, _, err = run_cli(capsys, "run", "--resume", str(tmp_path))  # a folder, but no run in it
     assert code == 2 and "holds no run" in err and err.count("\n") == 1
     code, _, err = run_cli(capsys, "run", "lever", "--resume", str(tmp_path))
     assert code == 2 and "--resume: takes only the run folder" in err
@@ -328,6 +330,27 @@ def test_errors_name_the_key_that_was_set(tmp_path, capsys, argv, needle):
     code, _, err = run_cli(capsys, *argv, "--out", str(tmp_path / "run"))
     assert code == 2 and needle in err and err.count("\n") == 1, err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["table", "{missing}"], "RUN"),
+    (["compare", "{missing}", "--metric", "m", "--algo", "a", "--baseline", "b"], "RUN"),
+    (["status", "{missing}"], "RUN_DIR"),
+    (["evaluate", "{missing}"], "RUN_DIR"),
+    (["render", "buffers", "{missing}"], "RUN_DIR"),
+    (["render", "episode", "{missing}", "--maze", "SixteenRooms"], "RUN_DIR"),
+    (["run", "--resume", "{missing}"], "--resume"),
+])
+def test_a_missing_run_folder_is_said_not_to_exist(tmp_path, capsys, argv, flag):
+    """A run-reading command given a folder that is not there says so (not that the folder "holds no
+    run"); given a file, that it is no folder."""
+    missing = tmp_path / "nonexistent"
+    code, _, err = run_cli(capsys, *[a.format(missing=missing) for a in argv])
+    assert code == 2 and err == f"remidi: error: {flag}: {missing} does not exist\n", err
+    file = tmp_path / "file"
+    file.write_text("x")
+    code, _, err = run_cli(capsys, *[a.format(missing=file) for a in argv])
+    assert code == 2 and err.count("\n") == 1 and "holds no run" not in err and "no summary.json" not in err, err
 
 
 def test_resume_of_a_file_names_resume(tmp_path, capsys):

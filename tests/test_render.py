@@ -256,7 +256,7 @@ ALLOWED_MAZES = "allowed: SixteenRooms, SixteenRooms2, Labyrinth, LabyrinthFlipp
     (["render", "maze", "SmallCorridor", "--out", "{tmp}/x.gif"], "--out: {tmp}/x.gif must be a .png file name"),
     (["render", "maze", "SmallCorridor", "--tile", "0"], "--tile: must be an integer in [2, 64]"),
     (["render", "buffers", "{tmp}"], "holds no run (no config.json)"),
-    (["render", "buffers", "{tmp}/nowhere"], "is not a folder"),
+    (["render", "buffers", "{tmp}/nowhere"], "{tmp}/nowhere does not exist"),
     (["render", "buffers", "{nockpt}"], "has no checkpoint.npz"),
     (["render", "buffers", "{maze}", "--seed", "7"], "--seed: unknown value 7; allowed: 0, 1"),
     (["render", "buffers", "{maze}", "--top", "0"], "--top: must be an integer ≥ 1"),

@@ -145,6 +145,7 @@ def test_folders_of_several_algorithms_no_checkpoint_and_no_run(tmp_path, capsys
     assert main(["status", str(both)]) == 0
     out = capsys.readouterr().out
     assert "checkpoint at update 300 of 1500" in out and "no checkpoint yet" in out
+    (tmp_path / "empty").mkdir()
     with pytest.raises(ConfigError, match=r"^RUN_DIR: .*empty holds no run"):
         run_folders([tmp_path / "empty"])
     assert main(["status", str(tmp_path / "empty")]) == 2

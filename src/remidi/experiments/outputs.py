@@ -39,6 +39,8 @@ def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> 
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{flag}: {out} exists and is not a folder")
     holds_run = (out / "config.json").exists()
+    if resume and not out.exists():
+        raise ConfigError(f"--resume: {out} does not exist")
     if resume and not holds_run:
         raise ConfigError(f"--resume: {out} holds no run (no config.json)")
     if not resume and out.is_dir() and not holds_run:  # a several-algorithm run: one sub-folder per algorithm

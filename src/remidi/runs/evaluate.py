@@ -55,6 +55,7 @@ import numpy as np
 from remidi.errors import ConfigError, RemidiError
 from remidi.envs.perfect_mazes import perfect_mazes
 from remidi.files import code_version, writable
+from remidi.runs import require_folder
 
 ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
 DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
@@ -129,8 +130,7 @@ def _run_folders(run_dir: Path) -> list[Path]:
     """The run folders of ``run_dir``: itself, or its algorithms' sub-folders in the run's order."""
     from remidi.experiments import outputs
 
-    if not run_dir.is_dir():
-        raise ConfigError(f"RUN_DIR: {run_dir} is not a folder")
+    require_folder("RUN_DIR", run_dir)
     if (run_dir / "config.json").is_file():
         return [run_dir]
     subs = sorted(p for p in run_dir.iterdir() if (p / "config.json").is_file())

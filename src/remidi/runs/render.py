@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from remidi.errors import RemidiError, one_of
+from remidi.runs import require_folder
 from remidi.runs.sheets import (ACTION_NAMES, BACKGROUND, CAPTION, DEFAULT_TILE, DEFAULT_TOP, EPISODE_KEY,
                                 EPISODE_STEPS, HEADER, KEY, MAX_COLUMNS, MAZE_EXPERIMENTS, MAZE_KEY, MIN_FRAME_WIDTH,
                                 PAD, TILE_RANGE, UNSEEN, _draw_key, _render_levels, _renderer, _save_gif, _save_png,
@@ -100,8 +101,7 @@ def _load_run(run_dir) -> _Run:
     from remidi.experiments.resuming import saved_run
 
     folder = Path(run_dir)
-    if not folder.is_dir():
-        raise RemidiError(f"RUN_DIR: {folder} is not a folder")
+    require_folder("RUN_DIR", folder)
     if not (folder / "config.json").is_file():
         subs = sorted(p.name for p in folder.iterdir() if (p / "config.json").is_file())
         hint = f"; it holds a several-algorithm run, pass one of its sub-folders: {', '.join(subs)}" if subs else ""

@@ -15,6 +15,7 @@ import numpy as np
 from remidi.engine.run.checkpoint import CHECKPOINT, HISTORY, load_history, read_meta, unreadable
 from remidi.errors import ConfigError
 from remidi.experiments.outputs import read_json_object
+from remidi.runs import require_folder
 
 
 def run_folders(folders: list[Path]) -> list[Path]:
@@ -22,6 +23,7 @@ def run_folders(folders: list[Path]) -> list[Path]:
     several-algorithm run's folder: its algorithms' folders, by name)."""
     found = []
     for folder in map(Path, folders):
+        require_folder("RUN_DIR", folder)
         config = folder / "config.json"
         subs = sorted(p.parent for p in folder.glob("*/config.json")) if folder.is_dir() else []
         if config.is_file() and "algo" in read_json_object(config, "RUN_DIR"):

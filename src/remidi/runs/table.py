@@ -24,6 +24,7 @@ import numpy as np
 from remidi import stats
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
+from remidi.runs import require_folder
 
 # remidi.belief_spread's default (engine/config.py, ReMiDiConfig; this module stays free of JAX):
 # a learned-tracker run with another value is named with it (label)
@@ -61,6 +62,7 @@ def summaries(folders: list[Path]) -> list[dict]:
     by the algorithm order recorded in ``config.json``, else by name)."""
     found = []
     for folder in map(Path, folders):
+        require_folder("RUN", folder)
         if (folder / "summary.json").is_file():
             found.append({**_read_summary(folder / "summary.json"), "folder": str(folder)})
             continue

@@ -149,6 +149,33 @@ def test_default_columns_are_the_claims_metrics_the_headline_and_the_level_share
                      "seeds", "preset", "wall time"], head
 
 
+def test_default_columns_show_every_evaluation_sets_primary_metric(tmp_path, capsys):
+    """Where the headline is one evaluation set's metric, every set's primary metric is shown: the
+    lever's visible and hidden levels' solve rates, a user's task's sets "random" and the hand-made
+    "single" (returns: that task has no solve criterion); a headline over all sets (tmaze's
+    solve_rate/mean) still stands for them."""
+    two = [0.5, 0.5]
+    lever = {name: two for name in ("solve_rate/visible", "solve_rate/hidden", "regret/visible/mean",
+                                    "replay_fraction/hidden", "buffer_fraction/hidden", "mean_return",
+                                    "discounted_return/hidden", "discounted_return/visible", "return/hidden",
+                                    "return/visible")}
+    write_run(tmp_path / "l", "lever", "plr", lever)
+    mine = {name: two for name in ("return/random", "return/single", "regret/random/mean", "replay_fraction/far",
+                                   "buffer_fraction/far", "discounted_return/random", "discounted_return/single")}
+    write_run(tmp_path / "m", "mine", "plr", mine)
+    maze = {name: two for name in ("solve_rate/mean", "solve_rate/Labyrinth", "solve_rate/SixteenRooms",
+                                   "replay_fraction/tmaze", "discounted_return/Labyrinth",
+                                   "discounted_return/SixteenRooms")}
+    write_run(tmp_path / "t", "tmaze", "plr", maze)
+    assert main(["table", str(tmp_path / "l"), str(tmp_path / "m"), str(tmp_path / "t")]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    shown = [cell for cell in head.strip("| ").split(" | ") if not cell.endswith((" IQM", " 95% CI"))]
+    assert shown == ["experiment", "algorithm", "solve_rate/visible", "solve_rate/hidden", "replay_fraction/hidden",
+                     "buffer_fraction/hidden", "return/random", "return/single", "replay_fraction/far",
+                     "buffer_fraction/far", "solve_rate/mean", "replay_fraction/tmaze", "seeds", "preset",
+                     "wall time"], head
+
+
 def test_an_unfinished_algorithm_of_a_several_algorithm_run_is_noted(tmp_path, capsys):
     """Its sub-folder holds config.json but no summary.json: the table shows the finished ones and
     a note names the one left out (before: silently one row fewer)."""

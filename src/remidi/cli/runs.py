@@ -137,9 +137,11 @@ def add_commands(sub) -> None:
                                        "the mean ± sample standard deviation over seeds (ddof 1), the "
                                        "interquartile mean and the 95% percentile-bootstrap interval of the mean.")
     table.add_argument("runs", nargs="+", metavar="RUN", help="finished run folders")
-    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: per experiment, its first "
-                                                         "metric and level shares replay_fraction/TAG, "
-                                                         "buffer_fraction/TAG; else its first three)")
+    table.add_argument("--metrics", metavar="M1,M2", help="metrics to show (default: per experiment, every "
+                                                         "evaluation set's solve rate, or return, unless its "
+                                                         "first metric sums them up (solve_rate/mean), and level "
+                                                         "shares replay_fraction/TAG, buffer_fraction/TAG; else its "
+                                                         "first three)")
     table.add_argument("--last", type=int, metavar="K", help="per seed, the mean of each metric's last K logged "
                                                             "points (metrics.csv) instead of its final value")
     table.set_defaults(func=_cmd_table)

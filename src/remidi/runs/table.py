@@ -194,11 +194,29 @@ def _name(doc: dict) -> str:
 SHARES = ("replay_fraction", "buffer_fraction")  # the level shares that carry the UED experiments' claims
 
 
+def evaluation_sets(names: list[str]) -> list[str]:
+    """The evaluation sets a summary's metric ``names`` hold, in the order of their first metric:
+    the sets whose ``discounted_return/<set>`` is there (every evaluation set's metrics include it,
+    ``engine/run/evaluation.py``; no training metric is named so)."""
+    sets = {name.split("/", 1)[1] for name in names if name.startswith("discounted_return/") and name.count("/") == 1}
+    order = [name.split("/", 1)[1] for name in names if name.count("/") == 1 and name.split("/", 1)[1] in sets]
+    return list(dict.fromkeys(order))
+
+
+def primary_metric(names: list[str], eval_set: str) -> str:
+    """An evaluation set's primary metric among ``names``: its solve rate, its return where the task
+    has no solve criterion (no ``solve_rate/<set>``)."""
+    return f"solve_rate/{eval_set}" if f"solve_rate/{eval_set}" in names else f"return/{eval_set}"
+
+
 def default_metrics(docs: list[dict]) -> list[str]:
-    """The columns without ``--metrics``: per experiment (in the order of the runs), its summary's
-    first metric (the headline: solve_rate/mean, return/undisturbed, ...) and its first two level
-    shares (``replay_fraction/<tag>``, ``buffer_fraction/<tag>``: what PLR⊥ replays is the paper's
-    claim); an experiment without shares (the tabular games): its first three metrics."""
+    """The columns without ``--metrics``: per experiment (in the order of the runs), the primary
+    metric of every evaluation set (:func:`primary_metric`: the lever's visible and hidden levels,
+    a user's task's sets), where the summary's first metric (the headline) is one of them; a
+    headline that sums the sets up instead (``solve_rate/mean`` over the ten held-out mazes,
+    ``return/mean`` over a gymnax grid) stands for them; then its first two level shares
+    (``replay_fraction/<tag>``, ``buffer_fraction/<tag>``: what PLR⊥ replays is the paper's claim).
+    An experiment without shares or evaluation sets (the tabular games): its first three metrics."""
     first: dict[str, dict] = {}
     for doc in docs:
         first.setdefault(doc["experiment"], doc)
@@ -206,7 +224,9 @@ def default_metrics(docs: list[dict]) -> list[str]:
     for doc in first.values():
         names = list(doc["metrics"])
         shares = [name for name in names if name.split("/")[0] in SHARES][:2]
-        metrics += names[:1] + shares if shares else names[:3]
+        primaries = [primary_metric(names, s) for s in evaluation_sets(names)]
+        headline = names[:1] if not primaries or names[0] not in primaries else primaries
+        metrics += headline + shares if shares or primaries else names[:3]
     return list(dict.fromkeys(metrics))
 
 

@@ -92,11 +92,12 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
         assert entry["cvar_levels_used"] == 40
         m = entry["metrics"]
         for name in ("solve_rate/visible", "solve_rate/hidden", "solve_rate/mean", "return/visible",
-                     "cvar/solve_rate/1%", "cvar/solve_rate/10%", "cvar/solve_rate/100%", "cvar/return/1%"):
+                     "cvar/solve_rate/10%", "cvar/solve_rate/100%", "cvar/return/10%"):
             assert name in m, (algo, name)
+        assert "cvar/solve_rate/1%" not in m and "cvar/return/1%" not in m  # 1% of 40 levels: less than one
         for s in range(2):
-            # ranked and scored on independent episodes, so the worst 1% may score above the mean
-            worst = [m[f"cvar/solve_rate/{a}"]["per_seed"][s] for a in ("1%", "10%", "100%")]
+            # ranked and scored on independent episodes, so the worst 10% may score above the mean
+            worst = [m[f"cvar/solve_rate/{a}"]["per_seed"][s] for a in ("10%", "100%")]
             assert all(0 <= w <= 1 for w in worst)
         assert {"generator/solve_rate/hidden", "generator/solve_rate/not-hidden"} <= set(m)
         assert not any(name.startswith("perfect") for name in m)  # only maze runs get perfect mazes
@@ -104,7 +105,9 @@ def test_evaluate_a_several_algorithm_run(lever_run, tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     assert {r["algo"] for r in rows} == {"plr", "remidi"} and {r["seed"] for r in rows} == {"0", "1"}
     assert (run / "evaluate.png").stat().st_size > 5_000
-    assert "wrote" in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert "wrote" in out
+    assert "CVaR at 1% left out: of 40 levels that share is less than one level" in err and "--cvar-levels 100" in err
 
 
 def test_evaluate_with_the_most_likely_action_writes_its_own_files(lever_run, tmp_path):
@@ -238,6 +241,23 @@ def test_evaluate_png_is_titled_with_the_experiment_and_the_run(tmp_path, monkey
     unfinished = {**entry, "num_updates": 600}
     evaluate._plot(tmp_path / "evaluate.png", {**doc, "algorithms": {"plr": unfinished, "remidi": unfinished}})
     assert titles[1] == "lever: solve rate of lever/20261124-2338's last checkpoint (unfinished), update 300"
+
+
+def test_cvar_is_reported_from_the_mean_down_and_only_where_its_share_holds_a_level():
+    """cvar/<kind>/<α> in the order 100%, 10%, 1% (the mean, then further into the tail); 1% of 50
+    levels is half a level, so 1% is left out (it would be the single worst level); of 100, it is one."""
+    from types import SimpleNamespace
+
+    from remidi.runs.evaluate import _summarise, cvar_shares
+
+    setup = SimpleNamespace(task=SimpleNamespace(solved=None))
+    for n, labels in ((50, ["100%", "10%"]), (100, ["100%", "10%", "1%"]), (9, ["100%"])):
+        score = np.linspace(0.0, 1.0, 2 * n).reshape(2, n)
+        raw = {"cvar_raw/score/solve_rate": score, "cvar_raw/rank/solve_rate": score}
+        out = _summarise(raw, setup, {})
+        assert [name for name in out if name.startswith("cvar/")] == [f"cvar/solve_rate/{a}" for a in labels], n
+        assert [label for _, label in cvar_shares(n)] == labels
+    np.testing.assert_allclose(out["cvar/solve_rate/100%"], score.mean(axis=1))
 
 
 def test_generator_metrics_by_tag_are_the_scoring_rollouts_means_over_that_kind():

@@ -14,8 +14,10 @@ latest) and evaluated on
   ``--cvar-attempts`` episodes each, twice, on independent episodes (SFL's protocol): the first
   set of rollouts ranks the levels (per level its solve rate, or mean return), the second scores
   them, so the worst levels' luck in ranking does not bias their score downward; then the mean
-  score over the worst α of levels for α ∈ {1%, 10%, 100%}: ``cvar/solve_rate/<α>``,
-  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts); where the task tags its
+  score over the worst α of levels for α ∈ {100%, 10%, 1%}: ``cvar/solve_rate/<α>``,
+  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts), in that order, each only
+  where α of the levels is at least one level (1% needs ``--cvar-levels`` ≥ 100: below, it would
+  be the single worst level, said in one line instead); where the task tags its
   levels (``level_tags``: T-mazes, blind levels, hidden answers), the scoring rollouts' mean over
   the (solvable) generator levels of one kind alone and over the others: ``generator/solve_rate/<tag>``,
   ``generator/solve_rate/not-<tag>`` (and ``generator/return/...``);
@@ -57,7 +59,7 @@ from remidi.envs.perfect_mazes import perfect_mazes
 from remidi.files import code_version, writable
 from remidi.runs import require_folder
 
-ALPHAS = ((0.01, "1%"), (0.1, "10%"), (1.0, "100%"))
+ALPHAS = ((1.0, "100%"), (0.1, "10%"), (0.01, "1%"))  # the mean, then ever further into the tail
 DEFAULTS = {"attempts": 10, "cvar_levels": 256, "cvar_attempts": 4, "perfect_sizes": (21, 51), "perfect_count": 16,
             "seed": 0}
 MAX_PERFECT_SIZE = 101
@@ -98,6 +100,12 @@ def cvar(values: np.ndarray, alpha: float, rank_by: np.ndarray | None = None) ->
     order = np.argsort(values if rank_by is None else np.asarray(rank_by, dtype=float), kind="stable")
     k = max(1, math.ceil(alpha * len(values) - 1e-9))
     return float(values[order[:k]].mean())
+
+
+def cvar_shares(num_levels: int) -> list[tuple[float, str]]:
+    """The shares of :data:`ALPHAS` that hold at least one of ``num_levels`` levels (``α · N ≥ 1``):
+    a smaller one would be the single worst level, not a CVaR at α."""
+    return [(alpha, label) for alpha, label in ALPHAS if alpha * num_levels + 1e-9 >= 1]
 
 
 # ------------------------------------------------------------------------------ the command
@@ -247,7 +255,7 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
         if f"cvar_raw/score/{kind}" in raw:
             ranking = np.asarray(raw[f"cvar_raw/rank/{kind}"], float)  # [S, N]
             scoring = np.asarray(raw[f"cvar_raw/score/{kind}"], float)  # [S, N], independent episodes
-            for alpha, label in ALPHAS:
+            for alpha, label in cvar_shares(scoring.shape[1]):
                 out[f"cvar/{kind}/{label}"] = np.array([cvar(v, alpha, r) for v, r in zip(scoring, ranking)])
             for tag, tagged in (tags or {}).items():  # the generator's levels of one kind alone
                 if tagged.any():
@@ -308,6 +316,12 @@ def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Calla
         if task not in cvar_sets:
             batch = _solvable_levels(task, cvar_levels, seed)
             cvar_sets[task] = batch, {name: np.asarray(t, bool) for name, t in jax.vmap(task.level_tags)(batch).items()}
+            count = int(jax.tree.leaves(batch)[0].shape[0])
+            left_out = [(alpha, label) for alpha, label in ALPHAS if (alpha, label) not in cvar_shares(count)]
+            if left_out and log is not None:
+                log(f"CVaR at {', '.join(label for _, label in left_out)} left out: of {count} levels that share is "
+                    f"less than one level (the single worst one); --cvar-levels "
+                    f"{math.ceil(1 / left_out[-1][0] - 1e-9)} or more reports it")
         levels, tags = cvar_sets[task]
         is_maze = isinstance(task.env, MazeEnv)
         perfect = {size: (env, batch) for size, (env, batch, _) in mazes.items()} if is_maze else {}

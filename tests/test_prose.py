@@ -48,6 +48,30 @@ def test_the_readmes_first_code_block_is_the_two_set_up_commands():
     assert [line.strip() for line in blocks[0] if line.strip()] == [DEMO, TESTS]
 
 
+def _section(text: str, title: str) -> str:
+    """The Markdown section ``## title`` of ``text``, up to the next ``## `` heading."""
+    return re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.DOTALL | re.MULTILINE).group(1)
+
+
+def test_the_installation_commands_run_as_written():
+    """No placeholder (``<this repository's URL>``) to fill in: the commands start in the clone."""
+    install = _section(README.read_text(encoding="utf-8"), "Installation")
+    (first, *_) = _code_blocks(install)
+    assert not [line for line in first if re.search(r"<[^>]+>", line)], first
+    assert first[0].startswith("python3 -m venv") and "clone of this repository" in install
+
+
+def test_the_readme_says_where_the_compilation_cache_goes_and_how_to_turn_it_off():
+    """Runs write JAX's compiled programs outside the run folder (remidi/compile_cache.py): the README
+    names the folder and the environment variable that moves it or turns it off."""
+    from remidi import compile_cache
+
+    install = " ".join(_section(README.read_text(encoding="utf-8"), "Installation").split())
+    assert "~/.cache/remidi/jax/" in install and "$XDG_CACHE_HOME" in install
+    assert f"{compile_cache.ENV}=off" in install and f"{compile_cache.ENV}=DIR" in install
+    assert "off" in compile_cache.OFF
+
+
 def test_ci_runs_the_readmes_test_command_first():
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
     first = next(line.strip() for line in ci if "pytest" in line and not line.lstrip().startswith("#"))

@@ -292,6 +292,31 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(runs, tmp_path, capsys,
     assert snapshot(tmp_path, runs["maze"], runs["lever"]) == before
 
 
+def test_render_buffers_of_a_dr_run_says_dr_keeps_none(tmp_path, capsys):
+    """DR keeps no level (its state's buffer has no slot): render buffers says so in one line
+    instead of drawing an empty buffer."""
+    from remidi.engine.run import driver
+    from remidi.engine import train as tr
+    from remidi.engine.run.checkpoint import CHECKPOINT, save_checkpoint
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import RunSpec, resolve_config
+    from remidi.experiments.running import write_run_config
+    from remidi.experiments.maze import task_factory
+
+    exp = get_experiment("tmaze")
+    config = resolve_config(exp, "smoke", TINY)
+    folder = tmp_path / "dr_run"
+    folder.mkdir()
+    write_run_config(folder, RunSpec(exp, ["dr"], "smoke", SEEDS, argv=["run", "tmaze"]), "dr", config)
+    setup = tr.make_setup(task_factory("tmaze")(config), config, "dr")
+    runner = jax.device_get(driver._init(setup, jax.vmap(jax.random.PRNGKey)(jnp.asarray(SEEDS, jnp.uint32))))
+    save_checkpoint(folder / CHECKPOINT, runner, {"done": 20, "steps": [10, 20], "num_blocks": 2})
+    code, out, err = run_cli(capsys, "render", "buffers", folder)
+    assert code == 2 and out == "" and err == (f"remidi: error: RUN_DIR: {folder} is a dr run, which keeps no level "
+                                               f"buffers (fresh levels every update); render episode shows its agent\n")
+    assert not list(folder.glob("*.png"))
+
+
 def test_a_several_algorithm_folder_names_its_runs(runs, tmp_path, capsys):
     (tmp_path / "both" / "remidi").mkdir(parents=True)
     shutil.copy(runs["maze"] / "config.json", tmp_path / "both" / "remidi" / "config.json")

@@ -171,6 +171,9 @@ def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out
     if not isinstance(top, int) or top < 1:
         raise RemidiError(f"--top: must be an integer ≥ 1, got {top}")
     run, s, seed, path, runner, meta = _open_run(run_dir, seed, out, "buffers_seed{seed}.png", ".png")
+    if np.asarray(runner.adversary.buffers.valid).shape[-1] == 0:  # DR: buffers without a slot
+        raise RemidiError(f"RUN_DIR: {run.folder} is a {run.setup.algo.name} run, which keeps no level buffers (fresh "
+                          f"levels every update); render episode shows its agent")
 
     buffers = jax.tree.map(lambda x: np.asarray(x[s]), runner.adversary.buffers)  # leaves [K, C, ...]
     levels = getattr(buffers.levels, "level", buffers.levels)  # blindfold-noisy: the maze of a SeededLevel

@@ -42,7 +42,8 @@ from remidi.errors import ConfigError
 @struct.dataclass
 class AdversaryState:
     """What every adversary carries: ``buffers`` (K stacked level buffers, leaves [K, capacity,
-    ...]: the PLR family's, a generator sequence's reservoirs; one unused buffer for DR),
+    ...]: the PLR family's, a generator sequence's reservoirs (:func:`empty_buffers`); for DR, which
+    keeps no level, one buffer without a slot, leaves [1, 0, ...], :func:`no_buffers`),
     ``active`` (i32[], the index of the buffer being filled and replayed) and ``count`` (i32[],
     updates, or replays, spent on the active one)."""
 
@@ -103,12 +104,11 @@ class Adversary:
     replays = False
 
     def init(self, setup, example_level, example_obs, rng) -> AdversaryState:
-        """The initial state: K empty buffers of levels like ``example_level``; ``rng`` (the
-        runner's key, which an adversary that needs one folds, never splits)."""
-        one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
+        """The initial state: buffers without a slot (:func:`no_buffers`: DR keeps no level; an
+        adversary that keeps levels replaces them with :func:`empty_buffers`), the first one
+        active; ``rng`` (the runner's key, which an adversary that needs one folds, never splits)."""
         zero = jnp.zeros((), jnp.int32)
-        return AdversaryState(buffers=buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo)), active=zero,
-                              count=zero)
+        return AdversaryState(buffers=no_buffers(setup, example_level), active=zero, count=zero)
 
     def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
         state = runner.adversary
@@ -163,6 +163,23 @@ class Adversary:
 @dataclass(frozen=True)
 class RandomLevels(Adversary):
     """DR's adversary: the protocol's default, fresh random levels every update."""
+
+
+def empty_buffers(setup, example_level) -> buf.BufferState:
+    """K empty level buffers (leaves [K, capacity, ...]) of levels like ``example_level``, with
+    MaxMC's ``max_return`` record: ``remidi.num_buffers`` of ``remidi.buffer_capacity`` for a
+    sequence, else one of ``buffer.capacity`` (:func:`~remidi.engine.config.buffer_config`)."""
+    one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
+    return buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo))
+
+
+def no_buffers(setup, example_level) -> buf.BufferState:
+    """:func:`empty_buffers` without a slot (leaves [K, 0, ...], :func:`~remidi.engine.adversaries.
+    level_buffer.without_slots`): the state of an adversary that keeps no level (DR), with the
+    fields of every adversary's and nothing stored (a checkpoint of DR held ``buffer.capacity``
+    empty levels it never read)."""
+    one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
+    return buf.stack_buffers([buf.without_slots(one)] * num_buffers(setup.cfg, setup.algo))
 
 
 def tag_counts(setup, levels, weight) -> dict[str, jax.Array]:

@@ -92,6 +92,15 @@ def init_buffer(config: BufferConfig, example_level, extra_names: Sequence[str] 
     )
 
 
+def without_slots(state: BufferState) -> BufferState:
+    """``state`` with none of its slots (every per-level leaf [0, ...]; the clock kept): the buffer
+    of an adversary that keeps no level, the fields of a buffer without its storage."""
+    cut = lambda x: x[:0]  # noqa: E731
+    return state.replace(levels=jax.tree.map(cut, state.levels), scores=cut(state.scores),
+                         last_seen=cut(state.last_seen), valid=cut(state.valid),
+                         extras={name: cut(v) for name, v in state.extras.items()})
+
+
 @jax.jit
 def size(state: BufferState) -> jax.Array:
     """Number of valid entries, ``i32[]``."""

@@ -33,7 +33,7 @@ from flax import struct
 
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
-from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
+from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers
 from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
@@ -153,7 +153,7 @@ class LevelGenerator(Adversary):
     def init(self, setup, example_level, example_obs, rng) -> GeneratorState:
         """The buffers, a fresh generator and antagonist from ``rng`` (folded, never split)."""
         base = super().init(setup, example_level, example_obs, rng)
-        return GeneratorState(buffers=base.buffers, active=base.active, count=base.count,
+        return GeneratorState(buffers=empty_buffers(setup, example_level), active=base.active, count=base.count,
                               **self._learners(setup, example_obs, rng))
 
     def _learners(self, setup, example_obs, rng, antagonist: bool = True) -> dict:

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine.adversaries import level_buffer as buf
-from remidi.engine.adversaries.base import Adversary, Proposal, tag_counts
+from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers, tag_counts
 from remidi.engine.config import buffer_config
 
 
@@ -32,6 +32,10 @@ class LevelBuffers(Adversary):
     buffer_sequence: bool = False
 
     replays = True
+
+    def init(self, setup, example_level, example_obs, rng) -> AdversaryState:
+        """K empty buffers (:func:`~remidi.engine.adversaries.base.empty_buffers`), the first active."""
+        return super().init(setup, example_level, example_obs, rng).replace(buffers=empty_buffers(setup, example_level))
 
     def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
         """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``: which)

@@ -9,7 +9,10 @@ the state that differs. Checkpoints of remidi before this format stored arrays b
 
 The runner holds one state per component (``.learner``, ``.adversary``, ``.tracker``). A
 checkpoint of the earlier layout, one runner field per feature (``.train_state``, ``.buffers``,
-``.belief``, ...), loads through one rename, :data:`RENAMES` (:func:`current_name`)."""
+``.belief``, ...), loads through one rename, :data:`RENAMES` (:func:`current_name`). A part of
+the state that earlier versions allocated and this one leaves empty (:data:`UNUSED`: DR's level
+buffer, which it never fills) is read as this run's empty part where the checkpoint holds it
+unfilled (every value zero)."""
 
 from __future__ import annotations
 
@@ -37,6 +40,22 @@ RENAMES = {".train_state": ".learner.train_state", ".obs_stats": ".learner.obs_s
            ".last_replayed": ".adversary.last_replayed", ".generator": ".adversary.generator",
            ".antagonist": ".adversary.antagonist", ".next_generators": ".adversary.next_generators",
            ".belief": ".tracker"}
+
+
+#: parts of the runner, by tree path, that earlier versions allocated in full for runs that never
+#: fill them: DR's adversary held one empty buffer of ``buffer.capacity`` levels (a checkpoint of
+#: a maze run's 4000 levels: most of its size); it now holds the buffer without a slot
+#: (``engine/adversaries/base.py``, ``no_buffers``). Such a checkpoint's unfilled (all-zero) leaves
+#: there are read as this run's empty ones.
+UNUSED = (".adversary.buffers",)
+
+
+def _unused(name: str, stored: np.ndarray, want) -> bool:
+    """The stored leaf ``name`` (``PREFIX`` + tree path) is an earlier version's unfilled copy of
+    a part :data:`UNUSED` that this run's state ``want`` leaves empty (no element)."""
+    path = name[len(PREFIX):]
+    return (any(path == p or path.startswith((p + ".", p + "[")) for p in UNUSED) and np.size(want) == 0
+            and stored.dtype == want.dtype and not np.any(stored))
 
 
 def current_name(path: str) -> str:
@@ -127,6 +146,9 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
     else:
         for name, want in wanted.items():
             leaf = leaves[name]
+            if leaf.shape != want.shape and _unused(name, leaf, want):  # DR's unfilled buffer, stored in full
+                leaves[name] = np.asarray(want)
+                continue
             if leaf.shape != want.shape or leaf.dtype != want.dtype:
                 mismatch = (f"{name[len(PREFIX):]} is {leaf.dtype}{list(leaf.shape)}, this run's state needs "
                             f"{want.dtype}{list(want.shape)}")

@@ -28,6 +28,9 @@ def test_the_catalog_is_what_the_experiment_modules_define():
     (["run", "lever", "--algo", "plr,foo"], "--algo: unknown value 'foo'; allowed: dr, plr"),
     (["run", "tmaze", "--seeds", "0"], "--seeds: must be an integer ≥ 1, got 0"),
     (["run", "tmaze", "--seed", "-1"], "--seed: must be an integer ≥ 0, got -1"),
+    (["table", "/nonexistent/run"], "RUN: /nonexistent/run does not exist"),
+    (["evaluate", "/nonexistent/run"], "RUN_DIR: /nonexistent/run does not exist"),
+    (["status", "/nonexistent/run"], "RUN_DIR: /nonexistent/run does not exist"),
     (["list"], None),
     (["run", "--help"], None),
 ])

@@ -9,6 +9,7 @@ from pathlib import Path
 from remidi.cli.common import _Parser
 from remidi.cli.experiments import _print_metrics
 from remidi.errors import RemidiError
+from remidi.runs import require_folder
 
 
 def _cmd_render(args) -> int:
@@ -29,6 +30,7 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_evaluate(args) -> int:
+    require_folder("RUN_DIR", args.run_dir)  # before the imports below, which take seconds
     from remidi.runs.evaluate import files_stem, run_from_args
 
     doc = run_from_args(args)
@@ -42,6 +44,8 @@ def _cmd_evaluate(args) -> int:
 
 
 def _cmd_table(args) -> int:
+    for folder in args.runs:
+        require_folder("RUN", folder)
     from remidi.runs.table import markdown_table, summaries
 
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
@@ -60,6 +64,8 @@ def _note_unfinished(runs) -> None:
 
 
 def _cmd_status(args) -> int:
+    for folder in args.runs:
+        require_folder("RUN_DIR", folder)
     from remidi.runs.status import run_folders, run_status
 
     for folder in run_folders(args.runs):

@@ -184,6 +184,54 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
     assert all(score.needs_finished_episodes for score in SCORES.values())  # every built-in score reads episodes
 
 
+def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(corridor, tmp_path, capsys, monkeypatch):
+    """A run of three algorithms on rollouts shorter than an episode: one warning line, before the
+    first algorithm trains, naming each score with the algorithms it ranks levels for and the
+    --set that scores every level by a finished episode (it was one line per algorithm)."""
+    from remidi import run_ued
+    from remidi.experiments import ued
+
+    class Trained(Exception):
+        pass
+
+    def first_training(*args, **kwargs):
+        raise Trained  # the first algorithm's training: what was said before it is all there is
+
+    monkeypatch.setattr(ued, "train_seeds", first_training)
+    short = dataclasses.replace(TINY, num_steps=4, num_updates=16, remidi=dataclasses.replace(
+        TINY.remidi, num_buffers=2, steps_per_buffer=4))
+    with pytest.raises(Trained):
+        run_ued(corridor.make_task(), short, ["dr", "plr", "minimax-return", "remidi"], [0], tmp_path / "out",
+                progress=False)
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("remidi: warning:")]
+    assert warnings == [
+        "remidi: warning: scores perfect_regret (plr, remidi) and neg_return (minimax-return) use the episodes that "
+        "end inside a rollout, but num_steps (4) is shorter than an episode can last (14): with perfect_regret, "
+        "levels whose episode does not end are scored by the reward collected so far as if the episode had ended "
+        "(a goal not yet reached looks like a failure); with neg_return, levels whose episode does not end are "
+        "scored by the reward collected so far as if the episode had ended; --set num_steps=14 (or more) scores "
+        "every level by a finished episode"], warnings
+
+
+def test_the_short_rollout_warning_names_the_preset_that_chose_num_steps():
+    """tmaze's smoke preset keeps rollouts short (64 steps of a 250-step episode) on purpose: the
+    warning says it is that preset's choice; with the user's own num_steps it does not."""
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import RunSpec, resolve_config
+
+    exp = get_experiment("tmaze")
+    algos = ["dr", "plr", "minimax-return", "remidi"]
+    (warning,) = exp.run_warnings(RunSpec(exp, algos, "smoke", [0, 1]), resolve_config(exp, "smoke", {}))
+    assert warning.startswith("scores perfect_regret (plr, remidi) and neg_return (minimax-return) use the episodes "
+                              "that end inside a rollout, but num_steps (64, the smoke preset's choice for a short "
+                              "run) is shorter than an episode can last (250)"), warning
+    assert warning.endswith("; --set num_steps=250 (or more) scores every level by a finished episode"), warning
+    own = {"num_steps": 100}
+    (warning,) = exp.run_warnings(RunSpec(exp, algos, "smoke", [0, 1], own), resolve_config(exp, "smoke", own))
+    assert "num_steps (100) is shorter" in warning and "preset" not in warning
+    assert exp.run_warnings(RunSpec(exp, algos, "cpu", [0, 1]), resolve_config(exp, "cpu", {})) == []
+
+
 def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(corridor):
     """ReMiDi's exact tracker steps frozen levels with the agent's draws: a step with randomness of
     its own is warned of (not for PLR⊥, nor with a belief tracker, nor for the example's step)."""

@@ -96,6 +96,10 @@ class Experiment:
     # a user's task given by import path: {"import": "module:function", "folder": the folder it is
     # imported from}, recorded in config.json so that --resume and evaluate rebuild it from anywhere
     task_ref: dict[str, Any] | None = None
+    # (RunSpec, config) → one-line warnings about a valid run that would train degenerately, said
+    # once at the start of a fresh run for all its algorithms (UED experiments: the engine's
+    # run_warnings); None: nothing to check
+    run_warnings: Callable[[Any, Any], list[str]] | None = None
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,8 @@ def run_experiment(spec: RunSpec, out: Path, progress: bool = True) -> dict[str,
                           f"{min(seeds)}..{max(seeds)}; lower --seed or --seeds")
     _check_devices(exp, devices, len(seeds))
     _check_memory(exp, config, len(seeds), devices)
+    if exp.run_warnings is not None:  # once for the run's algorithms, printed with the notes
+        notes += [f"warning: {warning}" for warning in exp.run_warnings(spec, config)]
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # mesh spans them) into scratch
             return _write_and_train(replace(spec, log=[]), config, Path(scratch) / "run", [], False)

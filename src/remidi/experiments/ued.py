@@ -124,22 +124,35 @@ def separation_warning(seeds: list[int], final: dict[str, np.ndarray]) -> str | 
             f"an earlier one's whatever they hold (docs/belief.md, \"The learned belief tracker\")")
 
 
+def make_run_warnings(task_factory: Callable[[UEDConfig], UEDTask], check_step: bool = False):
+    """``(spec, config) -> warnings``: :func:`~remidi.engine.run.validation.run_warnings` for all of
+    the run's algorithms at once (said once per run, not once per algorithm), naming the preset
+    where it, not the user's ``--set``, chose ``num_steps`` (the maze smoke presets' short
+    rollouts). ``check_step``: warn of a step that draws from its key (a user's task)."""
+
+    def warnings(spec, cfg: UEDConfig) -> list[str]:
+        chosen = "num_steps" in spec.exp.presets.get(spec.preset, {}) and "num_steps" not in spec.overrides
+        return run_warnings(cfg, list(spec.algos), task_factory(cfg), check_step,
+                            num_steps_from=f"the {spec.preset} preset" if chosen else None)
+
+    return warnings
+
+
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
-               check_step: bool = False, cheap_step: bool = False):
+               cheap_step: bool = False):
     """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
-    over evaluation sets), f[S, T] each. ``check_step``: warn of a step that draws from its key
-    (:func:`~remidi.engine.run.validation.run_warnings`; a user's task). ``cheap_step``: the
-    environment's step costs little beside the agent's network, so the tracker's cost
-    (:func:`~remidi.engine.trackers.tracker_cost_note`) is not said."""
+    over evaluation sets), f[S, T] each. ``cheap_step``: the environment's step costs little
+    beside the agent's network, so the tracker's cost
+    (:func:`~remidi.engine.trackers.tracker_cost_note`) is not said. (The warnings about a run
+    that would train degenerately are said once per run, before its first algorithm trains:
+    :func:`make_run_warnings`.)"""
 
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
         task = task_factory(cfg)
         # validation: train_seeds (the engine's entry point, for every caller) checks the config with
         # validate_ued_config; run_experiment calls the same function before it writes anything
-        for warning in run_warnings(cfg, ctx.algo, task, check_step):
-            print(f"remidi: warning: {warning}", file=sys.stderr, flush=True)
         cost = None if cheap_step or ctx.resume else tracker_cost_note(task, cfg, get_algorithm(ctx.algo))
         if cost is not None and jax.process_index() == 0:
             print(f"remidi: {cost}", file=sys.stderr, flush=True)
@@ -278,7 +291,8 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
         config_factory=config_factory,
         presets=presets, preset_seeds=preset_seeds, validate=validate,
-        train=make_train(task_for, summary_metrics, derive, check_step, spec.cheap_step),
+        train=make_train(task_for, summary_metrics, derive, spec.cheap_step),
+        run_warnings=make_run_warnings(task_for, check_step),
         plot=make_plot(plot_panels_spec, bar_chart, name),
         scaled_keys=SCALED_KEYS,
         divisor_keys=("eval_every",),  # the length of a compiled block of updates

@@ -25,14 +25,19 @@ from remidi.envs.interface import UEDTask, tree_equal
 from remidi.errors import ConfigError, choice, positive_int, require
 
 
-def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_step: bool = False) -> list[str]:
-    """One-line warnings about a valid run that would train degenerately without saying so:
+def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
+                 num_steps_from: str | None = None) -> list[str]:
+    """One-line warnings about a valid run of ``algos`` (a name or an :class:`Algorithm`, or a list
+    of them: a run's algorithms, each warning said once for all of them) that would train
+    degenerately without saying so:
 
     * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
       ``engine/adversaries/scores.py``: every built-in one) on rollouts shorter than the task's episode limit: a
       level whose episode does not end inside the rollout scores −inf (``pvl``, ``maxmc``,
       ``learnability``: with every episode too long the buffer holds one level and replays only it)
-      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which);
+      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which),
+      with the ``--set`` that scores every level by a finished episode; ``num_steps_from`` says who
+      chose ``num_steps`` where it was not the user (``"the smoke preset"``);
     * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
       give different first observations): the tracker assumes an episode is a function of the
       level and the actions, so it may judge identical levels distinguishable;
@@ -41,13 +46,46 @@ def run_warnings(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask, check_ste
       it steps each frozen level with the agent's own draws, so a prefix another draw of that level
       would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
     """
+    algos = [get_algorithm(a) for a in ([algos] if isinstance(algos, (str, Algorithm)) else algos)]
+    short = short_rollout_warning(cfg, algos, task, num_steps_from)
+    out = [short] if short is not None else []
+    for algo in algos:
+        out += _algorithm_warnings(cfg, algo, task, check_step)
+    return list(dict.fromkeys(out))  # one algorithm's warning said once, however many share it
+
+
+def short_rollout_warning(cfg: UEDConfig, algos: list[Algorithm], task: UEDTask,
+                          num_steps_from: str | None = None) -> str | None:
+    """:func:`run_warnings`' first: one line for every algorithm of ``algos`` whose score reads
+    finished episodes on rollouts (``num_steps``) shorter than the task's episode limit, naming the
+    algorithms each score ranks levels for when there are several; None where none does."""
+    if cfg.num_steps >= task.max_episode_steps:
+        return None
+    users: dict[str, list[str]] = {}  # score → the algorithms whose buffers it ranks
+    for algo in algos:
+        score = sc.SCORES[score_name(cfg, algo)]
+        if algo.replays and score.needs_finished_episodes:
+            users.setdefault(score.name, []).append(algo.name)
+    if not users:
+        return None
+    scores = [sc.SCORES[name] for name in users]
+    named = [f"{name} ({', '.join(names)})" if len(algos) > 1 else name for name, names in users.items()]
+    if len(scores) == 1:
+        head, fate = f"score {named[0]} uses", f"levels whose episode does not end {scores[0].unfinished}"
+    else:
+        head = f"scores {', '.join(named[:-1])} and {named[-1]} use"
+        fate = "; ".join(f"with {s.name}, levels whose episode does not end {s.unfinished}" for s in scores)
+    who = f", {num_steps_from}'s choice for a short run" if num_steps_from else ""
+    others = [s.name for s in sc.SCORES.values() if not s.needs_finished_episodes]
+    fix = f"--set num_steps={task.max_episode_steps} (or more) scores every level by a finished episode" + (
+        f", or --set score={others[0]}" if others else "")
+    return (f"{head} the episodes that end inside a rollout, but num_steps ({cfg.num_steps}{who}) is shorter than "
+            f"an episode can last ({task.max_episode_steps}): {fate}; {fix}")
+
+
+def _algorithm_warnings(cfg: UEDConfig, algo: Algorithm, task: UEDTask, check_step: bool) -> list[str]:
+    """:func:`run_warnings`' warnings about one algorithm (SFL's refresh, ReMiDi's tracker)."""
     out = []
-    algo = get_algorithm(algo)
-    score = sc.SCORES[score_name(cfg, algo)]
-    if algo.replays and score.needs_finished_episodes and cfg.num_steps < task.max_episode_steps:
-        out.append(f"score {score.name} uses the episodes that end inside a rollout, but num_steps ({cfg.num_steps}) "
-                   f"is shorter than an episode can last ({task.max_episode_steps}): levels whose episode does not "
-                   f"end {score.unfinished}; raise num_steps or use another score")
     if isinstance(algo.adversary, LearnabilityBuffers) and cfg.sfl.rollout_steps < task.max_episode_steps:
         out.append(f"sfl.rollout_steps ({cfg.sfl.rollout_steps}) is shorter than an episode can last "
                    f"({task.max_episode_steps}): a candidate level none of whose episodes ends inside the refresh's "

@@ -232,6 +232,43 @@ def test_the_short_rollout_warning_names_the_preset_that_chose_num_steps():
     assert exp.run_warnings(RunSpec(exp, algos, "cpu", [0, 1]), resolve_config(exp, "cpu", {})) == []
 
 
+def test_list_offers_only_the_scores_the_task_can_use(tmp_path, capsys, monkeypatch):
+    """remidi list names the level scores whose needs the task meets: an import-path task without
+    an optimal return gets no perfect_regret, one without a solve criterion no learnability; so do
+    gymnax's cartpole (no optimum) and Brax (no solve criterion), without building their tasks."""
+    extra = ("\n\ndef make_plain():\n    import dataclasses\n"
+             "    return dataclasses.replace(make_task(), optimal_return=None, optimal_discounted_return=None)\n"
+             "\n\ndef make_unsolved():\n    import dataclasses\n"
+             "    return dataclasses.replace(make_task(), solved=None)\n")
+    monkeypatch.chdir(write_module(tmp_path / "proj", "scoreless_task_i30", extra=extra))
+
+    def scores(name):
+        assert main(["list", name]) == 0
+        (line,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  scores:")]
+        return line.split(":", 1)[1].split(" (")[0].strip().split(", ")
+
+    assert scores("scoreless_task_i30:make_task") == ["perfect_regret", "pvl", "maxmc", "neg_return", "learnability"]
+    assert scores("scoreless_task_i30:make_plain") == ["pvl", "maxmc", "neg_return", "learnability"]
+    assert scores("scoreless_task_i30:make_unsolved") == ["perfect_regret", "pvl", "maxmc", "neg_return"]
+    assert scores("cartpole") == ["pvl", "maxmc", "neg_return", "learnability"]
+    assert scores("brax-hopper") == ["perfect_regret", "pvl", "maxmc", "neg_return"]
+
+
+@pytest.mark.parametrize("name", ["lever", "lever-noisy", "tmaze", "blindfold-noisy", "cartpole", "acrobot", "pendulum",
+                                  pytest.param("brax-hopper", marks=pytest.mark.slow)])
+def test_the_scores_an_experiment_declares_are_those_its_tasks_can_use(name):
+    """A built-in experiment says which scores its task can use without building it (remidi list,
+    UEDSpec.task_gives): the same as the task of every preset, built, allows."""
+    from remidi.engine.adversaries.scores import task_scores
+    from remidi.experiments import get_experiment
+    from remidi.experiments.base import resolve_config
+
+    exp = get_experiment(name)
+    for preset in exp.presets:
+        cfg = resolve_config(exp, preset, {})
+        assert exp.scores(cfg) == task_scores(exp.make_task(cfg)), (name, preset)
+
+
 def test_remidi_with_the_exact_tracker_warns_of_a_step_that_draws_from_its_key(corridor):
     """ReMiDi's exact tracker steps frozen levels with the agent's draws: a step with randomness of
     its own is warned of (not for PLR⊥, nor with a belief tracker, nor for the example's step)."""

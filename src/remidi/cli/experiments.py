@@ -94,10 +94,9 @@ def _cmd_list(args) -> int:
     print(f"{exp.name}: {exp.description}")
     print(f"  algorithms: {', '.join(exp.algorithms)}"
           + (f" (default: {', '.join(exp.default_algorithms)}; --algo all: every one)" if exp.default_algorithms else ""))
-    if exp.make_task is not None:  # a UED experiment: the level scores of the PLR family
-        from remidi.engine.adversaries.scores import SCORES
-
-        print(f"  scores:     {', '.join(SCORES)} (--set score=NAME)")
+    if exp.scores is not None:  # a UED experiment: the level scores of the PLR family its task can use
+        print(f"  scores:     {', '.join(exp.scores(resolve_config(exp, default_preset(exp), {})))} (--set score=NAME)")
+    if exp.make_task is not None:
         _print_networks()
     presets = ", ".join(f"{p} ({exp.preset_seeds[p]} seed{'s' if exp.preset_seeds[p] != 1 else ''})"
                         for p in exp.presets)

@@ -96,6 +96,9 @@ class Experiment:
     # a user's task given by import path: {"import": "module:function", "folder": the folder it is
     # imported from}, recorded in config.json so that --resume and evaluate rebuild it from anywhere
     task_ref: dict[str, Any] | None = None
+    # config → the level scores (``--set score=NAME``) its task can use, those whose needs it meets
+    # (remidi list NAME; UED experiments); None: the experiment has no level scores
+    scores: Callable[[Any], list[str]] | None = None
     # (RunSpec, config) → one-line warnings about a valid run that would train degenerately, said
     # once at the start of a fresh run for all its algorithms (UED experiments: the engine's
     # run_warnings); None: nothing to check

@@ -164,6 +164,7 @@ def _experiment(morphology: str):
         config_factory=paper_config,
         presets=PRESETS,
         preset_seeds={"paper": 10, "smoke": 2, "reference": 1, "cpu": 2},
+        task_gives=("optimal_return",),  # the reference return; no solve criterion for a walker
         summary_metrics=("return/undisturbed", "replay_fraction/type_b", "buffer_fraction/type_b",
                          "regret/undisturbed/mean"),
         plot_panels_spec=(("return/undisturbed", "return on undisturbed type A levels (θ = 1)"),

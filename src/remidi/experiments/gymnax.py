@@ -159,6 +159,7 @@ def _experiment(d: Domain):
         config_factory=lambda: dataclasses.replace(paper_config(), reward_scale=d.reward_scale),
         presets=PRESETS,
         preset_seeds={"paper": 10, "smoke": 2},
+        task_gives=("solved",),  # a return threshold; no optimal return
         cheap_step=True,  # classic control: a few arithmetic operations per step
         summary_metrics=("return/mean", "solve_rate/mean", *(f"return/{p}" for p in points),
                          *(f"replay_fraction/{t}" for t in tags)),

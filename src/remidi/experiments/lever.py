@@ -96,6 +96,7 @@ def _experiment(name: str, description: str, task_factory):
                                        config_factory=paper_config, presets=PRESETS,
                                        preset_seeds={"paper": 10, "smoke": 2}, summary_metrics=SUMMARY_METRICS,
                                        plot_panels_spec=PLOT_PANELS, notes=(PAIRED_NOTE,),
+                                       task_gives=("optimal_return", "solved"),
                                        cheap_step=True))  # a one-step game: its step is a table look-up
 
 

@@ -144,6 +144,7 @@ def _experiment(name: str, tag: str, what: str, description: str):
         config_factory=paper_config,
         presets=PRESETS,
         preset_seeds={"paper": 10, "smoke": 2, "cpu": 2, "cpu4x": 2},
+        task_gives=("optimal_return", "solved"),  # a shortest path's discounted return; the goal reached
         cheap_step=True,  # the exact tracker's 768 frozen levels cost little beside the LSTM (docs/performance.md)
         summary_metrics=("solve_rate/mean", *SOLVE_RATES, f"replay_fraction/{tag}", f"buffer_fraction/{tag}"),
         plot_panels_spec=(("solve_rate/mean", "mean solve rate, held-out mazes"),

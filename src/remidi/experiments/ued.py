@@ -19,6 +19,7 @@ from remidi.engine.run.driver import RunFolder, replay_fractions, train_seeds
 from remidi.engine.algorithms import PAPER_ALGORITHMS, RegisteredNames, get_algorithm
 from remidi.engine.config import UEDConfig
 from remidi.engine.adversaries.paired import LevelGenerator
+from remidi.engine.adversaries.scores import scores_for, task_scores
 from remidi.engine.run.validation import run_warnings, validate_ued_config
 from remidi.engine.trackers import tracker_cost_note
 from remidi.envs.interface import UEDTask
@@ -241,7 +242,10 @@ class UEDSpec:
     ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
     (None: it can; :func:`remidi.engine.run.validation.task_refusal` of one task). ``check_step``: warn
     of a step that draws from its key (a user's task, :func:`make_train`). ``notes``: lines ``remidi
-    list NAME`` prints (:attr:`~remidi.experiments.base.Experiment.notes`)."""
+    list NAME`` prints (:attr:`~remidi.experiments.base.Experiment.notes`). ``task_gives``: which of
+    the task's fields that a level score may need (``optimal_return``, ``solved``) it sets, known
+    without building it, so that ``remidi list NAME`` lists only the scores it can use without
+    building a physics model; None: the task is built to see (a user's task, built already)."""
 
     name: str
     description: str
@@ -259,6 +263,7 @@ class UEDSpec:
     check_step: bool = False
     notes: tuple[str, ...] = ()
     cheap_step: bool = False
+    task_gives: tuple[str, ...] | None = None
 
 
 def make_ued_experiment(spec: UEDSpec) -> Experiment:
@@ -286,6 +291,11 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
     def validate(cfg: UEDConfig, algo: str) -> None:
         validate_ued_config(cfg, algo, task_for(cfg))
 
+    def scores(cfg: UEDConfig) -> list[str]:
+        if spec.task_gives is not None:
+            return scores_for("optimal_return" in spec.task_gives, "solved" in spec.task_gives)
+        return task_scores(task_for(cfg))
+
     return Experiment(
         name=name, description=description, default_algorithms=PAPER_ALGORITHMS,
         algorithms=RegisteredNames(None if refusal is None else lambda algo: refusal(algo) is None, why=refusal),
@@ -300,5 +310,6 @@ def make_ued_experiment(spec: UEDSpec) -> Experiment:
         preset_reasons=preset_reasons or {},
         notes=tuple(spec.notes),
         make_task=task_for,
+        scores=scores,
         derive=derive,
     )

@@ -208,6 +208,18 @@ SCORES: dict[str, Score] = {score.name: score for score in (
 BUILTIN_SCORES = tuple(SCORES)  # the scores of the library itself, in order
 
 
+def scores_for(optimum: bool, solved: bool) -> list[str]:
+    """The registered scores (:data:`SCORES`, in order) a task can rank levels by: those whose
+    needs it meets, ``optimum``: it gives its optimal return (``UEDTask.optimal_return``),
+    ``solved``: a solve criterion (``UEDTask.solved``)."""
+    return [s.name for s in SCORES.values() if (optimum or not s.needs_optimum) and (solved or not s.needs_solved)]
+
+
+def task_scores(task) -> list[str]:
+    """:func:`scores_for` the UEDTask ``task``."""
+    return scores_for(task.optimal_return is not None, task.solved is not None)
+
+
 def register_score(name: str, fn: Callable[[ScoreInputs], jax.Array], *, needs_optimum: bool = False,
                    needs_solved: bool = False, needs_finished_episodes: bool = False, help: str = "",
                    unfinished: str = "are scored by whatever the score makes of a rollout in which no episode "

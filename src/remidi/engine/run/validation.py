@@ -184,9 +184,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
             (score.needs_solved, "a solve criterion, which this task does not define (UEDTask.solved)",
              task.solved is not None)):
         if needed and not has:
-            fits = [s.name for s in sc.SCORES.values() if not (s.needs_optimum and task.optimal_return is None)
-                    and not (s.needs_solved and task.solved is None)]
-            raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(fits)}")
+            raise ConfigError(f"score: {score.name} needs {what}; allowed: {', '.join(sc.task_scores(task))}")
     require(isinstance(cfg.discounted_regret, bool), "discounted_regret", "true or false", cfg.discounted_regret)
     if score.needs_optimum and cfg.discounted_regret and task.optimal_discounted_return is None:
         raise ConfigError(f"discounted_regret: this task gives no discounted optimal return "

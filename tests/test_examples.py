@@ -4,6 +4,7 @@ bring_your_own_env.py, my_score.py, my_algorithm.py and my_network.py."""
 import importlib.util
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -86,12 +87,38 @@ def test_a_users_task_runs_from_the_command_line_by_import_path(tmp_path, capsys
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
 
 
+def test_the_extending_guides_worked_example_runs_as_written(monkeypatch):
+    """docs/extending.md's core of the worked example runs as written, from examples/: every name it
+    uses exists (it once called make_config, which only the example defines) and run_ued takes its
+    arguments (a config dict) and validates the run; only the training is left out."""
+    from remidi.experiments import running
+
+    guide = (EXAMPLE.parent.parent / "docs" / "extending.md").read_text(encoding="utf-8")
+    core = guide[guide.index("what to change to make it yours. Its core:"):]
+    block = re.search(r"^```python\n(.*?)^```", core, re.DOTALL | re.MULTILINE).group(1)
+    trained = {}
+
+    def validated_only(spec, config, out, notes, progress):  # what run_experiment calls once all is checked
+        trained.update(algos=spec.algos, seeds=spec.seeds, config=config, out=out)
+        return {algo: {} for algo in spec.algos}
+
+    monkeypatch.setattr(running, "_write_and_train", validated_only)
+    monkeypatch.chdir(EXAMPLE.parent)  # "in examples/": the task_ref imports from here
+    monkeypatch.syspath_prepend(str(EXAMPLE.parent))
+    namespace = {}
+    exec(compile(block, "docs/extending.md", "exec"), namespace)
+    assert namespace["summaries"] == {"plr": {}, "remidi": {}}
+    assert trained["algos"] == ["plr", "remidi"] and trained["seeds"] == [0, 1]
+    assert trained["config"].num_updates == 200 and trained["config"].network == "mlp"
+    assert trained["config"].score == "perfect_regret"  # the task's default: it gives its optimal return
+
+
 @pytest.mark.parametrize("target, needle", [
     ("no_such_module_xyz:make", "experiment: cannot import no_such_module_xyz (ModuleNotFoundError"),
     ("bring_your_own_env:nothing", "experiment: bring_your_own_env has no nothing"),
     ("bring_your_own_env:sample_level", "building the task of bring_your_own_env:sample_level failed"),
     ("json:dumps", "building the task of json:dumps failed"),
-    ("bring_your_own_env:LENGTH", "gives a int, not a remidi UEDTask"),
+    ("bring_your_own_env:LENGTH", "gives an int, not a remidi UEDTask"),  # once "a int"
 ])
 def test_an_import_path_that_is_no_task_is_one_line(tmp_path, capsys, monkeypatch, target, needle):
     from remidi.cli import main

@@ -4,6 +4,9 @@ top of the module). Read with ``ast``: module-level imports only, ``if TYPE_CHEC
 included (they are imports a reader must follow too)."""
 
 import ast
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -108,3 +111,14 @@ def test_no_function_local_remidi_import_inside_the_engine():
                         if name not in OPTIONAL:
                             local.append(f"{path.relative_to(SRC)}:{node.lineno} {fn.name} imports {name}")
     assert not local, "function-local imports of remidi in the engine:\n" + "\n".join(local)
+
+
+def test_dir_of_the_package_lists_its_public_names_without_importing_jax():
+    """``dir(remidi)`` (tab completion) lists ``__all__``, the lazily imported names included; it
+    imports nothing heavy (``import remidi`` stays free of JAX). Before, it listed none of them."""
+    probe = ("import sys, json, remidi; names = dir(remidi); "
+             "print(json.dumps([names, remidi.__all__, 'jax' in sys.modules]))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    names, public, jax_imported = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(public) <= set(names) and "run_ued" in names and "register_score" in names
+    assert not jax_imported

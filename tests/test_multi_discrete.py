@@ -74,12 +74,37 @@ def test_the_distribution_and_the_network_head_follow_the_declared_space():
 
 # ------------------------------------------------------------------ declaring and checking the space
 class KinetixLikeSpace:
-    """Kinetix's MultiDiscrete: ``n`` the total of choices, ``number_of_dims_per_distribution`` per dimension."""
+    """Kinetix's MultiDiscrete (kinetix/environment/spaces.py): ``n`` the total of choices,
+    ``number_of_dims_per_distribution`` (i32[k]) per dimension, ``shape`` ``(k,)``, ``dtype`` ``jnp.int_``."""
 
     def __init__(self, counts):
-        self.number_of_dims_per_distribution = jnp.asarray(counts)
+        self.number_of_dims_per_distribution = jnp.asarray(counts, jnp.int32)
         self.n = int(sum(counts))
         self.shape = (len(counts),)
+        self.dtype = jnp.int_
+
+
+class JaxMARLMultiDiscrete:
+    """JaxMARL's MultiDiscrete (jaxmarl/environments/spaces.py): ``num_categories`` per dimension."""
+
+    def __init__(self, num_categories):
+        self.num_categories = jnp.array(num_categories)
+        self.shape = (len(num_categories),)
+        self.dtype = jnp.int_
+
+
+class JaxMARLDiscrete:
+    """JaxMARL's Discrete: ``n``, ``shape`` ``()``, ``dtype``."""
+
+    def __init__(self, num_categories, dtype=jnp.int32):
+        self.n, self.shape, self.dtype = num_categories, (), dtype
+
+
+class JaxMARLBox:
+    """JaxMARL's Box: ``low``, ``high``, ``shape``, ``dtype``."""
+
+    def __init__(self, low, high, shape, dtype=jnp.float32):
+        self.low, self.high, self.shape, self.dtype = low, high, shape, dtype
 
 
 @struct.dataclass
@@ -150,12 +175,46 @@ def test_spaces_are_read_off_the_environment_and_another_is_refused_in_one_line(
                                               "sequence of integers ≥ 1"),
     ({"action_space": MultiDiscrete((3, 2)), "num_actions": 5}, "task.num_actions: num_actions=5 disagrees with "
                                                                 "action_space=MultiDiscrete((3, 2))"),
-    ({"action_space": KinetixLikeSpace((3, 2))}, "task.action_space: must be one of remidi.envs.actions'"),
+    ({"action_space": KinetixLikeSpace((3, 3))}, "task.action_space: must be the environment's MultiDiscrete((3, 2))"),
+    ({"action_space": JaxMARLDiscrete(6)}, "task.action_space: must be the environment's MultiDiscrete((3, 2)) (its "
+                                           "action_space), got Discrete(6)"),
+    ({"action_space": {"a": 3}}, "task.action_space: a dict is not supported; allowed: Discrete(n), MultiDiscrete"),
 ])
 def test_a_wrong_declaration_is_one_line_naming_the_space(actions, message):
     with pytest.raises(ConfigError) as err:
         validate_task(dials_task(**actions))
     assert str(err.value).startswith(message) and "\n" not in str(err.value), str(err.value)
+
+
+def _gymnasium_spaces():
+    from gymnasium import spaces
+
+    return spaces
+
+
+@pytest.mark.parametrize("make, ours", [
+    (lambda: KinetixLikeSpace((3, 2)), MultiDiscrete((3, 2))),  # once refused: "must be one of remidi.envs.actions'"
+    (lambda: JaxMARLMultiDiscrete([3, 2]), MultiDiscrete((3, 2))),
+    (lambda: _gymnasium_spaces().MultiDiscrete([3, 2]), MultiDiscrete((3, 2))),
+    (lambda: JaxMARLDiscrete(4), Discrete(4)),
+    (lambda: _gymnasium_spaces().Discrete(4), Discrete(4)),  # XLand-MiniGrid's gymnasium wrapper's action space
+    (lambda: __import__("gymnax").environments.spaces.Discrete(4), Discrete(4)),
+    (lambda: JaxMARLBox(-1.0, 1.0, (2, 3)), Box(6)),
+    (lambda: __import__("gymnax").environments.spaces.Box(-1.0, 1.0, (2,)), Box(2)),
+])
+def test_an_environments_own_space_is_a_tasks_action_space(make, ours):
+    """gymnax's, Kinetix's, JaxMARL's and gymnasium's spaces (XLand-MiniGrid's is gymnasium's)
+    given as ``action_space`` become this package's when the task is built; the task trains on it."""
+    task = dials_task(action_space=make())
+    assert task.action_space == ours and task.actions == ours
+    if ours == MultiDiscrete((3, 2)):  # the dials environment's own space: the task passes its check
+        validate_task(task)
+
+
+def test_a_space_whose_choices_do_not_start_at_zero_is_refused_in_one_line():
+    with pytest.raises(ConfigError) as err:
+        validate_task(dials_task(action_space=_gymnasium_spaces().Discrete(6, start=1)))
+    assert str(err.value).startswith("task.action_space: a Discrete whose choices start at 1 is not supported")
 
 
 def test_expected_return_needs_discrete_actions():

@@ -187,7 +187,8 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
 def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(corridor, tmp_path, capsys, monkeypatch):
     """A run of three algorithms on rollouts shorter than an episode: one warning line, before the
     first algorithm trains, naming each score with the algorithms it ranks levels for and the
-    --set that scores every level by a finished episode (it was one line per algorithm)."""
+    setting that scores every level by a finished episode, in run_ued's words for the UEDConfig it
+    was given (it was one line per algorithm, and said --set)."""
     from remidi import run_ued
     from remidi.experiments import ued
 
@@ -209,7 +210,7 @@ def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(c
         "end inside a rollout, but num_steps (4) is shorter than an episode can last (14): with perfect_regret, "
         "levels whose episode does not end are scored by the reward collected so far as if the episode had ended "
         "(a goal not yet reached looks like a failure); with neg_return, levels whose episode does not end are "
-        "scored by the reward collected so far as if the episode had ended; --set num_steps=14 (or more) scores "
+        "scored by the reward collected so far as if the episode had ended; config.num_steps=14 (or more) scores "
         "every level by a finished episode"], warnings
 
 

@@ -26,3 +26,9 @@ def __getattr__(name):
         module, attribute = _LAZY[name]
         return getattr(importlib.import_module(module), attribute)
     raise AttributeError(f"module 'remidi' has no attribute {name!r}")
+
+
+def __dir__():
+    """The public names, the lazy ones included: ``dir(remidi)`` and tab completion list them
+    without importing JAX."""
+    return sorted(set(globals()) | set(__all__))

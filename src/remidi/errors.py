@@ -10,6 +10,7 @@ the environments and the experiments all use them.
 """
 
 import re
+from dataclasses import dataclass
 from typing import Any, Iterable
 
 
@@ -25,10 +26,54 @@ class GameFileError(RemidiError):
     """A malformed game file given to ``remidi solve``."""
 
 
+def a_type(value) -> str:
+    """``value``'s type's name with its article, for messages: ``an int``, ``a dict``, ``an
+    UnderspecifiedEnv``, ``a UEDTask`` (an acronym's U is said "you")."""
+    name = type(value).__name__
+    vowel = name[:1].lower() in "aeiou" and not (name[:1] == "U" and name[1:2].isupper())
+    return f"{'an' if vowel else 'a'} {name}"
+
+
 def one_of(field: str, value, allowed) -> ConfigError:
     """Error for a value outside a finite set: names the field, the value and the allowed values."""
     allowed = ", ".join(str(a) for a in allowed)
     return ConfigError(f"{field}: unknown value {value!r}; allowed: {allowed}")
+
+
+# ------------------------------------------------------------------------------ the caller's words
+@dataclass(frozen=True)
+class Naming:
+    """How a message names what the user gave: the command line's options (:data:`COMMAND_LINE`) or
+    a Python caller's arguments (:data:`PYTHON`, ``run_ued``'s). The caller chooses it once (a
+    run's ``RunSpec.naming``); the checks it reaches read their words from it."""
+
+    algos: str = "--algo"  # the algorithms
+    seeds: str = "--seeds"  # the seeds (the command line's count)
+    first_seed: str = "--seed"  # the first seed
+    out: str = "--out"  # the run folder of a fresh run
+    resume: str = "--resume"  # the run folder of a resumed run
+    overrides: str = "--set"  # the configuration keys given, as the field of an unknown key
+    setting_form: str = "--set {key}={value}"  # how to give one key a value
+    where_set: str = "with --set"  # where keys are given, in a sentence ("set them with --set")
+    resume_form: str = "--resume {out}"  # how to resume the run in a folder
+    resumes: str = "--resume"  # what resumes a run, as a sentence's subject ("--resume writes ...")
+    seed_fix: str = "; lower --seed or --seeds"  # what lowers a seed out of range
+
+    def setting(self, key: str, value: Any) -> str:
+        """``--set num_envs=N`` or ``config["num_envs"]=N``: how to give ``key`` the value ``value``."""
+        return self.setting_form.format(key=key, value=value)
+
+    def resuming(self, out: Any) -> str:
+        """``--resume OUT`` or ``out='OUT', resume=True``: how to resume the run in ``out``."""
+        return self.resume_form.format(out=str(out))
+
+
+#: the command line's words (``remidi run``)
+COMMAND_LINE = Naming()
+#: ``run_ued``'s words: its arguments, a configuration key as an entry of its ``config`` dict
+PYTHON = Naming(algos="algos", seeds="seeds", first_seed="seeds", out="out", resume="out", overrides="config",
+                setting_form='config["{key}"]={value}', where_set="in config", resume_form="out={out!r}, resume=True",
+                resumes="resume=True", seed_fix="")
 
 
 # ------------------------------------------------------------------------------ validation

@@ -8,9 +8,11 @@
 - :class:`Box` ``(dims)``: ``dims`` unbounded floats (the environment clips); an action is
   ``f32[dims]``.
 
-:func:`from_env_space` reads one off an environment's own ``action_space(params)`` (gymnax's
-``Discrete`` and ``Box``, and any space that gives a choice count per dimension: ``nvec``, or
-Kinetix's ``number_of_dims_per_distribution``).
+:func:`from_env_space` reads one off an environment's own ``action_space(params)``: gymnax's,
+JaxMARL's and gymnasium's ``Discrete`` (``n``) and ``Box``, and any space that gives a choice count
+per dimension (gymnasium's ``nvec``, Kinetix's ``number_of_dims_per_distribution``, JaxMARL's
+``num_categories``). A task may be given such a space as its ``action_space`` directly:
+:func:`as_action_space` converts it when the task is built.
 """
 
 from __future__ import annotations
@@ -22,11 +24,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, a_type
 
 #: what :func:`from_env_space` reads, for messages
-SUPPORTED = ("Discrete(n)", "MultiDiscrete(nvec) (a choice count per dimension: nvec or "
-             "number_of_dims_per_distribution)", "Box (float actions)")
+SUPPORTED = ("Discrete(n)", "MultiDiscrete(nvec) (a choice count per dimension: nvec, "
+             "number_of_dims_per_distribution or num_categories)", "Box (float actions)")
+#: the attributes that give a multi-discrete space's choice count per dimension, in the order read:
+#: Kinetix's (read before its ``n``, the total), gymnasium's, JaxMARL's
+COUNTS = ("number_of_dims_per_distribution", "nvec", "num_categories")
 
 
 def _is_size(value) -> bool:
@@ -130,14 +135,29 @@ def zero_action(space: ActionSpace) -> jax.Array:
     return jnp.zeros(space.shape, space.dtype)
 
 
-def from_env_space(space) -> ActionSpace:
+def from_env_space(space, field: str = "task.env.action_space") -> ActionSpace:
     """The :data:`ActionSpace` of an environment's ``action_space(params)``: a space with a choice
-    count per dimension (``nvec``, or Kinetix's ``number_of_dims_per_distribution``, read before its
-    ``n``, the total) → :class:`MultiDiscrete`; one with an integer ``n`` → :class:`Discrete`; one
-    with a float ``dtype`` and a ``shape`` → :class:`Box` (its size). ConfigError (one line, naming
-    the supported spaces) for any other."""
-    counts = getattr(space, "number_of_dims_per_distribution", getattr(space, "nvec", None))
-    if counts is not None:
+    count per dimension (:data:`COUNTS`) → :class:`MultiDiscrete`; one with an integer ``n`` →
+    :class:`Discrete`; one with a float ``dtype`` and a ``shape`` → :class:`Box` (its size).
+    ConfigError (one line starting with ``field``, naming the supported spaces) for any other, or
+    for one whose choices do not start at 0 (gymnasium's ``start``)."""
+    start = np.asarray(getattr(space, "start", 0))
+    if np.issubdtype(start.dtype, np.integer) and np.any(start != 0):
+        raise ConfigError(f"{field}: {a_type(space)} whose choices start at {start.tolist()} is "
+                          f"not supported (an action here is a choice from 0); allowed: {', '.join(SUPPORTED)}")
+    try:
+        read = _read_space(space)
+    except (TypeError, ValueError):  # attributes of those names that are not numbers, shapes or dtypes
+        read = None
+    if read is None:
+        raise ConfigError(f"{field}: {a_type(space)} is not supported; allowed: {', '.join(SUPPORTED)}")
+    return read
+
+
+def _read_space(space) -> ActionSpace | None:
+    """:func:`from_env_space`'s reading of ``space``; None where it is none of the kinds."""
+    counts = next((getattr(space, name) for name in COUNTS if getattr(space, name, None) is not None), None)
+    if counts is not None and np.ndim(counts) >= 1:
         return MultiDiscrete(tuple(int(v) for v in np.asarray(counts).reshape(-1)))
     n = getattr(space, "n", None)
     if n is not None and np.ndim(n) == 0 and np.issubdtype(np.asarray(n).dtype, np.integer):
@@ -145,5 +165,16 @@ def from_env_space(space) -> ActionSpace:
     shape, dtype = getattr(space, "shape", None), getattr(space, "dtype", None)
     if isinstance(shape, tuple) and dtype is not None and jnp.issubdtype(jnp.dtype(dtype), jnp.floating):
         return Box(math.prod(shape))
-    raise ConfigError(f"task.env.action_space: a {type(space).__name__} is not supported; allowed: "
-                      f"{', '.join(SUPPORTED)}")
+    return None
+
+
+def as_action_space(space):
+    """``space`` as a task's :data:`ActionSpace`: one of this module's as it is, an environment's own
+    (gymnax, Kinetix, JaxMARL, gymnasium: :func:`from_env_space`) converted, None or anything else
+    as it is (the task's check, ``validate_task``, names what is wrong in one line)."""
+    if space is None or isinstance(space, (Discrete, MultiDiscrete, Box)):
+        return space
+    try:
+        return from_env_space(space)
+    except ConfigError:
+        return space

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from remidi.envs.actions import ActionSpace, Box, Discrete
+from remidi.envs.actions import ActionSpace, Box, Discrete, as_action_space
 
 
 def _jaxued_interface():
@@ -142,7 +142,9 @@ class UEDTask:
         sample_level: ``rng -> level``, the random level generator (domain randomisation).
         action_space: the actions (:mod:`remidi.envs.actions`): ``Discrete(n)`` (``i32[]``),
             ``MultiDiscrete(nvec)`` (``i32[k]``, one choice per component) or ``Box(dims)``
-            (``f32[dims]``, unbounded: the environment clips). Or the shorthand:
+            (``f32[dims]``, unbounded: the environment clips); or the environment's own space
+            (gymnax's, Kinetix's, JaxMARL's, gymnasium's), converted to one of those
+            (:func:`~remidi.envs.actions.from_env_space`). Or the shorthand:
         num_actions: ``Discrete(num_actions)``, or with ``continuous`` ``Box(num_actions)``. Given
             beside ``action_space``, the two must agree (``Discrete``/``Box`` only). Read the
             space as :attr:`actions` (set for either declaration).
@@ -212,7 +214,8 @@ class UEDTask:
         if self.action_space is None and self.num_actions is None:
             raise TypeError("UEDTask.__init__() needs the actions: action_space= (remidi.envs.actions) or "
                             "num_actions=")
-        declared = self.action_space
+        declared = as_action_space(self.action_space)  # an environment's own space: ours from here on
+        object.__setattr__(self, "action_space", declared)
         if declared is None:
             declared = Box(self.num_actions) if self.continuous else Discrete(self.num_actions)
         object.__setattr__(self, "actions", declared)  # checked by validate_task

@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from remidi.errors import ConfigError, one_of
+from remidi.errors import COMMAND_LINE, ConfigError, Naming, one_of
 from remidi.experiments.overrides import apply_overrides, scale_dependents
 
 
@@ -52,6 +52,7 @@ class RunContext:
     # called as each block of training finishes: (step, {metric: f[S]}), for experiment tracking;
     # experiments that train in one piece (the tabular games) never call it
     on_block: Callable[[int, dict], None] | None = None
+    naming: Naming = COMMAND_LINE  # the caller's words, for the notes training says (the run's RunSpec.naming)
 
 
 @dataclass(frozen=True)
@@ -75,9 +76,9 @@ class Experiment:
     # scaled key → the least it is scaled to (never above the new length), e.g. {"eval_every": 10}: a
     # short run still evaluates every 10 updates, not every one
     scale_floors: dict[str, int] = field(default_factory=dict)
-    # (config, --set overrides) → one line a fresh run says first (None: nothing to say), e.g. the
-    # defaults an import-path task's run derived from what the task provides
-    config_note: Callable[[Any, dict], str | None] | None = None
+    # (config, --set overrides, the caller's Naming) → one line a fresh run says first (None: nothing
+    # to say), e.g. the defaults an import-path task's run derived from what the task provides
+    config_note: Callable[[Any, dict, Naming], str | None] | None = None
     shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
@@ -111,7 +112,9 @@ class RunSpec:
     the order given (each gets ``OUT/<algo>/`` when there are several), the preset and the
     ``--set`` overrides on top of it (a resumed run's configuration comes from its config.json
     instead), the seeds, the devices they are sharded over, the logging backends
-    (:mod:`remidi.loggers`) and the command line that config.json records (None: this process's)."""
+    (:mod:`remidi.loggers`), the command line that config.json records (None: this process's) and
+    the caller's words for its messages (:class:`~remidi.errors.Naming`: ``run_ued`` names its
+    arguments, not the command line's options)."""
 
     exp: Experiment
     algos: list[str]
@@ -121,6 +124,7 @@ class RunSpec:
     devices: int = 1
     log: list[str] = field(default_factory=list)
     argv: list[str] | None = None
+    naming: Naming = COMMAND_LINE
 
 
 def default_preset(exp: Experiment) -> str:
@@ -128,41 +132,44 @@ def default_preset(exp: Experiment) -> str:
     return "smoke" if "smoke" in exp.presets else next(iter(exp.presets))
 
 
-def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None):
+def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None,
+                   naming: Naming = COMMAND_LINE):
     """The preset's configuration with ``overrides`` on top; keys that depend on a length the
     overrides change (``exp.scaled_keys``) and that they leave alone are scaled in proportion,
-    and a line saying so is appended to ``notes``."""
+    and a line saying so is appended to ``notes``. ``naming``: the caller's words in errors and notes."""
     if preset not in exp.presets:
         raise one_of("--preset", preset, exp.presets)
     base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
-    config, note = scale_dependents(apply_overrides(base, overrides), base, overrides, exp.scaled_keys,
-                                    exp.divisor_keys, exp.scale_floors)
-    said = exp.config_note(config, overrides) if exp.config_note is not None else None
+    config, note = scale_dependents(apply_overrides(base, overrides, source=naming.overrides), base, overrides,
+                                    exp.scaled_keys, exp.divisor_keys, exp.scale_floors, naming.where_set)
+    said = exp.config_note(config, overrides, naming) if exp.config_note is not None else None
     if notes is not None:
         notes.extend(line for line in (said, note) if line is not None)
     return config
 
 
-def parse_algos(exp: Experiment, text: str | None) -> list[str]:
+def parse_algos(exp: Experiment, text: str | None, key: str = "--algo") -> list[str]:
+    """The algorithms ``text`` names (comma-separated, or ``all``; None: the experiment's default
+    ones); ConfigError (one line, starting with ``key``, the caller's name for them) otherwise."""
     if text is None:
         return list(exp.default_algorithms or exp.algorithms)
     if text == "all":
         return list(exp.algorithms)
     algos = [a.strip() for a in text.split(",")]
     if not any(algos):
-        raise one_of("--algo", text, exp.algorithms)
+        raise one_of(key, text, exp.algorithms)
     if not all(algos):
-        raise ConfigError(f"--algo: {text!r} has an empty name; give algorithms separated by single commas "
+        raise ConfigError(f"{key}: {text!r} has an empty name; give algorithms separated by single commas "
                           f"(allowed: {', '.join(exp.algorithms + ('all',))})")
     for algo in algos:
         if algo not in exp.algorithms:
             why = exp.algorithms.refusal(algo) if hasattr(exp.algorithms, "refusal") else None
             if why is not None:
-                raise ConfigError(f"--algo: {algo} cannot run on {exp.name}: {why}; "
+                raise ConfigError(f"{key}: {algo} cannot run on {exp.name}: {why}; "
                                   f"allowed: {', '.join(exp.algorithms + ('all',))}")
-            raise one_of("--algo", algo, exp.algorithms + ("all",))
+            raise one_of(key, algo, exp.algorithms + ("all",))
     if len(set(algos)) != len(algos):
-        raise ConfigError(f"--algo: {text!r} names an algorithm twice")
+        raise ConfigError(f"{key}: {text!r} names an algorithm twice")
     return algos
 
 

@@ -7,7 +7,7 @@ Two entry points:
   seeds you name and writes the standard outputs::
 
       from remidi import run_ued
-      summaries = run_ued(make_task(), cfg, ["plr", "remidi"], seeds=[0, 1], out="runs/mine")
+      summaries = run_ued(make_task(), {"num_updates": 200}, ["plr", "remidi"], seeds=[0, 1], out="runs/mine")
 
 * Command line: ``remidi run mypkg.tasks:make_task [--algo ...] [--set key=value ...]`` imports
   ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) as Python
@@ -34,15 +34,16 @@ import importlib
 import os
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import jax
+import numpy as np
 
 from remidi.engine.config import UEDConfig
 from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
-from remidi.errors import ConfigError
-from remidi.experiments.base import Experiment, RunSpec
+from remidi.errors import PYTHON, ConfigError, Naming, a_type
+from remidi.experiments.base import MAX_SEED, Experiment, RunSpec, parse_algos
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
@@ -63,7 +64,7 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
     from the task (:func:`task_defaults`), said in one line at the start of a run."""
     task = make_task()
     if not isinstance(task, UEDTask):
-        raise ConfigError(f"experiment: {name} gives a {type(task).__name__}, not a remidi UEDTask")
+        raise ConfigError(f"experiment: {name} gives {a_type(task)}, not a remidi UEDTask")
     validate_task(task)  # one line naming the field, before anything reads the task
     base, why = (config, {}) if config is not None else task_defaults(task)
     tags = sorted(jax.eval_shape(lambda k: task.level_tags(task.sample_level(k)), jax.random.PRNGKey(0)))  # names only
@@ -119,36 +120,118 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
 
 
 def defaults_note(why: dict[str, str]):
-    """``(config, overrides) -> line``: the one line a fresh run of an import-path task says first,
-    naming the defaults it derived from the task (:func:`task_defaults`) that ``--set`` left
-    alone (None where it set them all)."""
-    def note(config, overrides) -> str | None:
+    """``(config, overrides, naming) -> line``: the one line a fresh run of an import-path task says
+    first, naming the defaults it derived from the task (:func:`task_defaults`) that the overrides
+    (``--set``, ``run_ued``'s config dict) left alone (None where they set them all)."""
+    def note(config, overrides, naming: Naming) -> str | None:
         kept = [f"{key} {getattr(config, key)} ({reason})" for key, reason in why.items() if key not in overrides]
         if not kept:
             return None
-        return f"defaults for this task: {'; '.join(kept)}; --set KEY=VALUE chooses another"
+        return f"defaults for this task: {'; '.join(kept)}; {naming.setting('KEY', 'VALUE')} chooses another"
     return note
 
 
-def run_ued(task: UEDTask, config: UEDConfig, algos: list[str], seeds: list[int], out: str | Path, *,
-            progress: bool = True, resume: bool = False, name: str = "custom",
-            task_ref: str | None = None) -> dict[str, dict]:
-    """Train ``task`` with each of ``algos`` (``dr``, ``plr``, ``minimax-return``, ``remidi``) over
-    ``seeds`` and write the standard outputs into ``out`` (one sub-folder per algorithm when there
-    are several); ``resume=True`` continues the run in ``out`` from its checkpoints. Validates
-    everything first, the task included (one-line :class:`~remidi.errors.ConfigError`, nothing
-    written). Returns ``{algo: summary}`` (the ``summary.json`` documents).
+def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str | Sequence[str],
+            seeds: int | Sequence[int], out: str | Path, *, progress: bool = True, resume: bool = False,
+            name: str = "custom", task_ref: str | None = None) -> dict[str, dict]:
+    """Train ``task`` with each of ``algos`` (``dr``, ``plr``, ``minimax-return``, ``remidi``, ...:
+    a list or a comma-separated string, or ``"all"``) over ``seeds`` (a list of seeds, or how many:
+    ``2`` is ``[0, 1]``) and write the standard outputs into ``out`` (one sub-folder per algorithm
+    when there are several); ``resume=True`` continues the run in ``out`` from its checkpoints.
+
+    ``config``: a dict of :class:`~remidi.engine.config.UEDConfig` keys (dotted, ``"ppo.lr"``, or
+    nested dicts), set on the defaults chosen from what the task provides as ``remidi run
+    module:function --set KEY=VALUE`` does (:func:`task_defaults`, said in one line at the start);
+    or a whole ``UEDConfig``, used as it is; None: the task's defaults. Validates everything first,
+    the task included (one-line :class:`~remidi.errors.ConfigError` naming the argument or the key,
+    nothing written). Returns ``{algo: summary}`` (the ``summary.json`` documents).
 
     ``task_ref``: ``"module:function"`` (or ``"module:attribute"``) giving this task again, recorded
     in ``config.json`` with the folder the module imports from, so that ``remidi run --resume OUT``
     and ``remidi evaluate OUT`` can rebuild the task from any folder; checked to import (not
     called) before anything is written. Without it the command line cannot rebuild the task (it
-    says so): resume with ``resume=True`` here and evaluate with ``evaluate_run(OUT, task=task)``."""
+    says so): resume with ``resume=True`` here and evaluate with
+    ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``."""
+    naming = python_naming(config)
+    whole, overrides = config_argument(config)
     record = task_source(task_ref) if task_ref is not None else None
-    exp = task_experiment(name, lambda: task, config, task_ref=record)
+    exp = task_experiment(name, lambda: task, whole, task_ref=record)
     if resume:
-        return resume_experiment(lambda *_: exp, Path(out), progress=progress)
-    return run_experiment(RunSpec(exp, list(algos), PRESET, list(seeds)), Path(out), progress=progress)
+        return resume_experiment(lambda *_: exp, Path(out), progress=progress, naming=naming)
+    spec = RunSpec(exp, parse_algos(exp, algos_argument(algos), key=naming.algos), PRESET, seeds_argument(seeds),
+                   overrides=overrides, naming=naming)
+    return run_experiment(spec, Path(out), progress=progress)
+
+
+def python_naming(config) -> Naming:
+    """:func:`run_ued`'s words in its errors and notes: its arguments, and a configuration key
+    spelt as the configuration was given (``config["ppo.lr"]`` for a dict, ``config.ppo.lr`` for
+    a ``UEDConfig``)."""
+    if isinstance(config, UEDConfig):
+        return dataclasses.replace(PYTHON, setting_form="config.{key}={value}")
+    return PYTHON
+
+
+def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
+    """``(whole config or None, overrides)`` of :func:`run_ued`'s ``config``: a ``UEDConfig`` is
+    the whole configuration; a dict (nested dicts flattened to dotted keys) or None gives
+    overrides of the task's defaults, checked by the run (an unknown key is one line naming it
+    and the allowed keys). ConfigError for anything else."""
+    if isinstance(config, UEDConfig):
+        return config, {}
+    if config is None:
+        return None, {}
+    if not isinstance(config, dict) or not all(isinstance(key, str) for key in config):
+        raise ConfigError(f"config: must be a dict of UEDConfig keys (e.g. {{'num_updates': 200, 'ppo.lr': 3e-4}}) "
+                          f"or a UEDConfig, got {_described(config)}")
+    return None, flat_keys(config)
+
+
+def flat_keys(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"ppo": {"lr": 3e-4}, "num_updates": 20}`` → ``{"ppo.lr": 3e-4, "num_updates": 20}``."""
+    flat: dict[str, Any] = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            flat.update(flat_keys(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def algos_argument(algos) -> str:
+    """:func:`run_ued`'s ``algos`` as the comma-separated text that ``parse_algos`` reads (``--algo``'s):
+    a string as it is, a list or tuple of names joined. ConfigError (naming ``algos``) otherwise."""
+    if isinstance(algos, str):
+        return algos
+    if not isinstance(algos, (list, tuple)) or not all(isinstance(a, str) for a in algos):
+        raise ConfigError(f"algos: must be a list of algorithm names or a comma-separated string "
+                          f"(e.g. ['plr', 'remidi'] or 'plr,remidi'), got {_described(algos)}")
+    return ",".join(algos)
+
+
+def seeds_argument(seeds) -> list[int]:
+    """:func:`run_ued`'s ``seeds`` as a list: a list or tuple of seeds as it is, an integer ``n``
+    the seeds ``0 .. n-1`` (``--seeds n``). ConfigError (naming ``seeds``) for anything else; the
+    run checks the range."""
+    if _is_int(seeds):
+        if seeds < 1:
+            raise ConfigError(f"seeds: must be a number of seeds ≥ 1 or a list of seeds, got {seeds!r}")
+        return list(range(int(seeds)))
+    if not isinstance(seeds, (list, tuple, range)) or not seeds or not all(_is_int(s) for s in seeds):
+        raise ConfigError(f"seeds: must be a non-empty list of integers in [0, {MAX_SEED}] or a number of seeds "
+                          f"≥ 1, got {_described(seeds)}")
+    return [int(s) for s in seeds]
+
+
+def _is_int(value) -> bool:
+    """An integer (Python's or NumPy's), not a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _described(value) -> str:
+    """``value`` for a message: its repr where short, else its type's name."""
+    text = repr(value)
+    return text if len(text) <= 60 else a_type(value)
 
 
 def _split(path: str) -> tuple[str, str]:

@@ -27,37 +27,37 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from remidi.errors import ConfigError
+from remidi.errors import COMMAND_LINE, ConfigError, Naming
 from remidi.files import atomic_write, remove_temporaries
 
 
-def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True) -> Path:
+def prepare_out_dir(out: Path, *, resume: bool = False, create: bool = True, naming: Naming = COMMAND_LINE) -> Path:
     """Check that ``out`` can receive a new run (or holds the run to resume); create it unless
-    ``create`` is False (check only)."""
+    ``create`` is False (check only). ``naming``: the caller's words in its errors."""
     out = Path(out)
-    flag = "--resume" if resume else "--out"
+    flag = naming.resume if resume else naming.out
     if out.exists() and not out.is_dir():
         raise ConfigError(f"{flag}: {out} exists and is not a folder")
     holds_run = (out / "config.json").exists()
     if resume and not out.exists():
-        raise ConfigError(f"--resume: {out} does not exist")
+        raise ConfigError(f"{flag}: {out} does not exist")
     if resume and not holds_run:
-        raise ConfigError(f"--resume: {out} holds no run (no config.json)")
+        raise ConfigError(f"{flag}: {out} holds no run (no config.json)")
     if not resume and out.is_dir() and not holds_run:  # a several-algorithm run: one sub-folder per algorithm
         holds_run = any((sub / "config.json").exists() for sub in out.iterdir() if sub.is_dir())
     if not resume and holds_run:
-        raise ConfigError(f"--out: {out} already holds a run; choose another folder or pass --resume {out}")
+        raise ConfigError(f"{flag}: {out} already holds a run; choose another folder or pass {naming.resuming(out)}")
     if not resume:
         existing = next(p for p in (out, *out.parents) if p.exists())  # the folder it will be made in
         if not existing.is_dir():
-            raise ConfigError(f"--out: {out} cannot be made: {existing} is a file, not a folder")
+            raise ConfigError(f"{flag}: {out} cannot be made: {existing} is a file, not a folder")
         if not os.access(existing, os.W_OK | os.X_OK):
-            raise ConfigError(f"--out: {out} cannot be made: {existing} is not writable")
+            raise ConfigError(f"{flag}: {out} cannot be made: {existing} is not writable")
     if create:
         try:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
-            raise ConfigError(f"--out: {out} cannot be made ({err.strerror or type(err).__name__})") from None
+            raise ConfigError(f"{flag}: {out} cannot be made ({err.strerror or type(err).__name__})") from None
     return out
 
 

@@ -139,7 +139,8 @@ def nearest_divisor(length: int, target: float) -> int:
 
 
 def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]],
-                     divisors: tuple[str, ...] = (), floors: dict[str, int] | None = None):
+                     divisors: tuple[str, ...] = (), floors: dict[str, int] | None = None,
+                     where_set: str = "with --set"):
     """Scale the keys that depend on a length the user changed, in proportion.
 
     ``rules`` maps a length (``num_updates``) to the keys measured against it (``eval_every``,
@@ -150,7 +151,8 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
     was scaled (``None`` if nothing was). A key in ``divisors`` (a block length, e.g. ``eval_every``:
     a short last block would compile another program) becomes the divisor of the new length
     nearest to that value instead. ``floors`` (key → least value): a scaled key is at least
-    ``min(floor, new length)`` before it is rounded.
+    ``min(floor, new length)`` before it is rounded. ``where_set``: where the caller gives keys, in
+    the note (``with --set``; ``run_ued``: ``in config``).
     """
     scaled: dict[str, int] = {}
     parts = []
@@ -175,7 +177,7 @@ def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, t
     if not scaled:
         return config, None
     config = apply_overrides(config, scaled, source="scaling")
-    return config, f"{'; '.join(parts)} (set them with --set to choose other values)"
+    return config, f"{'; '.join(parts)} (set them {where_set} to choose other values)"
 
 
 def config_to_dict(config) -> dict[str, Any]:

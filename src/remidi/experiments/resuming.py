@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from remidi.errors import ConfigError
+from remidi.errors import COMMAND_LINE, ConfigError, Naming
 from remidi.experiments import outputs
 from remidi.experiments.base import Experiment, RunResult, RunSpec
 from remidi.experiments.overrides import config_from_dict
@@ -21,7 +21,7 @@ from remidi.files import writable
 
 
 def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path,
-                      progress: bool = True) -> dict[str, dict]:
+                      progress: bool = True, naming: Naming = COMMAND_LINE) -> dict[str, dict]:
     """Continue the run in ``folder`` from its last checkpoint. ``exp_lookup(name, task)``: the
     experiment of ``config.json``'s ``experiment`` and ``task`` (its user's task's import record,
     or None): :func:`remidi.experiments.saved_experiment`.
@@ -29,19 +29,20 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
     ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
     run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
     are redrawn. The run keeps its recorded ``devices``. A finished run (:func:`finished_run`) is
-    checked, then returned as it is: nothing is trained or written.
+    checked, then returned as it is: nothing is trained or written. ``naming``: the caller's words
+    in errors (``run_ued``'s ``out``, not ``--resume``).
     """
     folder = Path(folder)
     if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # resume a scratch copy of it
             shutil.copytree(folder, Path(scratch) / "run")
-            return _resume(exp_lookup, Path(scratch) / "run", progress=False, notes=False)
+            return _resume(exp_lookup, Path(scratch) / "run", progress=False, notes=False, naming=naming)
     if not folder.is_dir():  # _resume says what is wrong
-        return _resume(exp_lookup, folder, progress)
+        return _resume(exp_lookup, folder, progress, naming=naming)
     # one process writes a run at a time; one algorithm of a several-algorithm run locks the whole run
     part_of = (folder / "config.json").exists() and outputs.several_algorithm_run(folder.parent)
-    with outputs.folder_lock(folder.parent if part_of else folder, "--resume"):
-        return _resume(exp_lookup, folder, progress)
+    with outputs.folder_lock(folder.parent if part_of else folder, naming.resume):
+        return _resume(exp_lookup, folder, progress, naming=naming)
 
 
 def finished_run(folder: Path) -> bool:
@@ -67,49 +68,50 @@ def _missing_algorithms(folder: Path, subs: list[Path]) -> list[str]:
             and not (folder / a / "config.json").exists()]
 
 
-def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path]) -> list[Path]:
+def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path], naming: Naming) -> list[Path]:
     """Write the config.json of :func:`_missing_algorithms` from one that was written (every
     algorithm of a several-algorithm run shares its experiment, preset, seeds, config, devices,
     tracking and command), so that --resume trains them; returns their sub-folders."""
     missing = _missing_algorithms(folder, subs)
     if not missing:
         return []
-    exp, _, preset, seeds, config = saved_run(exp_lookup, subs[0])
+    exp, _, preset, seeds, config = saved_run(exp_lookup, subs[0], naming.resume)
     saved = outputs.read_json(subs[0] / "config.json")
     command = saved.get("command") if isinstance(saved.get("command"), list) else ["remidi"]
     made = []
     for algo in missing:
-        sub = outputs.prepare_out_dir(folder / algo)
-        spec = RunSpec(exp, saved["algos"], preset, seeds, devices=_saved_devices(subs[0]), log=_saved_log(subs[0]),
-                       argv=command[1:])
+        sub = outputs.prepare_out_dir(folder / algo, naming=naming)
+        spec = RunSpec(exp, saved["algos"], preset, seeds, devices=_saved_devices(subs[0]),
+                       log=_saved_log(subs[0], naming.resume), argv=command[1:])
         write_run_config(sub, spec, algo, config)
         made.append(sub)
     return made
 
 
 def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, progress: bool,
-            notes: bool = True) -> dict[str, dict]:
+            notes: bool = True, naming: Naming = COMMAND_LINE) -> dict[str, dict]:
     """Resume ``folder`` (:func:`resume_experiment`); ``notes``: say which runs have no checkpoint
     yet (process 0 only)."""
+    flag = naming.resume
     if not (folder / "config.json").exists() and folder.is_dir():
         subs = sorted(p for p in folder.iterdir() if (p / "config.json").exists())
         if subs and not outputs.several_algorithm_run(folder):
-            raise ConfigError(f"--resume: {folder} holds separate runs, not one several-algorithm run; resume each "
-                              f"(e.g. remidi run --resume {subs[0]})")
+            raise ConfigError(f"{flag}: {folder} holds separate runs, not one several-algorithm run; resume each "
+                              f"(e.g. {naming.resuming(subs[0])})")
         if subs:
-            subs = sorted(subs + _write_missing_configs(exp_lookup, folder, subs))
-            return _resume_several(exp_lookup, folder, subs, progress, notes)
-    folder = outputs.prepare_out_dir(folder, resume=True)
-    exp, algo, preset, seeds, config = saved_run(exp_lookup, folder)
+            subs = sorted(subs + _write_missing_configs(exp_lookup, folder, subs, naming))
+            return _resume_several(exp_lookup, folder, subs, progress, notes, naming)
+    folder = outputs.prepare_out_dir(folder, resume=True, naming=naming)
+    exp, algo, preset, seeds, config = saved_run(exp_lookup, folder, flag)
     devices = _saved_devices(folder)
     _check_devices(exp, devices, len(seeds))
     if finished_run(folder):  # nothing to train: its results as they are (a rerun would overwrite wall_s)
-        return {algo: _finished_summary(folder)}
-    _check_writable(folder)
+        return {algo: _finished_summary(folder, naming)}
+    _check_writable(folder, flag)
     outputs.remove_stale_temporaries(folder)
     if notes:
         _note_fresh_start(exp, folder)
-    spec = RunSpec(exp, [algo], preset, seeds, devices=devices, log=_saved_log(folder))
+    spec = RunSpec(exp, [algo], preset, seeds, devices=devices, log=_saved_log(folder, flag), naming=naming)
     return _train_and_write(spec, config, {algo: folder}, folder, resume=True, progress=progress)
 
 
@@ -123,29 +125,30 @@ def _note_fresh_start(exp: Experiment, folder: Path) -> None:
               f"it trains from its start", file=sys.stderr, flush=True)
 
 
-def _check_writable(folder: Path) -> None:
+def _check_writable(folder: Path, flag: str = "--resume") -> None:
     """ConfigError (one line) for a run folder to resume that cannot be written: before, the run
     compiled and trained a block before its first checkpoint failed."""
     if not writable(folder):
-        raise ConfigError(f"--resume: {folder} is not writable: the resumed run could not write its checkpoints "
+        raise ConfigError(f"{flag}: {folder} is not writable: the resumed run could not write its checkpoints "
                           f"and results; resume a writable copy of it")
 
 
-def _finished_summary(folder: Path) -> dict:
+def _finished_summary(folder: Path, naming: Naming = COMMAND_LINE) -> dict:
     """A finished run's summary.json, checked: a damaged one is a one-line error (the run's
     outputs are written again from its last checkpoint once it is deleted)."""
-    return outputs.read_json_object(folder / "summary.json", "--resume",
-                                    f"; delete it, and --resume writes the run's outputs again from checkpoint.npz")
+    return outputs.read_json_object(folder / "summary.json", naming.resume,
+                                    f"; delete it, and {naming.resumes} writes the run's outputs again from "
+                                    f"checkpoint.npz")
 
 
-def _saved_log(folder: Path) -> list[str]:
+def _saved_log(folder: Path, flag: str = "--resume") -> list[str]:
     """The tracking backends recorded in ``folder/config.json`` (checked again: a resume on a
     machine without the package says so before anything is written)."""
     from remidi.loggers import parse_log
 
     saved = outputs.read_json(folder / "config.json").get("log") or []
     if not isinstance(saved, list) or not all(isinstance(name, str) for name in saved):
-        raise ConfigError(f"--resume: {folder / 'config.json'}: log must be a list of backend names, got {saved!r}")
+        raise ConfigError(f"{flag}: {folder / 'config.json'}: log must be a list of backend names, got {saved!r}")
     return parse_log(",".join(saved))
 
 
@@ -215,17 +218,19 @@ def _run_order(sub: Path, exp: Experiment, algo: str) -> tuple[int, int]:
     return given, exp.algorithms.index(algo) if algo in exp.algorithms else len(exp.algorithms)
 
 
-def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, notes: bool) -> dict[str, dict]:
-    runs = [(sub, *saved_run(exp_lookup, sub)) for sub in subs]
+def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, notes: bool,
+                    naming: Naming = COMMAND_LINE) -> dict[str, dict]:
+    flag = naming.resume
+    runs = [(sub, *saved_run(exp_lookup, sub, flag)) for sub in subs]
     runs.sort(key=lambda run: _run_order(run[0], run[1], run[2]))
     devices = {sub: _saved_devices(sub) for sub in subs}
-    logs = {sub: _saved_log(sub) for sub in subs}
+    logs = {sub: _saved_log(sub, flag) for sub in subs}
     for sub, exp, algo, preset, seeds, config in runs:  # every run checked before any trains
         _check_devices(exp, devices[sub], len(seeds))
     summaries = {}
     unfinished = [run for run in runs if not (run[0] / "summary.json").exists()]
     for sub in [folder, *(run[0] for run in unfinished)] if unfinished else []:
-        _check_writable(sub)
+        _check_writable(sub, flag)
         outputs.remove_stale_temporaries(sub)
 
     def compare(last: dict[str, RunResult]) -> None:  # with the last unfinished algorithm's result, before its summary
@@ -235,11 +240,11 @@ def _resume_several(exp_lookup, folder: Path, subs: list[Path], progress: bool, 
 
     for sub, exp, algo, preset, seeds, config in runs:  # nothing trained (finished): the folder stays as it is
         if (sub / "summary.json").exists():
-            summaries[algo] = _finished_summary(sub)
+            summaries[algo] = _finished_summary(sub, naming)
         else:
             if notes:
                 _note_fresh_start(exp, sub)
-            spec = RunSpec(exp, [algo], preset, seeds, devices=devices[sub], log=logs[sub])
+            spec = RunSpec(exp, [algo], preset, seeds, devices=devices[sub], log=logs[sub], naming=naming)
             summaries.update(_train_and_write(spec, config, {algo: sub}, sub, resume=True, progress=progress,
                                               compare=compare if sub == unfinished[-1][0] else None))
     return summaries

@@ -29,7 +29,7 @@ from dataclasses import replace
 from typing import Callable
 
 from remidi import __version__
-from remidi.errors import ConfigError
+from remidi.errors import COMMAND_LINE, ConfigError, Naming
 from remidi.experiments import outputs
 from remidi.experiments.base import MAX_SEED, Experiment, RunContext, RunResult, RunSpec, resolve_config
 from remidi.experiments.overrides import config_to_dict
@@ -41,19 +41,16 @@ def run_experiment(spec: RunSpec, out: Path, progress: bool = True) -> dict[str,
     ``{algo: summary}``.
 
     ``spec.devices``: shard the seeds over that many devices (:func:`_check_devices`).
-    ``spec.log``: the logging backends (:mod:`remidi.loggers`, checked by its ``parse_log``)."""
-    exp, seeds, devices = spec.exp, spec.seeds, spec.devices
+    ``spec.log``: the logging backends (:mod:`remidi.loggers`, checked by its ``parse_log``).
+    ``spec.naming``: the caller's words in errors and notes (``run_ued``'s arguments)."""
+    exp, seeds, devices, naming = spec.exp, spec.seeds, spec.devices, spec.naming
     notes: list[str] = []
-    config = resolve_config(exp, spec.preset, spec.overrides, notes)
+    config = resolve_config(exp, spec.preset, spec.overrides, notes, naming)
     for algo in spec.algos:
         exp.validate(config, algo)
-    if not seeds:
-        raise ConfigError("--seeds: must be an integer ≥ 1")
-    if min(seeds) < 0 or max(seeds) > MAX_SEED:
-        raise ConfigError(f"--seed: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
-                          f"{min(seeds)}..{max(seeds)}; lower --seed or --seeds")
+    check_seeds(seeds, naming)
     _check_devices(exp, devices, len(seeds))
-    _check_memory(exp, config, len(seeds), devices)
+    _check_memory(exp, config, len(seeds), devices, naming)
     if exp.run_warnings is not None:  # once for the run's algorithms, printed with the notes
         notes += [f"warning: {warning}" for warning in exp.run_warnings(spec, config)]
     if _secondary_process(devices):  # only process 0 writes OUT; the others train alongside it (the
@@ -62,20 +59,31 @@ def run_experiment(spec: RunSpec, out: Path, progress: bool = True) -> dict[str,
     return _write_and_train(spec, config, Path(out), notes, progress)
 
 
+def check_seeds(seeds: list[int], naming: Naming = COMMAND_LINE) -> None:
+    """ConfigError (one line, in the caller's words) unless ``seeds`` names at least one seed, each
+    a 32-bit random key."""
+    if not seeds:
+        raise ConfigError(f"{naming.seeds}: must be an integer ≥ 1")
+    if min(seeds) < 0 or max(seeds) > MAX_SEED:
+        raise ConfigError(f"{naming.first_seed}: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
+                          f"{min(seeds)}..{max(seeds)}{naming.seed_fix}")
+
+
 def _write_and_train(spec: RunSpec, config, out: Path, notes: list[str], progress: bool) -> dict[str, dict]:
     folders = {algo: (out / algo if len(spec.algos) > 1 else out) for algo in spec.algos}
+    naming = spec.naming
     for folder in dict.fromkeys([out, *folders.values()]):  # check every folder before writing anything
-        outputs.prepare_out_dir(folder, create=False)
+        outputs.prepare_out_dir(folder, create=False, naming=naming)
     for note in notes:  # only once the run is known to be valid: an error stays the only line
         print(f"remidi: {note}", file=sys.stderr, flush=True)
     before = _existing_paths(out, list(folders.values()))
     try:
-        outputs.prepare_out_dir(out)
-        with outputs.folder_lock(out, "--out"):
+        outputs.prepare_out_dir(out, naming=naming)
+        with outputs.folder_lock(out, naming.out):
             for folder in dict.fromkeys([out, *folders.values()]):  # again: a run another process began here since
-                outputs.prepare_out_dir(folder, create=False)
+                outputs.prepare_out_dir(folder, create=False, naming=naming)
             for algo, folder in folders.items():
-                outputs.prepare_out_dir(folder)
+                outputs.prepare_out_dir(folder, naming=naming)
                 write_run_config(folder, spec, algo, config)
             return _train_and_write(spec, config, folders, out, resume=False, progress=progress)
     except TooLarge as err:  # resuming would fail the same way: remove what this run wrote, keep finished algorithms
@@ -90,9 +98,9 @@ class TooLarge(ConfigError):
     MemoryError, or an array outgrew XLA's 32-bit indices."""
 
 
-def too_large_message(err: BaseException, config) -> str | None:
+def too_large_message(err: BaseException, config, naming: Naming = COMMAND_LINE) -> str | None:
     """One line for an error that says the run is too large for the device, naming ``num_envs``
-    (the usual culprit) and the size XLA asked for; None for any other error."""
+    (the usual culprit, in the caller's words) and the size XLA asked for; None for any other error."""
     text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
     if isinstance(err, MemoryError):
         what = "does not fit in memory (MemoryError)"
@@ -106,7 +114,8 @@ def too_large_message(err: BaseException, config) -> str | None:
         return None
     num_envs = getattr(config, "num_envs", None)
     size = f"num_envs={num_envs}: " if num_envs is not None else ""
-    fix = "lower num_envs (--set num_envs=N)" if num_envs is not None else "use a smaller configuration"
+    fix = (f"lower num_envs ({naming.setting('num_envs', 'N')})" if num_envs is not None
+           else "use a smaller configuration")
     return f"{size}the run {what}; {fix} or the number of seeds"
 
 
@@ -132,7 +141,7 @@ def _device_memory() -> tuple[int | None, str]:
         return None, "this machine's memory"
 
 
-def _check_memory(exp: Experiment, config, num_seeds: int, devices: int) -> None:
+def _check_memory(exp: Experiment, config, num_seeds: int, devices: int, naming: Naming = COMMAND_LINE) -> None:
     """Refuse a UED run before anything is written when its rollouts alone cannot fit one device: a
     block stores, per seed on the device, ``num_steps × num_envs`` observations and a reward, value
     and log-probability each (a lower bound of what training holds: parameters, buffers and the
@@ -157,7 +166,7 @@ def _check_memory(exp: Experiment, config, num_seeds: int, devices: int) -> None
         raise TooLarge(f"num_envs={num_envs}: the rollouts alone need {_size(need)} ({seeds} seed"
                        f"{'s' if seeds != 1 else ''} × num_steps {num_steps} × num_envs {num_envs} × {per_step} "
                        f"bytes), more than the {_size(have)} of {what}; lower num_envs "
-                       f"(--set num_envs=N), num_steps or the number of seeds")
+                       f"({naming.setting('num_envs', 'N')}), num_steps or the number of seeds")
 
 
 def _existing_paths(out: Path, folders: list[Path]) -> set[Path]:
@@ -252,14 +261,15 @@ def _train_and_write(spec: RunSpec, config, folders: dict[str, Path], out: Path,
             run_logger = RunLogger(list(log), folder, f"{exp.name}/{algo}", outputs.read_json(folder / "config.json"),
                                    seeds, group=str(Path(out).resolve()))
         ctx = RunContext(exp.name, algo, preset, seeds, config, folder, resume=resume, progress=progress,
-                         devices=devices, on_block=run_logger.log if run_logger is not None else None)
+                         devices=devices, on_block=run_logger.log if run_logger is not None else None,
+                         naming=spec.naming)
         started = time.perf_counter()
         try:
             result = exp.train(ctx)
         except BaseException as err:  # Ctrl-C or an error: close the logged runs, a resume continues them
             if run_logger is not None:
                 run_logger.close()
-            message = too_large_message(err, config)
+            message = too_large_message(err, config, spec.naming)
             if message is not None:  # a resumed run keeps its folder: it resumes on a larger device
                 kept = resume and (folder / "checkpoint.npz").exists()
                 raise TooLarge(message + (f"; {folder} keeps its last checkpoint" if kept else "")) from None

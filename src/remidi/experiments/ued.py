@@ -134,7 +134,7 @@ def make_run_warnings(task_factory: Callable[[UEDConfig], UEDTask], check_step: 
     def warnings(spec, cfg: UEDConfig) -> list[str]:
         chosen = "num_steps" in spec.exp.presets.get(spec.preset, {}) and "num_steps" not in spec.overrides
         return run_warnings(cfg, list(spec.algos), task_factory(cfg), check_step,
-                            num_steps_from=f"the {spec.preset} preset" if chosen else None)
+                            num_steps_from=f"the {spec.preset} preset" if chosen else None, naming=spec.naming)
 
     return warnings
 
@@ -154,7 +154,7 @@ def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tu
         task = task_factory(cfg)
         # validation: train_seeds (the engine's entry point, for every caller) checks the config with
         # validate_ued_config; run_experiment calls the same function before it writes anything
-        cost = None if cheap_step or ctx.resume else tracker_cost_note(task, cfg, get_algorithm(ctx.algo))
+        cost = None if cheap_step or ctx.resume else tracker_cost_note(task, cfg, get_algorithm(ctx.algo), ctx.naming)
         if cost is not None and jax.process_index() == 0:
             print(f"remidi: {cost}", file=sys.stderr, flush=True)
         stalls = stall_warner(ctx.seeds, cfg.remidi.tracker, cfg.num_envs, cfg.eval_every)

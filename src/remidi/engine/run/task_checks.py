@@ -17,7 +17,7 @@ from remidi.engine.core.networks import (NETWORKS, describe_observation, flatten
 from remidi.engine.setup import example_observation
 from remidi.envs import actions as acts
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
-from remidi.errors import ConfigError
+from remidi.errors import ConfigError, a_type
 
 
 _VALIDATED: weakref.WeakSet = weakref.WeakSet()  # tasks validate_task passed (UEDTask hashes by identity)
@@ -90,9 +90,8 @@ def _check_actions(task) -> None:
     declared = task.action_space
     if declared is None:
         _task_size("task.num_actions", task.num_actions)
-    elif not isinstance(declared, (acts.Discrete, acts.MultiDiscrete, acts.Box)):
-        raise ConfigError(f"task.action_space: must be one of remidi.envs.actions' {', '.join(acts.SUPPORTED)} "
-                          f"(from_env_space reads one off an environment's space), got a {type(declared).__name__}")
+    elif not isinstance(declared, (acts.Discrete, acts.MultiDiscrete, acts.Box)):  # not even from_env_space reads it
+        acts.from_env_space(declared, "task.action_space")  # raises: one line naming the spaces it reads
     elif declared.problem() is not None:
         raise ConfigError(f"task.action_space: {declared}: {declared.problem()}")
     else:  # the shorthand given beside it must say the same
@@ -181,7 +180,7 @@ def validate_task(task: UEDTask) -> None:
     environment resets to an observation of the training observation's shapes. Checked once per
     task object."""
     if not isinstance(task, UEDTask):
-        raise ConfigError(f"task: must be a remidi UEDTask, got a {type(task).__name__}")
+        raise ConfigError(f"task: must be a remidi UEDTask, got {a_type(task)}")
     if task in _VALIDATED:
         return
     _task_size("task.max_episode_steps", task.max_episode_steps)
@@ -189,7 +188,7 @@ def validate_task(task: UEDTask) -> None:
         if not isinstance(getattr(task, key), bool):
             raise ConfigError(f"task.{key}: must be true or false, got {getattr(task, key)!r}")
     if not isinstance(task.env, UnderspecifiedEnv):
-        raise ConfigError(f"task.env: must be a jaxued UnderspecifiedEnv, got a {type(task.env).__name__}")
+        raise ConfigError(f"task.env: must be a jaxued UnderspecifiedEnv, got {a_type(task.env)}")
     for key in ("sample_level", "level_tags"):
         if not callable(getattr(task, key)):
             raise ConfigError(f"task.{key}: must be a function, got {getattr(task, key)!r}")
@@ -206,7 +205,7 @@ def validate_task(task: UEDTask) -> None:
         if name not in task.eval_sets:
             raise ConfigError(f"task.eval_envs: {name!r} is no evaluation set; allowed: {', '.join(task.eval_sets)}")
         if not isinstance(env, UnderspecifiedEnv):
-            raise ConfigError(f"task.eval_envs: {name!r} must be a jaxued UnderspecifiedEnv, got a {type(env).__name__}")
+            raise ConfigError(f"task.eval_envs: {name!r} must be a jaxued UnderspecifiedEnv, got {a_type(env)}")
 
     _check_actions(task)
     if task.expected_return is not None and not isinstance(task.actions, acts.Discrete):

@@ -22,11 +22,11 @@ from remidi.engine.run.task_checks import check_network_reads_observations, step
 from remidi.engine.setup import network_for
 from remidi.engine.trackers import tracker_for, validate_tracker
 from remidi.envs.interface import UEDTask, tree_equal
-from remidi.errors import ConfigError, choice, positive_int, require
+from remidi.errors import COMMAND_LINE, ConfigError, Naming, choice, positive_int, require
 
 
 def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
-                 num_steps_from: str | None = None) -> list[str]:
+                 num_steps_from: str | None = None, naming: Naming = COMMAND_LINE) -> list[str]:
     """One-line warnings about a valid run of ``algos`` (a name or an :class:`Algorithm`, or a list
     of them: a run's algorithms, each warning said once for all of them) that would train
     degenerately without saying so:
@@ -45,9 +45,11 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
       known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
       it steps each frozen level with the agent's own draws, so a prefix another draw of that level
       would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
+
+    ``naming``: the caller's words for the settings a warning suggests (``run_ued``'s ``config``).
     """
     algos = [get_algorithm(a) for a in ([algos] if isinstance(algos, (str, Algorithm)) else algos)]
-    short = short_rollout_warning(cfg, algos, task, num_steps_from)
+    short = short_rollout_warning(cfg, algos, task, num_steps_from, naming)
     out = [short] if short is not None else []
     for algo in algos:
         out += _algorithm_warnings(cfg, algo, task, check_step)
@@ -55,7 +57,7 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
 
 
 def short_rollout_warning(cfg: UEDConfig, algos: list[Algorithm], task: UEDTask,
-                          num_steps_from: str | None = None) -> str | None:
+                          num_steps_from: str | None = None, naming: Naming = COMMAND_LINE) -> str | None:
     """:func:`run_warnings`' first: one line for every algorithm of ``algos`` whose score reads
     finished episodes on rollouts (``num_steps``) shorter than the task's episode limit, naming the
     algorithms each score ranks levels for when there are several; None where none does."""
@@ -77,8 +79,8 @@ def short_rollout_warning(cfg: UEDConfig, algos: list[Algorithm], task: UEDTask,
         fate = "; ".join(f"with {s.name}, levels whose episode does not end {s.unfinished}" for s in scores)
     who = f", {num_steps_from}'s choice for a short run" if num_steps_from else ""
     others = [s.name for s in sc.SCORES.values() if not s.needs_finished_episodes]
-    fix = f"--set num_steps={task.max_episode_steps} (or more) scores every level by a finished episode" + (
-        f", or --set score={others[0]}" if others else "")
+    fix = (f"{naming.setting('num_steps', task.max_episode_steps)} (or more) scores every level by a finished episode"
+           + (f", or {naming.setting('score', others[0])}" if others else ""))
     return (f"{head} the episodes that end inside a rollout, but num_steps ({cfg.num_steps}{who}) is shorter than "
             f"an episode can last ({task.max_episode_steps}): {fate}; {fix}")
 
@@ -217,7 +219,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         sequences = [a for a in ALGORITHMS if rehearses(ALGORITHMS[a])]
         if not rehearses(algo):
             raise ConfigError(f"remidi.rehearsal: {algo.name} has no sequence of level buffers to rehearse; allowed: 0, "
-                              f"or a probability with --algo {' or '.join(sequences)}")
+                              f"or a probability with the algorithm {' or '.join(sequences)}")
         require(r.policy == "masked", "remidi.policy", "masked with remidi.rehearsal (under combine the frozen "
                 "policies act on the earlier buffers' levels, so the trained one never does)", r.policy)
     positive_int("accel.num_edits", cfg.accel.num_edits)

@@ -23,7 +23,7 @@ from remidi.engine.trackers.belief_model import BeliefModel, LearnedSettings, co
 from remidi.engine.trackers.exact import MODES, exact_budget, make_tracker
 from remidi.engine.trackers.simulated import Simulated
 from remidi.envs.actions import Box, MultiDiscrete
-from remidi.errors import ConfigError, positive_int, require
+from remidi.errors import COMMAND_LINE, ConfigError, Naming, positive_int, require
 
 #: every value of ``remidi.tracker``
 TRACKERS = MODES + ("belief", "simulated")
@@ -106,13 +106,13 @@ COSTLY_STEPS = 9
 LOWER_BUDGET = 8  # the budget a note suggests (9 environment steps per env step)
 
 
-def tracker_cost_note(task, cfg, algo) -> str | None:
+def tracker_cost_note(task, cfg, algo, naming: Naming = COMMAND_LINE) -> str | None:
     """One line for a run whose exact tracker will step the environment at least
     :data:`COSTLY_STEPS` times per rollout env step once an adversary is frozen (``remidi.tracker``
     prefix or per_step on a sequence of at least two buffers; ``tracker_budget`` slots per env, or
     every frozen level for the reference tracker), naming the option that lowers it and what
-    lowering costs; None otherwise. The caller says it only where the environment's step is not
-    cheap beside the agent's network (``UEDSpec.cheap_step``)."""
+    lowering costs (in the caller's words, ``naming``); None otherwise. The caller says it only
+    where the environment's step is not cheap beside the agent's network (``UEDSpec.cheap_step``)."""
     r = cfg.remidi
     if not (algo.buffer_sequence and r.num_buffers >= 2) or r.tracker not in MODES:
         return None
@@ -123,8 +123,9 @@ def tracker_cost_note(task, cfg, algo) -> str | None:
         return None
     what = (f"steps up to {followed} frozen levels (remidi.tracker_budget={r.tracker_budget}) beside each rollout env"
             if slots else f"steps every frozen level ({frozen}: the reference tracker) beside each rollout env")
+    lower = naming.setting("remidi.tracker_budget", LOWER_BUDGET)  # in the caller's words: --set or config[...]
     if slots and slots > LOWER_BUDGET:
-        fix = (f"--set remidi.tracker_budget={LOWER_BUDGET} makes it {LOWER_BUDGET + 1}×, at a cost where more than "
+        fix = (f"{lower} makes it {LOWER_BUDGET + 1}×, at a cost where more than "
                f"{LOWER_BUDGET} frozen levels share an env's first observation: those beyond the slots are not "
                f"followed (counted by the tracker_overflow metric), so a prefix only they explain counts as "
                f"distinguishable")
@@ -132,7 +133,7 @@ def tracker_cost_note(task, cfg, algo) -> str | None:
         fix = "a smaller remidi.buffer_capacity or remidi.num_buffers freezes fewer levels"
     else:
         fix = ("remidi.tracker=belief judges with a learned model instead (docs/belief.md)" if r.tracker == "per_step"
-               or not task.deterministic_reset else f"--set remidi.tracker_budget={LOWER_BUDGET} follows at most "
+               or not task.deterministic_reset else f"{lower} follows at most "
                f"{LOWER_BUDGET} per env (the tracker_overflow metric counts those it could not)")
     return (f"ReMiDi's exact tracker {what} once an adversary is frozen: a rollout steps this environment up to "
             f"{followed + 1}× as often as PLR⊥'s (docs/performance.md, \"The tracker's cost\"); {fix}")

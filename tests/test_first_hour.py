@@ -106,3 +106,18 @@ def test_an_error_line_closes_the_progress_bar_instead_of_running_into_it(capsys
     err = capsys.readouterr().err
     assert "\nremidi: error: something\n" in err and err.endswith("remidi: error: something\n")
     assert bar not in getattr(tqdm, "_instances", ())
+
+
+def test_a_failing_task_factory_is_one_line_with_where_and_its_traceback_on_request(tmp_path, capsys, monkeypatch):
+    (tmp_path / "broken_factory.py").write_text("def make_task():\n    return {}['factory bug']\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv(DEBUG_ENV, raising=False)
+    assert main(["run", "broken_factory:make_task", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "building the task of broken_factory:make_task failed (KeyError: 'factory bug', at broken_factory.py:2; " \
+           f"{DEBUG_ENV}=1 shows the traceback)" in err
+    monkeypatch.setenv(DEBUG_ENV, "1")
+    with pytest.raises(KeyError, match="factory bug"):
+        main(["run", "broken_factory:make_task", "--out", str(tmp_path / "run")])
+    assert not (tmp_path / "run").exists()

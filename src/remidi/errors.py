@@ -134,12 +134,12 @@ def _innermost(tb) -> str:
     return f"{frames[-1].filename.rsplit('/', 1)[-1]}:{frames[-1].lineno}" if frames else ""
 
 
-def user_code_error(what: str, err: BaseException) -> RemidiError:
+def user_code_error(what: str, err: BaseException) -> ConfigError:
     """One line for an exception ``err`` raised by the user's code while doing ``what``: its type,
     the first line of its message, where it was raised, and how to see the whole traceback."""
     detail = (str(err).strip().splitlines() or [""])[0]
     where = _innermost(err.__traceback__)
-    return RemidiError(f"{what} failed ({type(err).__name__}{': ' + detail if detail else ''}"
+    return ConfigError(f"{what} failed ({type(err).__name__}{': ' + detail if detail else ''}"
                        f"{', at ' + where if where else ''}; {DEBUG_ENV}=1 shows the traceback)")
 
 

@@ -42,7 +42,7 @@ import numpy as np
 from remidi.engine.config import UEDConfig
 from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
-from remidi.errors import PYTHON, ConfigError, Naming, a_type
+from remidi.errors import PYTHON, ConfigError, Naming, a_type, debugging, user_code_error
 from remidi.experiments.base import MAX_SEED, Experiment, RunSpec, parse_algos
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
@@ -310,7 +310,8 @@ def import_experiment(path: str, folder: str | None = None, name: str | None = N
     except ConfigError:
         raise
     except Exception as err:  # the user's task builder
-        detail = (str(err).strip().splitlines() or [""])[0]
-        raise ConfigError(f"experiment: building the task of {path} failed ({type(err).__name__}: {detail})") from None
+        if debugging():
+            raise
+        raise user_code_error(f"experiment: building the task of {path}", err) from None
     _IMPORTED[known] = exp
     return exp

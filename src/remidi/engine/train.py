@@ -23,7 +23,8 @@ and the learner (:mod:`remidi.engine.learner`):
    the active buffer, move to the next, stay on the last); ACCEL's memory of the replay; at a
    switch ``learner.freeze_policy`` (Combine) and ``tracker.freeze``.
 6. :func:`step_metrics`: the step's scalars, and PPO's diagnostics (:data:`BLOCK_REDUCTIONS` says
-   how the driver reduces each over a block).
+   how the driver reduces each over a block); ``nonfinite/...`` flags a NaN or infinite reward or
+   observation in any of the step's rollouts, which stops the run.
 
 No stage compares an algorithm's name or tests its flags: PLR⊥ is ReMiDi's adversary with one
 buffer, minimax return is PLR⊥ scored by negative return. Everything in a step is a pure function
@@ -40,7 +41,7 @@ from remidi.engine import learner as lrn
 from remidi.engine.adversaries.base import Proposal, tag_counts
 from remidi.engine.algorithms import Algorithm, get_algorithm
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.rollout import Trajectory
+from remidi.engine.core.rollout import Trajectory, nonfinite
 from remidi.engine.setup import Setup, example_observation, network_for
 from remidi.engine.trackers import tracker_for
 from remidi.envs.interface import UEDTask
@@ -111,7 +112,7 @@ def train_step(setup: Setup, runner: Runner):
     # 6. what the step reports
     return runner, {**step_metrics(setup, runner, proposal, traj, (mean_ret, scores, overlap, inserted), frozen),
                     **{f"ppo/{name}": value for name, value in ppo_metrics.items()}, **adversary_metrics,
-                    **tracker_metrics}
+                    **tracker_metrics, **(proposal.nonfinite or {})}
 
 
 #: how the driver reduces a step metric over a block of updates: "sum", "last", "mean" (any
@@ -135,6 +136,7 @@ def step_metrics(setup: Setup, runner: Runner, chosen: Proposal, traj: Trajector
         "active_buffer": runner.adversary.active.astype(jnp.float32),
         "rejected": jnp.sum(overlap).astype(jnp.float32),
         "inserted": jnp.sum(inserted).astype(jnp.float32),
+        **nonfinite(traj),  # the driver stops the run on a NaN reward or observation
     }
     if frozen is not None:  # rollout envs whose first observation more frozen levels share than the tracker has slots
         metrics["tracker_overflow"] = jnp.sum(traj.overflow[0] > 0).astype(jnp.float32)

@@ -65,7 +65,9 @@ class Proposal:
     the levels are edits of the last replay's (None for an adversary that does not edit);
     rehearse: bool[], the levels come from a frozen buffer (``remidi.rehearsal``, see
     :func:`~remidi.engine.adversaries.plr.rehearse_frozen`): trained on at every step, given to
-    no buffer (None without rehearsal).
+    no buffer (None without rehearsal); nonfinite: the step metrics
+    (:func:`~remidi.engine.core.rollout.nonfinite`) of the rollouts the adversary ran to propose
+    (SFL's candidates, PAIRED's generator; None without).
     """
 
     replay: jax.Array
@@ -76,6 +78,7 @@ class Proposal:
     edit: jax.Array | None = None
     generated: object = None  # PAIRED: the generator's episode that built the levels
     rehearse: jax.Array | None = None
+    nonfinite: dict | None = None
 
     def explained(self, indist: jax.Array) -> jax.Array:
         """bool[T, N]: the steps the learner and the buffer treat as explained by a frozen level:

@@ -38,7 +38,7 @@ from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, swit
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
 from remidi.engine.core.ppo import Batch, compute_gae, create_train_state, ppo_update
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.core.rollout import Policy, Stepping, nonfinite, rollout
 from remidi.errors import ConfigError
 
 ESTIMATORS = ("paired", "flexible", "perfect")
@@ -181,7 +181,8 @@ class LevelGenerator(Adversary):
         levels = jax.vmap(builder.build)(reset_keys, traj.action.T)
         replay = jnp.asarray(False)
         return Proposal(replay=replay, levels=levels, buffer=buf.select_buffer(state.buffers, state.active),
-                        slots=None, train=jnp.asarray(True), generated=(traj, last_value))
+                        slots=None, train=jnp.asarray(True), generated=(traj, last_value),
+                        nonfinite=nonfinite(traj, "generator"))
 
     def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
         """The antagonist plays the levels and learns (the agent's rollout and masked PPO, with
@@ -210,7 +211,8 @@ class LevelGenerator(Adversary):
             values=gen_traj.value, advantages=g_adv, targets=g_targets, mask=jnp.ones_like(dones)),
             k_gen, generator_ppo(setup), net.apply)
         metrics = {"paired/regret": jnp.mean(regret), "paired/antagonist_return": jnp.mean(ant_mean),
-                   "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32)}
+                   "paired/generator_entropy": g_metrics["entropy"].astype(jnp.float32),
+                   **nonfinite(traj, "antagonist")}
         tags = jax.vmap(task.level_tags)(proposal.levels)  # {name: bool[N]}
         for name, t in tags.items():
             metrics[f"generated/{name}"] = jnp.sum(jnp.where(t, 1.0, 0.0)) / n

@@ -42,7 +42,11 @@ from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
 from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, switches
 from remidi.engine.config import BufferConfig, num_buffers
+from remidi.engine.core.rollout import nonfinite, nonfinite_names
 from remidi.engine.core.seeds import cond_per_seed
+
+#: the name of the refresh's rollouts in their non-finite flags (``nonfinite/reward/candidates``)
+CANDIDATES = "candidates"
 
 
 def select_top(scores: jax.Array, solve_rates: jax.Array, k: int) -> tuple[jax.Array, jax.Array]:
@@ -110,7 +114,9 @@ class LearnabilityBuffers(Adversary):
         state, cfg = runner.adversary, setup.cfg
         active = buf.select_buffer(state.buffers, state.active)
         due = state.count % cfg.sfl.refresh_every == 0
-        active = cond_per_seed(due, lambda b: self.refresh(setup, runner, k_branch, b), lambda b: b, active)
+        unrefreshed = {name: jnp.float32(0.0) for name in nonfinite_names(CANDIDATES)}
+        active, flags = cond_per_seed(due, lambda b: self.refresh(setup, runner, k_branch, b),
+                                      lambda b: (b, unrefreshed), active)
         n = cfg.num_envs
         weights = active.valid / jnp.maximum(jnp.sum(active.valid), 1)
         slots = jax.random.choice(k_sample, active.valid.shape[0], (n,), replace=True,
@@ -118,12 +124,14 @@ class LearnabilityBuffers(Adversary):
         replay = mix_mask(n, cfg.sfl.sampled_envs_ratio) & jnp.any(active.valid)
         levels = jax.tree.map(lambda r, f: jnp.where(per_level(replay, r), r, f), buf.get_levels(active, slots),
                               self._fresh(setup, k_levels))
-        return Proposal(replay=replay, levels=levels, buffer=active, slots=slots, train=jnp.asarray(True))
+        return Proposal(replay=replay, levels=levels, buffer=active, slots=slots, train=jnp.asarray(True),
+                        nonfinite=flags)
 
-    def refresh(self, setup, runner, rng, old: buf.BufferState) -> buf.BufferState:
+    def refresh(self, setup, runner, rng, old: buf.BufferState) -> tuple[buf.BufferState, dict]:
         """The active buffer refilled: ``sfl.batch_size × sfl.num_batches`` fresh candidates, each
         played ``sfl.rollout_steps`` steps by the current policy (one batch at a time, with the
-        tracker against the frozen levels), the K most learnable kept (:func:`select_top`)."""
+        tracker against the frozen levels), the K most learnable kept (:func:`select_top`).
+        Returns it with its rollouts' :func:`~remidi.engine.core.rollout.nonfinite` flags."""
         s = setup.cfg.sfl
         frozen = setup.tracker.frozen(setup, runner)
 
@@ -132,9 +140,9 @@ class LearnabilityBuffers(Adversary):
             levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, s.batch_size))
             traj, _ = lrn.play(setup, runner.learner, k_roll, levels, s.rollout_steps, frozen)
             score, p = learnability_of(setup, traj)
-            return levels, score, p
+            return levels, score, p, nonfinite(traj, CANDIDATES)
 
-        levels, scores, rates = jax.lax.map(one_batch, jax.random.split(rng, s.num_batches))
+        levels, scores, rates, flags = jax.lax.map(one_batch, jax.random.split(rng, s.num_batches))
         levels, scores, rates = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), (levels, scores, rates))
         top, valid = select_top(scores, rates, old.valid.shape[0])  # over the M = num_batches · B candidates
 
@@ -143,7 +151,7 @@ class LearnabilityBuffers(Adversary):
 
         return old.replace(levels=jax.tree.map(kept, levels), scores=kept(scores), valid=valid,
                            extras={"solve_rate": kept(rates)}, last_seen=jnp.zeros_like(old.last_seen),
-                           time=old.time + 1)
+                           time=old.time + 1), jax.tree.map(jnp.max, flags)
 
     def frozen_levels(self, setup, runner):
         """A sequence's earlier buffers; nothing for a single buffer."""

@@ -124,6 +124,27 @@ def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=
     return traj, last_value[0]
 
 
+#: the prefix of the step metrics that flag a rollout's non-finite rewards and observations
+#: (:func:`nonfinite`); the driver stops the run on one and keeps them out of the history
+NONFINITE = "nonfinite/"
+
+
+def nonfinite_names(rollout_name: str | None = None) -> tuple[str, str]:
+    """The keys of :func:`nonfinite`: ``nonfinite/reward`` and ``nonfinite/observation``, each
+    ending in ``/<rollout_name>`` for a rollout other than the agent's."""
+    tail = "" if rollout_name is None else f"/{rollout_name}"
+    return f"{NONFINITE}reward{tail}", f"{NONFINITE}observation{tail}"
+
+
+def nonfinite(traj: Trajectory, rollout_name: str | None = None) -> dict[str, jax.Array]:
+    """f32[] 1.0 or 0.0 under :func:`nonfinite_names`: whether some reward, and some floating
+    observation leaf (integer leaves cannot be), of ``traj`` is NaN or ±inf. Unchecked, a NaN is
+    silent: PLR's scores drop it, so nothing enters the buffer and nothing trains."""
+    floats = [jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(traj.obs) if jnp.issubdtype(x.dtype, jnp.inexact)]
+    flags = (~jnp.all(jnp.isfinite(traj.reward)), ~jnp.all(jnp.stack(floats)) if floats else False)
+    return {name: jnp.asarray(flag, jnp.float32) for name, flag in zip(nonfinite_names(rollout_name), flags)}
+
+
 def combine(frozen, tstate, apply_fn: Callable, frozen_hidden, obs_in, reset, logits):
     """ReMiDi's ``Combine`` (Algorithm 1), the one place it is computed: each frozen buffer's
     policy (``frozen.params``, leaves [B, ...], each with its recurrent state ``frozen_hidden``

@@ -7,8 +7,9 @@ run is cut into blocks of ``eval_every`` updates. After each block the driver ev
 the block's metrics (reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the
 progress bar and, every ``checkpoint_every`` updates, writes a checkpoint
 (:mod:`remidi.engine.run.checkpoint`) atomically, so a killed run never leaves a corrupt
-checkpoint. ``resume`` continues from the last checkpoint and ends in exactly the state an
-uninterrupted run reaches (same blocks, same keys). Each invocation records its part of the run
+checkpoint. A block whose rollouts met a NaN or infinite reward or observation stops the run
+(:func:`nonfinite_error`) before anything of it is written. ``resume`` continues from the last
+checkpoint and ends in exactly the state an uninterrupted run reaches (same blocks, same keys). Each invocation records its part of the run
 (:class:`PartClock`): the updates it trained, its wall time and the time of its blocks after the
 first (which compiles), from which ``remidi status`` tells the time left.
 
@@ -41,6 +42,7 @@ from remidi import preemption
 from remidi.engine import train as tr
 from remidi.engine.algorithms import Algorithm
 from remidi.engine.config import UEDConfig
+from remidi.engine.core.rollout import NONFINITE
 from remidi.engine.run.validation import validate_ued_config
 from remidi.engine.run.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
                                       remove_stale_temporaries, save_run)
@@ -86,6 +88,29 @@ def _check_finite(runner, done: int) -> None:
         raise RemidiError(f"training diverged: the agent's network parameters are not finite after update {done} "
                           f"(NaN or inf; e.g. a NaN reward, or a learning rate too high); the last checkpoint before "
                           f"it is kept")
+
+
+def nonfinite_error(flags: dict[str, np.ndarray], start: int, seeds: list[int], kept: str) -> RemidiError | None:
+    """The one-line error naming the first update (``start + 1`` is the block's first) and seed
+    where a rollout's non-finite flag (``nonfinite/<metric>[/<rollout>]`` f[S, B],
+    :func:`~remidi.engine.core.rollout.nonfinite`) is set; None where none is. ``kept``: what the
+    message ends with (the checkpoint that stays)."""
+    hits = [(int(np.argmax(v.any(axis=0))), name) for name, v in flags.items() if np.any(v)]
+    if not hits:
+        return None
+    column, name = min(hits, key=lambda hit: hit[0])  # at one update, the first flag named (reward)
+    metric, *rollout = name[len(NONFINITE):].split("/", 1)
+    seed = seeds[int(np.argmax(flags[name][:, column]))]
+    where = f", in the {rollout[0]} rollout" if rollout else ""
+    return RemidiError(f"training stopped: the environment returned a non-finite {metric} at update "
+                       f"{start + column + 1} (NaN or inf; seed {seed}{where}){kept}")
+
+
+def _kept(ckpt: Path | None, kept: int | None) -> str:
+    """What a run stopped before its checkpoint keeps, as the end of its error message."""
+    if ckpt is None:
+        return ""
+    return "; no checkpoint was written" if kept is None else f"; the last checkpoint before it (update {kept}) is kept"
 
 
 def _in_any_process(flag: bool) -> bool:
@@ -183,6 +208,7 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
         if writer:
             remove_stale_temporaries(ckpt)
     earlier: list[dict] = []  # the parts before this invocation's
+    kept = None  # the updates of the last checkpoint (None: none written yet)
     if resume and ckpt is not None and ckpt.exists():  # no checkpoint yet: start from update 0
         runner, meta = load_checkpoint(ckpt, runner)
         check_run(ckpt, meta, run)
@@ -190,6 +216,7 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
             runner = _put(runner, sharding)
         history, per_step = load_history(ckpt.with_name(HISTORY), meta)  # checks meta's keys too
         done, steps = meta["done"], meta["steps"]
+        kept = done
         earlier = list(meta.get("parts") or [{"updates": [0, done], "code": None}])  # older checkpoints: unrecorded
     part, first = (PartClock(done) if ckpt is not None else None), done
 
@@ -212,6 +239,12 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
                 stack.enter_context(preemption.checkpointing())
                 armed = True
             step_metrics = _to_host(step_metrics)
+            flags = {name: step_metrics.pop(name) for name in list(step_metrics) if name.startswith(NONFINITE)}
+            error = nonfinite_error(flags, done, seeds, _kept(ckpt, kept))
+            if error is not None:  # nothing of the block is written: its training saw a NaN
+                if bar is not None:
+                    bar.close()
+                raise error
             eval_keys = jax.vmap(jax.random.fold_in, (0, None))(keys, done + length)
             evals = _to_host(programs.evaluate(runner, eval_keys if sharding is None else _put(eval_keys, sharding)))
             done += length
@@ -229,6 +262,7 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
                 _check_finite(host_runner, done)  # a diverged network never replaces the last good checkpoint
                 if writer:  # process 0 writes
                     save_run(ckpt, host_runner, done, steps, history, per_step, earlier + [part.record(done)], run)
+                kept = done
             if on_block is not None:
                 on_block(done, history[-1])
             if preempted:

@@ -121,3 +121,36 @@ def test_a_failing_task_factory_is_one_line_with_where_and_its_traceback_on_requ
     with pytest.raises(KeyError, match="factory bug"):
         main(["run", "broken_factory:make_task", "--out", str(tmp_path / "run")])
     assert not (tmp_path / "run").exists()
+
+
+def test_a_setting_given_twice_is_refused_not_the_first_dropped(capsys):
+    assert main(["run", "lever", "--set", "ppo.epochs=abc", "--set", "ppo.epochs=2"]) == 2
+    assert "--set: ppo.epochs is given twice ('abc', '2'); give it once" in capsys.readouterr().err
+
+
+def test_a_config_json_of_another_experiment_is_refused_before_anything_is_trained():
+    from remidi.engine.config import UEDConfig
+    from remidi.errors import ConfigError
+    from remidi.experiments.overrides import config_from_dict
+    from remidi.tabular.learner import TabularUEDConfig
+
+    lever = {"num_updates": 4, "num_envs": 8, "ppo": {"gamma": 0.99, "total_updates": 4}}
+    assert config_from_dict(UEDConfig, lever).num_updates == 4  # a derived key (total_updates) is no foreign key
+    with pytest.raises(ConfigError, match="config.json: num_updates, num_envs, ppo.gamma … are no keys"):
+        config_from_dict(TabularUEDConfig, lever)
+
+
+def test_repeated_seeds_are_refused(tmp_path):
+    from remidi.errors import ConfigError
+    from remidi.experiments.running import check_seeds
+
+    with pytest.raises(ConfigError, match="seed 0 is given twice"):
+        check_seeds([0, 0])
+
+
+def test_a_module_that_exits_on_import_is_a_plugin_error(tmp_path, monkeypatch, capsys):
+    (tmp_path / "exits_on_import.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("REMIDI_PLUGINS", "exits_on_import")
+    assert main(["list"]) == 2
+    assert "REMIDI_PLUGINS: cannot import exits_on_import (SystemExit: 3)" in capsys.readouterr().err

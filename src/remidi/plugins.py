@@ -42,7 +42,7 @@ def load_plugins() -> list[str]:
                 importlib.import_module(name)
             except RemidiError as err:  # a registration refused: its own line, with where it came from
                 raise RemidiError(f"{ENV}: {name}: {err}") from None
-            except Exception as err:
+            except (Exception, SystemExit) as err:  # SystemExit: a module that parses arguments or exits on import
                 raise RemidiError(f"{ENV}: cannot import {name} ({_reason(err)})") from None
             _loaded.add(name)
             done.append(name)

@@ -153,6 +153,8 @@ def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str
     says so): resume with ``resume=True`` here and evaluate with
     ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``."""
     naming = python_naming(config)
+    if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
+        raise ConfigError(f"out: must be a folder path (a str or a Path), got {out!r}")
     whole, overrides = config_argument(config)
     record = task_source(task_ref) if task_ref is not None else None
     exp = task_experiment(name, lambda: task, whole, task_ref=record)
@@ -309,7 +311,7 @@ def import_experiment(path: str, folder: str | None = None, name: str | None = N
             exp = task_experiment(name or path, make, description=f"the UEDTask of {path}", task_ref=record)
     except ConfigError:
         raise
-    except Exception as err:  # the user's task builder
+    except (Exception, SystemExit) as err:  # the user's task builder (a SystemExit too: no silent exit 0)
         if debugging():
             raise
         raise user_code_error(f"experiment: building the task of {path}", err) from None

@@ -26,6 +26,8 @@ def parse_set_items(items: Iterable[str]) -> dict[str, str]:
         key = key.strip()
         if not sep or not key:
             raise ConfigError(f"--set: expected key=value, got {item!r}")
+        if key in out:
+            raise ConfigError(f"--set: {key} is given twice ({out[key]!r}, {value.strip()!r}); give it once")
         out[key] = value.strip()
     return out
 
@@ -203,5 +205,11 @@ def config_from_dict(cls, data: dict[str, Any]):
 
     walk("", data)
     settable = set(field_names(cls()))
+    derived = {key for c in cls.__mro__ for key in getattr(sys.modules.get(c.__module__), "DERIVED_KEYS", ())}
+    foreign = [k for k in flat if k not in settable and k not in derived]
+    if foreign:  # another experiment's config (its file edited, or copied into this folder): nothing is trained
+        raise ConfigError(f"config.json: {', '.join(foreign[:3])}{' …' if len(foreign) > 3 else ''} "
+                          f"{'is no key' if len(foreign) == 1 else 'are no keys'} of this experiment's config; "
+                          f"the file was written for another experiment or edited")
     flat.update({k: v for k, v in BEFORE_THE_KEY.items() if k in settable and k not in flat})
     return apply_overrides(cls(), {k: v for k, v in flat.items() if k in settable}, source="config.json")

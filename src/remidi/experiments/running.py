@@ -67,6 +67,9 @@ def check_seeds(seeds: list[int], naming: Naming = COMMAND_LINE) -> None:
     if min(seeds) < 0 or max(seeds) > MAX_SEED:
         raise ConfigError(f"{naming.first_seed}: every seed must be in [0, {MAX_SEED}] (a 32-bit random key), got "
                           f"{min(seeds)}..{max(seeds)}{naming.seed_fix}")
+    repeated = sorted({seed for seed in seeds if list(seeds).count(seed) > 1})
+    if repeated:  # a seed trained twice would count twice in every mean and spread
+        raise ConfigError(f"{naming.seeds}: seed {repeated[0]} is given twice; give each seed once")
 
 
 def _write_and_train(spec: RunSpec, config, out: Path, notes: list[str], progress: bool) -> dict[str, dict]:

@@ -123,11 +123,6 @@ def test_a_failing_task_factory_is_one_line_with_where_and_its_traceback_on_requ
     assert not (tmp_path / "run").exists()
 
 
-def test_a_setting_given_twice_is_refused_not_the_first_dropped(capsys):
-    assert main(["run", "lever", "--set", "ppo.epochs=abc", "--set", "ppo.epochs=2"]) == 2
-    assert "--set: ppo.epochs is given twice ('abc', '2'); give it once" in capsys.readouterr().err
-
-
 def test_a_config_json_of_another_experiment_is_refused_before_anything_is_trained():
     from remidi.engine.config import UEDConfig
     from remidi.errors import ConfigError

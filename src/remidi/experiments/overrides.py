@@ -26,8 +26,6 @@ def parse_set_items(items: Iterable[str]) -> dict[str, str]:
         key = key.strip()
         if not sep or not key:
             raise ConfigError(f"--set: expected key=value, got {item!r}")
-        if key in out:
-            raise ConfigError(f"--set: {key} is given twice ({out[key]!r}, {value.strip()!r}); give it once")
         out[key] = value.strip()
     return out
 

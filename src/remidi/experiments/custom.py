@@ -43,6 +43,7 @@ from remidi.engine.config import UEDConfig
 from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import PYTHON, ConfigError, Naming, a_type, debugging, user_code_error
+from remidi.experiments.overrides import flat_keys
 from remidi.experiments.base import MAX_SEED, Experiment, RunSpec, parse_algos
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
@@ -187,17 +188,6 @@ def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
         raise ConfigError(f"config: must be a dict of UEDConfig keys (e.g. {{'num_updates': 200, 'ppo.lr': 3e-4}}) "
                           f"or a UEDConfig, got {_described(config)}")
     return None, flat_keys(config)
-
-
-def flat_keys(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``{"ppo": {"lr": 3e-4}, "num_updates": 20}`` → ``{"ppo.lr": 3e-4, "num_updates": 20}``."""
-    flat: dict[str, Any] = {}
-    for key, value in config.items():
-        if isinstance(value, dict):
-            flat.update(flat_keys(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
 
 
 def algos_argument(algos) -> str:

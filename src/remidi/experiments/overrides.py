@@ -189,19 +189,21 @@ def config_to_dict(config) -> dict[str, Any]:
 BEFORE_THE_KEY = {"remidi.belief_spread": 0.0}
 
 
+def flat_keys(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"ppo": {"lr": 3e-4}, "num_updates": 20}`` → ``{"ppo.lr": 3e-4, "num_updates": 20}``."""
+    flat: dict[str, Any] = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            flat.update(flat_keys(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
 def config_from_dict(cls, data: dict[str, Any]):
     """Rebuild a config dataclass from :func:`config_to_dict` output (e.g. a run's config.json); a
     key of :data:`BEFORE_THE_KEY` it lacks takes the value the run was written with."""
-    flat: dict[str, Any] = {}
-
-    def walk(prefix, d):
-        for k, v in d.items():
-            if isinstance(v, dict):
-                walk(f"{prefix}{k}.", v)
-            else:
-                flat[f"{prefix}{k}"] = v
-
-    walk("", data)
+    flat = flat_keys(data)
     settable = set(field_names(cls()))
     derived = {key for c in cls.__mro__ for key in getattr(sys.modules.get(c.__module__), "DERIVED_KEYS", ())}
     foreign = [k for k in flat if k not in settable and k not in derived]

@@ -180,6 +180,30 @@ def test_a_bound_passes_only_when_the_interval_lies_inside(tmp_path):
     assert not out["tests"][0]["in_mean"] and out["verdict"] == "not reproduced"
 
 
+def test_a_no_worse_test_passes_only_when_the_differences_interval_lies_above_minus_the_margin(tmp_path):
+    """"A no worse than B by more than δ": the 95% interval of mean(A) − mean(B) (independent
+    bootstrap) above −δ. Checked against a bootstrap written here in numpy (same percentile rule)."""
+    claim = claims.Claim("nw", "constructed", "A no worse than B", "summary:solve_rate/lit", ("tabular-shared",),
+                         no_worse=(("remidi", "plr", 0.05),), min_seeds=5)
+    cases = {"equal": ([0.50, 0.52, 0.48, 0.51, 0.49], "reproduced"),
+             "slightly below": ([0.47, 0.49, 0.45, 0.48, 0.46], "partly (no test passes)"),  # −0.03 in the mean
+             "far below": ([0.30, 0.32, 0.28, 0.31, 0.29], "not reproduced")}
+    plr = [0.50, 0.53, 0.47, 0.51, 0.49]
+    rng = np.random.default_rng(1)
+    for name, (remidi, expected) in cases.items():
+        folder = tmp_path / name.replace(" ", "-")
+        write_run(folder, "tabular-shared", "remidi", [0, 1, 2, 3, 4], summary={"solve_rate/lit": remidi})
+        write_run(folder, "tabular-shared", "plr", [0, 1, 2, 3, 4], summary={"solve_rate/lit": plr})
+        r = verdicts.evaluate_claim(claim, data.load_runs(folder))
+        (t,) = r["tests"]
+        assert r["verdict"] == expected, name
+        assert t["difference"] == pytest.approx(np.mean(remidi) - np.mean(plr))
+        draws = [np.mean(rng.choice(remidi, 5)) - np.mean(rng.choice(plr, 5)) for _ in range(20000)]
+        assert t["difference_ci"][0] == pytest.approx(np.percentile(draws, 2.5), abs=0.004)
+        row = tables.verdict_table([r])
+        assert "remidi ≥ plr − 0.05" in row and "A − B" in row
+
+
 def test_the_summary_names_the_smallest_and_largest_group(tmp_path):
     r = verdict_of(tmp_path, [0.5 + 0.01 * i for i in range(12)], [0.1 + 0.01 * i for i in range(10)],
                    [0.2 + 0.01 * i for i in range(10)])

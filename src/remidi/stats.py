@@ -119,6 +119,14 @@ def bootstrap_ci(values, statistic: Callable = np.mean, *, strata=None, confiden
     return _interval(samples, pooled, confidence, n_resamples, seed, method)
 
 
+def difference_ci(x, y, *, confidence: float = 0.95, n_resamples: int = N_RESAMPLES,
+                  seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval ``(low, high)`` of mean(x) − mean(y), the two groups
+    (independent seeds, f[n] and f[m]) resampled independently; ``(nan, nan)`` as
+    :func:`bootstrap_ci` for a group of fewer than two values or a NaN."""
+    return _interval([_sample(x), _sample(y)], _mean_difference, confidence, n_resamples, seed, "percentile")
+
+
 def _poi(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """P(X > Y) + ½ P(X = Y) over all pairs, f[...] from x f[..., n] and y f[..., m]."""
     x, y = x[..., :, None], y[..., None, :]

@@ -13,7 +13,8 @@ class Claim:
     ``remidi evaluate``; ``"summary:NAME"``: the run's last logged point, for ``replay_fraction/*``
     its last 10% of training) on ``experiments``;
     ``greater``: pairs (A, B) claiming A's mean > B's on every experiment; ``bounds``: (A, lo,
-    hi) claiming A's mean in [lo, hi]; ``min_seeds``: seeds per algorithm a verdict needs."""
+    hi) claiming A's mean in [lo, hi]; ``no_worse``: (A, B, δ) claiming A's mean ≥ B's − δ (A no
+    worse than B by more than δ); ``min_seeds``: seeds per algorithm a verdict needs."""
 
     key: str
     title: str
@@ -22,12 +23,14 @@ class Claim:
     experiments: tuple[str, ...]
     greater: tuple[tuple[str, str], ...] = ()
     bounds: tuple[tuple[str, float, float], ...] = ()
+    no_worse: tuple[tuple[str, str, float], ...] = ()
     min_seeds: int = 10
 
     @property
     def algorithms(self) -> list[str]:
         """The algorithms the claim reads, each once: those it compares, then those it bounds."""
-        return list(dict.fromkeys([a for pair in self.greater for a in pair] + [b[0] for b in self.bounds]))
+        compared = [a for pair in self.greater for a in pair] + [a for *pair, _ in self.no_worse for a in pair]
+        return list(dict.fromkeys(compared + [b[0] for b in self.bounds]))
 
 
 BRAX = ("brax-ant", "brax-halfcheetah", "brax-hopper", "brax-walker2d")

@@ -21,7 +21,8 @@ probability of improvement's 95% interval lies above 0.5 or the one-sided permut
 (exact up to :data:`remidi.stats.MAX_EXACT` arrangements, every design of at most 10 seeds per
 group; beyond, a Monte Carlo estimate), Holm-adjusted over the claim's comparisons, is below 0.05 (independent groups: the
 seeds of two algorithms share their initial network but not their curricula, so they are not
-paired). A bound passes when the 95% bootstrap interval of the mean lies inside it. A claim is
+paired). A bound passes when the 95% bootstrap interval of the mean lies inside it; a no-worse
+test "A's mean ≥ B's − δ" when the 95% bootstrap interval of the difference lies above −δ. A claim is
 **reproduced** when all of its tests pass, **partly** when some pass and others do not (and
 **partly (no test passes)** when all hold in the mean but none passes), **not reproduced**
 otherwise, and **pending** while an algorithm has fewer seeds than the claim requires. Everything

@@ -70,6 +70,13 @@ def verdict_table(results: list[dict]) -> str:
                 poi = f"{_f(t['poi'])} [{_f(t['poi_ci'][0])}, {_f(t['poi_ci'][1])}]" if "poi" in t else "—"
                 p = f"{_p(t['p'])} ({_p(t['p_holm'])})" if "p" in t else "—"
                 seeds = f"{t['n'][0]} / {t['n'][1]}"
+            elif t["kind"] == "no_worse":
+                test = f"{t['algo']} ≥ {t['baseline']} − {t['margin']:g}{where}"
+                a = _f(t["mean"][0], d) if "mean" in t else "—"
+                b = _f(t["mean"][1], d) if "mean" in t else "—"
+                lo, hi = t.get("difference_ci", (math.nan, math.nan))
+                poi = f"A − B {_f(t['difference'], d)} [{_f(lo, d)}, {_f(hi, d)}]" if "mean" in t else "—"
+                p, seeds = "", f"{t['n'][0]} / {t['n'][1]}"
             else:
                 lo, hi = t["bound"]
                 test = f"{t['algo']} in [{lo:g}, {hi:g}]{where}"
@@ -120,7 +127,7 @@ def summary_lines(results: list[dict]) -> str:
         means = {}
         for t in r["tests"]:
             if "mean" in t:
-                names = (t["algo"], t["baseline"]) if t["kind"] == "greater" else (t["algo"],)
+                names = (t["algo"], t["baseline"]) if "baseline" in t else (t["algo"],)
                 where = f" ({t['experiment'].removeprefix('brax-')})" if len(claim.experiments) > 1 else ""
                 for name, mean in zip(names, t["mean"]):
                     means[f"{name}{where}"] = mean

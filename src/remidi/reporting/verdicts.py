@@ -99,6 +99,10 @@ def evaluate_claim(claim: Claim, runs: dict) -> dict:
         t["p_holm"] = float(p)
         t["in_mean"] = "mean" in t and t["mean"][0] > t["mean"][1]
         t["passes"] = t["in_mean"] and (_holds(t["poi_ci"][0], 0.5) or (math.isfinite(p) and p < ALPHA))
+    for a, b, margin in claim.no_worse:
+        for exp in claim.experiments:
+            tests.append(no_worse_test(exp, a, b, margin, metric_values(runs, exp, a, claim.metric),
+                                       metric_values(runs, exp, b, claim.metric)))
     for a, lo, hi in claim.bounds:
         for exp in claim.experiments:
             x = metric_values(runs, exp, a, claim.metric)
@@ -114,6 +118,22 @@ def evaluate_claim(claim: Claim, runs: dict) -> dict:
     shown = f"stale: its runs predate {fix.commit} ({fix.change}); {fix.rerun}" if fix else ruled
     return {"claim": claim, "tests": tests, "verdict": shown, "rule_verdict": ruled,
             "scale": claim_scale(claim, runs)}
+
+
+def no_worse_test(experiment: str, a: str, b: str, margin: float, x: dict, y: dict) -> dict:
+    """The test "A's mean ≥ B's mean − ``margin``" over the seeds' values ``x`` (A's) and ``y``
+    (B's), ``{seed: value}``: it holds in the mean when mean(A) − mean(B) > −margin, and passes when
+    the 95% bootstrap interval of that difference (the two groups resampled independently) lies
+    above −margin (a non-inferiority test)."""
+    row = {"kind": "no_worse", "experiment": experiment, "algo": a, "baseline": b, "margin": margin,
+           "n": (len(x), len(y))}
+    if x and y:
+        xs, ys = np.array(list(x.values()), float), np.array(list(y.values()), float)
+        diff = float(np.mean(xs) - np.mean(ys))
+        ci = stats.difference_ci(xs, ys)
+        row.update(mean=(float(np.mean(xs)), float(np.mean(ys))), difference=diff, difference_ci=ci,
+                   in_mean=math.isfinite(diff) and diff > -margin, passes=math.isfinite(ci[0]) and ci[0] > -margin)
+    return row
 
 
 def verdict(tests: list[dict], min_seeds: int) -> str:

@@ -38,6 +38,7 @@ Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``),
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,24 +64,26 @@ class TrackerState:
 
 
 def _compare(obs_f, obs) -> jax.Array:
-    """bool[F]: frozen observation f equals the agent's observation."""
+    """bool[F]: frozen observation f equals the agent's observation (the exact trackers' rule;
+    another tracker passes its own as ``compare``, e.g. :mod:`~remidi.engine.trackers.tolerance`)."""
     return jax.vmap(tree_equal, in_axes=(0, None))(obs_f, obs)
 
 
 # ---------------------------------------------------------------------- the reference tracker
-def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs) -> TrackerState:
+def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs, compare=_compare) -> TrackerState:
     """Start a new episode on every frozen level and compare first observations.
 
     ``rng`` must be the key the agent's own reset used, so that environments whose reset
     draws randomness stay in lock-step.
     """
     obs_f, states = jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(rng, frozen_levels, params)
-    match = valid & _compare(obs_f, agent_obs)
+    match = valid & compare(obs_f, agent_obs)
     return TrackerState(index=jnp.arange(valid.shape[0]), env_states=states, match=match,
                         every_step=jnp.any(match))
 
 
-def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_obs, agent_done) -> TrackerState:
+def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_obs, agent_done,
+                 compare=_compare) -> TrackerState:
     """Advance after the agent took ``action`` and saw ``agent_obs`` (``agent_done``: its episode
     ended); ``frozen``: the frozen levels (``levels`` leaves [F, ...], ``valid`` bool[F]).
 
@@ -91,10 +94,10 @@ def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_ob
     rng_step, rng_reset = jax.random.split(rng)
     obs_f, states, _, done_f, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
         rng_step, state.env_states, action, params)
-    same = _compare(obs_f, agent_obs) & (done_f == agent_done)
+    same = compare(obs_f, agent_obs) & (done_f == agent_done)
     stepped = state.replace(env_states=states, match=state.match & same,
                             every_step=state.every_step & jnp.any(frozen.valid & same))
-    restarted = tracker_reset(env, params, rng_reset, frozen.levels, frozen.valid, agent_obs)
+    restarted = tracker_reset(env, params, rng_reset, frozen.levels, frozen.valid, agent_obs, compare)
     return tree_select(agent_done, restarted, stepped)
 
 
@@ -105,11 +108,11 @@ def frozen_starts(env, params, frozen_levels):
     return jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(jax.random.PRNGKey(0), frozen_levels, params)
 
 
-def candidates_reset(starts, valid, agent_obs, budget: int) -> TrackerState:
+def candidates_reset(starts, valid, agent_obs, budget: int, compare=_compare) -> TrackerState:
     """Slots for the first ``budget`` valid frozen levels (in index order: earlier buffers first)
     whose first observation equals ``agent_obs``, the env's first observation."""
     first_obs, first_states = starts
-    matches = valid & _compare(first_obs, agent_obs)  # bool[F]
+    matches = valid & compare(first_obs, agent_obs)  # bool[F]
     index = jnp.nonzero(matches, size=budget, fill_value=-1)[0]
     match = index >= 0
     states = jax.tree.map(lambda x: x[jnp.maximum(index, 0)], first_states)
@@ -118,19 +121,20 @@ def candidates_reset(starts, valid, agent_obs, budget: int) -> TrackerState:
                         start_states=states, start_match=match, overflow=overflow)
 
 
-def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done) -> TrackerState:
+def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done,
+                    compare=_compare) -> TrackerState:
     """Advance the slots as :func:`tracker_step` does (same keys); a restart restores the slots'
     first states, since the env's restart replays the same level from the same start."""
     rng_step, _ = jax.random.split(rng)
     stepped = jax.vmap(env.step, in_axes=(None, 0, None, None))(rng_step, state.env_states, action, params)
-    return candidates_advance(state, stepped, agent_obs, agent_done)
+    return candidates_advance(state, stepped, agent_obs, agent_done, compare)
 
 
-def candidates_advance(state: TrackerState, stepped, agent_obs, agent_done) -> TrackerState:
+def candidates_advance(state: TrackerState, stepped, agent_obs, agent_done, compare=_compare) -> TrackerState:
     """The second half of :func:`candidates_step`, given the slots' environment step ``stepped =
     (obs, env_states, reward, done, info)`` (leaves [S, ...]): compare, or restart the slots."""
     obs_s, states, _, done_s, _ = stepped
-    same = _compare(obs_s, agent_obs) & (done_s == agent_done)
+    same = compare(obs_s, agent_obs) & (done_s == agent_done)
     advanced = state.replace(env_states=states, match=state.match & same)
     restarted = state.replace(env_states=state.start_states, match=state.start_match)
     return tree_select(agent_done, restarted, advanced)
@@ -167,9 +171,15 @@ class ExactTracker(Tracker):
         if self.mode not in MODES:
             raise ValueError(f"tracker mode must be one of {MODES}, got {self.mode!r}")
 
+    def compare(self, obs_f, obs) -> jax.Array:
+        """bool[F]: frozen observation f (leaves [F, ...]) is the agent's ``obs`` (exact equality;
+        :mod:`~remidi.engine.trackers.tolerance` overrides it)."""
+        return _compare(obs_f, obs)
+
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
         """The state at the envs' first observations ``obs`` (reset with ``reset_keys`` [N])."""
-        return jax.vmap(tracker_reset, in_axes=(None, None, 0, None, None, 0))(
+        reset = functools.partial(tracker_reset, compare=self.compare)
+        return jax.vmap(reset, in_axes=(None, None, 0, None, None, 0))(
             env, params, reset_keys, frozen.levels, frozen.valid, obs)
 
     def explained(self, state: TrackerState) -> jax.Array:
@@ -178,7 +188,8 @@ class ExactTracker(Tracker):
 
     def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
         """After the envs took ``action`` with ``env_keys`` [N] and saw ``next_obs``, ``done``."""
-        return jax.vmap(tracker_step, in_axes=(None, None, 0, 0, None, 0, 0, 0))(
+        return jax.vmap(functools.partial(tracker_step, compare=self.compare),
+                        in_axes=(None, None, 0, 0, None, 0, 0, 0))(
             env, params, env_keys, state, frozen, action, next_obs, done)
 
     def overflow(self, state: TrackerState) -> jax.Array:
@@ -234,16 +245,17 @@ class CandidateTracker(ExactTracker):
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
         starts = frozen_starts(env, params, frozen.levels) if starts is None else starts
-        return jax.vmap(candidates_reset, in_axes=(None, None, 0, None))(starts, frozen.valid, obs, self.budget)
+        reset = functools.partial(candidates_reset, budget=self.budget, compare=self.compare)
+        return jax.vmap(reset, in_axes=(None, None, 0))(starts, frozen.valid, obs)
 
     def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
-        return jax.vmap(candidates_step, in_axes=(None, None, 0, 0, 0, 0, 0))(
+        return jax.vmap(functools.partial(candidates_step, compare=self.compare), in_axes=(None, None, 0, 0, 0, 0, 0))(
             env, params, env_keys, state, action, next_obs, done)
 
     def advance_stepped(self, state: TrackerState, stepped, next_obs, done) -> TrackerState:
         """:meth:`advance` given the slots' environment step, taken together with the envs'
         (leaves [N, S, ...]: :func:`step_with_slots`)."""
-        return jax.vmap(candidates_advance)(state, stepped, next_obs, done)
+        return jax.vmap(functools.partial(candidates_advance, compare=self.compare))(state, stepped, next_obs, done)
 
     def overflow(self, state: TrackerState) -> jax.Array:
         return state.overflow

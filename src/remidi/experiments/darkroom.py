@@ -1,0 +1,65 @@
+"""The dark room experiment (beyond the paper): ``remidi run darkroom``.
+
+A 5×5 grid, 12 border goals (:mod:`remidi.envs.darkroom`): on lit levels the observation shows
+the goal, on dark ones nothing, so a dark level's best policy guesses (1/12) and its regret is
+irreducible. Only 108 lit levels: the small level space of a user's own environment, where
+ReMiDi's first buffer holds a good part of the learnable levels, its second rejects them (a
+complete overlap) and masks their steps. ``buffer_solve_rate/b<k>`` (each buffer's levels,
+played by the current policy) shows what the agent keeps of a frozen buffer after the switch
+(docs/retention.md).
+
+Budgets are comparable: one capacity for PLR⊥'s buffer and for each of ReMiDi's, duplicate check
+on (a small level space), and the switch at half of the run (``remidi.steps_per_buffer =
+ceil(num_updates / num_buffers)``).
+"""
+
+from __future__ import annotations
+
+from remidi.engine.config import BufferConfig, ReMiDiConfig, UEDConfig
+from remidi.engine.core.ppo import PPOConfig
+from remidi.envs.darkroom import darkroom_task
+from remidi.experiments.ued import UEDSpec, make_ued_experiment
+
+SIZE, NUM_GOALS = 5, 12
+CAPACITY = 64  # PLR⊥'s buffer and each ReMiDi buffer
+
+
+def base_config() -> UEDConfig:
+    """32 envs × 16 steps (an episode lasts at most 15), a 64-unit MLP, perfect regret, rank
+    prioritisation over a buffer of 64 with duplicate check; ReMiDi 2 buffers of 64, switching
+    at half of the run."""
+    return UEDConfig(
+        num_updates=1000, num_envs=32, num_steps=16, score="perfect_regret", network="mlp", hidden_size=64,
+        eval_every=100, eval_attempts=10, checkpoint_every=500,
+        ppo=PPOConfig(gamma=0.99, gae_lambda=0.95, clip_eps=0.2, clip_value=True, vf_coef=0.5, ent_coef=0.01,
+                      epochs=4, minibatches=1, lr=2e-3, anneal_lr=True, adam_eps=1e-5, max_grad_norm=0.5),
+        buffer=BufferConfig(capacity=CAPACITY, prioritization="rank", temperature=0.3, staleness_coef=0.3,
+                            replay_prob=0.8, min_fill=0.5, duplicate_check=True),
+        remidi=ReMiDiConfig(num_buffers=2, buffer_capacity=CAPACITY, steps_per_buffer=500, count="updates"),
+    )
+
+
+PRESETS = {
+    "cpu": {},
+    # a few minutes on a 2-core CPU: the switch at update 100
+    "smoke": {"num_updates": 200, "eval_every": 50, "checkpoint_every": 100, "remidi.steps_per_buffer": 100},
+}
+
+SUMMARY_METRICS = ("solve_rate/lit", "solve_rate/dark", "regret/lit/mean", "buffer_solve_rate/b0",
+                   "buffer_solve_rate/b1", "replay_fraction/dark", "buffer_fraction/dark", "buffer_fraction/dark/b1")
+PLOT_PANELS = (("solve_rate/lit", "solve rate, lit levels"),
+               ("solve_rate/dark", "solve rate, dark levels",
+                {"references": [(1 / NUM_GOALS, f"chance (1/{NUM_GOALS})")]}),
+               ("buffer_solve_rate/b0", "solve rate on buffer 1's levels", {"optional": True}),
+               ("buffer_solve_rate/b1", "solve rate on buffer 2's levels", {"optional": True}),
+               ("replay_fraction/dark", "share of dark levels among replayed"),
+               ("buffer_fraction/dark", "share of dark levels in the active buffer"))
+
+EXPERIMENTS = [
+    make_ued_experiment(UEDSpec(
+        name="darkroom", description="beyond the paper: 5×5 grid, 12 border goals, half the levels hide the goal "
+                                     "(irreducible regret); a small level space",
+        task_factory=lambda cfg: darkroom_task(SIZE, NUM_GOALS), config_factory=base_config, presets=PRESETS,
+        preset_seeds={"cpu": 3, "smoke": 2}, summary_metrics=SUMMARY_METRICS, plot_panels_spec=PLOT_PANELS,
+        builds_levels=False, task_gives=("optimal_return", "solved"), cheap_step=True)),
+]

@@ -89,7 +89,9 @@ class ReMiDiConfig:
         "help": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' "
                 "unit) or replays"})
     tracker: str = field(default="prefix", metadata={
-        "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule), belief "
+        "help": "ReMiDi: prefix (one frozen level made the whole prefix), per_step (authors' rule), tolerance "
+                "(prefix, with observations compared up to remidi.tracker_tolerance: for continuous or noisy "
+                "observations; engine/trackers/tolerance.py), belief "
                 "(a learned model per buffer judges the prefix: for environments whose observations are random "
                 "given the level; engine/trackers/belief.py) or simulated (the frozen levels simulated under fresh randomness "
                 "with a learnt noise model, the belief_* keys as for belief; engine/trackers/simulated.py)"})
@@ -98,6 +100,16 @@ class ReMiDiConfig:
     # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
     tracker_budget: int = field(default=64, metadata={
         "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
+    # remidi.tracker=tolerance (engine/trackers/tolerance.py): a float observation entry a is the
+    # frozen level's b while |a − b| ≤ tracker_tolerance + tracker_rtol·|b| (integer entries and
+    # episode ends: equal); in the observation's own units: wider than the observation noise,
+    # narrower than the differences that carry information (docs/tolerance.md)
+    tracker_tolerance: float = field(default=0.0, metadata={
+        "help": "ReMiDi, tracker=tolerance: the absolute tolerance of a float observation entry, in the "
+                "observation's units (wider than its noise, narrower than what tells levels apart)"})
+    tracker_rtol: float = field(default=0.0, metadata={
+        "help": "ReMiDi, tracker=tolerance: the tolerance relative to the frozen level's |entry|, added to "
+                "tracker_tolerance"})
     # remidi.tracker=belief (engine/trackers/belief.py): each adversary (buffer or generator) has a learned
     # model of its trajectories, trained on the rollouts of its own levels (a buffer's replays, a
     # generator's every update) and frozen with it; its threshold is the belief_false_rate quantile

@@ -20,7 +20,8 @@ from remidi.engine.config import (POLICIES, UEDConfig, buffer_config, score_name
 from remidi.engine.core.ppo import validate_ppo_config
 from remidi.engine.run.task_checks import check_network_reads_observations, step_reads_its_key, validate_task
 from remidi.engine.setup import network_for
-from remidi.engine.trackers import tracker_for, validate_tracker
+from remidi.engine.trackers import REPLAYING, tracker_advice, validate_tracker
+from remidi.engine.trackers.exact import MODES as EXACT_MODES
 from remidi.envs.interface import UEDTask, tree_equal
 from remidi.errors import COMMAND_LINE, ConfigError, Naming, choice, positive_int, require
 
@@ -44,7 +45,10 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
     * with ``check_step`` (a user's task: tracing a step costs seconds for Brax, whose steps are
       known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
       it steps each frozen level with the agent's own draws, so a prefix another draw of that level
-      would give counts as distinguishable (the noisy domains of docs/results.md show the effect).
+      would give counts as distinguishable (the noisy domains of docs/results.md show the effect);
+      it recommends only the trackers that can read the task's observations
+      (:func:`~remidi.engine.trackers.readable_trackers`: tolerance for float ones, belief or
+      simulated for categorical ones).
 
     ``naming``: the caller's words for the settings a warning suggests (``run_ued``'s ``config``).
     """
@@ -52,7 +56,7 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
     short = short_rollout_warning(cfg, algos, task, num_steps_from, naming)
     out = [short] if short is not None else []
     for algo in algos:
-        out += _algorithm_warnings(cfg, algo, task, check_step)
+        out += _algorithm_warnings(cfg, algo, task, check_step, naming)
     return list(dict.fromkeys(out))  # one algorithm's warning said once, however many share it
 
 
@@ -85,7 +89,8 @@ def short_rollout_warning(cfg: UEDConfig, algos: list[Algorithm], task: UEDTask,
             f"an episode can last ({task.max_episode_steps}): {fate}; {fix}")
 
 
-def _algorithm_warnings(cfg: UEDConfig, algo: Algorithm, task: UEDTask, check_step: bool) -> list[str]:
+def _algorithm_warnings(cfg: UEDConfig, algo: Algorithm, task: UEDTask, check_step: bool,
+                        naming: Naming = COMMAND_LINE) -> list[str]:
     """:func:`run_warnings`' warnings about one algorithm (SFL's refresh, ReMiDi's tracker)."""
     out = []
     if isinstance(algo.adversary, LearnabilityBuffers) and cfg.sfl.rollout_steps < task.max_episode_steps:
@@ -100,12 +105,13 @@ def _algorithm_warnings(cfg: UEDConfig, algo: Algorithm, task: UEDTask, check_st
                        "observations), but ReMiDi's tracker assumes an episode is a function of the level and the "
                        "actions; put the random seed into the level (UEDTask.deterministic_reset)")
     if check_step and algo.buffer_sequence and cfg.remidi.num_buffers > 1 \
-            and not tracker_for(task, cfg, algo).learns and step_reads_its_key(task):
+            and cfg.remidi.tracker in EXACT_MODES and step_reads_its_key(task):
+        advice = tracker_advice(task, naming)  # only trackers that can read the task's observations
         out.append("this task's env.step_env draws from its random key, but ReMiDi's exact tracker steps "
                    "each frozen level with the agent's own draws, so a prefix that another draw of a frozen level "
                    "would give counts as distinguishable; draw the step's randomness from a seed the level holds "
-                   "(remidi.envs.noisy does; UEDTask.reseed_level redraws it) or judge with remidi.tracker=belief "
-                   "or simulated")
+                   "(remidi.envs.noisy does; UEDTask.reseed_level redraws it)"
+                   + (f" or {advice}" if advice else ""))
     return out
 
 
@@ -149,7 +155,7 @@ def validate_sfl(cfg: UEDConfig, algo: Algorithm, task: UEDTask) -> None:
             f"{s.batch_size} × {s.num_batches} (the candidates of a refresh)", capacity)
     r = cfg.remidi
     require(r.count == "updates", "remidi.count", "updates with SFL (every update trains on its buffer)", r.count)
-    require(r.tracker in ("prefix", "per_step") or not algo.buffer_sequence, "remidi.tracker", "prefix or per_step "
+    require(r.tracker in REPLAYING or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step or tolerance "
             "with ReMiDi over SFL (a learned tracker learns from whole updates of the adversary's levels; SFL mixes "
             "them with fresh ones in every update)", r.tracker)
 

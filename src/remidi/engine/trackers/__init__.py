@@ -4,8 +4,11 @@
 ``remidi.tracker`` names it: ``prefix`` (the default, :mod:`~remidi.engine.trackers.exact`: one
 frozen level produced the whole prefix; candidate slots per env, ``remidi.tracker_budget``, where
 the reset allows, else every frozen level stepped), ``per_step`` (the authors' looser rule, same
-module), ``belief`` (:mod:`~remidi.engine.trackers.belief`) and ``simulated``
-(:mod:`~remidi.engine.trackers.simulated`). The keys keep their names in ``remidi.*`` (run folders'
+module), ``tolerance`` (the prefix rule with float observations compared up to
+``remidi.tracker_tolerance`` and ``remidi.tracker_rtol``, :mod:`~remidi.engine.trackers.tolerance`),
+``belief`` (:mod:`~remidi.engine.trackers.belief`) and ``simulated``
+(:mod:`~remidi.engine.trackers.simulated`). :func:`readable_trackers` says which judge a task's
+observations beyond exact equality (what the start-up warnings recommend). The keys keep their names in ``remidi.*`` (run folders'
 ``config.json`` files use them); only this package reads the ``remidi.tracker*`` and
 ``remidi.belief_*`` keys.
 """
@@ -15,6 +18,7 @@ from __future__ import annotations
 import functools
 
 import jax
+import jax.numpy as jnp
 
 from remidi.engine.setup import example_observation
 from remidi.engine.trackers.base import Frozen, Tracker
@@ -22,11 +26,14 @@ from remidi.engine.trackers.belief import BeliefTracker
 from remidi.engine.trackers.belief_model import BeliefModel, LearnedSettings, coding_for, coding_problem
 from remidi.engine.trackers.exact import MODES, exact_budget, make_tracker
 from remidi.engine.trackers.simulated import Simulated
+from remidi.engine.trackers.tolerance import ToleranceCandidates, ToleranceTracker, make_tolerance_tracker
 from remidi.envs.actions import Box, MultiDiscrete
 from remidi.errors import COMMAND_LINE, ConfigError, Naming, positive_int, require
 
 #: every value of ``remidi.tracker``
-TRACKERS = MODES + ("belief", "simulated")
+TRACKERS = MODES + ("tolerance", "belief", "simulated")
+#: the trackers that replay the frozen levels and compare observations (no learned model)
+REPLAYING = MODES + ("tolerance",)
 
 
 @functools.lru_cache(maxsize=None)
@@ -44,6 +51,8 @@ def tracker_for(task, cfg, algo) -> Tracker:
     sequence of at least two adversaries (nothing else freezes one)."""
     r = cfg.remidi
     sequence = algo.buffer_sequence and r.num_buffers >= 2
+    if sequence and r.tracker == "tolerance":
+        return make_tolerance_tracker(exact_budget(task, r, "prefix"), r.tracker_tolerance, r.tracker_rtol)
     if not sequence or r.tracker in MODES:
         mode = r.tracker if r.tracker in MODES else "prefix"
         return make_tracker(mode, exact_budget(task, r, mode))
@@ -64,8 +73,18 @@ def validate_tracker(cfg, algo, task) -> None:
             "remidi.tracker_budget", "an integer ≥ 0 (0: the reference tracker)", r.tracker_budget)
     if r.tracker not in TRACKERS:  # the exact tracker is "prefix" (the definition); name it so
         raise ConfigError(f"remidi.tracker: unknown value {r.tracker!r}; allowed: prefix (the exact tracker, the "
-                          f"default), per_step (the authors' looser exact rule), belief (the learned belief model), "
+                          f"default), per_step (the authors' looser exact rule), tolerance (prefix, with float "
+                          f"observations compared up to remidi.tracker_tolerance), belief (the learned belief model), "
                           f"simulated (the frozen levels simulated under fresh randomness, with a learnt noise model)")
+    for key in ("tracker_tolerance", "tracker_rtol"):
+        value = getattr(r, key)
+        require(isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value < float("inf"),
+                f"remidi.{key}", "a finite number ≥ 0", value)
+    if r.tracker == "tolerance":
+        require(r.tracker_tolerance > 0 or r.tracker_rtol > 0, "remidi.tracker_tolerance", "> 0 with "
+                "remidi.tracker=tolerance (the largest |difference| of a float observation entry that is still the "
+                "same observation: wider than the noise, narrower than what tells levels apart; docs/tolerance.md)",
+                r.tracker_tolerance)
     # the belief model's keys are checked whichever tracker runs: a bad value is a mistake either way
     require(0.0 <= r.belief_false_rate < 1.0, "remidi.belief_false_rate", "a number in [0, 1)", r.belief_false_rate)
     positive_int("remidi.belief_hidden", r.belief_hidden)
@@ -76,25 +95,58 @@ def validate_tracker(cfg, algo, task) -> None:
     require(r.belief_lr > 0, "remidi.belief_lr", "> 0", r.belief_lr)
     require(isinstance(r.belief_reference, bool), "remidi.belief_reference", "true or false", r.belief_reference)
     if r.tracker == "simulated":
-        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step or belief with a "
+        require(algo.replays or not algo.buffer_sequence, "remidi.tracker", "prefix, per_step, tolerance or belief "
+                "with a "
                 "learned generator (the simulated model needs the adversary's levels: a buffer's)", r.tracker)
-        require(task.deterministic_reset, "remidi.tracker", "prefix, per_step or belief for a task whose reset draws "
+        require(task.deterministic_reset, "remidi.tracker", "prefix, per_step, tolerance or belief for a task whose "
+                "reset draws "
                 "randomness (the simulated model follows the frozen levels from their fixed starts)", r.tracker)
     if r.tracker in ("belief", "simulated"):
         require(not r.belief_reference or algo.replays, "remidi.belief_reference", "false with a learned generator "
                 "(the reference learns from the task generator's fresh levels, which a generator never plays)",
                 r.belief_reference)
-        require(not isinstance(task.actions, Box), "remidi.tracker", "prefix or per_step for a task with continuous "
+        require(not isinstance(task.actions, Box), "remidi.tracker", "prefix, per_step or tolerance for a task with "
+                "continuous "
                 "actions (the belief model reads discrete actions: Discrete or MultiDiscrete)", r.tracker)
         obs = example_observation(task)[0]
         problem = coding_problem(coding_for(obs), obs)
         if problem is not None:
             raise ConfigError(f"remidi.tracker: {r.tracker} cannot read this task: {problem}; allowed here: prefix, "
-                              f"per_step")
+                              f"per_step, tolerance (float observations compared up to remidi.tracker_tolerance)")
     if r.policy == "combine":
-        require(r.tracker in ("prefix", "belief"), "remidi.tracker", "prefix or belief with remidi.policy=combine (a "
+        require(r.tracker in ("prefix", "tolerance", "belief"), "remidi.tracker", "prefix, tolerance or belief with "
+                "remidi.policy=combine (a "
                 "policy per buffer acts where that buffer's levels produced, or its model explains, the whole prefix)",
                 r.tracker)
+
+
+def readable_trackers(task) -> tuple[str, ...]:
+    """The trackers beyond exact equality that can read ``task``'s observations, for the start-up
+    warnings to recommend: ``tolerance`` where an observation holds floats that are no categories
+    (positions, lidar, pixels: the belief model's coding cannot read them), else ``belief`` for
+    discrete actions (and ``simulated``, whose model follows the frozen levels from their fixed
+    starts, where the reset ignores its key); a tolerance below a category's step would judge
+    categorical observations exactly, so it is not recommended there."""
+    obs = example_observation(task)[0]
+    floats = any(jnp.issubdtype(jnp.result_type(leaf), jnp.inexact) for leaf in jax.tree.leaves(obs))
+    if floats and coding_problem(coding_for(obs), obs) is not None:
+        return ("tolerance",)
+    if isinstance(task.actions, Box):
+        return ()
+    return ("belief", "simulated") if task.deterministic_reset else ("belief",)
+
+
+def tracker_advice(task, naming: Naming = COMMAND_LINE) -> str | None:
+    """The words that recommend :func:`readable_trackers` (in the caller's words, ``naming``), or
+    None where no tracker can read ``task`` beyond exact equality."""
+    names = readable_trackers(task)
+    if names == ("tolerance",):
+        return (f"judge with {naming.setting('remidi.tracker', 'tolerance')} and "
+                f"{naming.setting('remidi.tracker_tolerance', '<wider than the observation noise>')} (float "
+                f"observations compared up to a tolerance; docs/tolerance.md)")
+    if not names:
+        return None
+    return "judge with " + " or ".join(naming.setting("remidi.tracker", name) for name in names)
 
 
 # a rollout that steps the environment at least this many times per env step (the env and the
@@ -114,9 +166,9 @@ def tracker_cost_note(task, cfg, algo, naming: Naming = COMMAND_LINE) -> str | N
     lowering costs (in the caller's words, ``naming``); None otherwise. The caller says it only
     where the environment's step is not cheap beside the agent's network (``UEDSpec.cheap_step``)."""
     r = cfg.remidi
-    if not (algo.buffer_sequence and r.num_buffers >= 2) or r.tracker not in MODES:
+    if not (algo.buffer_sequence and r.num_buffers >= 2) or r.tracker not in REPLAYING:
         return None
-    slots = exact_budget(task, r, r.tracker)
+    slots = exact_budget(task, r, "prefix" if r.tracker == "tolerance" else r.tracker)
     frozen = (r.num_buffers - 1) * r.buffer_capacity
     followed = slots or frozen
     if followed + 1 < COSTLY_STEPS:
@@ -132,12 +184,17 @@ def tracker_cost_note(task, cfg, algo, naming: Naming = COMMAND_LINE) -> str | N
     elif slots:
         fix = "a smaller remidi.buffer_capacity or remidi.num_buffers freezes fewer levels"
     else:
-        fix = ("remidi.tracker=belief judges with a learned model instead (docs/belief.md)" if r.tracker == "per_step"
-               or not task.deterministic_reset else f"{lower} follows at most "
-               f"{LOWER_BUDGET} per env (the tracker_overflow metric counts those it could not)")
+        if r.tracker != "per_step" and task.deterministic_reset:  # remidi.tracker_budget=0 chose the reference
+            fix = (f"{lower} follows at most {LOWER_BUDGET} per env (the tracker_overflow metric counts those it "
+                   f"could not)")
+        elif "belief" in readable_trackers(task):
+            fix = "remidi.tracker=belief judges with a learned model instead (docs/belief.md)"
+        else:
+            fix = "a smaller remidi.buffer_capacity or remidi.num_buffers freezes fewer levels"
     return (f"ReMiDi's exact tracker {what} once an adversary is frozen: a rollout steps this environment up to "
             f"{followed + 1}× as often as PLR⊥'s (docs/performance.md, \"The tracker's cost\"); {fix}")
 
 
-__all__ = ["Frozen", "Tracker", "TRACKERS", "tracker_for", "validate_tracker", "exact_budget", "model_for",
-           "tracker_cost_note"]
+__all__ = ["Frozen", "Tracker", "TRACKERS", "REPLAYING", "tracker_for", "validate_tracker", "exact_budget",
+           "model_for", "tracker_cost_note", "readable_trackers", "tracker_advice", "ToleranceTracker",
+           "ToleranceCandidates"]

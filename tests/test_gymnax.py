@@ -214,8 +214,9 @@ def test_the_cartpole_example_is_a_task_in_ten_lines_that_the_cli_runs(monkeypat
     exp = import_experiment("examples.gymnax_cartpole:make_task")
     task = exp.make_task(exp.config_factory())
     assert len(task.eval_sets) == 9 and task.optimal_return is None and task.deterministic_reset
-    # no optimum, a solve criterion: the default score is learnability (experiments/custom.task_defaults)
-    assert exp.config_factory().score == "learnability"
+    # no optimum, episodes of 500 steps outlasting a rollout of 256: the default score is pvl, which scores a
+    # truncated rollout by its bootstrapped value (experiments/custom.task_defaults)
+    assert exp.config_factory().score == "pvl"
     # perfect regret needs an optimum: refused before anything is written, in one line
     assert main(["run", "examples.gymnax_cartpole:make_task", "--out", str(tmp_path / "x"), "--quiet",
                  "--set", "score=perfect_regret"]) == 2

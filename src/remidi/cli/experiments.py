@@ -79,7 +79,7 @@ def _print_networks() -> None:
 
 
 def _cmd_list(args) -> int:
-    from remidi.experiments import catalog, get_experiment
+    from remidi.experiments import catalog
 
     if not args.experiment:  # an overview, one line per experiment; the details of one: remidi list NAME
         width = max(len(name) for name in catalog())
@@ -87,7 +87,7 @@ def _cmd_list(args) -> int:
             print(f"{name:<{width}}  {entry['description']} (presets: {', '.join(entry['presets'])})")
         print("remidi list NAME: its algorithms, scores, networks (what each reads), presets and --set keys", file=sys.stderr)
         return 0
-    exp = get_experiment(args.experiment)
+    exp = _experiment(args.experiment, getattr(args, "task_args", []))
     from remidi.experiments.base import default_preset, resolve_config
     from remidi.experiments.overrides import field_names, get_value, key_help
 
@@ -168,8 +168,23 @@ def _reject_unknown_algos(name: str, text: str | None) -> None:
             raise one_of("--algo", algo, catalog()[name]["algorithms"] + ["all"])
 
 
+def _experiment(name: str, task_args: list[str]):
+    """The experiment ``name`` names; a task given as ``module:function`` called with the
+    ``--task-arg NAME=VALUE`` keyword arguments (refused for a built-in experiment)."""
+    from remidi.experiments import get_experiment
+
+    if not task_args:
+        return get_experiment(name)
+    if ":" not in name:
+        raise RemidiError(f"--task-arg: gives keyword arguments to a task's function (remidi run "
+                          f"mypkg.tasks:make_task --task-arg size=9); {name} is a built-in experiment: use --set")
+    from remidi.experiments.custom import import_experiment, parse_task_args
+
+    return import_experiment(name, args=parse_task_args(task_args))
+
+
 def _cmd_run(args) -> int:
-    from remidi.experiments import get_experiment, saved_experiment
+    from remidi.experiments import saved_experiment
     from remidi.experiments.base import RunSpec, default_preset, parse_algos
     from remidi.experiments.resuming import resume_experiment
     from remidi.experiments.running import run_experiment
@@ -181,7 +196,8 @@ def _cmd_run(args) -> int:
             raise RemidiError(f"{flag}: must name a folder, got {value!r}")
     if args.resume is not None:
         if (args.experiment is not None or args.algo or args.out is not None or args.sets or args.seeds is not None
-                or args.seed is not None or args.preset is not None or args.devices is not None or args.log):
+                or args.seed is not None or args.preset is not None or args.devices is not None or args.log
+                or args.task_args):
             raise RemidiError("--resume: takes only the run folder; its config.json says the rest")
         _RUN_DIR.append(Path(args.resume))
         from remidi.experiments.resuming import finished_run
@@ -206,7 +222,7 @@ def _cmd_run(args) -> int:
     for flag, value, least in (("--seeds", args.seeds, 1), ("--seed", args.seed, 0)):
         if value is not None and value < least:
             raise RemidiError(f"{flag}: must be an integer ≥ {least}, got {value}")
-    exp = get_experiment(args.experiment)
+    exp = _experiment(args.experiment, args.task_args)
     algos = parse_algos(exp, args.algo)
     if args.preset is None:
         args.preset = default_preset(exp)
@@ -239,6 +255,10 @@ def add_commands(sub) -> None:
                                      "write config.json, metrics.csv, summary.json and plots.")
     run.add_argument("experiment", nargs="?", help="experiment name (see `remidi list`), or module:function returning your UEDTask "
                           "(imported as Python does: from the current folder first)")
+    run.add_argument("--task-arg", dest="task_args", action="append", default=[], metavar="NAME=VALUE",
+                     help="a keyword argument of the task's function, for a task given as module:function "
+                          "(repeatable; the value read as JSON: 9, 0.5, true, null, else a string; recorded in "
+                          "config.json, so --resume, evaluate and render rebuild the same task)")
     run.add_argument("--algo", help="algorithm, comma-separated list, or 'all' (default: the experiment's default set)")
     run.add_argument("--preset", help="smoke (minutes on a CPU), paper, or another of the experiment's presets "
                                       "(cpu, reference: remidi list EXPERIMENT); default: smoke (a task given "
@@ -263,4 +283,6 @@ def add_commands(sub) -> None:
                          description="List the experiments, one line each; with EXPERIMENT, its algorithms, "
                                      "presets and --set keys (each with its default and what it means).")
     lst.add_argument("experiment", nargs="?", help="this experiment's details")
+    lst.add_argument("--task-arg", dest="task_args", action="append", default=[], metavar="NAME=VALUE",
+                     help="a keyword argument of the task's function (module:function; as remidi run's)")
     lst.set_defaults(func=_cmd_list)

@@ -77,7 +77,8 @@ def saved_experiment(name: str, task: dict | None = None):
                 and isinstance(task.get("folder"), (str, type(None)))):
             raise ConfigError(f"task: must be a record {{\"import\": \"module:function\", \"folder\": ...}}, "
                               f"got {task!r:.120}")
-        return import_experiment(task["import"], folder=task.get("folder"), name=name)
+        return import_experiment(task["import"], folder=task.get("folder"), name=name, args=task.get("args"),
+                                 key="task.args")
     if ":" in name or name in catalog():
         return get_experiment(name)
     raise ConfigError(f"experiment: {name!r} is a task given to run_ued without task_ref, so this run records no import "

@@ -79,6 +79,13 @@ class Experiment:
     # (config, --set overrides, the caller's Naming) → one line a fresh run says first (None: nothing
     # to say), e.g. the defaults an import-path task's run derived from what the task provides
     config_note: Callable[[Any, dict, Naming], str | None] | None = None
+    # (config, overrides) → the config with the keys the experiment derives from others (an import-path
+    # task's buffer sizes and schedule, from num_updates, num_envs, ...) recomputed where the overrides
+    # leave them alone; None: nothing is derived
+    derive_config: Callable[[Any, dict], Any] | None = None
+    # (config, algo) → one line stating the budget ``algo`` gets (its buffers, schedule, score), said at
+    # the start of a fresh run, one line per algorithm; None: not said
+    budget_line: Callable[[Any, str], str | None] | None = None
     shards_seeds: bool = False  # train honours RunContext.devices (remidi run --devices N)
     # preset → {key: why it deviates from the paper}: shown by `remidi list` for presets that stand
     # in for the paper's at a smaller scale (e.g. cpu)
@@ -142,6 +149,8 @@ def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], note
     base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")
     config, note = scale_dependents(apply_overrides(base, overrides, source=naming.overrides), base, overrides,
                                     exp.scaled_keys, exp.divisor_keys, exp.scale_floors, naming.where_set)
+    if exp.derive_config is not None:
+        config = exp.derive_config(config, overrides)
     said = exp.config_note(config, overrides, naming) if exp.config_note is not None else None
     if notes is not None:
         notes.extend(line for line in (said, note) if line is not None)

@@ -9,17 +9,20 @@ Two entry points:
       from remidi import run_ued
       summaries = run_ued(make_task(), {"num_updates": 200}, ["plr", "remidi"], seeds=[0, 1], out="runs/mine")
 
-* Command line: ``remidi run mypkg.tasks:make_task [--algo ...] [--set key=value ...]`` imports
-  ``make_task`` (a function of no arguments returning a ``UEDTask``, or a ``UEDTask``) as Python
-  does, from the current folder first, and runs it on defaults chosen from what the task provides
-  (:func:`task_defaults`: the score, the rollout length, how often to evaluate; said in one line
-  at the start) with your ``--set`` keys.
+* Command line: ``remidi run mypkg.tasks:make_task [--task-arg NAME=VALUE ...] [--algo ...] [--set
+  key=value ...]`` imports ``make_task`` (a function returning a ``UEDTask``, called with the
+  ``--task-arg`` keyword arguments, each value a JSON scalar or else a string; or a ``UEDTask``)
+  as Python does, from the current folder first, and runs it on defaults chosen from what the task
+  provides (:func:`task_defaults`: the score, the rollout length, how often to evaluate; said in
+  one line at the start) and budgets derived from the run's size (:func:`budget_defaults`: one
+  line per algorithm at the start) with your ``--set`` keys.
 
 ``config.json`` records where the task comes from (``"task": {"import": "mypkg.tasks:make_task",
-"folder": the folder it was imported from}``), so ``remidi run --resume DIR`` and ``remidi evaluate
-DIR`` rebuild it from any folder. :func:`run_ued` records it when given ``task_ref=
-"mypkg.tasks:make_task"``; without, the run is resumed with ``run_ued(..., resume=True)`` and
-evaluated with ``evaluate_run(DIR, task=...)`` in Python.
+"folder": the folder it was imported from, "args": the keyword arguments, where any}``), so ``remidi
+run --resume DIR``, ``remidi evaluate DIR`` and ``remidi render DIR`` rebuild the same task from any
+folder. :func:`run_ued` records it when given ``task_ref="mypkg.tasks:make_task"`` (and
+``task_args={...}``); without, the run is resumed with ``run_ued(..., resume=True)`` and evaluated
+with ``evaluate_run(DIR, task=...)`` in Python.
 
 Metrics reported and plotted: ``solve_rate/<set>`` (and ``regret/<set>/mean`` when the task gives
 an optimal return) for each evaluation set, ``replay_fraction/<tag>`` and ``buffer_fraction/<tag>``
@@ -31,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import importlib
+import math
 import os
 import sys
 from pathlib import Path
@@ -39,17 +43,31 @@ from typing import Any, Callable, Sequence
 import jax
 import numpy as np
 
+from remidi.engine.adversaries.accel import EditingBuffers
+from remidi.engine.adversaries.base import RandomLevels
+from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
+from remidi.engine.adversaries.plr import LevelBuffers
+from remidi.engine.adversaries.sfl import LearnabilityBuffers
+from remidi.engine.algorithms import get_algorithm
 from remidi.engine.config import UEDConfig
 from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import PYTHON, ConfigError, Naming, a_type, debugging, user_code_error
-from remidi.experiments.overrides import flat_keys
+from remidi.experiments.overrides import apply_overrides, flat_keys
 from remidi.experiments.base import MAX_SEED, Experiment, RunSpec, parse_algos
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 PRESET = "default"
+FRESH_PER_SLOT = 16  # an import-path task's buffers hold a sixteenth of the fresh levels PLR⊥ evaluates (buffer_capacity) ...
+MIN_CAPACITY, MAX_CAPACITY = 64, 4000  # ... at least 64, at most 4,000 (the paper's maze buffer and JaxUED's)
+SFL_CANDIDATES = 4  # SFL keeps the most learnable quarter of its candidates (budget_defaults)
+SFL_EPISODES = 4  # ... each played this many episodes of the task's bound
+SFL_BATCH_ROLLOUTS = 8  # ... in batches of as many steps as this many training rollouts
+# the keys budget_defaults derives from the run's size (not scaled in proportion to num_updates)
+BUDGET_KEYS = ("buffer.capacity", "remidi.buffer_capacity", "buffer.duplicate_check", "remidi.steps_per_buffer",
+               "sfl.buffer_size", "sfl.rollout_steps", "sfl.batch_size", "sfl.num_batches", "sfl.refresh_every")
 EVALUATIONS = 20  # an import-path task's run evaluates this many times (eval_every = num_updates / 20) ...
 EVAL_FLOOR = 10  # ... but at most every 10 updates: --set num_updates=30 evaluates 3 times, not 30
 MAX_ROLLOUT = 256  # an import-path task's rollouts last its episode bound, at most this (the paper's maze: 256)
@@ -83,8 +101,11 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
         refusal=lambda algo: task_refusal(algo, task),  # --algo all: the algorithms this task can run
         check_step=True,  # warn of a step with randomness of its own under ReMiDi's exact tracker
     ))
+    derived = {} if config is not None else {  # derived from the run's size: recomputed, not scaled
+        "scaled_keys": {length: tuple(k for k in keys if k not in BUDGET_KEYS) for length, keys in exp.scaled_keys.items()},
+        "derive_config": lambda cfg, overrides: budget_defaults(task, cfg, overrides)}
     return dataclasses.replace(exp, task_ref=task_ref, scale_floors={"eval_every": EVAL_FLOOR} if why else {},
-                               config_note=defaults_note(why) if why else None)
+                               config_note=defaults_note(why) if why else None, budget_line=budget_line, **derived)
 
 
 def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
@@ -93,12 +114,17 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
 
     * ``score``: perfect regret where the task gives its optimal return (on the discounted
       utility where it gives the discounted optimum, else ``discounted_regret=false``), else
+      positive value loss where its episodes outlast the rollout (``max_episode_steps`` >
+      :data:`MAX_ROLLOUT`: it scores a truncated rollout by its bootstrapped value), else
       learnability (SFL's p(1 − p), p a level's solve rate) where it defines ``solved``, else
       positive value loss (needs neither);
     * ``num_steps``: the task's episode bound, at most :data:`MAX_ROLLOUT`, so that an episode can
       end inside a rollout (every score reads finished episodes);
     * ``eval_every``: ``num_updates`` / :data:`EVALUATIONS` (scaled with ``--set num_updates=N``,
-      but never below :data:`EVAL_FLOOR` updates)."""
+      but never below :data:`EVAL_FLOOR` updates).
+
+    The algorithms' budgets (buffer sizes, ReMiDi's switch schedule, SFL's refresh) follow the
+    run's size instead, recomputed from the configuration a run resolves: :func:`budget_defaults`."""
     base = UEDConfig()
     why: dict[str, str] = {}
     changes: dict[str, Any] = {}
@@ -107,6 +133,11 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
         if task.optimal_discounted_return is None:
             changes["discounted_regret"] = False
             why["discounted_regret"] = "it gives no discounted optimum: undiscounted regret"
+    elif task.max_episode_steps > MAX_ROLLOUT:
+        changes["score"] = "pvl"
+        why["score"] = (f"the task gives no optimal return and its episodes (up to {task.max_episode_steps} steps) "
+                        f"outlast a rollout (at most {MAX_ROLLOUT}): pvl scores a truncated rollout by its "
+                        f"bootstrapped value")
     elif task.solved is not None:
         changes["score"], why["score"] = "learnability", "the task defines solved but gives no optimal return"
     else:
@@ -118,6 +149,90 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
     changes["eval_every"] = max(base.num_updates // EVALUATIONS, 1)
     why["eval_every"] = f"{EVALUATIONS} evaluations per run, at least {EVAL_FLOOR} updates apart"
     return dataclasses.replace(base, **changes), why
+
+
+def buffer_capacity(config: UEDConfig) -> int:
+    """C, the one buffer capacity of an import-path task's run (PLR⊥, minimax return, ACCEL, each
+    ReMiDi buffer, SFL's kept levels): a sixteenth of the fresh levels PLR⊥ evaluates over the run,
+    ``num_updates × num_envs × (1 − buffer.replay_prob)``, rounded up and clamped to
+    [:data:`MIN_CAPACITY`, :data:`MAX_CAPACITY`]. A buffer then keeps about the best sixteenth of
+    what the generator offers (replay stays selective) while each level it holds can be replayed
+    about 16·p/(1 − p) times (64 at p = 0.8), enough for its score to follow the agent."""
+    fresh = config.num_updates * config.num_envs * (1.0 - config.buffer.replay_prob)
+    return int(min(max(math.ceil(fresh / FRESH_PER_SLOT), MIN_CAPACITY), MAX_CAPACITY))
+
+
+def budget_defaults(task: UEDTask, config: UEDConfig, overrides: dict[str, Any]) -> UEDConfig:
+    """``config`` (a run's, its overrides applied) with the budget keys (:data:`BUDGET_KEYS`) that
+    ``overrides`` leave alone derived from its other keys, so that they follow ``--set
+    num_updates=N`` (and ``num_envs``, ``buffer.replay_prob``, ``remidi.num_buffers``,
+    ``num_steps``, ``eval_every``); a key the overrides set is kept as set:
+
+    * one capacity C for every buffer (:func:`buffer_capacity`; a capacity set by hand,
+      ``buffer.capacity`` or else ``remidi.buffer_capacity``, is C): ``buffer.capacity`` (PLR⊥,
+      minimax return, ACCEL), ``remidi.buffer_capacity`` (each of ReMiDi's adversaries is a PLR⊥
+      over its phase), ``sfl.buffer_size``;
+    * ``buffer.duplicate_check`` true: a small level space repeats levels, and a repeated level
+      updates its entry instead of filling the buffer with copies;
+    * ``remidi.steps_per_buffer`` = ⌈num_updates / remidi.num_buffers⌉: the switches spread over the run;
+    * SFL keeps the C most learnable of 4·C candidates (published: 1,000 of 25,000), each played
+      ``sfl.rollout_steps`` = 4 episodes of the task's bound (at most 4 × :data:`MAX_ROLLOUT`), in
+      batches whose rollouts hold about as many steps as 8 training rollouts (``sfl.batch_size`` =
+      ⌈8 · num_envs · num_steps / rollout_steps⌉, at most 4·C; ``sfl.num_batches`` = ⌈4·C /
+      batch_size⌉), refreshed every ``eval_every`` updates (published: the evaluation period)."""
+    given = set(overrides)
+    if "buffer.capacity" in given:
+        capacity = config.buffer.capacity
+    elif "remidi.buffer_capacity" in given:
+        capacity = config.remidi.buffer_capacity
+    else:
+        capacity = buffer_capacity(config)
+    kept = config.sfl.buffer_size if "sfl.buffer_size" in given else capacity
+    rollout = config.sfl.rollout_steps if "sfl.rollout_steps" in given else \
+        SFL_EPISODES * min(task.max_episode_steps, MAX_ROLLOUT)
+    candidates = SFL_CANDIDATES * kept
+    batch = config.sfl.batch_size if "sfl.batch_size" in given else \
+        min(candidates, max(1, math.ceil(SFL_BATCH_ROLLOUTS * config.num_envs * config.num_steps / rollout)))
+    derived = {
+        "buffer.capacity": capacity, "remidi.buffer_capacity": capacity, "buffer.duplicate_check": True,
+        "remidi.steps_per_buffer": max(1, math.ceil(config.num_updates / max(1, config.remidi.num_buffers))),
+        "sfl.buffer_size": kept, "sfl.rollout_steps": rollout, "sfl.batch_size": batch,
+        "sfl.num_batches": max(1, math.ceil(candidates / batch)), "sfl.refresh_every": max(1, config.eval_every),
+    }
+    return apply_overrides(config, {k: v for k, v in derived.items() if k not in given}, source="task budgets")
+
+
+def budget_line(config: UEDConfig, algo_name: str) -> str | None:
+    """The one line a fresh run says of ``algo_name``'s budget under ``config``: its buffers (how
+    many, how large, what a duplicate does), ReMiDi's switches, SFL's refresh, the replay
+    probability and the score; None for an algorithm of an adversary it does not know."""
+    algo = get_algorithm(algo_name)
+    adversary, b, r, s = algo.adversary, config.buffer, config.remidi, config.sfl
+    score = f"score {algo.score_name(config.score)}"
+    many = r.num_buffers if algo.buffer_sequence else 1
+    size = r.buffer_capacity if algo.buffer_sequence else None
+    switch = (f", switch every {r.steps_per_buffer:,} {'updates' if r.count == 'updates' else 'replays'}"
+              if algo.buffer_sequence and many > 1 else "")
+    if isinstance(adversary, LearnabilityBuffers):
+        kept = size if size is not None else s.buffer_size
+        buffers = f"{many} buffers of {kept:,}{switch}" if algo.buffer_sequence else f"1 buffer of {kept:,} levels"
+        return (f"{algo.name}: {buffers}, the most learnable of {s.batch_size * s.num_batches:,} candidates "
+                f"({s.num_batches:,} batches of {s.batch_size:,}, {s.rollout_steps:,} steps each) every "
+                f"{s.refresh_every:,} updates; {s.sampled_envs_ratio:g} of each update's levels from it")
+    if isinstance(adversary, LevelBuffers):
+        duplicates = "duplicates update their entry" if b.duplicate_check else "no duplicate check"
+        buffers = (f"{many} buffers of {size:,} ({duplicates}){switch}" if algo.buffer_sequence else
+                   f"1 buffer of {b.capacity:,} levels ({duplicates})")
+        edits = f", {config.accel.num_edits} edits per edited level" if isinstance(adversary, EditingBuffers) else ""
+        return f"{algo.name}: {buffers}, replay {b.replay_prob:g}{edits}, {score}"
+    if isinstance(adversary, RandomLevels):
+        return f"{algo.name}: no buffer, {config.num_envs} fresh levels every update"
+    if isinstance(adversary, (LevelGenerator, GeneratorSequence)):
+        more = f"{r.num_buffers} generators, switch every {r.steps_per_buffer:,} updates, " \
+            if isinstance(adversary, GeneratorSequence) else ""
+        return f"{algo.name}: {more}a learned generator ({config.paired.generator_network}), estimator " \
+               f"{config.paired.estimator}"
+    return None
 
 
 def defaults_note(why: dict[str, str]):
@@ -134,7 +249,8 @@ def defaults_note(why: dict[str, str]):
 
 def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str | Sequence[str],
             seeds: int | Sequence[int], out: str | Path, *, progress: bool = True, resume: bool = False,
-            name: str = "custom", task_ref: str | None = None) -> dict[str, dict]:
+            name: str = "custom", task_ref: str | None = None,
+            task_args: dict[str, Any] | None = None) -> dict[str, dict]:
     """Train ``task`` with each of ``algos`` (``dr``, ``plr``, ``minimax-return``, ``remidi``, ...:
     a list or a comma-separated string, or ``"all"``) over ``seeds`` (a list of seeds, or how many:
     ``2`` is ``[0, 1]``) and write the standard outputs into ``out`` (one sub-folder per algorithm
@@ -152,12 +268,21 @@ def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str
     and ``remidi evaluate OUT`` can rebuild the task from any folder; checked to import (not
     called) before anything is written. Without it the command line cannot rebuild the task (it
     says so): resume with ``resume=True`` here and evaluate with
-    ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``."""
+    ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``.
+
+    ``task_args``: the keyword arguments ``task`` was built with (``task_ref``'s function called as
+    ``make_task(**task_args)``; JSON scalars: str, int, float, bool, None), recorded beside the
+    import path so that ``--resume`` and ``remidi evaluate`` rebuild the same task; checked against
+    the function's parameters (one line naming a wrong one) before anything is written."""
     naming = python_naming(config)
     if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
         raise ConfigError(f"out: must be a folder path (a str or a Path), got {out!r}")
     whole, overrides = config_argument(config)
-    record = task_source(task_ref) if task_ref is not None else None
+    if task_args is not None and task_ref is None:
+        raise ConfigError("task_args: records how task_ref's function built the task, so it needs task_ref "
+                          "(e.g. task_ref='mypkg.tasks:make_task', task_args={'size': 9})")
+    args = task_args_argument(task_args, "task_args")
+    record = task_source(task_ref, args=args, key="task_args") if task_ref is not None else None
     exp = task_experiment(name, lambda: task, whole, task_ref=record)
     if resume:
         return resume_experiment(lambda *_: exp, Path(out), progress=progress, naming=naming)
@@ -188,6 +313,81 @@ def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
         raise ConfigError(f"config: must be a dict of UEDConfig keys (e.g. {{'num_updates': 200, 'ppo.lr': 3e-4}}) "
                           f"or a UEDConfig, got {_described(config)}")
     return None, flat_keys(config)
+
+
+SCALARS = (str, int, float, bool, type(None))  # what a task argument may be: JSON gives it back as it was
+
+
+def task_args_argument(args, key: str = "task_args") -> dict[str, Any]:
+    """``args`` (a dict of keyword arguments for a task's function, or None: none) checked to be
+    what ``config.json`` records and gives back unchanged: str keys, JSON scalar values (str, int,
+    float, bool, None; a finite float). ConfigError (one line, naming ``key`` and the argument)."""
+    if args is None:
+        return {}
+    if not isinstance(args, dict) or not all(isinstance(name, str) and name.isidentifier() for name in args):
+        raise ConfigError(f"{key}: must be a dict of keyword arguments (e.g. {{'size': 9, 'dark': True}}), "
+                          f"got {_described(args)}")
+    for name, value in args.items():
+        if not isinstance(value, SCALARS) or (isinstance(value, float) and not math.isfinite(value)):
+            raise ConfigError(f"{key}: {name} must be a JSON scalar (str, int, float, bool or None) for config.json "
+                              f"to record it, got {_described(value)}")
+    return dict(args)
+
+
+def parse_task_args(items: Sequence[str], key: str = "--task-arg") -> dict[str, Any]:
+    """``["size=9", "dark=true", "name=big"]`` → ``{"size": 9, "dark": True, "name": "big"}``: each
+    value read as a JSON scalar (a number, ``true``/``false``, ``null``, a quoted string), else kept
+    as the string given; a name given twice keeps the last. ConfigError (one line) for an item that
+    is not ``NAME=VALUE`` with NAME a Python identifier."""
+    import json
+
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name.isidentifier():
+            raise ConfigError(f"{key}: expected NAME=VALUE (NAME a keyword argument of the task's function), "
+                              f"got {item!r}")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            value = text
+        out[name] = value if isinstance(value, SCALARS) and value not in (float("inf"), float("-inf")) else text
+    return out
+
+
+def check_task_args(target, path: str, args: dict[str, Any], key: str = "--task-arg") -> None:
+    """ConfigError (one line) unless ``target`` (the attribute ``path`` names) can be called with
+    ``args`` as keyword arguments: a name that is none of its parameters, a required parameter
+    left out, or arguments for a ``UEDTask`` (no function), each said with the parameters it takes."""
+    import inspect
+
+    if isinstance(target, UEDTask) or not callable(target):
+        if args:
+            raise ConfigError(f"{key}: {path} is {a_type(target)}, not a function: it takes no arguments "
+                              f"(given: {', '.join(args)})")
+        return
+    try:
+        signature = inspect.signature(target)
+    except (TypeError, ValueError):  # a builtin without a signature: its own call says what is wrong
+        return
+    params = [p for p in signature.parameters.values() if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    accepted = ", ".join(p.name for p in params) or "none"
+    takes_any = any(p.kind == p.VAR_KEYWORD for p in signature.parameters.values())
+    for name in args:
+        named = [p for p in params if p.name == name]
+        if not takes_any and (not named or named[0].kind == named[0].POSITIONAL_ONLY):
+            raise ConfigError(f"{key}: {name} is no parameter of {path}; it accepts: {accepted}")
+    try:
+        signature.bind(**args)
+    except TypeError as err:
+        raise ConfigError(f"{key}: {path} cannot be called with {_shown(args)} ({err}); it accepts: {accepted}") \
+            from None
+
+
+def _shown(args: dict[str, Any]) -> str:
+    """``size=9, dark=True``, or ``no arguments``."""
+    return ", ".join(f"{name}={value!r}" for name, value in args.items()) or "no arguments"
 
 
 def algos_argument(algos) -> str:
@@ -224,6 +424,18 @@ def _described(value) -> str:
     """``value`` for a message: its repr where short, else its type's name."""
     text = repr(value)
     return text if len(text) <= 60 else a_type(value)
+
+
+def _parameters(target) -> str:
+    """The names of ``target``'s parameters, comma-separated (``none``; ``?`` where unknown)."""
+    import inspect
+
+    try:
+        names = [p.name for p in inspect.signature(target).parameters.values()
+                 if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    except (TypeError, ValueError):
+        return "?"
+    return ", ".join(names) or "none"
 
 
 def _split(path: str) -> tuple[str, str]:
@@ -273,34 +485,53 @@ def _module_folder(module, module_name: str) -> str:
     return str(path.parents[depth])
 
 
-def task_source(path: str, folder: str | None = None) -> dict[str, str]:
+def task_source(path: str, folder: str | None = None, args: dict[str, Any] | None = None,
+                key: str = "--task-arg") -> dict[str, Any]:
     """``{"import": path, "folder": F}`` for ``module:attribute``, ``F`` the folder the module is
-    imported from (looked up in ``folder``, default the current one, then the installed packages).
-    ConfigError (one line) when the module cannot be imported or lacks the attribute."""
+    imported from (looked up in ``folder``, default the current one, then the installed packages),
+    with ``"args": args`` where the attribute is called with keyword arguments (checked against
+    its parameters: :func:`check_task_args`, ``key`` naming them in the error). ConfigError (one
+    line) when the module cannot be imported, lacks the attribute or does not take ``args``."""
     module_name, attribute = _split(path)
     module = _import(module_name, folder)
-    if getattr(module, attribute, None) is None:
+    target = getattr(module, attribute, None)
+    if target is None:
         raise ConfigError(f"experiment: {module_name} has no {attribute}")
-    return {"import": path, "folder": _module_folder(module, module_name)}
+    check_task_args(target, path, args or {}, key)
+    return {"import": path, "folder": _module_folder(module, module_name), **({"args": dict(args)} if args else {})}
 
 
-def import_experiment(path: str, folder: str | None = None, name: str | None = None) -> Experiment:
-    """The experiment of ``module:attribute``: the attribute a ``UEDTask`` or a function of no
-    arguments returning one, the module imported from ``folder`` (default: the current folder)
-    first, then from the installed packages. Named ``name`` (default: ``path``). ConfigError (one
-    line) when it cannot be imported or is neither."""
+def import_experiment(path: str, folder: str | None = None, name: str | None = None,
+                      args: dict[str, Any] | None = None, key: str = "--task-arg") -> Experiment:
+    """The experiment of ``module:attribute``: the attribute a ``UEDTask`` or a function returning
+    one, called with the keyword arguments ``args`` (none by default; recorded in ``config.json``),
+    the module imported from ``folder`` (default: the current folder) first, then from the
+    installed packages. Named ``name`` (default: ``path``). ConfigError (one line) when it cannot
+    be imported or is neither, or when ``args`` do not fit the function (``key`` names them: a name
+    it does not take, or a TypeError it raises on them)."""
+    import json
+
     module_name, attribute = _split(path)
-    record = task_source(path, folder)
-    known = (path, record["folder"], name or path)
+    args = task_args_argument(args, key)
+    record = task_source(path, folder, args, key)
+    known = (path, record["folder"], name or path, json.dumps(args, sort_keys=True))
     if known in _IMPORTED:  # one task object per process: its compiled programs are reused (UEDTask
         return _IMPORTED[known]  # compares by identity), e.g. by every algorithm of an evaluated run
     target: Any = getattr(importlib.import_module(module_name), attribute)
-    make = target if callable(target) and not isinstance(target, UEDTask) else (lambda: target)
+    make = (lambda: target(**args)) if callable(target) and not isinstance(target, UEDTask) else (lambda: target)
     try:
         with _folder_on_path(record["folder"]):  # what the task builder imports is found beside it
             exp = task_experiment(name or path, make, description=f"the UEDTask of {path}", task_ref=record)
     except ConfigError:
         raise
+    except TypeError as err:  # the function refused its arguments (or has a TypeError of its own: said)
+        if debugging():
+            raise
+        if not args:
+            raise user_code_error(f"experiment: building the task of {path}", err) from None
+        detail = (str(err).strip().splitlines() or [""])[0]
+        raise ConfigError(f"{key}: {path} refused {_shown(args)} (TypeError: {detail}); it accepts: "
+                          f"{_parameters(target)}") from None
     except (Exception, SystemExit) as err:  # the user's task builder (a SystemExit too: no silent exit 0)
         if debugging():
             raise

@@ -143,3 +143,25 @@ def test_resume_evaluate_and_render_rebuild_the_task_with_its_arguments_from_any
     assert str(err.value) == (f"--resume: {run / 'config.json'}: task.args: size is no parameter of "
                               f"{MODULE}:make_sized; it accepts: max_steps, hidden")
     assert task_source(f"{MODULE}:make_sized", str(here))["folder"] == str(here.resolve())
+
+
+TINY_SETS = ["--set", "num_updates=2", "--set", "eval_every=1", "--set", "checkpoint_every=1", "--set", "num_envs=4",
+             "--set", "eval_attempts=1", "--set", "ppo.epochs=1", "--set", "ppo.minibatches=1", "--set", "hidden_size=16"]
+
+
+@pytest.mark.slow  # trains two updates of PLR⊥, resumes and evaluates them: compiles for about 15 s
+def test_the_command_line_trains_resumes_and_evaluates_with_the_recorded_arguments(here, tmp_path, monkeypatch,
+                                                                                  capsys):
+    run = tmp_path / "run"
+    assert main(["run", f"{MODULE}:make_sized", "--task-arg", "max_steps=12", "--algo", "plr", "--seeds", "1",
+                 "--out", str(run), "--quiet", *TINY_SETS]) == 0, capsys.readouterr().err
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["task"]["args"] == {"max_steps": 12} and saved["config"]["num_steps"] == 12
+    assert "remidi: plr: 1 buffer of 64 levels (duplicates update their entry)" in capsys.readouterr().err
+    (run / "summary.json").unlink()  # unfinished again: --resume trains from its last checkpoint
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delitem(sys.modules, MODULE)
+    assert main(["run", "--resume", str(run), "--quiet"]) == 0, capsys.readouterr().err
+    assert main(["evaluate", str(run), "--attempts", "1", "--cvar-levels", "4", "--cvar-attempts", "1"]) == 0, \
+        capsys.readouterr().err
+    assert (run / "evaluate.json").exists()

@@ -31,7 +31,7 @@ def make_sized(max_steps=14, hidden=True):
     return dataclasses.replace(make_task(), max_episode_steps=max_steps)
 
 
-def make_required(size):
+def make_required(size, hidden=True):
     return make_sized(size)
 
 
@@ -76,8 +76,8 @@ def test_the_arguments_build_the_task_and_are_recorded_beside_the_import_path(he
     ("make_sized", {"size": 9}, "--task-arg: size is no parameter of {m}:make_sized; it accepts: max_steps, hidden"),
     ("make_sized", {"max_steps": "long"}, "--task-arg: {m}:make_sized refused max_steps='long' (TypeError: max_steps "
                                           "must be an integer, got 'long'); it accepts: max_steps, hidden"),
-    ("make_required", {}, "--task-arg: {m}:make_required cannot be called with no arguments (missing a required "
-                          "argument: 'size'); it accepts: size"),
+    ("make_required", {"hidden": False}, "--task-arg: {m}:make_required cannot be called with hidden=False (missing "
+                                         "a required argument: 'size'); it accepts: size, hidden"),
     ("make_task", {"size": 9}, "--task-arg: size is no parameter of {m}:make_task; it accepts: none"),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_the_accepted_parameters(here, path, args, message):

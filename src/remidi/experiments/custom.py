@@ -359,7 +359,8 @@ def parse_task_args(items: Sequence[str], key: str = "--task-arg") -> dict[str, 
 def check_task_args(target, path: str, args: dict[str, Any], key: str = "--task-arg") -> None:
     """ConfigError (one line) unless ``target`` (the attribute ``path`` names) can be called with
     ``args`` as keyword arguments: a name that is none of its parameters, a required parameter
-    left out, or arguments for a ``UEDTask`` (no function), each said with the parameters it takes."""
+    left out where some are given, or arguments for a ``UEDTask`` (no function), each said with the
+    parameters it takes."""
     import inspect
 
     if isinstance(target, UEDTask) or not callable(target):
@@ -379,7 +380,8 @@ def check_task_args(target, path: str, args: dict[str, Any], key: str = "--task-
         if not takes_any and (not named or named[0].kind == named[0].POSITIONAL_ONLY):
             raise ConfigError(f"{key}: {name} is no parameter of {path}; it accepts: {accepted}")
     try:
-        signature.bind(**args)
+        if args:  # none given: a function that needs some fails when it is called, as any other error of its own
+            signature.bind(**args)
     except TypeError as err:
         raise ConfigError(f"{key}: {path} cannot be called with {_shown(args)} ({err}); it accepts: {accepted}") \
             from None

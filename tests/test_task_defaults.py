@@ -67,7 +67,7 @@ def test_a_short_run_evaluates_every_ten_updates_and_the_defaults_are_said_in_on
     assert given.config_factory() == UEDConfig(eval_every=50) and given.config_note is None
 
 
-def test_the_exact_trackers_cost_is_said_with_the_option_that_lowers_it():
+def test_the_exact_trackers_cost_is_said_with_the_option_that_lowers_it(task):
     """engine/trackers.tracker_cost_note: ReMiDi with a frozen adversary and at least 8 slots per env
     (or the reference tracker) is said, naming remidi.tracker_budget and tracker_overflow; PLR⊥, a
     single buffer, a learned tracker or few slots are not."""
@@ -79,7 +79,8 @@ def test_the_exact_trackers_cost_is_said_with_the_option_that_lowers_it():
 
     def note(deterministic=True, **remidi):
         cfg = UEDConfig(remidi=ReMiDiConfig(**{"num_buffers": 2, "buffer_capacity": 512, **remidi}))
-        return tracker_cost_note(SimpleNamespace(deterministic_reset=deterministic), cfg, get_algorithm("remidi"))
+        return tracker_cost_note(dataclasses.replace(task, deterministic_reset=deterministic), cfg,
+                                 get_algorithm("remidi"))  # a task whose observations the belief tracker reads
 
     line = note()
     assert line.startswith("ReMiDi's exact tracker steps up to 64 frozen levels (remidi.tracker_budget=64) beside "

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from remidi.engine.core.distributions import acting, for_task
 from remidi.engine.core.rollout import Policy, Stepping, combine, rollout
 from remidi.engine.learner import combines
+from remidi.engine.run.buffer_eval import buffer_solve_rates
 from remidi.engine.setup import Setup, policy_apply
 from remidi.engine.train import Runner
 from remidi.envs.interface import UEDTask
@@ -124,7 +125,9 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
             regret = set_optimal - expected
             out[f"regret/{name}/mean"] = jnp.mean(regret)
             out[f"regret/{name}/worst"] = jnp.max(regret)
-    return out
+    # each buffer's levels (a buffer sequence): what the policy keeps of a frozen buffer
+    return {**out, **buffer_solve_rates(setup, runner, jax.random.fold_in(rng, 1 << 20),
+                                        lambda *a: (*level_returns(*a), None), action)}
 
 
 def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:

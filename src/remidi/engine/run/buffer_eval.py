@@ -1,0 +1,49 @@
+"""``buffer_solve_rate/b<k>``: the current policy's solve rate on the levels of each buffer of a
+buffer sequence (ReMiDi), so that a curve shows what the agent keeps of a frozen buffer after
+the switch (docs/retention.md).
+
+Each buffer's valid levels (at most :data:`MAX_LEVELS` of them, drawn uniformly without
+replacement when it holds more) are played as the evaluation sets are: ``eval_attempts`` sampled
+episodes each, the first episode's return judged by the task's ``solved``; the rate is the mean
+over the buffer's levels and attempts. NaN for a buffer without a valid level (a buffer not yet
+reached). Nothing for an algorithm without a buffer sequence or a task without ``solved``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+#: levels played per buffer at most (a buffer of PLR⊥'s published 4,000 would cost 40,000
+#: episodes per evaluation; 256 give the rate to about ±0.03)
+MAX_LEVELS = 256
+
+
+def buffer_solve_rates(setup, runner, rng, level_episodes, action: str = "sample") -> dict[str, jax.Array]:
+    """``{"buffer_solve_rate/b<k>": f32[]}`` for each of the K buffers of ``runner.adversary``,
+    the episodes played by ``level_episodes(setup, runner, env, levels, attempts, rng, action) ->
+    (returns, discounted, flags | None)`` (:func:`remidi.engine.run.evaluation.level_episodes`,
+    as the evaluation sets are: under ``remidi.policy=combine`` the combined policy) and judged by
+    the task's ``solved``."""
+    task = setup.task
+    if not setup.algo.buffer_sequence or task.solved is None:
+        return {}
+    buffers = runner.adversary.buffers
+    valid = buffers.valid  # bool[K, C]
+    k, capacity = valid.shape
+    if capacity == 0:  # a generator sequence keeps no levels
+        return {}
+    m = min(capacity, MAX_LEVELS)
+    k_pick, k_play = jax.random.split(rng)
+    # valid slots first, in random order: the first m are a uniform draw without replacement
+    _, slots = jax.lax.top_k(jnp.where(valid, jax.random.uniform(k_pick, (k, capacity)), -1.0), m)  # i32[K, m]
+    picked = jnp.take_along_axis(valid, slots, axis=1)  # bool[K, m]
+    levels = jax.tree.map(lambda x: jax.vmap(lambda xs, s: xs[s])(x, slots).reshape((k * m,) + x.shape[2:]),
+                          buffers.levels)
+    returns, _, flags = level_episodes(setup, runner, task.env, levels, setup.cfg.eval_attempts, k_play, action)
+    # an info key's flags where the task's solved names one, else its function of the return
+    solved = (task.solved(returns) if flags is None else flags).astype(jnp.float32)  # [K·m, attempts]
+    solved = jnp.mean(solved, axis=1).reshape(k, m)  # per level
+    count = jnp.sum(picked, axis=1)
+    rate = jnp.where(count > 0, jnp.sum(jnp.where(picked, solved, 0.0), axis=1) / jnp.maximum(count, 1), jnp.nan)
+    return {f"buffer_solve_rate/b{b}": rate[b] for b in range(k)}

@@ -48,25 +48,26 @@ def test_score_formulas():
 
 
 # [T=4, N=3]. env 0: episodes [t0] and [t1..t3]; env 1: episode [t0], then an unfinished tail;
-# env 2: no finished episode.
+# env 2: no finished episode (scored from its truncated rollout: tests/test_long_episode_scores.py).
 X = jnp.array([[1.0, 2.0, 5.0], [3.0, -1.0, 5.0], [-2.0, 4.0, 5.0], [6.0, 8.0, 5.0]])
 EPISODE_DONE = jnp.array([[True, True, False], [False, False, False], [False, False, False], [True, False, False]])
 MAX_RETURN = jnp.array([4.0, 3.0, 1.0])
 # PVL: max(X, 0) per episode: env 0 -> mean(1, mean(3, 0, 6) = 3) = 2; env 1 -> 2 (tail left out)
-PVL = [2.0, 2.0, -np.inf]
+PVL = [2.0, 2.0, 5.0]  # env 2: the mean of max(X, 0) over all its steps
 # MaxMC with values X: max_return - X is env 0 [3, 1, 6, -2] -> mean(3, 5/3) = 7/3; env 1 [1, ...] -> 1
-MAXMC = [7 / 3, 1.0, -np.inf]
+# env 2 (advantages X too): max(1, V_0 + A_0 = 10) − 5 at every step -> 5
+MAXMC = [7 / 3, 1.0, 5.0]
 
 
 def test_pvl_and_maxmc_average_per_finished_episode():
     np.testing.assert_allclose(sc.positive_value_loss(X, EPISODE_DONE), PVL, rtol=1e-6)
-    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, EPISODE_DONE), MAXMC, rtol=1e-6)
+    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, EPISODE_DONE, X), MAXMC, rtol=1e-6)
 
 
 def test_one_step_episodes_reduce_to_the_mean_over_steps():
     done = jnp.ones_like(EPISODE_DONE)
     np.testing.assert_allclose(sc.positive_value_loss(X, done), [2.5, 3.5, 5.0], rtol=1e-6)
-    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, done), [2.0, -0.25, -4.0], rtol=1e-6)
+    np.testing.assert_allclose(sc.max_mc(X, MAX_RETURN, done, X), [2.0, -0.25, -4.0], rtol=1e-6)
 
 
 def test_score_levels_dispatches_by_name():
@@ -94,8 +95,10 @@ def test_pvl_and_maxmc_agree_with_jaxued(monkeypatch):
     x = jax.random.normal(k_x, (40, 6))
     done = (jax.random.uniform(k_done, (40, 6)) < 0.15).at[:, 0].set(False)  # env 0: no finished episode
     max_return = jax.random.normal(k_max, (6,))
-    np.testing.assert_allclose(sc.positive_value_loss(x, done), ref.positive_value_loss(done, x), rtol=1e-5)
-    np.testing.assert_allclose(sc.max_mc(x, max_return, done), ref.max_mc(done, x, max_return), rtol=1e-5)
+    # where an episode ended; env 0 (none: the references' -inf) is scored from its truncated rollout
+    np.testing.assert_allclose(sc.positive_value_loss(x, done)[1:], ref.positive_value_loss(done, x)[1:], rtol=1e-5)
+    np.testing.assert_allclose(sc.max_mc(x, max_return, done, x)[1:], ref.max_mc(done, x, max_return)[1:], rtol=1e-5)
+    assert np.isfinite(sc.positive_value_loss(x, done)[0]) and np.isfinite(sc.max_mc(x, max_return, done, x)[0])
 
 
 def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
@@ -118,7 +121,7 @@ def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
     reward[-1] = 1 - 0.9 * steps / M.MAX_STEPS
     done = np.zeros((steps, 1), bool)
     done[-1] = True
-    traj = SimpleNamespace(reward=jnp.asarray(reward), done=jnp.asarray(done), value=jnp.zeros((steps, 1)))
+    traj = SimpleNamespace(reward=jnp.asarray(reward), done=jnp.asarray(done), value=jnp.zeros((steps, 1)), solved=None)
     mean_return = jnp.asarray(reward.sum(0))
 
     def level_score(c):
@@ -164,7 +167,7 @@ def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion
     task = lever_task(64)
     cfg = dataclasses.replace(paper_config(), score="learnability")
     reward = jnp.asarray([[1.0, -10.0], [-1.0, -10.0], [1.0, 10.0], [1.0, -10.0]])  # one-step episodes
-    traj = SimpleNamespace(reward=reward, done=jnp.ones((4, 2), bool), value=jnp.zeros((4, 2)))
+    traj = SimpleNamespace(reward=reward, done=jnp.ones((4, 2), bool), value=jnp.zeros((4, 2)), solved=None)
     levels = jax.tree.map(lambda x: x[:2], task.eval_sets["visible"])
     got = score_rollout(make_setup(task, cfg, "plr"), levels, traj, jnp.zeros((4, 2)), jnp.zeros(2), jnp.zeros(2))
     np.testing.assert_allclose(got, [0.75 * 0.25, 0.25 * 0.75])

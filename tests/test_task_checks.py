@@ -167,8 +167,9 @@ def test_the_command_line_reports_a_broken_task_in_one_line(tmp_path, monkeypatc
 
 
 def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corridor):
-    """perfect_regret scores an unfinished episode by its partial return, pvl by -inf: both are
-    warned of when num_steps is shorter than an episode can last (the registry says which)."""
+    """perfect_regret scores an unfinished episode by its partial return, learnability by -inf: both
+    are warned of when num_steps is shorter than an episode can last (the registry says which); pvl
+    and maxmc score a truncated rollout by the critic's bootstrap, so they are not."""
     from remidi.engine.adversaries.scores import SCORES
     from remidi.engine.run.validation import run_warnings
 
@@ -178,10 +179,11 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
     assert warning.startswith("score perfect_regret uses the episodes that end inside a rollout, but num_steps (4) "
                               "is shorter than an episode can last (14): levels whose episode does not end are "
                               "scored by the reward collected so far"), warning
-    (warning,) = run_warnings(dataclasses.replace(short, score="pvl"), "plr", task)
-    assert "score -inf and are never inserted" in warning
+    (warning,) = run_warnings(dataclasses.replace(short, score="learnability"), "plr", task)
+    assert "score -inf and are never inserted" in warning and warning.endswith(", or --set score=pvl"), warning
+    assert run_warnings(dataclasses.replace(short, score="pvl"), "plr", task) == []
     assert run_warnings(dataclasses.replace(TINY, num_steps=14), "plr", task) == []
-    assert all(score.needs_finished_episodes for score in SCORES.values())  # every built-in score reads episodes
+    assert [s.name for s in SCORES.values() if not s.needs_finished_episodes] == ["pvl", "maxmc"]
 
 
 def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(corridor, tmp_path, capsys, monkeypatch):
@@ -211,7 +213,7 @@ def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(c
         "levels whose episode does not end are scored by the reward collected so far as if the episode had ended "
         "(a goal not yet reached looks like a failure); with neg_return, levels whose episode does not end are "
         "scored by the reward collected so far as if the episode had ended; config.num_steps=14 (or more) scores "
-        "every level by a finished episode"], warnings
+        "every level by a finished episode, or config.score=pvl"], warnings
 
 
 def test_the_short_rollout_warning_names_the_preset_that_chose_num_steps():
@@ -226,7 +228,8 @@ def test_the_short_rollout_warning_names_the_preset_that_chose_num_steps():
     assert warning.startswith("scores perfect_regret (plr, remidi) and neg_return (minimax-return) use the episodes "
                               "that end inside a rollout, but num_steps (64, the smoke preset's choice for a short "
                               "run) is shorter than an episode can last (250)"), warning
-    assert warning.endswith("; --set num_steps=250 (or more) scores every level by a finished episode"), warning
+    assert warning.endswith("; --set num_steps=250 (or more) scores every level by a finished episode, or "
+                            "--set score=pvl"), warning
     own = {"num_steps": 100}
     (warning,) = exp.run_warnings(RunSpec(exp, algos, "smoke", [0, 1], own), resolve_config(exp, "smoke", own))
     assert "num_steps (100) is shorter" in warning and "preset" not in warning

@@ -171,8 +171,8 @@ def test_a_scores_declared_needs_are_what_validation_checks():
     from remidi.engine.adversaries.scores import SCORES
 
     needs = {name: (s.needs_optimum, s.needs_solved, s.needs_finished_episodes) for name, s in SCORES.items()}
-    assert needs == {"perfect_regret": (True, False, True), "pvl": (False, False, True),
-                     "maxmc": (False, False, True), "neg_return": (False, False, True),
+    assert needs == {"perfect_regret": (True, False, True), "pvl": (False, False, False),
+                     "maxmc": (False, False, False), "neg_return": (False, False, True),
                      "learnability": (False, True, True)}
     bare = dataclasses.replace(TASK, optimal_return=None, solved=None)
     with pytest.raises(ConfigError, match=r"^score: learnability needs a solve criterion.*; allowed: pvl, maxmc, "

@@ -16,18 +16,34 @@ Higher = replayed more.
   the level − V(s_t)); then the mean over the finished episodes.
 * ``neg_return``: −mean episodic return (minimax return).
 * ``learnability`` (Rutherford et al. 2024, "No Regrets", SFL): p·(1 − p), p the share of the
-  level's episodes that ended inside the rollout and were solved (the task's ``solved`` on the
-  episode's return); highest for levels the agent solves half of the time.
+  level's episodes that ended inside the rollout and were solved (the task's ``solved``: on the
+  episode's return, or its last step's info flag, :func:`episode_solved`); highest for levels
+  the agent solves half of the time.
 
 PVL and MaxMC follow Jiang et al. (2021), "Prioritized Level Replay", as its reference
 implementations compute them (minimax's ``ued_scores.py``, and jaxued's ``positive_value_loss``
-and ``max_mc`` derived from it): an episode's score is its per-step average, the level's score
-is the average over the episodes that *ended* inside the rollout, and the steps of an
-unfinished trailing episode are left out. A rollout **without any finished episode** scores
-``-inf`` (PVL, MaxMC and learnability alike) (the references' ``incomplete_value``): a fresh level scored so is never inserted into
-the buffer, and a replayed one ranks last until it is scored again (staleness can still replay
-it). Make the rollout longer than an episode (``num_steps`` ≥ the episode limit) to score
-every level.
+and ``max_mc`` derived from it) wherever an episode ends inside the rollout: an episode's score is
+its per-step average, the level's score is the average over the episodes that *ended* inside the
+rollout, and the steps of an unfinished trailing episode are left out (they would add the
+critic's guess at the episode's end to scores of whole episodes; leaving them out keeps the
+references' values).
+
+A rollout **without any finished episode** (an episode longer than the rollout: Craftax's
+10,000 steps against 64–256-step rollouts) is scored from its truncated episode, bootstrapped by
+the critic, so that such levels are ranked instead of all scoring ``-inf`` (the references'
+``incomplete_value``, under which a buffer of such levels never grows past one level):
+
+* PVL: the mean over the rollout's steps of max(A_t, 0), A the GAE advantages, which already
+  bootstrap from V(s_T) after the rollout's last step (``engine/core/ppo.py``'s ``compute_gae``);
+* MaxMC: the mean over the steps of (best − V(s_t)), best the higher of the level's record (the
+  best return of an episode that ended on it, −inf while none has) and the truncated episode's
+  bootstrapped return V(s_0) + A_0 (GAE's target at its first step: the λ-return PPO fits the
+  critic to). That estimate ranks this rollout only; the record keeps finished episodes alone.
+
+``learnability`` still needs finished episodes (a solve rate counts outcomes): a rollout without
+one scores ``-inf``, so a fresh level scored so is never inserted and a replayed one ranks last
+until it is scored again (``num_steps`` ≥ the episode limit, or SFL's ``sfl.rollout_steps``,
+scores every level; validation warns otherwise).
 
 Episodic returns (``perfect_regret``, ``neg_return``) use the episodes that *ended* inside the
 rollout; an env whose episode never ended is credited with the reward collected so far (its
@@ -95,27 +111,50 @@ def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float = -jnp.i
     return jnp.where(count > 0, total / jnp.maximum(count, 1), incomplete_value)
 
 
-def solve_rate(reward: jax.Array, done: jax.Array, solved) -> tuple[jax.Array, jax.Array]:
-    """The share of the episodes that ended inside the rollout whose return ``solved`` (a function
-    ``f32[N] -> bool[N]``) calls solved, and their count: ``(f32[N] (0 if none), i32[N])``."""
+def info_key(solved) -> str | None:
+    """The info key a task's ``solved`` (``UEDTask.solved``) names, None for a function of the
+    return (or no criterion)."""
+    return solved if isinstance(solved, str) else None
+
+
+def episode_solved(solved, returns: jax.Array, flags: jax.Array | None = None) -> jax.Array:
+    """Which episodes the task's criterion ``solved`` (``UEDTask.solved``) calls solved, bool of
+    ``returns``' shape: ``solved(returns)`` for a function of the episode's return; for the name
+    of an info key, ``flags`` (bool, that key's value at each episode's last step: the rollout's
+    ``Trajectory.solved``), which the return does not enter."""
+    if info_key(solved) is None:
+        return solved(returns)
+    if flags is None:
+        raise ValueError(f"solved names the info key {solved!r}: the episodes' flags are needed (Trajectory.solved)")
+    return flags
+
+
+def solve_rate(reward: jax.Array, done: jax.Array, solved, flags: jax.Array | None = None
+               ) -> tuple[jax.Array, jax.Array]:
+    """The share of the episodes that ended inside the rollout that ``solved`` (the task's
+    criterion: a function ``f32[N] -> bool[N]`` of the return, or an info key, read from
+    ``flags`` bool[T, N]: :func:`episode_solved`) calls solved, and their count:
+    ``(f32[N] (0 if none), i32[N])``."""
 
     def step(carry, inp):
         running, wins, count = carry
-        rt, d = inp
+        rt, d, f = inp
         running = running + rt
-        wins = wins + (d & solved(running))
+        wins = wins + (d & episode_solved(solved, running, f))
         return (jnp.where(d, 0.0, running), wins, count + d), None
 
     n = reward.shape[1]
     izeros = jnp.zeros(n, jnp.int32)
-    (_, wins, count), _ = jax.lax.scan(step, (jnp.zeros(n), izeros, izeros), (reward, done))
+    (_, wins, count), _ = jax.lax.scan(step, (jnp.zeros(n), izeros, izeros), (reward, done, flags))
     return wins / jnp.maximum(count, 1), count
 
 
-def learnability(reward: jax.Array, done: jax.Array, solved, incomplete_value: float = -jnp.inf) -> jax.Array:
-    """f32[N]: p·(1 − p) with p = :func:`solve_rate`; ``incomplete_value`` for an env with no
-    finished episode (module docstring)."""
-    p, count = solve_rate(reward, done, solved)
+def learnability(reward: jax.Array, done: jax.Array, solved, incomplete_value: float = -jnp.inf,
+                 flags: jax.Array | None = None) -> jax.Array:
+    """f32[N]: p·(1 − p) with p = :func:`solve_rate` (``flags``: its info flags, for a ``solved``
+    that names an info key); ``incomplete_value`` for an env with no finished episode (module
+    docstring)."""
+    p, count = solve_rate(reward, done, solved, flags)
     return jnp.where(count > 0, p * (1.0 - p), incomplete_value)
 
 
@@ -125,14 +164,22 @@ def perfect_regret(mean_return: jax.Array, optimal_return: jax.Array) -> jax.Arr
 
 
 def positive_value_loss(advantages: jax.Array, done: jax.Array) -> jax.Array:
-    """``advantages`` f32[T, N] (GAE), ``done`` bool[T, N]."""
-    return episode_mean(jnp.maximum(advantages, 0.0), done)
+    """``advantages`` f32[T, N] (GAE, bootstrapped at the rollout's end), ``done`` bool[T, N]: the
+    mean over finished episodes of their per-step mean of max(A, 0); where no episode ended, the
+    mean over all T steps (module docstring)."""
+    total, _, count, truncated = _episode_stats(jnp.maximum(advantages, 0.0), done, time_average=True)
+    return jnp.where(count > 0, total / jnp.maximum(count, 1), truncated)
 
 
-def max_mc(values: jax.Array, max_return: jax.Array, done: jax.Array) -> jax.Array:
-    """``values`` f32[T, N], ``max_return`` f32[N] (highest return ever seen on the level),
-    ``done`` bool[T, N]."""
-    return episode_mean(max_return[None, :] - values, done)
+def max_mc(values: jax.Array, max_return: jax.Array, done: jax.Array, advantages: jax.Array) -> jax.Array:
+    """``values`` f32[T, N], ``max_return`` f32[N] (highest return of an episode that ended on the
+    level, −inf if none has), ``done`` bool[T, N], ``advantages`` f32[T, N] (GAE): the mean over
+    finished episodes of their per-step mean of (max_return − V(s_t)); where no episode ended, the
+    mean over all T steps of (max(max_return, V(s_0) + A_0) − V(s_t)), V(s_0) + A_0 the truncated
+    episode's bootstrapped return (module docstring)."""
+    total, _, count, _ = _episode_stats(max_return[None, :] - values, done, time_average=True)
+    best = jnp.maximum(max_return, values[0] + advantages[0])
+    return jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.mean(best[None, :] - values, axis=0))
 
 
 def negative_return(mean_return: jax.Array) -> jax.Array:
@@ -147,8 +194,9 @@ class ScoreInputs:
     critic's, GAE), ``max_return`` f32[N] (MaxMC's record: the best return of an episode that
     ended on the level, in this rollout or a replay before; −inf where none has), ``done``
     bool[T, N], ``reward`` f32[T, N], ``optimal_return`` f32[N] (the task's optimum, given only to
-    a score that ``needs_optimum``); ``solved`` (the task's ``return -> bool``, static) for one
-    that ``needs_solved``."""
+    a score that ``needs_optimum``); ``solved`` (the task's criterion, static: ``return -> bool``
+    or an info key) and ``solved_flags`` (bool[T, N], that key's value at each step; None for a
+    function of the return) for one that ``needs_solved``: read them with :func:`solve_rate`."""
 
     mean_return: jax.Array
     values: jax.Array
@@ -157,7 +205,8 @@ class ScoreInputs:
     done: jax.Array
     reward: jax.Array
     optimal_return: jax.Array | None = None
-    solved: Callable | None = struct.field(pytree_node=False, default=None)
+    solved: Callable | str | None = struct.field(pytree_node=False, default=None)
+    solved_flags: jax.Array | None = None
 
 
 @dataclass(frozen=True)
@@ -187,6 +236,8 @@ class Score:
 
 
 PARTIAL = "are scored by the reward collected so far as if the episode had ended"  # the episodic-return scores
+#: pvl, maxmc: a rollout without a finished episode is scored from its truncated episode (module docstring)
+BOOTSTRAPPED = "are scored by their steps' advantages and values, bootstrapped by the critic at the rollout's end"
 
 
 #: every score ``score=`` accepts, by name
@@ -194,14 +245,17 @@ SCORES: dict[str, Score] = {score.name: score for score in (
     Score("perfect_regret", lambda x: perfect_regret(x.mean_return, x.optimal_return), needs_optimum=True,
           needs_finished_episodes=True, unfinished=PARTIAL + " (a goal not yet reached looks like a failure)",
           help="optimal return − the agent's mean return"),
-    Score("pvl", lambda x: positive_value_loss(x.advantages, x.done), needs_finished_episodes=True,
-          help="positive value loss: mean of max(GAE advantage, 0) over finished episodes"),
-    Score("maxmc", lambda x: max_mc(x.values, x.max_return, x.done), needs_finished_episodes=True,
-          help="best return seen on the level − V(s), over finished episodes"),
+    Score("pvl", lambda x: positive_value_loss(x.advantages, x.done), unfinished=BOOTSTRAPPED,
+          help="positive value loss: mean of max(GAE advantage, 0) over finished episodes (else the "
+               "bootstrapped rollout)"),
+    Score("maxmc", lambda x: max_mc(x.values, x.max_return, x.done, x.advantages), unfinished=BOOTSTRAPPED,
+          help="best return seen on the level − V(s), over finished episodes (else the bootstrapped rollout)"),
     Score("neg_return", lambda x: negative_return(x.mean_return), needs_finished_episodes=True, unfinished=PARTIAL,
           help="−mean return (minimax return)"),
-    Score("learnability", lambda x: learnability(x.reward, x.done, x.solved), needs_solved=True,
-          needs_finished_episodes=True, help="p(1 − p), p the level's solve rate in the rollout (SFL)"),
+    Score("learnability", lambda x: learnability(x.reward, x.done, x.solved, flags=x.solved_flags),
+          needs_solved=True, needs_finished_episodes=True,
+          unfinished="score -inf and are never inserted (a solve rate needs episodes that end)",
+          help="p(1 − p), p the level's solve rate in the rollout (SFL)"),
 )}
 
 

@@ -49,7 +49,7 @@ def test_learnability_of_given_rollouts():
     reward[3, 3] = 1.0
     indist = np.zeros((6, 4), bool)
     indist[:, 3] = True
-    traj = SimpleNamespace(reward=jnp.asarray(reward), done=jnp.asarray(done), indist=jnp.asarray(indist))
+    traj = SimpleNamespace(reward=jnp.asarray(reward), done=jnp.asarray(done), indist=jnp.asarray(indist), solved=None)
     setup = SimpleNamespace(task=SimpleNamespace(solved=lambda ret: ret > 0))
     score, p = learnability_of(setup, traj)
     np.testing.assert_allclose(score[:2], [0.25, 0.0])

@@ -92,7 +92,8 @@ def score_rollout(setup: Setup, levels, traj: Trajectory, adv, mean_return, max_
     unscale = 1.0 / setup.cfg.reward_scale
     return sc.score_levels(score.name, sc.ScoreInputs(
         mean_return=mean_return, values=traj.value * unscale, advantages=adv * unscale, max_return=max_return,
-        done=traj.done, optimal_return=optimal, reward=traj.reward, solved=setup.task.solved))
+        done=traj.done, optimal_return=optimal, reward=traj.reward, solved=setup.task.solved,
+        solved_flags=traj.solved))
 
 
 def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, frozen):
@@ -105,7 +106,8 @@ def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, froze
     if setup.cfg.reseed:  # a stochastic environment: each rollout draws the levels' own randomness afresh
         levels = jax.vmap(task.reseed_level)(jax.random.split(jax.random.fold_in(rng, 17), num_levels), levels)
     carry = setup.net.initialize_carry(num_levels)
-    return rollout(rng, Stepping(task.env, task.params, task.deterministic_reset),
+    return rollout(rng, Stepping(task.env, task.params, task.deterministic_reset,
+                                 solved_info=sc.info_key(task.solved)),
                    Policy(policy_apply(setup, learner), learner.train_state.params, carry), levels, num_steps, frozen,
                    dist=for_task(task))
 

@@ -55,7 +55,7 @@ _JAXUED = _jaxued_interface()
 EnvParams, UnderspecifiedEnv = _JAXUED.EnvParams, _JAXUED.UnderspecifiedEnv
 
 __all__ = ["UnderspecifiedEnv", "EnvParams", "AutoReplay", "AutoReplayState", "UEDTask", "tree_equal",
-           "one_step_discounted"]
+           "one_step_discounted", "info_flag"]
 
 
 @struct.dataclass
@@ -63,6 +63,7 @@ class AutoReplayState:
     env_state: Any
     level: Any
     start: Any = None  # (first observation, first state) when the reset is deterministic
+    solved: Any = None  # bool[]: the last step's info flag of solving (AutoReplay's solved_info); else None
 
 
 class AutoReplay(UnderspecifiedEnv):
@@ -76,11 +77,16 @@ class AutoReplay(UnderspecifiedEnv):
     reset and restored on restart, instead of resetting again at every step: the same result,
     without a reset in the step's program (for Brax, a forward-kinematics pass per step and
     several seconds of compilation).
+
+    With ``solved_info`` (the info key a task's ``solved`` names) the state keeps that key's value
+    at the last step as ``state.solved`` (:func:`info_flag`), which a restart leaves as it was:
+    the rollout records it (``Trajectory.solved``) where the terminal step's info is gone.
     """
 
-    def __init__(self, env: UnderspecifiedEnv, deterministic_reset: bool = False):
+    def __init__(self, env: UnderspecifiedEnv, deterministic_reset: bool = False, solved_info: str | None = None):
         self._env = env
         self._deterministic_reset = deterministic_reset
+        self._solved_info = solved_info
 
     @property
     def default_params(self):
@@ -97,7 +103,8 @@ class AutoReplay(UnderspecifiedEnv):
         """The wrapper's state at the start of an episode whose first observation and state the
         wrapped environment's reset returned."""
         start = (obs, state) if self._deterministic_reset else None
-        return AutoReplayState(env_state=state, level=level, start=start)
+        solved = jnp.asarray(False) if self._solved_info is not None else None
+        return AutoReplayState(env_state=state, level=level, start=start, solved=solved)
 
     def step_env(self, rng, state: AutoReplayState, action, params):
         rng_step, rng_reset = jax.random.split(rng)
@@ -116,7 +123,16 @@ class AutoReplay(UnderspecifiedEnv):
             obs_re, env_state_re = self._env.reset_to_level(rng_reset, state.level, params)
         obs = tree_select(done, obs_re, obs)
         env_state = tree_select(done, env_state_re, env_state)
-        return obs, state.replace(env_state=env_state), reward, done, info
+        state = state.replace(env_state=env_state)
+        if self._solved_info is not None:
+            state = state.replace(solved=info_flag(info, self._solved_info))
+        return obs, state, reward, done, info
+
+
+def info_flag(info, key: str) -> jax.Array:
+    """bool[]: the step's ``info[key]`` read as a flag: truthy (nonzero), and for an array (e.g.
+    one flag per agent) every entry truthy."""
+    return jnp.all(jnp.asarray(info[key]).astype(bool))
 
 
 def tree_select(pred, on_true, on_false):
@@ -161,8 +177,13 @@ class UEDTask:
             (e.g. a held-out maze larger than the training grid); same ``params``.
         level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
             fractions (e.g. ``{"hidden": ...}``).
-        solved: ``episode_return -> bool[]``, when an evaluation episode counts as solved; None
-            for a task without a notion of solving (no ``solve_rate`` metric, no learnability score).
+        solved: when an episode counts as solved (``solve_rate/<set>``, the learnability score,
+            SFL): a function of its return, ``f32[N] -> bool[N]`` (default: return > 0); or the
+            name of a key of the step's info dict (``env.step``'s fifth output) whose value at the
+            episode's last step says so (truthy; an array, e.g. one flag per agent, when all its
+            entries are: :func:`info_flag`), for an environment that reports success itself where
+            the return does not tell (JaxNav's goal flag); the return then does not enter. None for a
+            task without a notion of solving (no ``solve_rate`` metric, no learnability score).
         expected_return: for a one-step task with ``Discrete(n)`` actions, ``(level, probs f32[n]) -> f32[]``, the
             exact expected return of a policy with those action probabilities; makes the
             evaluation's regret exact (instead of sampled) and adds the policy's entropy.
@@ -197,7 +218,7 @@ class UEDTask:
     eval_sets: dict[str, Any] = field(default_factory=dict)
     eval_envs: dict[str, UnderspecifiedEnv] = field(default_factory=dict)
     level_tags: Callable[[Any], dict[str, jax.Array]] = lambda level: {}
-    solved: Callable[[jax.Array], jax.Array] | None = lambda ret: ret > 0
+    solved: Callable[[jax.Array], jax.Array] | str | None = lambda ret: ret > 0
     expected_return: Callable[[Any, jax.Array], jax.Array] | None = None
     mutate_level: Callable[[jax.Array, Any, int], Any] | None = None
     easy_level: Callable[[jax.Array], Any] | None = None

@@ -218,6 +218,7 @@ def _metrics_fn(setup, settings: EvalSettings, cvar_levels, perfect: dict):
     import jax
     import jax.numpy as jnp
 
+    from remidi.engine.adversaries.scores import episode_solved
     from remidi.engine.run import evaluation
     from remidi.engine import train as tr
 
@@ -228,11 +229,12 @@ def _metrics_fn(setup, settings: EvalSettings, cvar_levels, perfect: dict):
         out = dict(evaluation.evaluate(held_out, runner, key, action))
         # CVaR: one set of rollouts ranks the levels, an independent one (other keys) scores them
         for part, salt in (("rank", 1000), ("score", 1001)):
-            ret, _ = evaluation.level_returns(setup, runner, task.env, cvar_levels, cvar_attempts,
-                                              jax.random.fold_in(key, salt), action)
+            ret, _, flags = evaluation.level_episodes(setup, runner, task.env, cvar_levels, cvar_attempts,
+                                                      jax.random.fold_in(key, salt), action)
             out[f"cvar_raw/{part}/return"] = ret.mean(axis=1)
             if task.solved is not None:
-                out[f"cvar_raw/{part}/solve_rate"] = task.solved(ret).astype(jnp.float32).mean(axis=1)
+                solved = episode_solved(task.solved, ret, flags)
+                out[f"cvar_raw/{part}/solve_rate"] = solved.astype(jnp.float32).mean(axis=1)
         for size, (env, levels) in perfect.items():
             ret, _ = evaluation.level_returns(setup, runner, env, levels, attempts, jax.random.fold_in(key, 2000 + size),
                                               action)

@@ -64,8 +64,8 @@ def learnability_of(setup, traj) -> tuple[jax.Array, jax.Array]:
     """Each candidate's ``(learnability f32[B], solve rate f32[B])`` from its rollout ``traj``
     [T, B]: −inf where no episode ended or where the frozen levels explain every step."""
     solved = setup.task.solved
-    score = sc.learnability(traj.reward, traj.done, solved)
-    p, _ = sc.solve_rate(traj.reward, traj.done, solved)
+    score = sc.learnability(traj.reward, traj.done, solved, flags=traj.solved)
+    p, _ = sc.solve_rate(traj.reward, traj.done, solved, traj.solved)
     return jnp.where(jnp.all(traj.indist, axis=0), -jnp.inf, score), p
 
 

@@ -34,6 +34,7 @@ class Trajectory:
     indist: jax.Array  # bool: the prefix up to obs[t] is indistinguishable from a frozen level
     overflow: jax.Array  # i32: frozen levels sharing the episode's first observation that the
     #                      candidate tracker had no slot for (0 for the reference tracker)
+    solved: Any = None  # bool: the step's info flag of solving (Stepping.solved_info); None without one
 
 
 @dataclass(frozen=True)
@@ -42,18 +43,20 @@ class Stepping:
     ``deterministic_reset`` (its reset ignores its key, so a restart restores the episode's first
     state instead of resetting: :class:`AutoReplay`) and ``tracker_env`` (where a tracker plays
     the frozen levels: they are training levels, so a larger evaluation environment passes the
-    training one; default ``raw``). ``auto``: ``raw`` restarting each env's level when its
-    episode ends."""
+    training one; default ``raw``), ``solved_info`` (the info key a task's ``solved`` names,
+    whose value at each step the trajectory records as ``solved``; None: none). ``auto``: ``raw``
+    restarting each env's level when its episode ends."""
 
     raw: UnderspecifiedEnv
     params: Any
     deterministic_reset: bool = False
     tracker_env: UnderspecifiedEnv | None = None
+    solved_info: str | None = None
 
     def __post_init__(self):
         if self.tracker_env is None:
             object.__setattr__(self, "tracker_env", self.raw)
-        object.__setattr__(self, "auto", AutoReplay(self.raw, self.deterministic_reset))
+        object.__setattr__(self, "auto", AutoReplay(self.raw, self.deterministic_reset, self.solved_info))
 
 
 @dataclass(frozen=True)
@@ -110,7 +113,8 @@ def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=
             next_obs, state, reward, done, tstate = tracker.step(envs, frozen, env_keys, state, tstate, action)
         overflow = tracker.overflow(tstate) if tracker is not None else jnp.zeros((num_envs,), jnp.int32)
         record = Trajectory(obs=obs, reset=reset, action=action, log_prob=log_prob, value=value,
-                            reward=reward.astype(jnp.float32), done=done, indist=indist, overflow=overflow)
+                            reward=reward.astype(jnp.float32), done=done, indist=indist, overflow=overflow,
+                            solved=state.solved)
         return (state, next_obs, done, (hidden, frozen_hidden), tstate), record
 
     first = jnp.ones((num_envs,), bool)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from remidi.engine.adversaries import scores as sc
 from remidi.engine.core.distributions import acting, for_task
 from remidi.engine.core.rollout import Policy, Stepping, combine, rollout
 from remidi.engine.learner import combines
@@ -21,6 +22,13 @@ def first_episode_return(reward: jax.Array, done: jax.Array, gamma: float = 1.0)
     ended_before = jnp.cumsum(done, axis=0) - done  # episodes finished before step t
     discount = jnp.power(jnp.float32(gamma), jnp.arange(reward.shape[0], dtype=jnp.float32))[:, None]
     return jnp.sum(jnp.where(ended_before == 0, discount * reward, 0.0), axis=0)
+
+
+def first_episode_flag(done: jax.Array, flags: jax.Array) -> jax.Array:
+    """bool[N]: ``flags`` bool[T, N] (the rollout's ``Trajectory.solved``) at the last step of each
+    env's first episode; False where it did not end inside the rollout."""
+    first_end = done & (jnp.cumsum(done, axis=0) - done == 0)
+    return jnp.any(first_end & flags, axis=0)
 
 
 def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
@@ -65,23 +73,33 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels, action: str = "
 
 
 def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng, action: str = "sample"):
+    """:func:`level_episodes`' ``(returns, discounted)``."""
+    return level_episodes(setup, runner, env, levels, attempts, rng, action)[:2]
+
+
+def level_episodes(setup: Setup, runner: Runner, env, levels, attempts: int, rng, action: str = "sample"):
     """The first-episode return of ``attempts`` episodes on each of ``levels`` (leaves [L, ...],
     played by ``env``; under ``remidi.policy=combine`` by the combined policy), the actions drawn
     from the policy or, with ``action="mode"``, its most likely ones
     (:func:`~remidi.engine.core.distributions.acting`):
-    ``(returns f32[L, attempts], discounted f32[L, attempts])``, the latter Σ_t γ^t r_t with
-    γ = ``ppo.gamma``. One rollout of ``task.max_episode_steps`` on L·attempts envs."""
+    ``(returns f32[L, attempts], discounted f32[L, attempts], flags bool[L, attempts] | None)``,
+    ``discounted`` Σ_t γ^t r_t with γ = ``ppo.gamma``, ``flags`` the first episode's last-step info
+    flag for a task whose ``solved`` names an info key (None otherwise; judge the episodes with
+    :func:`~remidi.engine.adversaries.scores.episode_solved`). One rollout of
+    ``task.max_episode_steps`` on L·attempts envs."""
     task = setup.task
     frozen = setup.tracker.frozen(setup, runner) if combines(setup) else None  # act as the combined policy
     tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
     n = jax.tree.leaves(tiled)[0].shape[0]
-    traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env),
+    traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env,
+                                    solved_info=sc.info_key(task.solved)),
                       Policy(policy_apply(setup, runner.learner), runner.learner.train_state.params,
                              setup.net.initialize_carry(n)),
                       tiled, task.max_episode_steps, frozen, dist=acting(for_task(task), action))
     returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
     discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
-    return returns, discounted
+    flags = None if traj.solved is None else first_episode_flag(traj.done, traj.solved).reshape(-1, attempts)
+    return returns, discounted, flags
 
 
 def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[str, jax.Array]:
@@ -97,8 +115,8 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
         levels = jax.tree.map(lambda *xs: jnp.concatenate(xs), *(task.eval_sets[name] for name in names))
-        returns, discounted = level_returns(setup, runner, env, levels, cfg.eval_attempts, jax.random.fold_in(rng, i),
-                                            action)
+        returns, discounted, flags = level_episodes(setup, runner, env, levels, cfg.eval_attempts,
+                                                    jax.random.fold_in(rng, i), action)
         optimal = None
         if task.optimal_return is not None:  # once for the group's sets (for mazes, a search per level)
             optimal = jax.vmap(task.optimal_return)(levels)
@@ -108,9 +126,10 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
             count = jax.tree.leaves(set_levels)[0].shape[0]
             ret, set_discounted = returns[start:start + count], discounted[start:start + count]  # [count, attempts]
             set_optimal = None if optimal is None else optimal[start:start + count]
+            set_flags = None if flags is None else flags[start:start + count]
             start += count
-            if task.solved is not None:
-                out[f"solve_rate/{name}"] = jnp.mean(task.solved(ret).astype(jnp.float32))
+            if task.solved is not None:  # the first episodes' returns, or their last steps' info flags
+                out[f"solve_rate/{name}"] = jnp.mean(sc.episode_solved(task.solved, ret, set_flags).astype(jnp.float32))
             out[f"return/{name}"] = jnp.mean(ret)
             out[f"discounted_return/{name}"] = jnp.mean(set_discounted)
             if task.optimal_return is None:
@@ -126,8 +145,7 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
             out[f"regret/{name}/mean"] = jnp.mean(regret)
             out[f"regret/{name}/worst"] = jnp.max(regret)
     # each buffer's levels (a buffer sequence): what the policy keeps of a frozen buffer
-    return {**out, **buffer_solve_rates(setup, runner, jax.random.fold_in(rng, 1 << 20),
-                                        lambda *a: (*level_returns(*a), None), action)}
+    return {**out, **buffer_solve_rates(setup, runner, jax.random.fold_in(rng, 1 << 20), level_episodes, action)}
 
 
 def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:

@@ -192,7 +192,10 @@ def validate_task(task: UEDTask) -> None:
     for key in ("sample_level", "level_tags"):
         if not callable(getattr(task, key)):
             raise ConfigError(f"task.{key}: must be a function, got {getattr(task, key)!r}")
-    for key in ("optimal_return", "optimal_discounted_return", "solved", "expected_return", "mutate_level",
+    if task.solved is not None and not callable(task.solved) and not (isinstance(task.solved, str) and task.solved):
+        raise ConfigError(f"task.solved: must be a function of the episode's return, the name of a key of the step's "
+                          f"info, or None, got {task.solved!r}")
+    for key in ("optimal_return", "optimal_discounted_return", "expected_return", "mutate_level",
                 "easy_level", "reseed_level"):
         if getattr(task, key) is not None and not callable(getattr(task, key)):
             raise ConfigError(f"task.{key}: must be a function or None, got {getattr(task, key)!r}")
@@ -235,7 +238,7 @@ def validate_task(task: UEDTask) -> None:
                                                f"{_leaf(action)} of {task.actions}")
     if not isinstance(stepped, tuple) or len(stepped) != 5:
         raise ConfigError("task.env: step must return (obs, state, reward, done, info)")
-    next_obs, next_state, reward, done, _ = stepped
+    next_obs, next_state, reward, done, info = stepped
     if _difference(obs, next_obs) is not None:
         raise ConfigError(f"task.env: a step's observation must have the reset's shapes and dtypes; "
                           f"{_difference(obs, next_obs, 'at the reset')}")
@@ -262,7 +265,17 @@ def validate_task(task: UEDTask) -> None:
         if not _is_scalar(value, "float"):
             raise ConfigError(f"task.optimal_discounted_return: must give a float scalar (f32[]) per level, got "
                               f"{_shapes(value)}")
-    if task.solved is not None:
+    if isinstance(task.solved, str):  # an info key: the step's info holds a flag (or flags) there
+        if not isinstance(info, dict) or task.solved not in info:
+            held = (f"only {', '.join(map(str, info))}" if info else "no key") if isinstance(info, dict) else \
+                f"no dict but {a_type(info)}"
+            raise ConfigError(f"task.solved: names the info key {task.solved!r}, but a step's info holds {held}")
+        leaves = jax.tree.leaves(info[task.solved])
+        if len(leaves) != 1 or not (jnp.issubdtype(leaves[0].dtype, jnp.bool_)
+                                    or jnp.issubdtype(leaves[0].dtype, jnp.number)):
+            raise ConfigError(f"task.solved: the step's info[{task.solved!r}] must be a boolean or a number (an array: "
+                              f"solved when every entry is), got {_shapes(info[task.solved])}")
+    elif task.solved is not None:
         value = _traced("solved", "judging returns", task.solved, jax.ShapeDtypeStruct((3,), jnp.float32))
         if getattr(value, "shape", None) != (3,) or jnp.dtype(value.dtype) != jnp.bool_:
             raise ConfigError(f"task.solved: must map returns f32[N] to booleans bool[N], got {_shapes(value)} for N = 3")

@@ -195,6 +195,30 @@ CLAIMS = (
     Claim("kinetix-remidi-masks-nothing", "Kinetix (fully observed levels)", "ReMiDi's tracker explains almost no "
           "step where every level is fully observed (bound: the masked share of trained steps ≤ 0.01)",
           "summary:trained_fraction_masked", ("kinetix-s",), bounds=(("remidi", 0.0, 0.01),), min_seeds=5),
+    # constructed domains (issue 63): a small discrete level space and noisy float observations, both with
+    # levels that hide the goal; stated on 2026-12-02 before their runs (docs/results.md, "Constructed domains")
+    Claim("darkroom-lit", "beyond the paper (dark room)", "at comparable budgets ReMiDi "
+          "solves lit levels no worse than PLR⊥ (no-worse test, δ = 0.05)", "evaluate:solve_rate/lit", ("darkroom",),
+          no_worse=(("remidi", "plr", 0.05),), min_seeds=5),
+    Claim("darkroom-lit-greater", "beyond the paper (dark room)", "ReMiDi solves more lit "
+          "levels than PLR⊥ (a pilot before this claim, docs/retention.md: 0.99 against 0.39, 3 seeds, 600 updates)",
+          "evaluate:solve_rate/lit", ("darkroom",), greater=(("remidi", "plr"),), min_seeds=5),
+    Claim("darkroom-buffer", "beyond the paper (dark room)", "ReMiDi keeps dark levels out "
+          "of its last buffer (bound: the dark share of the active buffer at the end in [0, 0.1])",
+          "summary:buffer_fraction/dark", ("darkroom",), bounds=(("remidi", 0.0, 0.1),), min_seeds=5),
+    Claim("darkroom-replay", "beyond the paper (dark room)", "PLR⊥ replays dark levels far "
+          "more than ReMiDi (the last 10% of training)", "summary:replay_fraction/dark", ("darkroom",),
+          greater=(("plr", "remidi"),), min_seeds=5),
+    Claim("darkreach-tolerance", "beyond the paper (dark reach)", "the tolerance tracker "
+          "keeps fewer dark levels in ReMiDi's last buffer than the exact tracker, which matches no noisy float",
+          "summary:buffer_fraction/dark", ("darkreach",), greater=(("remidi", "remidi (tolerance)"),), min_seeds=5),
+    Claim("darkreach-lit", "beyond the paper (dark reach)", "ReMiDi with the tolerance "
+          "tracker solves lit levels no worse than PLR⊥ (no-worse test, δ = 0.05)", "evaluate:solve_rate/lit",
+          ("darkreach",), no_worse=(("remidi (tolerance)", "plr", 0.05),), min_seeds=5),
+    Claim("darkreach-lit-masks-nothing", "beyond the paper (dark reach, all lit)", "the "
+          "tolerance tracker explains almost no step where every level differs (bound: the masked share of "
+          "trained steps ≤ 0.01)", "summary:trained_fraction_masked", ("darkreach-lit",),
+          bounds=(("remidi (tolerance)", 0.0, 0.01),), min_seeds=5),
     Claim("brax-walk", "Table 1 (Brax)", "ReMiDi returns more on undisturbed levels than PLR⊥ and minimax return, "
           "on each morphology", "evaluate:return/undisturbed", BRAX,
           greater=(("remidi", "plr"), ("remidi", "minimax-return")), min_seeds=10),  # Table 1's caption: 10 seeds
@@ -277,6 +301,17 @@ SECTIONS = {  # experiment: (algorithms in page order, metrics of its table, cur
                   ["evaluate:solve_rate/mean", "evaluate:cvar/solve_rate/10%", "evaluate:cvar/solve_rate/100%",
                    "summary:trained_fraction_masked", "summary:rejected"],
                   ["solve_rate/mean", "trained_fraction_masked"]),
+    "darkroom": (["plr", "remidi"],
+                 ["evaluate:solve_rate/lit", "evaluate:solve_rate/dark", "summary:replay_fraction/dark",
+                  "summary:buffer_fraction/dark", "summary:buffer_solve_rate/b0"],
+                 ["solve_rate/lit", "solve_rate/dark", "buffer_solve_rate/b0", "replay_fraction/dark"]),
+    "darkreach": (["plr", "remidi", "remidi (tolerance)"],
+                  ["evaluate:solve_rate/lit", "evaluate:solve_rate/dark", "summary:buffer_fraction/dark",
+                   "summary:replay_fraction/dark", "summary:rejected", "summary:trained_fraction_masked"],
+                  ["solve_rate/lit", "solve_rate/dark", "buffer_fraction/dark", "replay_fraction/dark"]),
+    "darkreach-lit": (["plr", "remidi (tolerance)"],
+                      ["evaluate:solve_rate/lit", "summary:trained_fraction_masked", "summary:rejected"],
+                      ["solve_rate/lit", "trained_fraction_masked"]),
     **{m: (["dr", "plr", "minimax-return", "remidi"],
            ["evaluate:return/undisturbed", "summary:replay_fraction/type_b"],
            ["return/undisturbed", "replay_fraction/type_b"]) for m in BRAX},

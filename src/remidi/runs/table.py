@@ -97,7 +97,7 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
     tracker); a buffer sequence's with what differs from its exact single-policy form
     (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``,
     ``remidi (belief, spread 0)`` for a ``remidi.belief_spread`` other than its default,
-    ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's
+    ``remidi (tolerance)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's
     ``command`` asked for the default policy by name: a baseline run beside its variants, kept
     apart from the plain runs of earlier claims); the others by name."""
     estimator = config.get("paired", {}).get("estimator")
@@ -110,6 +110,8 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
         parts.append("belief")
         if r.get("belief_margin", 1e-3) != 1e-3:
             parts.append(f"margin {r['belief_margin']:g}")
+    if r.get("tracker") == "tolerance":
+        parts.append("tolerance")
     if r.get("tracker") == "simulated":
         parts.append("simulated, ratio" if r.get("belief_reference") else "simulated")
         if r.get("belief_false_rate", 0.05) != 0.05:

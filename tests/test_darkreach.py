@@ -31,21 +31,23 @@ def test_the_environment_by_hand():
     env, params = task.env, task.params
     both = levels(((5, 5), (0.8, 0.52), True, 7), ((5, 5), (0.8, 0.52), False, 7))  # lit, dark
     one = lambda i: jax.tree.map(lambda x: x[i], both)  # noqa: E731
-    obs, state = env.reset_to_level(jax.random.PRNGKey(0), one(0), params)
+    reset, step = jax.jit(env.reset_to_level), jax.jit(env.step)  # one program each, not one per operation
+    obs, state = reset(jax.random.PRNGKey(0), one(0), params)
     # position (0.5, 0.5) plus noise of deviation 0.01; the goal shown
     assert np.abs(np.asarray(obs[:2]) - 0.5).max() < 0.05 and np.allclose(obs[2:], [0.8, 0.52])
-    dark_obs, _ = env.reset_to_level(jax.random.PRNGKey(1), one(1), params)
+    dark_obs, _ = reset(jax.random.PRNGKey(1), one(1), params)
     np.testing.assert_array_equal(dark_obs[2:], [0.0, 0.0])
     np.testing.assert_array_equal(dark_obs[:2], obs[:2])  # same seed, same step: the same noise
     # three moves right reach (0.8, 0.5), 0.02 from the goal: 1 − 0.9·3/20
     rewards, dones = [], []
     for _ in range(3):
-        obs, state, r, d, _ = env.step(jax.random.PRNGKey(0), state, 1, params)
+        obs, state, r, d, _ = step(jax.random.PRNGKey(0), state, 1, params)
         rewards.append(float(r)), dones.append(bool(d))
     assert dones == [False, False, True] and np.isclose(rewards[-1], 1 - 0.9 * 3 / 20)
     assert np.isclose(float(task.optimal_return(one(0))), 1 - 0.9 * 3 / 20)
     # the noise: deviation 0.01, independent of the key, different for another seed
-    noise = jax.vmap(lambda s, t: env.observation(state.replace(level=state.level.replace(seed=s), t=t), params))(
+    noise = jax.jit(jax.vmap(lambda s, t: env.observation(state.replace(level=state.level.replace(seed=s), t=t),
+                                                          params)))(
         jnp.arange(2000, dtype=jnp.uint32), jnp.arange(2000) % 20)[:, :2] - env.position(state.cell)
     assert 0.009 < float(jnp.std(noise)) < 0.011 and abs(float(jnp.mean(noise))) < 0.001
 

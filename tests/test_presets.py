@@ -15,7 +15,7 @@ def test_the_maze_and_brax_experiments_have_a_cpu_preset():
     assert {"tmaze", "blindfold", "brax-ant", "brax-hopper"} <= {n for n in EXPERIMENTS if "cpu" in EXPERIMENTS[n].presets}
 
 
-@pytest.mark.parametrize("name", list(EXPERIMENTS))
+@pytest.mark.parametrize("name", [name for name in EXPERIMENTS if "paper" in EXPERIMENTS[name].presets])
 def test_paper_presets_default_to_the_papers_seeds(name):
     """Paper: 10 seeds for the lever, maze and Brax experiments, 50 for the tabular games."""
     want = 50 if name.startswith("tabular") else 10
@@ -31,7 +31,7 @@ def test_every_preset_switches_buffers_after_updates(name):
         assert resolve_config(exp, preset, {}).remidi.count == "updates", (name, preset)
 
 
-@pytest.mark.parametrize("name", [name for name in EXPERIMENTS if "cpu" in EXPERIMENTS[name].presets])
+@pytest.mark.parametrize("name", [name for name in EXPERIMENTS if {"cpu", "paper"} <= set(EXPERIMENTS[name].presets)])
 def test_cpu_preset_lists_each_deviation_from_paper_with_its_reason(name, capsys):
     exp = EXPERIMENTS[name]
     paper, cpu = resolve_config(exp, "paper", {}), resolve_config(exp, "cpu", {})

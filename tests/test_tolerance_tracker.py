@@ -82,9 +82,9 @@ def test_tolerance_zero_is_the_exact_trackers_judgement(noisy_case, candidates):
     want = indist(task, agents, frozen, exact, 24)
     np.testing.assert_array_equal(indist(task, agents, frozen, zero, 24), want)
     assert want[:, :4].all() and not want[:, 4:].any()  # the copies match throughout, nothing else ever
-    # a tolerance wider than the noise matches more (dark levels), never less
-    wide = indist(task, agents, frozen, dataclasses.replace(zero, atol=0.05), 24)
-    assert (wide >= want).all() and (wide & ~want).any()
+    if candidates:  # a tolerance wider than the noise matches more (dark levels), never less
+        wide = indist(task, agents, frozen, dataclasses.replace(zero, atol=0.05), 24)
+        assert (wide >= want).all() and (wide & ~want).any()
 
 
 def test_the_tolerance_tracker_is_chosen_from_the_config_and_checked():

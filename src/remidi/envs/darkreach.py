@@ -155,8 +155,8 @@ def eval_levels(env: Darkreach, params: DarkreachParams, lit: bool, random_start
                 key: int = 12345) -> DarkreachLevel:
     """``count`` levels of one lighting (leading dim ``count``), drawn once from a fixed key: the
     lit and dark sets share goals, starts and seeds."""
-    keys = jax.random.split(jax.random.PRNGKey(key), count)
-    levels = jax.vmap(lambda k: env.sample_level(k, params, 1.0, random_start))(keys)
+    sample = jax.jit(jax.vmap(lambda k: env.sample_level(k, params, 1.0, random_start)))  # one program
+    levels = sample(jax.random.split(jax.random.PRNGKey(key), count))
     return levels.replace(lit=jnp.full((count,), lit))
 
 

@@ -17,7 +17,8 @@ from pathlib import Path
 from remidi.errors import ConfigError, one_of
 
 CATALOG = Path(__file__).with_name("catalog.json")
-MODULES = ("tabular", "lever", "darkroom", "maze", "brax", "gymnax", "kinetix")  # remidi.experiments.<module>
+MODULES = ("tabular", "lever", "darkroom", "darkreach", "maze", "brax", "gymnax",  # remidi.experiments.<module>
+           "kinetix")
 
 
 @cache

@@ -59,6 +59,8 @@ def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> C
     warned: set[int] = set()
     start: list[int | None] = [None]  # where the block before ended (None: the first of this invocation)
     hint = ("" if tracker in ("prefix", "per_step") else
+            "; with remidi.tracker=tolerance a remidi.tracker_tolerance wider than the differences that tell levels "
+            "apart explains too much (docs/tolerance.md)" if tracker == "tolerance" else
             f"; with remidi.tracker={tracker} the frozen models may explain too much "
             f"(docs/belief.md, \"The learned belief tracker\")")
 

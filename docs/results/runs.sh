@@ -243,3 +243,14 @@ if [ -n "${KINETIX_PYTHON:-}" ]; then
 else
   echo "skipped: the Kinetix runs (set KINETIX_PYTHON to a python with the kinetix extra)"
 fi
+
+# issue 63: the constructed domains (claims stated at 839fdd2, before these runs): the dark room
+# and dark reach, cpu preset, 5 seeds each, at the commit that holds both domains' final code
+at 2ab6db9
+run plr-s0 darkroom plr 0 5 cpu
+run remidi-s0 darkroom remidi 0 5 cpu
+run plr-s0 darkreach plr 0 5 cpu
+run remidi-tolerance-s0 darkreach remidi 0 5 cpu
+run remidi-exact-s0 darkreach remidi 0 5 cpu --set remidi.tracker=prefix
+run plr-s0 darkreach-lit plr 0 5 cpu
+run remidi-tolerance-s0 darkreach-lit remidi 0 5 cpu

@@ -21,6 +21,11 @@ compiled block, ``driver.run_steps``):
 * ``maze-remidi``: the same for ReMiDi in its last buffer, three full frozen buffers of 256
   task levels (half of them T-mazes) tracked by the candidate tracker; reports the tracker's
   overflow.
+* ``nomatch-plr``, ``nomatch-remidi``: ``maze-plr`` and ``maze-remidi`` on the fogged maze
+  (:mod:`~remidi.bench.nomatch`: ordinary mazes whose every level carries a diffusing fog field
+  of its own, so no two levels share a first observation, and 32 stencil substeps make a step
+  costlier than the maze's), where ReMiDi's tracker matches nothing: ``nomatch_remidi_step_over_plr_step`` is what
+  ReMiDi costs where it masks nothing (not run by default).
 * ``maze-remidi-reference``: ``maze-remidi`` with the reference tracker (every frozen level
   stepped beside every env), for the ratio of the two trackers (not run by default: slow).
 * ``maze-remidi-combine``: ``maze-remidi`` with ``remidi.policy=combine`` (Algorithm 1's

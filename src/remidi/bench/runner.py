@@ -105,6 +105,7 @@ def device_description() -> str:
 # (workload, baseline, key): the workload's time per env step over the baseline's, in one invocation
 STEP_RATIOS = (
     ("maze-remidi", "maze-plr", "remidi_step_over_plr_step"),
+    ("nomatch-remidi", "nomatch-plr", "nomatch_remidi_step_over_plr_step"),
     ("maze-remidi-combine", "maze-remidi", "remidi_combine_step_over_remidi_step"),
     ("maze-remidi-rehearsal", "maze-remidi", "remidi_rehearsal_step_over_remidi_step"),
     ("maze-remidi-belief", "maze-remidi", "remidi_belief_step_over_remidi_step"),

@@ -129,6 +129,23 @@ def _maze_remidi_last_buffer(**remidi):
     return _train_workload(maze_task("tmaze"), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
 
 
+@register("nomatch-plr", "maze-plr on the fogged maze (bench/nomatch.py): every level's first observation its own, "
+                        "a step costlier than the maze's")
+def _nomatch_plr():
+    from remidi.bench.nomatch import fog_maze_task
+
+    return _train_workload(fog_maze_task(), _maze_config("plr"), "plr", active=0)
+
+
+@register("nomatch-remidi", "maze-remidi on the fogged maze: three full frozen buffers of 256 levels, none of "
+                           "which shares an env's first observation")
+def _nomatch_remidi():
+    from remidi.bench.nomatch import fog_maze_task
+
+    cfg = _maze_config("remidi")
+    return _train_workload(fog_maze_task(), cfg, "remidi", active=cfg.remidi.num_buffers - 1)
+
+
 @register("maze-accel", "ACCEL on the T-maze task: PLR⊥'s update, every other one editing the last replay's levels")
 def _maze_accel():
     from remidi.envs.maze import maze_task

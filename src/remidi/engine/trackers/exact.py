@@ -17,7 +17,9 @@ Two trackers compute that, over *slots* (each slot follows one frozen level, ``i
   level fixes the start). It computes the frozen levels' first observations once per rollout;
   a rollout env (whose restarts replay the same level, so every episode starts alike) keeps as
   slots only the first ``budget`` frozen levels whose first observation equals its own, and
-  steps those. Its per-step cost is ``budget`` environment steps, whatever F. A frozen level
+  steps those while they match (:func:`step_with_slots`: only the live slots, in a batch sized
+  to them). Its per-step cost is at most ``budget`` environment steps per env, whatever F, and
+  none where no frozen level shares the env's first observation. A frozen level
   that diverged never matches again within the episode, so this equals the reference whenever
   no more than ``budget`` frozen levels share the env's first observation; ``overflow`` counts
   those that did not fit (then a prefix might be judged distinguishable although a dropped
@@ -46,6 +48,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from remidi.engine.core.seeds import SEED_BATCH
 from remidi.engine.trackers.base import Tracker
 from remidi.envs.interface import tree_equal, tree_select
 
@@ -61,6 +64,8 @@ class TrackerState:
     start_states: Any = None  # candidate tracker: the slots' first states (leaves [S, ...]) ...
     start_match: Any = None  # ... and matches (bool[S]), restored when the agent's episode restarts
     overflow: Any = None  # candidate tracker: i32[], frozen levels matching the first observation that did not fit
+    restarted: Any = None  # candidate tracker, stepped with the envs (step_with_slots): bool[], the env restarted
+    #                        at the last step, so its slots are at their first states (env_states not restored)
 
 
 def _compare(obs_f, obs) -> jax.Array:
@@ -118,7 +123,7 @@ def candidates_reset(starts, valid, agent_obs, budget: int, compare=_compare) ->
     states = jax.tree.map(lambda x: x[jnp.maximum(index, 0)], first_states)
     overflow = jnp.maximum(jnp.sum(matches) - budget, 0).astype(jnp.int32)
     return TrackerState(index=index, env_states=states, match=match, every_step=jnp.any(match),
-                        start_states=states, start_match=match, overflow=overflow)
+                        start_states=states, start_match=match, overflow=overflow, restarted=jnp.zeros((), bool))
 
 
 def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done,
@@ -267,23 +272,99 @@ def make_tracker(mode: str = "prefix", budget: int = 0) -> ExactTracker:
     return CandidateTracker(mode=mode, budget=budget) if budget > 0 else ExactTracker(mode=mode)
 
 
+#: each batch size of :func:`slot_ladder` is at most this many times the next smaller one
+LADDER_FACTOR = 8
+
+
+def slot_ladder(num_envs: int, slots: int, factor: int = LADDER_FACTOR) -> tuple[int, ...]:
+    """The sizes M of the batch of live slots :func:`step_with_slots` may step, ascending: 0 (no
+    slot live: the N envs alone), ``N·S`` (every slot) and between them ``N·S`` divided by
+    ``factor`` again and again, down to about ``N / factor``. Each size is one copy of the
+    environment's step in the program (compile time), each gap a factor of slots stepped in vain."""
+    top = num_envs * slots
+    floor = max(1, num_envs // factor)
+    sizes, m = {0, top}, top
+    while m > floor:
+        m = max(floor, -(-m // factor))
+        sizes.add(m)
+    return tuple(sorted(sizes))
+
+
+def _most_over_seeds(count: jax.Array) -> jax.Array:
+    """``count`` of the seed that has the most among the seeds this program runs together (the
+    same value for every seed, so that a ``lax.switch`` on it stays a branch under the seed vmap:
+    :mod:`remidi.engine.core.seeds`), or ``count`` itself where no seeds are batched."""
+    try:
+        return jax.lax.pmax(count, SEED_BATCH)
+    except NameError:  # no seed batch bound here
+        return count
+
+
 def step_with_slots(envs, env_keys, state, tstate, action, tracker: CandidateTracker):
-    """One environment step of the N envs and of their candidate tracker slots together, as one
-    batch [N, 1 + S]: each env's slots take its action and the key its own step takes (the first
-    half of ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env` and
-    :func:`candidates_step`), so the results are theirs. Returns ``(next_obs, state, reward, done,
-    tstate)``, leaves [N, ...]."""
+    """One environment step of the N envs and of their candidate tracker's live slots together,
+    as one batch [N + M]: each slot takes its env's action and the key its env's own step takes
+    (the first half of ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env`
+    and :func:`candidates_step`), so the results are theirs. Returns ``(next_obs, state, reward,
+    done, tstate)``, leaves [N, ...].
+
+    Only live slots (``match``: their frozen level produced the whole prefix) are stepped: a slot
+    that diverged is read again only after its env restarts, from its first state. M is the
+    smallest size of :func:`slot_ladder` that holds the live slots of every seed of the program,
+    chosen by ``lax.switch``: where nothing matches the step costs the envs' alone, and the
+    tracker's cost grows with the live slots, not with the S slots per env."""
+    num_envs, slots = tstate.match.shape
+    sizes = slot_ladder(num_envs, slots)
+    rung = jnp.sum(_most_over_seeds(jnp.sum(tstate.match)) > jnp.asarray(sizes))  # the first size ≥ the count
     step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
-    both = jax.tree.map(lambda e, s: jnp.concatenate([e[:, None], s], axis=1), state.env_state, tstate.env_states)
-    slots = tstate.index.shape[1]
-    actions = jnp.broadcast_to(action[:, None], (action.shape[0], 1 + slots) + action.shape[1:])
-    stepped = jax.vmap(jax.vmap(envs.raw.step, in_axes=(None, 0, 0, None)), in_axes=(0, 0, 0, None))(
-        step_keys, both, actions, envs.params)
-    own = jax.tree.map(lambda x: x[:, 0], stepped)
+    branches = [functools.partial(_step_live, envs, tracker, size) for size in sizes]
+    return jax.lax.switch(rung, branches, step_keys, state, tstate, action)
+
+
+def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tstate, action):
+    """:func:`step_with_slots` with a batch of ``size`` slots, which holds every live one: they
+    are picked (in (env, slot) order, the rest of the batch filled with the last slot and
+    dropped), stepped beside the envs, compared with their envs' next observations and episode
+    ends, and put back; a restarting env's slots restart (``restarted``: from their first states
+    at the next step)."""
+    num_envs, slots = tstate.match.shape
+    if size == 0:
+        next_obs, state, reward, done, _ = _step_envs(envs, step_keys, state, action)
+        match = jnp.where(done[:, None], tstate.start_match, False)
+        return next_obs, state, reward, done, tstate.replace(match=match, restarted=done)
+    pick = jnp.nonzero(tstate.match.reshape(-1), size=size, fill_value=num_envs * slots)[0]  # i32[M]
+    owner = jnp.minimum(pick // slots, num_envs - 1)  # i32[M]: the env each picked slot follows
+    fresh = tstate.restarted[owner]  # bool[M]: its env restarted at the last step
+
+    def flat(x):
+        return x.reshape((num_envs * slots,) + x.shape[2:])
+
+    def picked(current, first):
+        now, start = flat(current).at[pick].get(mode="clip"), flat(first).at[pick].get(mode="clip")
+        return jnp.where(fresh.reshape(fresh.shape + (1,) * (now.ndim - 1)), start, now)
+
+    slot_states = jax.tree.map(picked, tstate.env_states, tstate.start_states)
+    batch = jax.tree.map(lambda e, s: jnp.concatenate([e, s]), state.env_state, slot_states)
+    keys = jnp.concatenate([step_keys, step_keys[owner]])
+    actions = jnp.concatenate([action, action[owner]])
+    stepped = jax.vmap(envs.raw.step, in_axes=(0, 0, 0, None))(keys, batch, actions, envs.params)
+    own = jax.tree.map(lambda x: x[:num_envs], stepped)
     next_obs, state, reward, done, _ = jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(
         state, own, envs.params)
-    tstate = tracker.advance_stepped(tstate, jax.tree.map(lambda x: x[:, 1:], stepped), next_obs, done)
-    return next_obs, state, reward, done, tstate
+    obs_m, states_m, _, done_m, _ = jax.tree.map(lambda x: x[num_envs:], stepped)
+    agent_obs = jax.tree.map(lambda x: x[owner], next_obs)
+    same = jax.vmap(lambda o, a: tracker.compare(jax.tree.map(lambda x: x[None], o), a)[0])(obs_m, agent_obs)
+    same = same & (done_m == done[owner])
+    match = jnp.zeros((num_envs * slots,), bool).at[pick].set(same, mode="drop").reshape(num_envs, slots)
+    env_states = jax.tree.map(lambda current, new: flat(current).at[pick].set(new, mode="drop").reshape(current.shape),
+                              tstate.env_states, states_m)
+    match = jnp.where(done[:, None], tstate.start_match, match)
+    return next_obs, state, reward, done, tstate.replace(env_states=env_states, match=match, restarted=done)
+
+
+def _step_envs(envs, step_keys, state, action):
+    """The N envs' step alone (``step_keys``: the first halves of their keys)."""
+    stepped = jax.vmap(envs.raw.step, in_axes=(0, 0, 0, None))(step_keys, state.env_state, action, envs.params)
+    return jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(state, stepped, envs.params)
 
 
 def exact_budget(task, r, mode: str) -> int:

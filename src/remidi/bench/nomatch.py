@@ -3,7 +3,7 @@
 The T-maze task's ordinary mazes (no T-mazes, no blindfolds), each level with a fog field of its
 own (``fog f32[13, 13]``, uniform in [0, 1), drawn with the level). The fog diffuses:
 ``substeps`` steps of a 5-point stencil on the torus per environment step, the knob that makes a
-step costlier than the maze's (32 by default: the step's cost grows with it, the maze's is one
+step costlier than the maze's (128 by default: the step's cost grows with it, the maze's is one
 ``substeps = 0`` step). The observation is the maze's, every image entry offset by a tenth of the
 fog density at the agent's cell, so every level's first observation differs from every other
 level's (the fog is continuous): as on Craftax or JaxNav, no frozen level ever shares an env's
@@ -24,7 +24,7 @@ from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 from remidi.envs.maze import MAX_STEPS, NUM_WALLS, TRAIN_SIZE, MazeEnv, MazeLevel, random_maze
 from remidi.envs.maze_paths import optimal_discounted_return, optimal_return
 
-SUBSTEPS = 32  # diffusion steps of the fog per environment step
+SUBSTEPS = 128  # diffusion steps of the fog per environment step: the step then costs several maze steps
 RATE = 0.2  # the stencil's diffusion rate (stable below 0.25)
 
 

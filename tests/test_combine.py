@@ -57,7 +57,7 @@ def test_behaviour_on_earlier_buffers_levels_is_kept_only_by_combine(policy):
 
 def test_combine_needs_the_exact_prefix_or_the_belief_tracker():
     cfg = R(TINY, remidi=R(TINY.remidi, policy="combine", tracker="per_step"))
-    with pytest.raises(ConfigError, match="remidi.tracker: must be prefix or belief with remidi.policy=combine"):
+    with pytest.raises(ConfigError, match="remidi.tracker: must be prefix, tolerance or belief with remidi.policy=combine"):
         validate_ued_config(cfg, "remidi", TASK)
     with pytest.raises(ConfigError, match="remidi.policy: unknown value 'exact'; allowed: masked, combine"):
         validate_ued_config(R(TINY, remidi=R(TINY.remidi, policy="exact")), "remidi", TASK)

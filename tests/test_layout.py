@@ -16,6 +16,8 @@ PUBLIC = "a documented Python entry point (README, docs/extending.md, examples):
 LONG_MODULES = {
     "engine/adversaries/level_buffer.py": "one job, the level buffer's pure functions (with a buffer of no slots for "
                                           "DR); split only where the content says, not to meet a count",
+    "engine/run/task_checks.py": "one job, a task's checks before a run (solved from info, the tolerance tracker's "
+                                 "advice); the network's checks may move out with the layout rework",
     "runs/evaluate.py": "one job, remidi evaluate (with CVaR's shares that hold no level left out); split only where "
                         "the content says, not to meet a count",
 }
@@ -24,6 +26,8 @@ LONG_MODULES = {
 MANY_PARAMETERS = {
     "experiments/custom.py:run_ued": PUBLIC,
     "envs/gymnax.py:gymnax_task": PUBLIC,
+    "engine/trackers/exact.py:tracker_step": "the reference tracker's step of one env (the rollout step's eight "
+                                             "values) and the component's comparison (exact, or the tolerance's)",
 }
 
 

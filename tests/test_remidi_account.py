@@ -1,4 +1,4 @@
-"""The line a run ends with for each buffer sequence (experiments/running.remidi_account and
+"""The line a run ends with for each buffer sequence (experiments/remidi_account.remidi_account and
 remidi_line): the fresh levels it rejected out of those it evaluated, the masked share of the
 steps it trained on and its frozen buffers' solve rates, or, where it rejected and masked
 nothing, that it was the algorithm it refines (at the cost ratio to that algorithm's run of the
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from remidi.experiments.base import RunResult
-from remidi.experiments.running import remidi_account, remidi_line
+from remidi.experiments.remidi_account import remidi_account, remidi_line
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "bring_your_own_env.py"
 

@@ -146,6 +146,6 @@ def test_sfl_refuses_a_task_without_a_solve_criterion_and_bad_keys():
         with pytest.raises(ConfigError, match=message) as err:
             validate_ued_config(dataclasses.replace(cfg, **change), "sfl", lever_task())
         assert "\n" not in str(err.value)
-    with pytest.raises(ConfigError, match="^remidi.tracker: must be prefix or per_step with ReMiDi over SFL"):
+    with pytest.raises(ConfigError, match="^remidi.tracker: must be prefix, per_step or tolerance with ReMiDi over SFL"):
         validate_ued_config(dataclasses.replace(cfg, remidi=dataclasses.replace(cfg.remidi, tracker="belief")),
                             "remidi-sfl", lever_task())

@@ -34,7 +34,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import importlib
-import math
 import os
 import sys
 from pathlib import Path
@@ -43,34 +42,21 @@ from typing import Any, Callable, Sequence
 import jax
 import numpy as np
 
-from remidi.engine.adversaries.accel import EditingBuffers
-from remidi.engine.adversaries.base import RandomLevels
-from remidi.engine.adversaries.paired import GeneratorSequence, LevelGenerator
-from remidi.engine.adversaries.plr import LevelBuffers
-from remidi.engine.adversaries.sfl import LearnabilityBuffers
-from remidi.engine.algorithms import get_algorithm
 from remidi.engine.config import UEDConfig
 from remidi.engine.run.validation import task_refusal, validate_task
 from remidi.envs.interface import UEDTask
 from remidi.errors import PYTHON, ConfigError, Naming, a_type, debugging, user_code_error
 from remidi.experiments.overrides import apply_overrides, flat_keys
+from remidi.experiments.budgets import BUDGET_KEYS, MAX_ROLLOUT, budget_defaults, budget_line
+from remidi.experiments.task_args import described, parameter_names, shown_args, check_task_args, parse_task_args, task_args_argument
 from remidi.experiments.base import MAX_SEED, Experiment, RunSpec, parse_algos
 from remidi.experiments.resuming import resume_experiment
 from remidi.experiments.running import run_experiment
 from remidi.experiments.ued import UEDSpec, make_ued_experiment
 
 PRESET = "default"
-FRESH_PER_SLOT = 16  # an import-path task's buffers hold a sixteenth of the fresh levels PLR⊥ evaluates (buffer_capacity) ...
-MIN_CAPACITY, MAX_CAPACITY = 64, 4000  # ... at least 64, at most 4,000 (the paper's maze buffer and JaxUED's)
-SFL_CANDIDATES = 4  # SFL keeps the most learnable quarter of its candidates (budget_defaults)
-SFL_EPISODES = 4  # ... each played this many episodes of the task's bound
-SFL_BATCH_ROLLOUTS = 8  # ... in batches of as many steps as this many training rollouts
-# the keys budget_defaults derives from the run's size (not scaled in proportion to num_updates)
-BUDGET_KEYS = ("buffer.capacity", "remidi.buffer_capacity", "buffer.duplicate_check", "remidi.steps_per_buffer",
-               "sfl.buffer_size", "sfl.rollout_steps", "sfl.batch_size", "sfl.num_batches", "sfl.refresh_every")
 EVALUATIONS = 20  # an import-path task's run evaluates this many times (eval_every = num_updates / 20) ...
 EVAL_FLOOR = 10  # ... but at most every 10 updates: --set num_updates=30 evaluates 3 times, not 30
-MAX_ROLLOUT = 256  # an import-path task's rollouts last its episode bound, at most this (the paper's maze: 256)
 _IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, name) → its experiment
 
 
@@ -151,90 +137,6 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
     return dataclasses.replace(base, **changes), why
 
 
-def buffer_capacity(config: UEDConfig) -> int:
-    """C, the one buffer capacity of an import-path task's run (PLR⊥, minimax return, ACCEL, each
-    ReMiDi buffer, SFL's kept levels): a sixteenth of the fresh levels PLR⊥ evaluates over the run,
-    ``num_updates × num_envs × (1 − buffer.replay_prob)``, rounded up and clamped to
-    [:data:`MIN_CAPACITY`, :data:`MAX_CAPACITY`]. A buffer then keeps about the best sixteenth of
-    what the generator offers (replay stays selective) while each level it holds can be replayed
-    about 16·p/(1 − p) times (64 at p = 0.8), enough for its score to follow the agent."""
-    fresh = config.num_updates * config.num_envs * (1.0 - config.buffer.replay_prob)
-    return int(min(max(math.ceil(fresh / FRESH_PER_SLOT), MIN_CAPACITY), MAX_CAPACITY))
-
-
-def budget_defaults(task: UEDTask, config: UEDConfig, overrides: dict[str, Any]) -> UEDConfig:
-    """``config`` (a run's, its overrides applied) with the budget keys (:data:`BUDGET_KEYS`) that
-    ``overrides`` leave alone derived from its other keys, so that they follow ``--set
-    num_updates=N`` (and ``num_envs``, ``buffer.replay_prob``, ``remidi.num_buffers``,
-    ``num_steps``, ``eval_every``); a key the overrides set is kept as set:
-
-    * one capacity C for every buffer (:func:`buffer_capacity`; a capacity set by hand,
-      ``buffer.capacity`` or else ``remidi.buffer_capacity``, is C): ``buffer.capacity`` (PLR⊥,
-      minimax return, ACCEL), ``remidi.buffer_capacity`` (each of ReMiDi's adversaries is a PLR⊥
-      over its phase), ``sfl.buffer_size``;
-    * ``buffer.duplicate_check`` true: a small level space repeats levels, and a repeated level
-      updates its entry instead of filling the buffer with copies;
-    * ``remidi.steps_per_buffer`` = ⌈num_updates / remidi.num_buffers⌉: the switches spread over the run;
-    * SFL keeps the C most learnable of 4·C candidates (published: 1,000 of 25,000), each played
-      ``sfl.rollout_steps`` = 4 episodes of the task's bound (at most 4 × :data:`MAX_ROLLOUT`), in
-      batches whose rollouts hold about as many steps as 8 training rollouts (``sfl.batch_size`` =
-      ⌈8 · num_envs · num_steps / rollout_steps⌉, at most 4·C; ``sfl.num_batches`` = ⌈4·C /
-      batch_size⌉), refreshed every ``eval_every`` updates (published: the evaluation period)."""
-    given = set(overrides)
-    if "buffer.capacity" in given:
-        capacity = config.buffer.capacity
-    elif "remidi.buffer_capacity" in given:
-        capacity = config.remidi.buffer_capacity
-    else:
-        capacity = buffer_capacity(config)
-    kept = config.sfl.buffer_size if "sfl.buffer_size" in given else capacity
-    rollout = config.sfl.rollout_steps if "sfl.rollout_steps" in given else \
-        SFL_EPISODES * min(task.max_episode_steps, MAX_ROLLOUT)
-    candidates = SFL_CANDIDATES * kept
-    batch = config.sfl.batch_size if "sfl.batch_size" in given else \
-        min(candidates, max(1, math.ceil(SFL_BATCH_ROLLOUTS * config.num_envs * config.num_steps / rollout)))
-    derived = {
-        "buffer.capacity": capacity, "remidi.buffer_capacity": capacity, "buffer.duplicate_check": True,
-        "remidi.steps_per_buffer": max(1, math.ceil(config.num_updates / max(1, config.remidi.num_buffers))),
-        "sfl.buffer_size": kept, "sfl.rollout_steps": rollout, "sfl.batch_size": batch,
-        "sfl.num_batches": max(1, math.ceil(candidates / batch)), "sfl.refresh_every": max(1, config.eval_every),
-    }
-    return apply_overrides(config, {k: v for k, v in derived.items() if k not in given}, source="task budgets")
-
-
-def budget_line(config: UEDConfig, algo_name: str) -> str | None:
-    """The one line a fresh run says of ``algo_name``'s budget under ``config``: its buffers (how
-    many, how large, what a duplicate does), ReMiDi's switches, SFL's refresh, the replay
-    probability and the score; None for an algorithm of an adversary it does not know."""
-    algo = get_algorithm(algo_name)
-    adversary, b, r, s = algo.adversary, config.buffer, config.remidi, config.sfl
-    score = f"score {algo.score_name(config.score)}"
-    many = r.num_buffers if algo.buffer_sequence else 1
-    size = r.buffer_capacity if algo.buffer_sequence else None
-    switch = (f", switch every {r.steps_per_buffer:,} {'updates' if r.count == 'updates' else 'replays'}"
-              if algo.buffer_sequence and many > 1 else "")
-    if isinstance(adversary, LearnabilityBuffers):
-        kept = size if size is not None else s.buffer_size
-        buffers = f"{many} buffers of {kept:,}{switch}" if algo.buffer_sequence else f"1 buffer of {kept:,} levels"
-        return (f"{algo.name}: {buffers}, the most learnable of {s.batch_size * s.num_batches:,} candidates "
-                f"({s.num_batches:,} batches of {s.batch_size:,}, {s.rollout_steps:,} steps each) every "
-                f"{s.refresh_every:,} updates; {s.sampled_envs_ratio:g} of each update's levels from it")
-    if isinstance(adversary, LevelBuffers):
-        duplicates = "duplicates update their entry" if b.duplicate_check else "no duplicate check"
-        buffers = (f"{many} buffers of {size:,} ({duplicates}){switch}" if algo.buffer_sequence else
-                   f"1 buffer of {b.capacity:,} levels ({duplicates})")
-        edits = f", {config.accel.num_edits} edits per edited level" if isinstance(adversary, EditingBuffers) else ""
-        return f"{algo.name}: {buffers}, replay {b.replay_prob:g}{edits}, {score}"
-    if isinstance(adversary, RandomLevels):
-        return f"{algo.name}: no buffer, {config.num_envs} fresh levels every update"
-    if isinstance(adversary, (LevelGenerator, GeneratorSequence)):
-        more = f"{r.num_buffers} generators, switch every {r.steps_per_buffer:,} updates, " \
-            if isinstance(adversary, GeneratorSequence) else ""
-        return f"{algo.name}: {more}a learned generator ({config.paired.generator_network}), estimator " \
-               f"{config.paired.estimator}"
-    return None
-
-
 def defaults_note(why: dict[str, str]):
     """``(config, overrides, naming) -> line``: the one line a fresh run of an import-path task says
     first, naming the defaults it derived from the task (:func:`task_defaults`) that the overrides
@@ -311,85 +213,8 @@ def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
         return None, {}
     if not isinstance(config, dict) or not all(isinstance(key, str) for key in config):
         raise ConfigError(f"config: must be a dict of UEDConfig keys (e.g. {{'num_updates': 200, 'ppo.lr': 3e-4}}) "
-                          f"or a UEDConfig, got {_described(config)}")
+                          f"or a UEDConfig, got {described(config)}")
     return None, flat_keys(config)
-
-
-SCALARS = (str, int, float, bool, type(None))  # what a task argument may be: JSON gives it back as it was
-
-
-def task_args_argument(args, key: str = "task_args") -> dict[str, Any]:
-    """``args`` (a dict of keyword arguments for a task's function, or None: none) checked to be
-    what ``config.json`` records and gives back unchanged: str keys, JSON scalar values (str, int,
-    float, bool, None; a finite float). ConfigError (one line, naming ``key`` and the argument)."""
-    if args is None:
-        return {}
-    if not isinstance(args, dict) or not all(isinstance(name, str) and name.isidentifier() for name in args):
-        raise ConfigError(f"{key}: must be a dict of keyword arguments (e.g. {{'size': 9, 'dark': True}}), "
-                          f"got {_described(args)}")
-    for name, value in args.items():
-        if not isinstance(value, SCALARS) or (isinstance(value, float) and not math.isfinite(value)):
-            raise ConfigError(f"{key}: {name} must be a JSON scalar (str, int, float, bool or None) for config.json "
-                              f"to record it, got {_described(value)}")
-    return dict(args)
-
-
-def parse_task_args(items: Sequence[str], key: str = "--task-arg") -> dict[str, Any]:
-    """``["size=9", "dark=true", "name=big"]`` → ``{"size": 9, "dark": True, "name": "big"}``: each
-    value read as a JSON scalar (a number, ``true``/``false``, ``null``, a quoted string), else kept
-    as the string given; a name given twice keeps the last. ConfigError (one line) for an item that
-    is not ``NAME=VALUE`` with NAME a Python identifier."""
-    import json
-
-    out: dict[str, Any] = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or not name.isidentifier():
-            raise ConfigError(f"{key}: expected NAME=VALUE (NAME a keyword argument of the task's function), "
-                              f"got {item!r}")
-        try:
-            value = json.loads(text)
-        except ValueError:
-            value = text
-        out[name] = value if isinstance(value, SCALARS) and value not in (float("inf"), float("-inf")) else text
-    return out
-
-
-def check_task_args(target, path: str, args: dict[str, Any], key: str = "--task-arg") -> None:
-    """ConfigError (one line) unless ``target`` (the attribute ``path`` names) can be called with
-    ``args`` as keyword arguments: a name that is none of its parameters, a required parameter
-    left out where some are given, or arguments for a ``UEDTask`` (no function), each said with the
-    parameters it takes."""
-    import inspect
-
-    if isinstance(target, UEDTask) or not callable(target):
-        if args:
-            raise ConfigError(f"{key}: {path} is {a_type(target)}, not a function: it takes no arguments "
-                              f"(given: {', '.join(args)})")
-        return
-    try:
-        signature = inspect.signature(target)
-    except (TypeError, ValueError):  # a builtin without a signature: its own call says what is wrong
-        return
-    params = [p for p in signature.parameters.values() if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    accepted = ", ".join(p.name for p in params) or "none"
-    takes_any = any(p.kind == p.VAR_KEYWORD for p in signature.parameters.values())
-    for name in args:
-        named = [p for p in params if p.name == name]
-        if not takes_any and (not named or named[0].kind == named[0].POSITIONAL_ONLY):
-            raise ConfigError(f"{key}: {name} is no parameter of {path}; it accepts: {accepted}")
-    try:
-        if args:  # none given: a function that needs some fails when it is called, as any other error of its own
-            signature.bind(**args)
-    except TypeError as err:
-        raise ConfigError(f"{key}: {path} cannot be called with {_shown(args)} ({err}); it accepts: {accepted}") \
-            from None
-
-
-def _shown(args: dict[str, Any]) -> str:
-    """``size=9, dark=True``, or ``no arguments``."""
-    return ", ".join(f"{name}={value!r}" for name, value in args.items()) or "no arguments"
 
 
 def algos_argument(algos) -> str:
@@ -399,7 +224,7 @@ def algos_argument(algos) -> str:
         return algos
     if not isinstance(algos, (list, tuple)) or not all(isinstance(a, str) for a in algos):
         raise ConfigError(f"algos: must be a list of algorithm names or a comma-separated string "
-                          f"(e.g. ['plr', 'remidi'] or 'plr,remidi'), got {_described(algos)}")
+                          f"(e.g. ['plr', 'remidi'] or 'plr,remidi'), got {described(algos)}")
     return ",".join(algos)
 
 
@@ -413,31 +238,13 @@ def seeds_argument(seeds) -> list[int]:
         return list(range(int(seeds)))
     if not isinstance(seeds, (list, tuple, range)) or not seeds or not all(_is_int(s) for s in seeds):
         raise ConfigError(f"seeds: must be a non-empty list of integers in [0, {MAX_SEED}] or a number of seeds "
-                          f"≥ 1, got {_described(seeds)}")
+                          f"≥ 1, got {described(seeds)}")
     return [int(s) for s in seeds]
 
 
 def _is_int(value) -> bool:
     """An integer (Python's or NumPy's), not a bool."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
-
-
-def _described(value) -> str:
-    """``value`` for a message: its repr where short, else its type's name."""
-    text = repr(value)
-    return text if len(text) <= 60 else a_type(value)
-
-
-def _parameters(target) -> str:
-    """The names of ``target``'s parameters, comma-separated (``none``; ``?`` where unknown)."""
-    import inspect
-
-    try:
-        names = [p.name for p in inspect.signature(target).parameters.values()
-                 if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    except (TypeError, ValueError):
-        return "?"
-    return ", ".join(names) or "none"
 
 
 def _split(path: str) -> tuple[str, str]:
@@ -532,8 +339,8 @@ def import_experiment(path: str, folder: str | None = None, name: str | None = N
         if not args:
             raise user_code_error(f"experiment: building the task of {path}", err) from None
         detail = (str(err).strip().splitlines() or [""])[0]
-        raise ConfigError(f"{key}: {path} refused {_shown(args)} (TypeError: {detail}); it accepts: "
-                          f"{_parameters(target)}") from None
+        raise ConfigError(f"{key}: {path} refused {shown_args(args)} (TypeError: {detail}); it accepts: "
+                          f"{parameter_names(target)}") from None
     except (Exception, SystemExit) as err:  # the user's task builder (a SystemExit too: no silent exit 0)
         if debugging():
             raise

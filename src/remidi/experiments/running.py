@@ -35,6 +35,7 @@ from remidi.errors import COMMAND_LINE, ConfigError, Naming
 from remidi.experiments import outputs
 from remidi.experiments.base import MAX_SEED, Experiment, RunContext, RunResult, RunSpec, resolve_config
 from remidi.experiments.overrides import config_to_dict
+from remidi.experiments.remidi_account import remidi_account, remidi_line
 from remidi.files import code_version
 
 
@@ -300,106 +301,3 @@ def _train_and_write(spec: RunSpec, config, folders: dict[str, Path], out: Path,
         if line is not None and not _secondary_process(devices):
             print(f"remidi: {line}", file=sys.stderr, flush=True)
     return summaries
-
-
-# how the end-of-run line names the algorithm a buffer sequence refines
-BASE_NAMES = {"plr": "PLR⊥", "accel": "ACCEL", "sfl": "SFL"}
-
-
-def remidi_account(algo_name: str, result: RunResult, num_envs: int | None) -> dict | None:
-    """What a buffer sequence (ReMiDi over PLR⊥, ACCEL, SFL, ...) did over the whole run, per seed,
-    from its block history (``result.history`` {name: f[S, T]}, blocks ending at ``result.steps``
-    i[T]): ``fresh_levels`` (the levels of updates that neither replayed nor rehearsed: a block's
-    ``length × num_envs × (1 − replay − rehearsal)``, ``replay`` the block's mean share of replayed
-    envs), ``rejected`` (those a frozen level explained completely, the step metric's sum),
-    ``masked_share`` (the share of the rollout steps trained on that a frozen level explained:
-    ``trained_fraction_masked`` is that share on a trained update and 0 on another, so its sum over
-    updates over the number of trained updates; an update of PLR⊥'s family trains when it replays
-    or rehearses, any other every update; NaN without one) and ``frozen_solve_rate`` {buffer:
-    f[S]} (``buffer_solve_rate/b<i>`` of the final metrics, where the run evaluates it, for the
-    buffers before the one active at the end on every seed: the frozen ones). None for
-    an algorithm that is no buffer sequence, or a history without those metrics."""
-    from remidi.engine.algorithms import ALGORITHMS
-
-    algo = ALGORITHMS.get(algo_name)
-    history = result.history
-    if algo is None or not algo.buffer_sequence or not num_envs or not all(
-            name in history for name in ("rejected", "replay", "trained_fraction_masked")):
-        return None
-    steps = np.asarray(result.steps, float)
-    lengths = np.diff(np.concatenate([[0.0], steps]))  # f[T]
-    replay = np.asarray(history["replay"], float)
-    rehearsal = np.asarray(history.get("rehearsal", np.zeros_like(replay)), float)
-    fresh = (lengths * num_envs * (1.0 - replay - rehearsal)).sum(axis=1)
-    rejected = np.asarray(history["rejected"], float).sum(axis=1)
-    trains_on_replay = algo.replays and not algo.trains_on_fresh
-    trained = (lengths * (replay + rehearsal)).sum(axis=1) if trains_on_replay else np.full(len(replay), lengths.sum())
-    masked = (lengths * np.asarray(history["trained_fraction_masked"], float)).sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        share = np.where(trained > 0, masked / trained, np.nan)
-    final = result.final_metrics()
-    active = np.asarray(history["active_buffer"], float)[:, -1] if "active_buffer" in history else None
-    solve = {name.split("/", 1)[1]: [float(v) for v in np.asarray(final[name], float)]
-             for name in sorted(final, key=lambda n: (len(n), n)) if name.startswith("buffer_solve_rate/b")
-             and active is not None and int(name.rsplit("b", 1)[1]) < np.min(active)}  # frozen on every seed
-    return {"fresh_levels": [int(round(v)) for v in fresh], "rejected": [int(round(v)) for v in rejected],
-            "masked_share": [float(v) for v in share], "base": _base_algorithm(algo),
-            **({"frozen_solve_rate": solve} if solve else {})}
-
-
-def _base_algorithm(algo) -> str | None:
-    """The registered algorithm ``algo`` (a buffer sequence) refines: the one with its adversary as
-    a single buffer and its score (``remidi`` → ``plr``); None where none is registered."""
-    from dataclasses import replace as replaced
-
-    from remidi.engine.algorithms import ALGORITHMS
-
-    try:
-        single = replaced(algo.adversary, buffer_sequence=False)
-    except TypeError:
-        return None
-    return next((name for name, other in ALGORITHMS.items() if other.adversary == single and other.score == algo.score),
-                None)
-
-
-def _cost_per_update(summary: dict) -> float | None:
-    """Seconds per update of the part of the run this invocation trained: the steady rate of its
-    blocks after the first (``parts``' ``train_s / train_updates``) where recorded, else its wall
-    time over its updates; None where neither is known."""
-    parts = summary.get("parts") or []
-    last = parts[-1] if parts and isinstance(parts[-1], dict) else {}
-    if last.get("train_updates"):
-        return last["train_s"] / last["train_updates"]
-    updates = (last["updates"][1] - last["updates"][0]) if last.get("updates") else None
-    return summary["wall_s"] / updates if updates and summary.get("wall_s") else None
-
-
-def remidi_line(algo: str, summary: dict, summaries: dict[str, dict]) -> str | None:
-    """The one line a run says at its end of what the buffer sequence ``algo`` did (its summary's
-    ``remidi_did``: :func:`remidi_account`), over every seed: the fresh levels it rejected out of
-    those it evaluated, the masked share of the steps it trained on, the frozen buffers' solve rates
-    where evaluated; and, where nothing was rejected or masked, that the run was the algorithm it
-    refines, at the cost ratio to that algorithm's run in ``summaries`` (the same invocation's)
-    where there is one."""
-    did = summary["remidi_did"]
-    fresh, rejected = sum(did["fresh_levels"]), sum(did["rejected"])
-    shares = [s for s in did["masked_share"] if isinstance(s, (int, float)) and s == s]  # NaN, null: none trained
-    masked = float(np.mean(shares)) if shares else 0.0
-    seeds = len(did["fresh_levels"])
-    who = f"what {algo} did{f' ({seeds} seeds)' if seeds > 1 else ''}"
-    base = did.get("base")
-    ratio = None
-    if base in summaries and base != algo:
-        mine, theirs = _cost_per_update(summary), _cost_per_update(summaries[base])
-        ratio = mine / theirs if mine and theirs else None
-    solve = did.get("frozen_solve_rate") or {}
-    solved = (", the frozen buffers solve " + ", ".join(f"{np.nanmean(v):.2f} ({name})" for name, v in solve.items())
-              if solve else "")
-    if rejected == 0 and masked == 0:
-        same = f": this run was {BASE_NAMES.get(base, base)}" if base else ""
-        cost = f" at {ratio:.1f}× its cost" if base and ratio is not None else ""
-        return f"{who}: rejected 0 of {fresh:,} fresh levels, masked no step{solved}{same}{cost}"
-    part = f" ({rejected / fresh:.1%})" if fresh else ""
-    steps = f"masked {masked:.1%} of the steps it trained on" if masked > 0 else "masked no step"
-    cost = f"; {ratio:.1f}× {BASE_NAMES.get(base, base)}'s cost" if base and ratio is not None else ""
-    return f"{who}: rejected {rejected:,} of {fresh:,} fresh levels{part}, {steps}{solved}{cost}"

@@ -195,7 +195,7 @@ CLAIMS = (
     Claim("kinetix-remidi-masks-nothing", "Kinetix (fully observed levels)", "ReMiDi's tracker explains almost no "
           "step where every level is fully observed (bound: the masked share of trained steps ≤ 0.01)",
           "summary:trained_fraction_masked", ("kinetix-s",), bounds=(("remidi", 0.0, 0.01),), min_seeds=5),
-    # constructed domains (issue 63): a small discrete level space and noisy float observations, both with
+    # constructed domains (a user's own environment): a small discrete level space and noisy float observations, both with
     # levels that hide the goal; stated on 2026-12-02 before their runs (docs/results.md, "Constructed domains")
     Claim("darkroom-lit", "beyond the paper (dark room)", "at comparable budgets ReMiDi "
           "solves lit levels no worse than PLR⊥ (no-worse test, δ = 0.05)", "evaluate:solve_rate/lit", ("darkroom",),

@@ -191,8 +191,10 @@ def tracker_cost_note(task, cfg, algo, naming: Naming = COMMAND_LINE) -> str | N
             fix = "remidi.tracker=belief judges with a learned model instead (docs/belief.md)"
         else:
             fix = "a smaller remidi.buffer_capacity or remidi.num_buffers freezes fewer levels"
+    when = (" while that many frozen levels keep matching its observations (a slot no frozen level matches is "
+            "not stepped: where nothing matches, ReMiDi steps as PLR⊥)") if slots else ""
     return (f"ReMiDi's exact tracker {what} once an adversary is frozen: a rollout steps this environment up to "
-            f"{followed + 1}× as often as PLR⊥'s (docs/performance.md, \"The tracker's cost\"); {fix}")
+            f"{followed + 1}× as often as PLR⊥'s{when} (docs/performance.md, \"The tracker's cost\"); {fix}")
 
 
 __all__ = ["Frozen", "Tracker", "TRACKERS", "REPLAYING", "tracker_for", "validate_tracker", "exact_budget",

@@ -82,18 +82,10 @@ class ToleranceTracker(ExactTracker):
 
 
 @dataclass(frozen=True)
-class ToleranceCandidates(CandidateTracker):
+class ToleranceCandidates(CandidateTracker, ToleranceTracker):
     """The candidate tracker (``budget`` slots per env: the frozen levels whose first observation
-    is within tolerance of the env's) with observations compared up to ``atol + rtol·|frozen|``."""
-
-    atol: float = 0.0
-    rtol: float = 0.0
-
-    def compare(self, obs_f, obs) -> jax.Array:
-        return close_to(obs_f, obs, self.atol, self.rtol)
-
-    def at_first_observation(self) -> ToleranceTracker:
-        return ToleranceTracker(mode=self.mode, atol=self.atol, rtol=self.rtol)
+    is within tolerance of the env's) with :class:`ToleranceTracker`'s comparison (``compare`` and
+    ``at_first_observation`` come from it: the candidate tracker defines neither)."""
 
 
 def make_tolerance_tracker(budget: int, atol: float, rtol: float) -> ExactTracker:

@@ -1,6 +1,6 @@
 """An import-path task's run starts from defaults chosen from what the task provides
 (experiments/custom.task_defaults): the score, the rollout length and how often to evaluate, said
-in one line; and from budgets derived from the run's size (custom.budget_defaults: one buffer
+in one line; and from budgets derived from the run's size (budgets.budget_defaults: one buffer
 capacity for every algorithm, duplicates updating their entry, ReMiDi's switches spread over the
 run, SFL sized to the task), one line per algorithm at the start; nothing trains here."""
 

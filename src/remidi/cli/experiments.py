@@ -178,7 +178,8 @@ def _experiment(name: str, task_args: list[str]):
     if ":" not in name:
         raise RemidiError(f"--task-arg: gives keyword arguments to a task's function (remidi run "
                           f"mypkg.tasks:make_task --task-arg size=9); {name} is a built-in experiment: use --set")
-    from remidi.experiments.custom import import_experiment, parse_task_args
+    from remidi.experiments.custom import import_experiment
+    from remidi.experiments.task_args import parse_task_args
 
     return import_experiment(name, args=parse_task_args(task_args))
 

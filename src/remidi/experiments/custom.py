@@ -14,7 +14,7 @@ Two entry points:
   ``--task-arg`` keyword arguments, each value a JSON scalar or else a string; or a ``UEDTask``)
   as Python does, from the current folder first, and runs it on defaults chosen from what the task
   provides (:func:`task_defaults`: the score, the rollout length, how often to evaluate; said in
-  one line at the start) and budgets derived from the run's size (:func:`budget_defaults`: one
+  one line at the start) and budgets derived from the run's size (:func:`~remidi.experiments.budgets.budget_defaults`: one
   line per algorithm at the start) with your ``--set`` keys.
 
 ``config.json`` records where the task comes from (``"task": {"import": "mypkg.tasks:make_task",

@@ -224,7 +224,12 @@ brax_seeds() {  # brax_seeds FIRST_SEED: PLR⊥, minimax return and ReMiDi on ev
 brax_seeds 5
 
 at 8214e56
-for e in tmaze blindfold; do run "minimax-return-cpu4x-s0" $e minimax-return 0 5 cpu4x; done
+run "minimax-return-cpu4x-s0" tmaze minimax-return 0 5 cpu4x
+# the blindfold run was started (2026-12-02) from the checkout at ac5a71a, whose checkpoints name the
+# learner's state (.learner.train_state); 8214e56 cannot read them. It resumed from update 1,200 at
+# 590cb41 (the engine reference unchanged between them), and resumes there
+at 590cb41
+run "minimax-return-cpu4x-s0" blindfold minimax-return 0 5 cpu4x
 
 # Table 1's seeds 0–4 were trained again at their commit (SUB=repeats/ brax_seeds 0: RUNS_DIR/repeats/,
 # collected with --collect-repeat into docs/results/repeats), because their final checkpoints were

@@ -1,5 +1,5 @@
-"""Writing files so that an interruption never leaves a half-written one (shared by the engine's
-checkpoints and the experiments' outputs)."""
+"""Writing files so that an interruption never leaves a half-written one, and reading the
+records they hold (shared by the engine's checkpoints and the experiments' outputs)."""
 
 from __future__ import annotations
 
@@ -39,6 +39,18 @@ def atomic_write(path: Path, write, binary: bool = False) -> None:
         if isinstance(err, OSError) and err.filename != str(path):  # name the file meant, not the temporary
             raise OSError(err.errno, err.strerror or str(err), str(path)) from None
         raise
+
+
+def flat_keys(record: dict, prefix: str = "") -> dict:
+    """A nested record (a run's config.json) as dotted keys: ``{"ppo": {"lr": 3e-4}, "num_updates":
+    20}`` → ``{"ppo.lr": 3e-4, "num_updates": 20}``."""
+    flat: dict = {}
+    for key, value in record.items():
+        if isinstance(value, dict):
+            flat.update(flat_keys(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
 
 
 def writable(folder: Path) -> bool:

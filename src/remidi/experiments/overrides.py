@@ -16,6 +16,7 @@ import typing
 from typing import Any, Iterable
 
 from remidi.errors import ConfigError
+from remidi.files import flat_keys
 
 
 def parse_set_items(items: Iterable[str]) -> dict[str, str]:
@@ -187,17 +188,6 @@ def config_to_dict(config) -> dict[str, Any]:
 # keys added with a default that changes what a run does, and the value a run written before the
 # key existed used: such a run (its config.json without the key) resumes as it started
 BEFORE_THE_KEY = {"remidi.belief_spread": 0.0}
-
-
-def flat_keys(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """``{"ppo": {"lr": 3e-4}, "num_updates": 20}`` → ``{"ppo.lr": 3e-4, "num_updates": 20}``."""
-    flat: dict[str, Any] = {}
-    for key, value in config.items():
-        if isinstance(value, dict):
-            flat.update(flat_keys(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
 
 
 def config_from_dict(cls, data: dict[str, Any]):

@@ -28,8 +28,6 @@ from pathlib import Path
 from dataclasses import replace
 from typing import Callable
 
-import numpy as np
-
 from remidi import __version__
 from remidi.errors import COMMAND_LINE, ConfigError, Naming
 from remidi.experiments import outputs

@@ -104,9 +104,9 @@ def episode_returns(reward: jax.Array, done: jax.Array, gamma: float = 1.0):
     return mean, best, count
 
 
-def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float = -jnp.inf) -> jax.Array:
+def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float | jax.Array = -jnp.inf) -> jax.Array:
     """f32[N]: the mean over finished episodes of each episode's per-step mean of ``x`` f32[T, N];
-    ``incomplete_value`` for an env with no finished episode (module docstring)."""
+    ``incomplete_value`` (a number, or f32[N]) for an env with no finished episode (module docstring)."""
     total, _, count, _ = _episode_stats(x, done, time_average=True)
     return jnp.where(count > 0, total / jnp.maximum(count, 1), incomplete_value)
 
@@ -167,8 +167,8 @@ def positive_value_loss(advantages: jax.Array, done: jax.Array) -> jax.Array:
     """``advantages`` f32[T, N] (GAE, bootstrapped at the rollout's end), ``done`` bool[T, N]: the
     mean over finished episodes of their per-step mean of max(A, 0); where no episode ended, the
     mean over all T steps (module docstring)."""
-    total, _, count, truncated = _episode_stats(jnp.maximum(advantages, 0.0), done, time_average=True)
-    return jnp.where(count > 0, total / jnp.maximum(count, 1), truncated)
+    positive = jnp.maximum(advantages, 0.0)
+    return episode_mean(positive, done, incomplete_value=jnp.mean(positive, axis=0))
 
 
 def max_mc(values: jax.Array, max_return: jax.Array, done: jax.Array, advantages: jax.Array) -> jax.Array:
@@ -177,9 +177,8 @@ def max_mc(values: jax.Array, max_return: jax.Array, done: jax.Array, advantages
     finished episodes of their per-step mean of (max_return − V(s_t)); where no episode ended, the
     mean over all T steps of (max(max_return, V(s_0) + A_0) − V(s_t)), V(s_0) + A_0 the truncated
     episode's bootstrapped return (module docstring)."""
-    total, _, count, _ = _episode_stats(max_return[None, :] - values, done, time_average=True)
     best = jnp.maximum(max_return, values[0] + advantages[0])
-    return jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.mean(best[None, :] - values, axis=0))
+    return episode_mean(max_return[None, :] - values, done, incomplete_value=jnp.mean(best[None, :] - values, axis=0))
 
 
 def negative_return(mean_return: jax.Array) -> jax.Array:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from remidi.engine.adversaries.scores import episode_solved
+
 #: levels played per buffer at most (a buffer of PLR⊥'s published 4,000 would cost 40,000
 #: episodes per evaluation; 256 give the rate to about ±0.03)
 MAX_LEVELS = 256
@@ -41,8 +43,7 @@ def buffer_solve_rates(setup, runner, rng, level_episodes, action: str = "sample
     levels = jax.tree.map(lambda x: jax.vmap(lambda xs, s: xs[s])(x, slots).reshape((k * m,) + x.shape[2:]),
                           buffers.levels)
     returns, _, flags = level_episodes(setup, runner, task.env, levels, setup.cfg.eval_attempts, k_play, action)
-    # an info key's flags where the task's solved names one, else its function of the return
-    solved = (task.solved(returns) if flags is None else flags).astype(jnp.float32)  # [K·m, attempts]
+    solved = episode_solved(task.solved, returns, flags).astype(jnp.float32)  # [K·m, attempts]
     solved = jnp.mean(solved, axis=1).reshape(k, m)  # per level
     count = jnp.sum(picked, axis=1)
     rate = jnp.where(count > 0, jnp.sum(jnp.where(picked, solved, 0.0), axis=1) / jnp.maximum(count, 1), jnp.nan)

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from remidi.errors import ConfigError
-from remidi.files import atomic_write, remove_temporaries
+from remidi.files import atomic_write, flat_keys, remove_temporaries
 
 CHECKPOINT = "checkpoint.npz"
 PREFIX = "leaf:"  # a runner array's name in checkpoint.npz: PREFIX + its tree path
@@ -204,23 +204,12 @@ def check_run(path: Path, meta: dict, run: dict | None) -> None:
     older run with its default); checkpoints written before runs were recorded are not checked."""
     if run is None or not isinstance(meta.get("run"), dict):
         return
-    was, now = _flat(meta["run"]), _flat(json.loads(json.dumps(run, default=_plain)))
+    was, now = flat_keys(meta["run"]), flat_keys(json.loads(json.dumps(run, default=_plain)))
     for key in was:
         if key in now and was[key] != now[key]:
             raise ConfigError(f"--resume: {path} does not match the run's config.json ({key}: {now[key]!r} there, "
                               f"{was[key]!r} when the checkpoint was written): was config.json edited? Put it back, "
                               f"or start a new run")
-
-
-def _flat(tree, prefix: str = "") -> dict:
-    """A nested dict as ``{"a.b": value}``."""
-    out = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run: dict | None = None) -> None:

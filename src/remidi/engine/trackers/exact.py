@@ -257,11 +257,6 @@ class CandidateTracker(ExactTracker):
         return jax.vmap(functools.partial(candidates_step, compare=self.compare), in_axes=(None, None, 0, 0, 0, 0, 0))(
             env, params, env_keys, state, action, next_obs, done)
 
-    def advance_stepped(self, state: TrackerState, stepped, next_obs, done) -> TrackerState:
-        """:meth:`advance` given the slots' environment step, taken together with the envs'
-        (leaves [N, S, ...]: :func:`step_with_slots`)."""
-        return jax.vmap(functools.partial(candidates_advance, compare=self.compare))(state, stepped, next_obs, done)
-
     def overflow(self, state: TrackerState) -> jax.Array:
         return state.overflow
 

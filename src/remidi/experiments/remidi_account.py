@@ -60,10 +60,11 @@ def _base_algorithm(algo) -> str | None:
     from dataclasses import replace as replaced
 
     from remidi.engine.algorithms import ALGORITHMS
+    from remidi.errors import ConfigError
 
     try:
         single = replaced(algo.adversary, buffer_sequence=False)
-    except TypeError:
+    except (TypeError, ConfigError):  # no such field, or no single-buffer form (PAIRED's sequence)
         return None
     return next((name for name, other in ALGORITHMS.items() if other.adversary == single and other.score == algo.score),
                 None)

@@ -288,13 +288,14 @@ if _REPORT:
 @pytest.fixture
 def restore_registries():
     """Algorithms, scores and networks registered by a test (remidi.register_algorithm /
-    register_score / register_network, an example loaded in-process) are removed again when it
+    register_score / register_network / register_replay_rule, an example loaded in-process) are removed again when it
     ends, so other tests see the library's."""
     from remidi.engine.algorithms import ALGORITHMS
     from remidi.engine.adversaries.scores import SCORES
+    from remidi.engine.adversaries.level_buffer import REPLAY_RULES
     from remidi.engine.core.networks import NETWORK_HELP, NETWORKS
 
-    registries = (ALGORITHMS, SCORES, NETWORKS, NETWORK_HELP)
+    registries = (ALGORITHMS, SCORES, NETWORKS, NETWORK_HELP, REPLAY_RULES)
     saved = [dict(registry) for registry in registries]
     yield
     for registry, before in zip(registries, saved):

@@ -219,3 +219,30 @@ def test_my_network_plugin_trains_through_the_command_line_and_resumes_with_it(t
     monkeypatch.setenv("REMIDI_PLUGINS", "my_network")
     assert main(["run", "--resume", str(out), "--quiet"]) == 0
     assert (out / "summary.json").exists() and "ln_mlp" in NETWORKS
+
+
+def test_my_replay_rule_example_sets_the_replay_distribution(restore_registries):
+    """examples/my_replay_rule.py: ``buffer.prioritization=proportional`` is accepted and the
+    buffer replays by (1-ρ)·score/Σscore + ρ·staleness, computed here by hand; draws follow it."""
+    import jax
+    import jax.numpy as jnp
+
+    from remidi.engine.adversaries import level_buffer as B
+    from remidi.engine.config import BufferConfig, validate_buffer_config
+
+    load_example(EXAMPLE.parent / "my_replay_rule.py")
+    cfg = BufferConfig(capacity=4, prioritization="proportional", staleness_coef=0.2)
+    validate_buffer_config(cfg)
+    state = B.init_buffer(cfg, jnp.zeros(()))
+    state = state.replace(scores=jnp.asarray([3.0, 1.0, -2.0, 5.0]), valid=jnp.asarray([True, True, True, False]),
+                          last_seen=jnp.asarray([0, 1, 2, 0]), time=jnp.asarray(3))
+    by_score = np.array([3.0, 1.0, 0.0, 0.0]) / 4.0  # the negative score weighs nothing, the invalid entry neither
+    staleness = np.array([3.0, 2.0, 1.0, 0.0]) / 6.0
+    want = 0.8 * by_score + 0.2 * staleness
+    np.testing.assert_allclose(B.replay_weights(state, cfg), want, rtol=1e-6)
+    _, idxs, _ = B.sample_replay(state, cfg, jax.random.PRNGKey(0), 4000)
+    np.testing.assert_allclose(np.bincount(np.asarray(idxs), minlength=4) / 4000, want, atol=0.03)
+    allowed = ", ".join(B.REPLAY_RULES)
+    assert allowed.endswith("proportional")
+    with pytest.raises(Exception, match=f"prioritization: unknown value 'nope'; allowed: {allowed}$"):
+        validate_buffer_config(BufferConfig(prioritization="nope"))

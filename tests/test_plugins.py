@@ -33,7 +33,8 @@ def test_a_registered_score_ranks_the_buffers_levels():
     runner = tr.init_runner(setup, jax.random.PRNGKey(3))
     # the rollout train_step makes (its keys split as train_step splits them)
     _, k_branch, k_roll, k_levels, _, k_sample = jax.random.split(runner.rng, 6)
-    proposal = setup.algo.adversary.propose(setup, runner, k_branch, k_levels, k_sample)
+    proposal = setup.algo.adversary.propose(setup, runner, tr.fresh_levels(setup, k_levels), k_branch, k_levels,
+                                            k_sample)
     assert not bool(proposal.replay)  # an empty buffer: fresh levels, scored and inserted
     traj, adv, _, mean_ret, best_ret = lrn.collect(setup, runner.learner, k_roll, proposal.levels, None)
     inputs = sc.ScoreInputs(mean_return=mean_ret, values=traj.value, advantages=adv, max_return=best_ret,

@@ -81,7 +81,11 @@ def remidi_sfl():
     every test here (on buffer 0 nothing is frozen and it is SFL's proposal)."""
     setup = tiny("remidi-sfl")
     runner = jax.jit(lambda key: tr.init_runner(setup, key))(jax.random.PRNGKey(0))
-    propose = jax.jit(lambda r, key: setup.algo.adversary.propose(setup, r, *jax.random.split(key, 3)))
+    def propose(r, key):
+        k_branch, k_levels, k_sample = jax.random.split(key, 3)
+        return setup.algo.adversary.propose(setup, r, tr.fresh_levels(setup, k_levels), k_branch, k_levels, k_sample)
+
+    propose = jax.jit(propose)
     return setup, runner, propose
 
 
@@ -108,9 +112,10 @@ def test_advance_counts_every_update_and_a_sequence_switches(remidi_sfl):
     proposal = SimpleNamespace(replay=jnp.zeros(8, bool))
     sfl = tr.make_setup(remidi.task, remidi.cfg, "sfl")
     r = runner.replace(adversary=runner.adversary.replace(count=jnp.asarray(4, jnp.int32)))
-    state = sfl.algo.adversary.advance(sfl, r, proposal)  # one buffer: counts on, never switches
+    outcome = SimpleNamespace(traj=None)
+    state = sfl.algo.adversary.advance(sfl, r, proposal, outcome)[0].adversary  # one buffer: counts on, never switches
     assert int(state.count) == 5 and int(state.active) == 0
-    state = remidi.algo.adversary.advance(remidi, r, proposal)  # the 5th update on buffer 0: switch
+    state = remidi.algo.adversary.advance(remidi, r, proposal, outcome)[0].adversary  # the 5th update: switch
     assert int(state.active) == 1 and int(state.count) == 0  # the next update refreshes buffer 1
 
 

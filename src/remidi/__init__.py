@@ -14,9 +14,11 @@ _LAZY = {
     "register_algorithm": ("remidi.engine.algorithms", "register_algorithm"),
     "register_score": ("remidi.engine.adversaries.scores", "register_score"),
     "register_network": ("remidi.engine.core.networks.registry", "register_network"),
+    "register_replay_rule": ("remidi.engine.adversaries.level_buffer", "register_replay_rule"),
 }
 
-__all__ = ["__version__", "register_algorithm", "register_network", "register_score", "run_ued"]
+__all__ = ["__version__", "register_algorithm", "register_network", "register_replay_rule", "register_score",
+           "run_ued"]
 
 
 def __getattr__(name):

@@ -12,7 +12,6 @@ from remidi.engine.core.ppo import PPOConfig
 from remidi.errors import ConfigError, one_of
 
 POLICIES = ("masked", "combine")
-PRIORITIZATIONS = ("rank", "topk")
 
 
 @dataclass(frozen=True)
@@ -33,7 +32,7 @@ class BufferConfig:
     """
 
     capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
-    prioritization: str = field(default="rank", metadata={"help": "replay sampling: rank or topk"})
+    prioritization: str = field(default="rank", metadata={"help": "replay rule: rank, topk, or one registered with remidi.register_replay_rule"})
     temperature: float = field(default=1.0, metadata={"help": "β of rank prioritisation and of the top-k softmax"})
     topk_k: int = field(default=32, metadata={"help": "k of top-k prioritisation"})
     staleness_coef: float = field(default=0.3, metadata={"help": "ρ: weight of staleness in the replay distribution"})
@@ -60,8 +59,10 @@ def validate_buffer_config(config: BufferConfig) -> None:
     """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
     if not (_is_int(config.capacity) and config.capacity >= 1):
         raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
-    if config.prioritization not in PRIORITIZATIONS:
-        raise one_of("prioritization", config.prioritization, PRIORITIZATIONS)
+    from remidi.engine.adversaries.level_buffer import REPLAY_RULES
+
+    if config.prioritization not in REPLAY_RULES:
+        raise one_of("prioritization", config.prioritization, REPLAY_RULES)
     if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
         raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
     if not (_is_int(config.topk_k) and config.topk_k >= 1):

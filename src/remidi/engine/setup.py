@@ -10,12 +10,18 @@ from functools import partial
 
 import jax
 
-from remidi.engine.config import UEDConfig
+from typing import TYPE_CHECKING
+
+from remidi.engine.config import BufferConfig, UEDConfig
 from remidi.engine.core import normalize as nrm
 from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
+
+if TYPE_CHECKING:
+    from remidi.engine.algorithms import Algorithm
+    from remidi.engine.trackers.base import Tracker
 
 
 @dataclass(frozen=True)
@@ -23,14 +29,16 @@ class Setup:
     """Static pieces of a run: the task, the config, the algorithm (its adversary and score,
     :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
     equality: the agent's network and the distinguishability tracker
-    (:mod:`remidi.engine.trackers`). Hashable: a static argument under jit. Built by
+    (:mod:`remidi.engine.trackers`) and the level buffers' settings
+    (:func:`~remidi.engine.config.buffer_config`). Hashable: a static argument under jit. Built by
     :func:`remidi.engine.train.make_setup`."""
 
     task: UEDTask
     cfg: UEDConfig
-    algo: object
+    algo: Algorithm
     net: object = field(compare=False)
-    tracker: object = field(compare=False, default=None)
+    tracker: Tracker | None = field(compare=False, default=None)
+    buffer: BufferConfig | None = field(compare=False, default=None)  # the level buffers' (buffer_config)
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):

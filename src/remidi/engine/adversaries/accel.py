@@ -37,12 +37,10 @@ class EditingBuffers(LevelBuffers):
                             edit_next=jnp.asarray(False),
                             last_replayed=jax.tree.map(lambda x: jnp.stack([x] * setup.cfg.num_envs), example_level))
 
-    def _fresh(self, setup, k_levels):
-        generate = setup.task.easy_level if setup.cfg.accel.easy_start else setup.task.sample_level
-        return jax.vmap(generate)(jax.random.split(k_levels, setup.cfg.num_envs))
-
-    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
-        base = super().propose(setup, runner, k_branch, k_levels, k_sample)  # replayed or fresh levels
+    def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
+        if setup.cfg.accel.easy_start:  # fresh levels from the easy generator (the step's keys)
+            fresh = jax.vmap(setup.task.easy_level)(jax.random.split(k_levels, setup.cfg.num_envs))
+        base = super().propose(setup, runner, fresh, k_branch, k_levels, k_sample)  # replayed or fresh levels
         state = runner.adversary
         edit = state.edit_next
         replay = base.replay & ~edit
@@ -56,11 +54,12 @@ class EditingBuffers(LevelBuffers):
         return Proposal(replay=replay, levels=levels, buffer=base.buffer, slots=base.slots, train=train, edit=edit,
                         rehearse=rehearse)
 
-    def advance(self, setup, runner, proposal: Proposal):
+    def advance(self, setup, runner, proposal: Proposal, outcome):
         """After a replay the next update edits its levels."""
-        state = super().advance(setup, runner, proposal)
+        runner, metrics = super().advance(setup, runner, proposal, outcome)
+        state = runner.adversary
         last = jax.tree.map(lambda c, o: jnp.where(proposal.replay, c, o), proposal.levels, state.last_replayed)
-        return state.replace(edit_next=proposal.replay, last_replayed=last)
+        return runner.replace(adversary=state.replace(edit_next=proposal.replay, last_replayed=last)), metrics
 
 
 def edit_levels(setup, levels, rng):

@@ -5,16 +5,15 @@ The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
 (:attr:`~remidi.engine.algorithms.Algorithm.adversary`), never its flags:
 
 * :meth:`Adversary.init`: its state (``Runner.adversary``; :class:`AdversaryState` or a subclass);
-* :meth:`Adversary.propose`: the N levels of this update (a :class:`Proposal`: where they come
-  from, whether the learner trains on them);
-* :meth:`Adversary.frozen_levels`: the earlier adversaries' levels, what the distinguishability
-  tracker (:mod:`remidi.engine.trackers`) tracks against (None: nothing is frozen);
-* :meth:`Adversary.own_levels`: whether this update's rollout played the active adversary's own
-  levels (what a learned tracker's model of it learns from);
-* :meth:`Adversary.update`: after scoring: the buffer's new scores or insertions (a level a
-  frozen level explains completely is never inserted), and the best-return record of MaxMC;
-* :meth:`Adversary.advance`: after the learner: a sequence's switch (freeze the active
-  adversary, move to the next), ACCEL's memory of the last replay, a fresh generator;
+* :meth:`Adversary.propose`: the N levels of this update, from the fresh levels the step drew (a
+  :class:`Proposal`: where they come from, whether the learner trains on them);
+* :meth:`Adversary.frozen`: what the rollout's tracker compares against, a sequence's earlier
+  adversaries' levels (None: nothing frozen, no tracker runs);
+* :meth:`Adversary.update`: after scoring (an :class:`Outcome`): the buffer's new scores or
+  insertions (a level a frozen level explains completely is never inserted);
+* :meth:`Adversary.advance`: after the learner, the end of the update: a sequence's switch (its
+  tracker and the policy frozen with the active adversary), ACCEL's memory of the last replay, a
+  fresh generator;
 * :meth:`Adversary.metrics`: what its buffers hold (tag shares, size).
 
 Implementations, each the one before plus what it adds: :class:`RandomLevels` (DR, here);
@@ -80,11 +79,22 @@ class Proposal:
     rehearse: jax.Array | None = None
     nonfinite: dict | None = None
 
-    def explained(self, indist: jax.Array) -> jax.Array:
-        """bool[T, N]: the steps the learner and the buffer treat as explained by a frozen level:
-        the tracker's ``indist``, none on a rehearsal (its levels are frozen levels, so the tracker
-        explains every step; rehearsal trains on them exactly to keep that behaviour)."""
-        return indist if self.rehearse is None else indist & ~self.rehearse
+
+@struct.dataclass
+class Outcome:
+    """What the rollout of a proposal says of each of its N levels, for the adversary's update.
+
+    traj: the rollout (:class:`~remidi.engine.core.rollout.Trajectory`, leaves [T, N]); scores:
+    f32[N], the levels' scores; overlap: bool[N], a new level whose rollout a frozen level explains
+    at every step (never inserted); best_return: f32[N], MaxMC's record (−inf where no episode
+    ended); mean_return: f32[N], the agent's mean episodic return (the partial return where no
+    episode ended)."""
+
+    traj: object
+    scores: jax.Array
+    overlap: jax.Array
+    best_return: jax.Array
+    mean_return: jax.Array
 
 
 @dataclass(frozen=True)
@@ -113,16 +123,18 @@ class Adversary:
         zero = jnp.zeros((), jnp.int32)
         return AdversaryState(buffers=no_buffers(setup, example_level), active=zero, count=zero)
 
-    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+    def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
+        """The N levels of this update: here the ``fresh`` ones (leaves [N, ...], the task
+        generator's, drawn by the step with ``k_levels``)."""
         state = runner.adversary
-        new = self._fresh(setup, k_levels)
         replay = jnp.asarray(False)
-        return Proposal(replay=replay, levels=new, buffer=buf.select_buffer(state.buffers, state.active),
+        return Proposal(replay=replay, levels=fresh, buffer=buf.select_buffer(state.buffers, state.active),
                         slots=None, train=replay | self.trains_on_fresh)
 
-    def _fresh(self, setup, k_levels):
-        """N fresh levels from the task's generator."""
-        return jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs))
+    def frozen(self, setup, runner, proposal: Proposal):
+        """The rollout's :class:`~remidi.engine.trackers.base.Frozen` view (None: nothing is frozen
+        and no tracker runs beside the environments)."""
+        return None
 
     def frozen_levels(self, setup, runner):
         """``(levels [F, ...], valid bool[F])``: the earlier adversaries' levels; None: none."""
@@ -144,19 +156,18 @@ class Adversary:
         (``best_return``: the best return of an episode that ended in it, −inf where none did)."""
         return best_return
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
-        """After scoring: ``(state, inserted bool[N], step metrics)``; nothing is kept.
-        ``best_return``: :meth:`best_return`'s record (−inf where no episode ended);
-        ``mean_return`` f32[N]: the agent's mean episodic return on each level (the partial return
-        where no episode ended); ``rng`` for an adversary that learns."""
+    def update(self, setup, runner, proposal: Proposal, outcome: Outcome, rng):
+        """After scoring: ``(state, inserted bool[N], step metrics)``; nothing is kept. ``rng``
+        for an adversary that learns."""
         return runner.adversary, jnp.zeros((setup.cfg.num_envs,), bool), {}
 
-    def advance(self, setup, runner, proposal: Proposal):
-        """The state after the learner (``runner``: after :meth:`update`). Counts the update on the
-        active buffer (a replay with ``remidi.count=replays``); with one buffer nothing switches."""
+    def advance(self, setup, runner, proposal: Proposal, outcome: Outcome):
+        """The end of the update (``runner``: after :meth:`update` and the learner's training):
+        ``(runner, step metrics)``. Counts the update on the active buffer (a replay with
+        ``remidi.count=replays``)."""
         state = runner.adversary
         count = state.count + (proposal.replay.astype(jnp.int32) if setup.cfg.remidi.count == "replays" else 1)
-        return state.replace(count=count)
+        return runner.replace(adversary=state.replace(count=count)), {}
 
     def metrics(self, setup, runner) -> dict:
         """What the adversary's buffers hold: nothing without buffers."""

@@ -29,13 +29,20 @@ Extras
 Scores
     Higher is replayed more. A level scored ``-inf`` or NaN is never inserted (``+inf`` is); an
     entry later set to NaN by :func:`update_scores` ranks like ``-inf``.
+
+Replay rule
+    How scores become replay weights is a :class:`ReplayRule`, named by ``buffer.prioritization``
+    (:data:`REPLAY_RULES`: ``rank``, ``topk``; :func:`register_replay_rule` adds one, e.g.
+    ``examples/my_replay_rule.py``). The rule's weights are normalised over the valid entries and
+    mixed with staleness: ``(1-ρ)·rule + ρ·staleness`` (:func:`replay_weights`).
 """
 
 from __future__ import annotations
 
 import math
 from functools import partial
-from typing import Any, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Sequence
 
 import flax.struct
 import jax
@@ -44,6 +51,7 @@ import jax.numpy as jnp
 from remidi.engine.config import BufferConfig, validate_buffer_config
 
 RUNNING_MAX_PREFIX = "max_"  # extras named max_* keep their maximum on updates (module docstring)
+
 
 @flax.struct.dataclass
 class BufferState:
@@ -108,113 +116,108 @@ def size(state: BufferState) -> jax.Array:
 
 
 def min_replay_size(config: BufferConfig) -> int:
-    """Smallest number of valid entries that allows replay: ``max(1, ceil(min_fill·capacity))``.
-
-    A tolerance of 1e-9 absorbs float error (``0.7 * 10`` counts as 7, not 8).
-    """
+    """Smallest number of valid entries that allows replay: ``max(1, ceil(min_fill·capacity))``
+    (a tolerance of 1e-9 absorbs float error: ``0.7 * 10`` counts as 7, not 8)."""
     return max(1, math.ceil(config.min_fill * config.capacity - 1e-9))
 
 
 @partial(jax.jit, static_argnames=("config",))
 def can_replay(state: BufferState, config: BufferConfig) -> jax.Array:
     """``bool[]``: the buffer holds at least :func:`min_replay_size` valid entries."""
-    return size(state) >= min_replay_size(config)
+    return jnp.sum(state.valid, dtype=jnp.int32) >= min_replay_size(config)
 
 
-def _effective_scores(state: BufferState) -> jax.Array:
-    """``f32[capacity]`` scores with NaN read as ``-inf``."""
-    return jnp.where(jnp.isnan(state.scores), -jnp.inf, state.scores)
+# ---------------------------------------------------------------------------- replay weights
+class ReplayRule:
+    """How the scores of a buffer become its replay weights, before staleness is mixed in.
+
+    One method: ``weights(state, config, ranks) -> f32[capacity]``, non-negative where valid (the
+    buffer normalises them over the valid entries; all zero: uniform). ``ranks`` i32[capacity]:
+    1 = the highest score among valid entries (ties by lower index, NaN like −inf, invalid
+    entries after the valid ones). Subclasses are frozen dataclasses (static under jit)."""
+
+    def weights(self, state: BufferState, config: BufferConfig, ranks: jax.Array) -> jax.Array:
+        raise NotImplementedError
 
 
-def _ranks(state: BufferState) -> jax.Array:
-    """``i32[capacity]``: rank 1 = highest score among valid entries, ties by lower index.
+@dataclass(frozen=True)
+class RankReplay(ReplayRule):
+    """PLR's rank prioritisation: ``(1/rank)^(1/temperature)``."""
 
-    Valid entries get ranks ``1..size``; invalid entries get the ranks after those. NaN scores
-    rank like ``-inf``.
-    """
-    cap = state.scores.shape[0]
-    index = jnp.arange(cap)
-    # lexsort: last key is primary -> valid first, then descending score, then ascending index.
-    order = jnp.lexsort((index, -_effective_scores(state), ~state.valid))
-    return jnp.zeros(cap, jnp.int32).at[order].set(jnp.arange(1, cap + 1, dtype=jnp.int32))
+    def weights(self, state, config, ranks):
+        return (1.0 / ranks.astype(jnp.float32)) ** (1.0 / config.temperature)
 
 
-def _normalise_over_valid(x: jax.Array, valid: jax.Array) -> jax.Array:
-    """``x`` restricted to valid entries, divided by its sum; uniform over valid if the sum is 0.
+@dataclass(frozen=True)
+class TopKReplay(ReplayRule):
+    """A softmax of score/temperature over the ``topk_k`` best valid entries, zero elsewhere
+    (``jaxued``'s ``topk`` at temperature 1); uniform over them if none has a finite score."""
 
-    All zeros when nothing is valid.
-    """
+    def weights(self, state, config, ranks):
+        top = (ranks <= config.topk_k) & state.valid  # ranks of valid entries are 1..size: k clipped to size
+        logits = jnp.where(jnp.isnan(state.scores), -jnp.inf, state.scores) / config.temperature
+        peak = jnp.max(jnp.where(top, logits, -jnp.inf))
+        return jnp.where(top, jnp.where(jnp.isfinite(peak), jnp.exp(logits - jnp.where(jnp.isfinite(peak), peak, 0.0)),
+                                        1.0), 0.0)
+
+
+#: every ``buffer.prioritization``, by name (:func:`register_replay_rule` adds to it)
+REPLAY_RULES: dict[str, ReplayRule] = {"rank": RankReplay(), "topk": TopKReplay()}
+
+
+def register_replay_rule(name: str, rule: ReplayRule) -> None:
+    """Make ``rule`` the replay rule ``buffer.prioritization=name`` selects."""
+    if not isinstance(rule, ReplayRule):
+        raise TypeError(f"register_replay_rule: {rule!r} is no ReplayRule")
+    hash(rule)  # static under jit: a frozen dataclass
+    REPLAY_RULES[name] = rule
+
+
+def _normalise(x: jax.Array, valid: jax.Array) -> jax.Array:
+    """``x`` on the valid entries over its sum (uniform over them if the sum is 0; zeros if none is valid)."""
     x = jnp.where(valid, x, 0.0)
     total = jnp.sum(x)
     uniform = valid / jnp.maximum(jnp.sum(valid), 1)
     return jnp.where(total > 0, x / jnp.where(total > 0, total, 1.0), uniform)
 
 
-def _score_weights(state: BufferState, config: BufferConfig, ranks: jax.Array) -> jax.Array:
-    """:func:`score_weights` given the :func:`_ranks` of ``state``."""
-    if config.prioritization == "rank":
-        raw = (1.0 / ranks.astype(jnp.float32)) ** (1.0 / config.temperature)
-    else:  # "topk": ranks of valid entries are 1..size, so this is the k best, k clipped to size
-        top = (ranks <= config.topk_k) & state.valid
-        logits = _effective_scores(state) / config.temperature
-        peak = jnp.max(jnp.where(top, logits, -jnp.inf))
-        # a softmax over the top k (exp(-inf) = 0); uniform over them if none has a finite score
-        raw = jnp.where(top, jnp.where(jnp.isfinite(peak), jnp.exp(logits - jnp.where(jnp.isfinite(peak), peak, 0.0)),
-                                       1.0), 0.0)
-    return _normalise_over_valid(raw, state.valid)
-
-
-@partial(jax.jit, static_argnames=("config",))
-def score_weights(state: BufferState, config: BufferConfig) -> jax.Array:
-    """``f32[capacity]`` score part of the replay distribution (sums to 1 over valid entries)."""
-    return _score_weights(state, config, _ranks(state))
-
-
-@jax.jit
-def staleness_weights(state: BufferState) -> jax.Array:
-    """``f32[capacity]`` ∝ ``time - last_seen`` over valid entries (uniform over valid if all 0)."""
-    staleness = (state.time - state.last_seen).astype(jnp.float32)
-    return _normalise_over_valid(staleness, state.valid)
-
-
-def _replay_weights(state: BufferState, config: BufferConfig, ranks: jax.Array) -> jax.Array:
-    """:func:`replay_weights` given the :func:`_ranks` of ``state``."""
+def _weights(state: BufferState, config: BufferConfig) -> tuple[jax.Array, jax.Array]:
+    """``(weights f32[capacity], ranks i32[capacity])``: the replay distribution
+    ``(1-ρ)·rule + ρ·staleness`` (zero on invalid entries; sums to 1 if any is valid) and the
+    ranks it was computed from (:class:`ReplayRule`)."""
+    cap = state.scores.shape[0]
+    index = jnp.arange(cap)
+    # lexsort: the last key is primary -> valid first, then descending score, then ascending index
+    order = jnp.lexsort((index, -jnp.where(jnp.isnan(state.scores), -jnp.inf, state.scores), ~state.valid))
+    ranks = jnp.zeros(cap, jnp.int32).at[order].set(jnp.arange(1, cap + 1, dtype=jnp.int32))
+    by_score = _normalise(REPLAY_RULES[config.prioritization].weights(state, config, ranks), state.valid)
+    staleness = _normalise((state.time - state.last_seen).astype(jnp.float32), state.valid)
     rho = config.staleness_coef
-    return (1.0 - rho) * _score_weights(state, config, ranks) + rho * staleness_weights(state)
+    return (1.0 - rho) * by_score + rho * staleness, ranks
 
 
 @partial(jax.jit, static_argnames=("config",))
 def replay_weights(state: BufferState, config: BufferConfig) -> jax.Array:
-    """``f32[capacity]`` replay distribution ``(1-ρ)·score + ρ·staleness``.
-
-    Zero on invalid entries; sums to 1 when any entry is valid, all zeros otherwise.
-    """
-    return _replay_weights(state, config, _ranks(state))
+    """``f32[capacity]`` replay distribution ``(1-ρ)·rule + ρ·staleness``: zero on invalid
+    entries, summing to 1 when any entry is valid, all zeros otherwise."""
+    return _weights(state, config)[0]
 
 
-def _tick(state: BufferState) -> BufferState:
-    """Advance the clock by one."""
-    return state.replace(time=state.time + 1)
-
-
+# ---------------------------------------------------------------------------- replay
 @partial(jax.jit, static_argnames=("config", "n"))
 def sample_replay(state: BufferState, config: BufferConfig, rng: jax.Array, n: int):
-    """Sample ``n`` entries with replacement from :func:`replay_weights` (``n`` static).
+    """``n`` entries drawn with replacement from :func:`replay_weights` (``n`` static); the clock
+    advances by one and stamps them. Meaningful only when :func:`can_replay` (an empty buffer
+    gives arbitrary invalid entries, so it can be traced inside ``lax.cond``/``vmap``).
 
-    Advances the clock by one and sets ``last_seen`` of the sampled entries to the new time.
-    Only meaningful when :func:`can_replay`; on an empty buffer it returns arbitrary (invalid)
-    entries without failing, so it may be traced inside ``lax.cond``/``vmap``.
-
-    Returns:
-        ``(state, idxs i32[n], levels)`` with every level leaf of leading dim ``[n]``.
-    """
-    weights = replay_weights(state, config)
+    Returns ``(state, idxs i32[n], levels)``, every level leaf of leading dim ``[n]``."""
+    weights = _weights(state, config)[0]
     cap = state.scores.shape[0]
     probs = jnp.where(jnp.any(state.valid), weights, 1.0 / cap)
     idxs = jax.random.choice(rng, cap, (n,), replace=True, p=probs).astype(jnp.int32)
-    state = _tick(state)
-    state = state.replace(last_seen=state.last_seen.at[idxs].set(state.time))
-    return state, idxs, get_levels(state, idxs)
+    time = state.time + 1
+    state = state.replace(time=time, last_seen=state.last_seen.at[idxs].set(time))
+    return state, idxs, jax.tree.map(lambda x: x[idxs], state.levels)
 
 
 def get_levels(state: BufferState, idxs: jax.Array):
@@ -222,12 +225,8 @@ def get_levels(state: BufferState, idxs: jax.Array):
     return jax.tree.map(lambda x: x[idxs], state.levels)
 
 
-def _is_running_max(name: str) -> bool:
-    return name.startswith(RUNNING_MAX_PREFIX)
-
-
-def _check_extra_names(state: BufferState, extras: Mapping[str, Any] | None) -> dict:
-    """``extras`` as a dict, raising ``ValueError`` on a name the buffer does not track."""
+def _known_extras(state: BufferState, extras) -> dict:
+    """``extras`` as a dict; ValueError for a name the buffer does not track."""
     extras = dict(extras or {})
     unknown = sorted(set(extras) - set(state.extras))
     if unknown:
@@ -235,160 +234,115 @@ def _check_extra_names(state: BufferState, extras: Mapping[str, Any] | None) -> 
     return extras
 
 
-def _last_occurrence(idxs: jax.Array) -> jax.Array:
-    """``bool[n]``: whether ``idxs[i]`` does not occur again at a later position."""
-    n = idxs.shape[0]
-    later = jnp.arange(n)[None, :] > jnp.arange(n)[:, None]
-    return ~jnp.any(later & (idxs[:, None] == idxs[None, :]), axis=1)
-
-
 @jax.jit
 def update_scores(state: BufferState, idxs: jax.Array, scores: jax.Array, extras=None) -> BufferState:
-    """Set the scores (and given extras) of entries ``idxs`` after they were replayed.
-
-    Args:
-        idxs: ``i32[n]`` entry indices; negative indices (e.g. the ``-1`` of a rejected
-            insertion) are ignored, and for a repeated index the last occurrence wins.
-        scores: ``f32[n]``.
-        extras: optional ``{name: f32[n]}``; extras not given are left unchanged, ``max_*``
-            extras keep the maximum of the stored value and every given one.
-
-    Does not move the clock or change ``last_seen`` (:func:`sample_replay` already stamped).
-    """
-    extras = _check_extra_names(state, extras)
+    """The scores ``f32[n]`` (and the given extras ``{name: f32[n]}``) of the entries ``idxs``
+    ``i32[n]`` after they were replayed. A negative index (the ``-1`` of a rejected insertion) is
+    ignored; of a repeated index the last occurrence wins, except for ``max_*`` extras, which
+    keep the maximum of the stored value and every given one. The clock and ``last_seen`` stay
+    (:func:`sample_replay` stamped them)."""
+    extras = _known_extras(state, extras)
     idxs = jnp.asarray(idxs, jnp.int32)
-    cap = state.scores.shape[0]
-    target = jnp.where(_last_occurrence(idxs) & (idxs >= 0), idxs, cap)  # cap: dropped
+    n, cap = idxs.shape[0], state.scores.shape[0]
+    later = jnp.arange(n)[None, :] > jnp.arange(n)[:, None]
+    last = ~jnp.any(later & (idxs[:, None] == idxs[None, :]), axis=1)  # idxs[i] does not occur again later
+    target = jnp.where(last & (idxs >= 0), idxs, cap)  # cap: dropped
     every = jnp.where(idxs >= 0, idxs, cap)  # every occurrence, for running maxima
-
-    def scatter(arr, values):
-        return arr.at[target].set(jnp.asarray(values, arr.dtype), mode="drop")
-
-    def update_extra(name, arr):
-        if name not in extras:
-            return arr
-        if _is_running_max(name):
-            return arr.at[every].max(jnp.asarray(extras[name], arr.dtype), mode="drop")
-        return scatter(arr, extras[name])
-
-    new_extras = {k: update_extra(k, v) for k, v in state.extras.items()}
-    return state.replace(scores=scatter(state.scores, scores), extras=new_extras)
+    new_extras = dict(state.extras)
+    for name, values in extras.items():
+        column = state.extras[name]
+        values = jnp.asarray(values, column.dtype)
+        new_extras[name] = (column.at[every].max(values, mode="drop") if name.startswith(RUNNING_MAX_PREFIX)
+                            else column.at[target].set(values, mode="drop"))
+    return state.replace(scores=state.scores.at[target].set(jnp.asarray(scores, jnp.float32), mode="drop"),
+                         extras=new_extras)
 
 
-def _find_duplicate(state: BufferState, level) -> tuple[jax.Array, jax.Array]:
-    """``(found bool[], idx i32[])``: the first valid entry whose leaves all equal ``level``'s."""
-    def leaf_equal(stored, new):
-        eq = stored == jnp.asarray(new, stored.dtype)
-        return jnp.all(eq.reshape(eq.shape[0], -1), axis=1)
-
-    equal = jax.tree.reduce(jnp.logical_and, jax.tree.map(leaf_equal, state.levels, level))
-    match = equal & state.valid
-    return jnp.any(match), jnp.argmax(match).astype(jnp.int32)
-
-
-def _lowest_weight_index(state: BufferState, config: BufferConfig) -> jax.Array:
-    """``i32[]``: the valid entry with the lowest replay weight; ties go to the worst rank."""
-    ranks = _ranks(state)
-    weights = _replay_weights(state, config, ranks)
-    lowest = jnp.min(jnp.where(state.valid, weights, jnp.inf))
-    candidates = state.valid & (weights <= lowest)
-    return jnp.argmax(jnp.where(candidates, ranks, 0)).astype(jnp.int32)
-
-
-@partial(jax.jit, static_argnames=("config", "keep_higher"))
-def insert(state: BufferState, config: BufferConfig, level, score, extras=None, keep_higher: bool = False):
-    """Try to insert one level; stamps a written entry with the current time (no clock tick).
-
-    Rules, in order:
-      * a score of ``-inf`` or NaN is never written (not even into an empty slot);
-      * with ``duplicate_check``, a level equal (all leaves) to a valid entry updates that entry's
-        score (``keep_higher``: to the higher of the two), given extras (``max_*`` extras keep
-        their maximum) and ``last_seen`` instead (``inserted = False``, ``idx`` = that entry);
-      * if there is an empty slot the level goes into the first one;
-      * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked), only if its
-        score is strictly higher than that entry's score.
-
-    Args:
-        level: one level (no leading capacity axis).
-        score: ``f32[]``.
-        extras: optional ``{name: f32[]}``; on a new entry missing extras are 0, on a duplicate
-            update they are left unchanged.
-
-    Returns:
-        ``(state, inserted bool[], idx i32[])``; ``idx`` is the written entry, or ``-1`` if
-        nothing was written.
-    """
-    extras = _check_extra_names(state, extras)
+# ---------------------------------------------------------------------------- insertion
+def _insert(config: BufferConfig, keep_higher: bool, state: BufferState, item):
+    """:func:`insert` of ``item = (level, score, extras)`` (a ``lax.scan`` body): ``(state,
+    (inserted bool[], idx i32[]))``."""
+    level, score, extras = item
+    extras = _known_extras(state, extras)
     score = jnp.asarray(score, jnp.float32)
     cap = state.scores.shape[0]
     acceptable = ~jnp.isnan(score) & (score > -jnp.inf)
-
-    if config.duplicate_check:
-        is_duplicate, duplicate_idx = _find_duplicate(state, level)
+    if config.duplicate_check:  # the first valid entry whose leaves all equal the level's
+        equal = state.valid
+        for stored, new in zip(jax.tree.leaves(state.levels), jax.tree.leaves(level)):
+            eq = stored == jnp.asarray(new, stored.dtype)
+            equal = equal & jnp.all(eq.reshape(eq.shape[0], -1), axis=1)
+        is_duplicate, duplicate_idx = jnp.any(equal), jnp.argmax(equal).astype(jnp.int32)
     else:
         is_duplicate, duplicate_idx = jnp.zeros((), bool), jnp.zeros((), jnp.int32)
-
-    full = size(state) >= cap
-    victim = _lowest_weight_index(state, config)
+    full = jnp.sum(state.valid, dtype=jnp.int32) >= cap
+    # the victim of a full buffer: the valid entry of lowest replay weight, ties to the worst rank
+    weights, ranks = _weights(state, config)
+    lowest = jnp.min(jnp.where(state.valid, weights, jnp.inf))
+    victim = jnp.argmax(jnp.where(state.valid & (weights <= lowest), ranks, 0)).astype(jnp.int32)
     new_idx = jnp.where(full, victim, jnp.argmin(state.valid)).astype(jnp.int32)
-    room = ~full | (score > _effective_scores(state)[victim])
+    room = ~full | (score > jnp.where(jnp.isnan(state.scores), -jnp.inf, state.scores)[victim])
 
     inserted = acceptable & ~is_duplicate & room
     updated = acceptable & is_duplicate
     written = inserted | updated
     idx = jnp.where(written, jnp.where(is_duplicate, duplicate_idx, new_idx), -1).astype(jnp.int32)
     target = jnp.where(written, idx, cap)  # cap: out of bounds, dropped
-
-    def scatter(arr, value):
-        return arr.at[target].set(jnp.asarray(value, arr.dtype), mode="drop")
-
-    def new_extra(name, column):
+    new_extras = {}
+    for name, column in state.extras.items():
         stored = column[duplicate_idx]
         if name not in extras:
-            return jnp.where(updated, stored, 0.0)
-        given = jnp.asarray(extras[name], column.dtype)
-        if _is_running_max(name):
-            return jnp.where(updated, jnp.maximum(stored, given), given)
-        return given
-
+            value = jnp.where(updated, stored, 0.0)
+        elif name.startswith(RUNNING_MAX_PREFIX):
+            value = jnp.where(updated, jnp.maximum(stored, jnp.asarray(extras[name], column.dtype)),
+                              jnp.asarray(extras[name], column.dtype))
+        else:
+            value = jnp.asarray(extras[name], column.dtype)
+        new_extras[name] = column.at[target].set(jnp.asarray(value, column.dtype), mode="drop")
     if keep_higher:
         score = jnp.where(updated, jnp.maximum(state.scores[duplicate_idx], score), score)
     state = state.replace(
-        levels=jax.tree.map(scatter, state.levels, level),
-        scores=scatter(state.scores, score),
-        last_seen=scatter(state.last_seen, state.time),
-        valid=scatter(state.valid, True),
-        extras={k: scatter(v, new_extra(k, v)) for k, v in state.extras.items()},
+        levels=jax.tree.map(lambda arr, x: arr.at[target].set(jnp.asarray(x, arr.dtype), mode="drop"),
+                            state.levels, level),
+        scores=state.scores.at[target].set(score, mode="drop"),
+        last_seen=state.last_seen.at[target].set(state.time, mode="drop"),
+        valid=state.valid.at[target].set(True, mode="drop"),
+        extras=new_extras,
     )
+    return state, (inserted, idx)
+
+
+@partial(jax.jit, static_argnames=("config", "keep_higher"))
+def insert(state: BufferState, config: BufferConfig, level, score, extras=None, keep_higher: bool = False):
+    """Try to insert one level (no leading capacity axis) with ``score`` f32[] and ``extras``
+    ``{name: f32[]}``; a written entry is stamped with the current time (no clock tick). In order:
+
+      * a score of ``-inf`` or NaN is never written (not even into an empty slot);
+      * with ``duplicate_check``, a level equal (all leaves) to a valid entry updates that entry's
+        score (``keep_higher``: to the higher of the two), given extras (``max_*``: their
+        maximum) and ``last_seen`` instead (``inserted = False``, ``idx`` = that entry);
+      * into the first empty slot if there is one;
+      * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked), only if its
+        score is strictly higher than that entry's.
+
+    On a new entry missing extras are 0, on a duplicate update they are kept. Returns
+    ``(state, inserted bool[], idx i32[])``, ``idx`` -1 if nothing was written."""
+    state, (inserted, idx) = _insert(config, keep_higher, state, (level, score, extras))
     return state, inserted, idx
 
 
 @partial(jax.jit, static_argnames=("config", "keep_higher"))
 def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extras=None, keep_higher: bool = False):
-    """Advance the clock by one, then :func:`insert` the ``n`` levels one after another.
-
-    Later insertions see earlier ones (``lax.scan``); ``keep_higher``: as in :func:`insert`.
-
-    Args:
-        levels: level pytree with leaves of leading dim ``[n]``.
-        scores: ``f32[n]``.
-        extras: optional ``{name: f32[n]}``.
-
-    Returns:
-        ``(state, inserted bool[n], idxs i32[n])`` (``-1`` where nothing was written).
-    """
-    extras = _check_extra_names(state, extras)
-
-    def step(carry, item):
-        level, score, extra = item
-        carry, inserted, idx = insert(carry, config, level, score, extra, keep_higher)
-        return carry, (inserted, idx)
-
+    """Advance the clock by one, then :func:`insert` the ``n`` levels (leaves [n, ...]) with
+    ``scores`` f32[n] and ``extras`` ``{name: f32[n]}`` one after another (``lax.scan``: later
+    insertions see earlier ones). Returns ``(state, inserted bool[n], idxs i32[n])``."""
     scores = jnp.asarray(scores, jnp.float32)
-    state, (inserted, idxs) = jax.lax.scan(step, _tick(state), (levels, scores, extras))
+    state, (inserted, idxs) = jax.lax.scan(partial(_insert, config, keep_higher), state.replace(time=state.time + 1),
+                                           (levels, scores, _known_extras(state, extras)))
     return state, inserted, idxs
 
 
+# ---------------------------------------------------------------------------- K buffers
 def valid_levels(state: BufferState):
     """``(levels [capacity, ...], valid bool[capacity])``: every stored level and whether it is one."""
     return state.levels, state.valid

@@ -34,7 +34,7 @@ from flax import struct
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers
-from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, switches
+from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
 from remidi.engine.core.ppo import Batch, compute_gae, create_train_state, ppo_update
@@ -168,7 +168,7 @@ class LevelGenerator(Adversary):
                                                    cfg.ppo)
         return out
 
-    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+    def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
         """One episode of the generator per env; the levels are what its actions built."""
         state = runner.adversary
         builder, n = setup.task.level_builder, setup.cfg.num_envs
@@ -184,7 +184,7 @@ class LevelGenerator(Adversary):
                         slots=None, train=jnp.asarray(True), generated=(traj, last_value),
                         nonfinite=nonfinite(traj, "generator"))
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+    def update(self, setup, runner, proposal: Proposal, outcome, rng):
         """The antagonist plays the levels and learns (the agent's rollout and masked PPO, with
         its parameters and nothing frozen); the generator is paid and learns."""
         cfg, task, state = setup.cfg, setup.task, runner.adversary
@@ -197,8 +197,10 @@ class LevelGenerator(Adversary):
         antagonist, _ = lrn.learn(setup, as_antagonist, k_ant, traj, adv, targets)
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
-        regret = regret_estimate(p.estimator, mean_return, best_return, ant_mean, ant_best, optimal, p.clip_negative)
-        paid = self._pay(setup, regret, overlap)
+        mean_return = outcome.mean_return
+        regret = regret_estimate(p.estimator, mean_return, outcome.best_return, ant_mean, ant_best, optimal,
+                                 p.clip_negative)
+        paid = self._pay(setup, regret, outcome.overlap)
         # the generator: paid on its last step, no bootstrap past its episode
         gen_traj, gen_last = proposal.generated
         net = generator_net(setup)
@@ -273,6 +275,9 @@ class GeneratorSequence(LevelGenerator):
             raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
                               "LevelGenerator); allowed: buffer_sequence=True")
 
+    def frozen(self, setup, runner, proposal: Proposal):
+        return sequence_frozen(setup, runner, proposal)
+
     def frozen_levels(self, setup, runner):
         return earlier_buffers(setup, runner.adversary)
 
@@ -306,18 +311,18 @@ class GeneratorSequence(LevelGenerator):
         return state.replace(next_generators=jax.tree.map(
             lambda *xs: jnp.stack(xs), *[g.replace(apply_fn=None, tx=None) for g in later]) if later else None)
 
-    def advance(self, setup, runner, proposal: Proposal):
+    def advance(self, setup, runner, proposal: Proposal, outcome):
         """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
-        next and start a fresh generator (new parameters and optimiser state); a learned tracker
-        freezes its model at the same switch (the train step asks it)."""
-        state = super().advance(setup, runner, proposal)
+        next and start a fresh generator (new parameters and optimiser state); the tracker and the
+        policy freeze at the same switch (:func:`~remidi.engine.adversaries.plr.sequence_advance`)."""
+        runner, _ = super().advance(setup, runner, proposal, outcome)
+        state = runner.adversary
         if state.next_generators is None:  # remidi.num_buffers=1: one generator, never switched
-            return state
+            return sequence_advance(setup, runner, state, jnp.asarray(False), proposal, outcome)
         switch = switches(setup, state, state.count)
         fresh = jax.tree.map(lambda x: x[jnp.minimum(state.active, x.shape[0] - 1)], state.next_generators)
         old = state.generator
         pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
         generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
                                 step=pick(fresh.step, old.step))
-        return state.replace(generator=generator, active=jnp.where(switch, state.active + 1, state.active),
-                             count=jnp.where(switch, 0, state.count))
+        return sequence_advance(setup, runner, state.replace(generator=generator), switch, proposal, outcome)

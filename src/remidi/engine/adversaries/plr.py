@@ -20,8 +20,8 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine.adversaries import level_buffer as buf
-from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers, tag_counts
-from remidi.engine.config import buffer_config
+from remidi.engine.adversaries.base import Adversary, AdversaryState, Outcome, Proposal, empty_buffers, tag_counts
+from remidi.engine.learner import freeze_policy
 
 
 @dataclass(frozen=True)
@@ -37,20 +37,23 @@ class LevelBuffers(Adversary):
         """K empty buffers (:func:`~remidi.engine.adversaries.base.empty_buffers`), the first active."""
         return super().init(setup, example_level, example_obs, rng).replace(buffers=empty_buffers(setup, example_level))
 
-    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
-        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``: which)
-        or N fresh levels (``k_levels``)."""
-        state, bcfg = runner.adversary, buffer_config(setup.cfg, setup.algo)
+    def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
+        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``:
+        which) or the N ``fresh`` levels; a sequence may rehearse a frozen buffer instead."""
+        state, bcfg = runner.adversary, setup.buffer
         active = buf.select_buffer(state.buffers, state.active)
         replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
-        new = self._fresh(setup, k_levels)
         sampled, slots, replayed = buf.sample_replay(active, bcfg, k_sample, setup.cfg.num_envs)
-        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, new)
+        levels = jax.tree.map(lambda r, f: jnp.where(replay, r, f), replayed, fresh)
         proposal = Proposal(replay=replay, levels=levels, buffer=sampled, slots=slots,
                             train=replay | self.trains_on_fresh)
         if self.buffer_sequence and setup.cfg.remidi.rehearsal > 0:
             proposal = rehearse_frozen(setup, state, proposal, jax.random.fold_in(k_branch, 1))
         return proposal
+
+    def frozen(self, setup, runner, proposal: Proposal):
+        """A sequence's tracker view of its earlier buffers (:func:`sequence_frozen`); None for one buffer."""
+        return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
 
     def frozen_levels(self, setup, runner):
         """A sequence's earlier buffers (:func:`earlier_buffers`); nothing for a single buffer."""
@@ -61,21 +64,20 @@ class LevelBuffers(Adversary):
         record = proposal.buffer.extras["max_return"][proposal.slots]
         return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
-        """Replayed levels get their new ``scores`` [N]; fresh levels are inserted into the active
-        buffer by score, never one whose rollout overlaps a frozen level completely (``overlap``
-        bool[N]: scored −inf); a rehearsal changes no buffer."""
-        state, n = runner.adversary, setup.cfg.num_envs
-        bcfg = buffer_config(setup.cfg, setup.algo)
+    def update(self, setup, runner, proposal: Proposal, outcome: Outcome, rng):
+        """Replayed levels get their new scores; fresh levels are inserted into the active buffer
+        by score, never one whose rollout overlaps a frozen level completely (scored −inf); a
+        rehearsal changes no buffer."""
+        state, n, bcfg = runner.adversary, setup.cfg.num_envs, setup.buffer
+        record = {"max_return": outcome.best_return}
 
         def rescore(_):
-            return (buf.update_scores(proposal.buffer, proposal.slots, scores, {"max_return": best_return}),
-                    jnp.zeros((n,), bool))
+            return buf.update_scores(proposal.buffer, proposal.slots, outcome.scores, record), jnp.zeros((n,), bool)
 
         def insert(_):
             active = buf.select_buffer(state.buffers, state.active)
-            new_buf, ins, _ = buf.insert_batch(active, bcfg, proposal.levels, jnp.where(overlap, -jnp.inf, scores),
-                                               {"max_return": best_return})
+            new_buf, ins, _ = buf.insert_batch(active, bcfg, proposal.levels,
+                                               jnp.where(outcome.overlap, -jnp.inf, outcome.scores), record)
             return new_buf, ins
 
         if proposal.rehearse is None:
@@ -88,13 +90,15 @@ class LevelBuffers(Adversary):
             new_buf, inserted = jax.lax.switch(branch, (insert, rescore, keep), None)
         return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted, {}
 
-    def advance(self, setup, runner, proposal: Proposal):
-        """After ``remidi.steps_per_buffer`` counted updates on the active buffer of a sequence:
-        freeze it and move to the next, staying on the last."""
-        state = super().advance(setup, runner, proposal)
-        switch = switches(setup, state, state.count) if self.buffer_sequence else jnp.asarray(False)
-        return state.replace(active=jnp.where(switch, state.active + 1, state.active),
-                             count=jnp.where(switch, 0, state.count))
+    def advance(self, setup, runner, proposal: Proposal, outcome: Outcome):
+        """Count the update on the active buffer (a replay only, with ``remidi.count=replays``);
+        a sequence switches after ``remidi.steps_per_buffer`` of them (:func:`sequence_advance`)."""
+        state = runner.adversary
+        state = state.replace(count=state.count + (proposal.replay.astype(jnp.int32)
+                                                   if setup.cfg.remidi.count == "replays" else 1))
+        if not self.buffer_sequence:
+            return runner.replace(adversary=state), {}
+        return sequence_advance(setup, runner, state, switches(setup, state, state.count), proposal, outcome)
 
     def metrics(self, setup, runner) -> dict:
         return buffer_contents(setup, runner.adversary)
@@ -138,6 +142,30 @@ def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
     levels = jax.tree.map(lambda f, o: jnp.where(rehearse, f, o), frozen, proposal.levels)
     return proposal.replace(levels=levels, replay=proposal.replay & ~rehearse, train=proposal.train | rehearse,
                             rehearse=rehearse)
+
+
+def sequence_frozen(setup, runner, proposal: Proposal):
+    """The tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of a sequence's
+    frozen levels for this update's rollout; a rehearsal's rollout explains no step (its levels
+    are frozen levels: rehearsal trains on every step to keep what they taught)."""
+    view = setup.tracker.frozen(setup, runner)
+    if view is None or proposal.rehearse is None:
+        return view
+    return view.replace(rehearse=proposal.rehearse)
+
+
+def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: Outcome):
+    """The end of a sequence's update, given its adversary ``state`` after counting: the tracker
+    learns from the rollout (a learned model); at a ``switch`` (bool[]) the active adversary is
+    frozen and the next takes over, and with it the policy (Combine, ``remidi.policy``) and the
+    tracker's model freeze. Returns ``(runner, the tracker's step metrics)``."""
+    tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.traj)
+    learner = freeze_policy(runner.learner, runner.adversary.active, switch)
+    runner = runner.replace(tracker=tracker)
+    tracker = setup.tracker.freeze(setup, runner, switch)
+    state = state.replace(active=jnp.where(switch, state.active + 1, state.active),
+                          count=jnp.where(switch, 0, state.count))
+    return runner.replace(adversary=state, learner=learner, tracker=tracker), metrics
 
 
 def switches(setup, state, count) -> jax.Array:

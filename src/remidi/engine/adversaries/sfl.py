@@ -40,7 +40,7 @@ from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
-from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, switches
+from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
 from remidi.engine.config import BufferConfig, num_buffers
 from remidi.engine.core.rollout import nonfinite, nonfinite_names
 from remidi.engine.core.seeds import cond_per_seed
@@ -107,9 +107,9 @@ class LearnabilityBuffers(Adversary):
         return AdversaryState(buffers=buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo)), active=zero,
                               count=zero)
 
-    def propose(self, setup, runner, k_branch, k_levels, k_sample) -> Proposal:
+    def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
         """Refresh the active buffer if due (``k_branch``), then N levels: round(ratio · N) drawn
-        uniformly from its valid levels (``k_sample``), the rest fresh (``k_levels``); all fresh
+        uniformly from its valid levels (``k_sample``), the rest ``fresh``; all fresh
         while it holds none."""
         state, cfg = runner.adversary, setup.cfg
         active = buf.select_buffer(state.buffers, state.active)
@@ -123,7 +123,7 @@ class LearnabilityBuffers(Adversary):
                                   p=jnp.where(jnp.any(active.valid), weights, 1.0 / active.valid.shape[0]))
         replay = mix_mask(n, cfg.sfl.sampled_envs_ratio) & jnp.any(active.valid)
         levels = jax.tree.map(lambda r, f: jnp.where(per_level(replay, r), r, f), buf.get_levels(active, slots),
-                              self._fresh(setup, k_levels))
+                              fresh)
         return Proposal(replay=replay, levels=levels, buffer=active, slots=slots, train=jnp.asarray(True),
                         nonfinite=flags)
 
@@ -157,7 +157,11 @@ class LearnabilityBuffers(Adversary):
         """A sequence's earlier buffers; nothing for a single buffer."""
         return earlier_buffers(setup, runner.adversary) if self.buffer_sequence else None
 
-    def update(self, setup, runner, proposal: Proposal, scores, overlap, best_return, mean_return, rng):
+    def frozen(self, setup, runner, proposal: Proposal):
+        """A sequence's tracker view of its earlier buffers; None for one buffer."""
+        return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
+
+    def update(self, setup, runner, proposal: Proposal, outcome, rng):
         """The refreshed buffer (the proposal's) becomes the active one; nothing else is kept.
         Reports the learnability and solve rate of its levels (``sfl/buffer_learnability``,
         ``sfl/buffer_solve_rate``; NaN while empty)."""
@@ -167,15 +171,14 @@ class LearnabilityBuffers(Adversary):
         state = state.replace(buffers=buf.replace_buffer(state.buffers, state.active, active))
         return state, jnp.zeros((setup.cfg.num_envs,), bool), metrics
 
-    def advance(self, setup, runner, proposal: Proposal):
+    def advance(self, setup, runner, proposal: Proposal, outcome):
         """Every update counts on the active buffer (whatever ``remidi.count``: each trains on
         it); a sequence moves on after ``remidi.steps_per_buffer``, its next buffer refreshed at
         its first update (count 0)."""
-        state = runner.adversary
-        count = state.count + 1
-        switch = switches(setup, state, count) if self.buffer_sequence else jnp.asarray(False)
-        return state.replace(active=jnp.where(switch, state.active + 1, state.active),
-                             count=jnp.where(switch, 0, count))
+        state = runner.adversary.replace(count=runner.adversary.count + 1)
+        if not self.buffer_sequence:
+            return runner.replace(adversary=state), {}
+        return sequence_advance(setup, runner, state, switches(setup, state, state.count), proposal, outcome)
 
     def metrics(self, setup, runner) -> dict:
         return buffer_contents(setup, runner.adversary)

@@ -42,12 +42,15 @@ class Frozen:
     With ``params`` (leaves [B, ...]: the policy frozen with each buffer, ReMiDi's ``Combine``),
     a step whose prefix one of those buffers explains is acted on by the policy of the earliest
     such buffer. ``belief``: what a learned tracker reads (its frozen models, thresholds).
-    ``tracker`` (static): the component that steps beside the environments."""
+    ``rehearse`` (bool[], None: never): the rollout rehearses frozen levels, so no step counts as
+    explained (``remidi.rehearsal``: it trains on every step). ``tracker`` (static): the
+    component that steps beside the environments."""
 
     levels: Any
     valid: jax.Array
     params: Any = None
     belief: Any = None
+    rehearse: Any = None
     tracker: Any = struct.field(pytree_node=False, default=None)
 
 

@@ -94,10 +94,10 @@ def test_a_prefix_that_goes_on_where_the_adversarys_episodes_end_is_unlikely():
                                valid=jnp.ones((1,), bool))
     frozen, tracker = Frozen(levels=None, valid=jnp.ones((1,), bool), belief=beliefs), bl.BeliefTracker(model)
     state = tracker.start(None, None, frozen, jnp.zeros((1, 2), jnp.uint32), obs[0, :1])
-    explained = [bool(tracker.explained(state)[0])]
+    explained = [bool(tracker.indistinguishable(state)[0])]
     for step in range(1, 6):
-        state = tracker.advance(None, None, frozen, None, state, action[step - 1, :1], obs[step, :1], longer[step])
-        explained.append(bool(tracker.explained(state)[0]))
+        state = tracker.observe(None, None, frozen, None, state, action[step - 1, :1], obs[step, :1], longer[step])
+        explained.append(bool(tracker.indistinguishable(state)[0]))
     assert explained == [True, True, True, False, False, False]
 
 
@@ -293,10 +293,10 @@ def test_the_judgement_is_monotone_and_calibrated_for_it():
     frozen = Frozen(levels=None, valid=None, belief=bl.FrozenBeliefs(
         params=jax.tree.map(lambda x: x[None], tracker.model.init(jax.random.PRNGKey(0))),
         threshold=jnp.array([-1e9]), valid=jnp.array([True])))  # every score reaches it
-    cont = tracker.advance(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
+    cont = tracker.observe(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
                            jnp.array([False]))
     assert not bool(cont.match[0, 0])  # the prefix failed before: still distinguishable
-    new = tracker.advance(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
+    new = tracker.observe(None, None, frozen, None, state, jnp.zeros((1,), jnp.int32), jnp.zeros((1,)),
                           jnp.array([True]))
     assert bool(new.match[0, 0])  # a new episode is judged afresh
     # held-out: 400 episodes of 8 steps whose per-step scores wander; the monotone false rate is α
@@ -456,10 +456,10 @@ def test_the_tracker_restarts_the_episode_when_it_ends(done):
     action = jnp.asarray([[1], [0]])
     reset = jnp.asarray([[True], [done]])
     state = tracker.start(None, None, frozen, jnp.zeros((1, 2), jnp.uint32), obs[0])
-    state = tracker.advance(None, None, frozen, None, state, action[0], obs[1], reset[1])
+    state = tracker.observe(None, None, frozen, None, state, action[0], obs[1], reset[1])
     batch = bm.prefix_scores(bm.step_logliks(model, params, obs, action, reset), reset)
     np.testing.assert_allclose(state.total[0, 0] / state.count[0], batch[1, 0], rtol=1e-5)
-    assert bool(tracker.explained(state)[0])
+    assert bool(tracker.indistinguishable(state)[0])
 
 
 # ------------------------------------------------------------------------------ in a run

@@ -1,4 +1,4 @@
-"""The candidate tracker steps only its live slots (engine/trackers/exact.py, step_with_slots):
+"""The candidate tracker steps only its live slots (engine/trackers/exact.py, CandidateTracker.step):
 where no env's first observation matches a frozen level a rollout steps the envs alone, and
 otherwise the batch of slots is the smallest size of the ladder that holds the live ones (over
 every seed of the program), whatever the slots per env. Counted by the environment itself (a

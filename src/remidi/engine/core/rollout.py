@@ -96,7 +96,7 @@ def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=
     def step(carry, key):
         state, obs, reset, (hidden, frozen_hidden), tstate = carry
         k_act, k_env = jax.random.split(key)
-        indist = tracker.explained(tstate) if tracker is not None else jnp.zeros((num_envs,), bool)
+        indist = tracker.indistinguishable(tstate) if tracker is not None else jnp.zeros((num_envs,), bool)
         if frozen is not None and frozen.rehearse is not None:  # a rehearsal: no step explained
             indist = indist & ~frozen.rehearse
         obs_in = jax.tree.map(lambda x: x[None], obs)

@@ -16,7 +16,7 @@ Per update (the train step, :mod:`remidi.engine.train`):
 
 Per rollout step (:func:`remidi.engine.core.rollout.rollout`, through ``frozen.tracker``):
 :meth:`Tracker.reset` and :meth:`Tracker.step` wrap the environments' reset and step (by default
-the plain ones, then :meth:`start` / :meth:`advance` beside them), :meth:`explained` says which
+the plain ones, then :meth:`start` / :meth:`observe` beside them), :meth:`indistinguishable` says which
 envs' prefixes are indistinguishable before each action, :meth:`overflow` what the tracker could
 not follow, :meth:`buffer_match` which frozen buffer explains each prefix (ReMiDi's Combine).
 
@@ -116,16 +116,16 @@ class Tracker:
         ``(next_obs, env state, reward, done, tracker state)``."""
         next_obs, state, reward, done, _ = jax.vmap(envs.auto.step, in_axes=(0, 0, 0, None))(
             env_keys, state, action, envs.params)
-        tstate = self.advance(envs.tracker_env, envs.params, frozen, env_keys, tstate, action, next_obs, done)
+        tstate = self.observe(envs.tracker_env, envs.params, frozen, env_keys, tstate, action, next_obs, done)
         return next_obs, state, reward, done, tstate
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None):
         raise NotImplementedError
 
-    def advance(self, env, params, frozen, env_keys, state, action, next_obs, done):
+    def observe(self, env, params, frozen, env_keys, state, action, next_obs, done):
         raise NotImplementedError
 
-    def explained(self, state) -> jax.Array:
+    def indistinguishable(self, state) -> jax.Array:
         raise NotImplementedError
 
     def overflow(self, state) -> jax.Array:

@@ -11,7 +11,7 @@ is explained when its score under SOME valid frozen model reaches that model's t
 length (and every shorter prefix's did).
 
 :class:`BeliefTracker` is the component (:mod:`remidi.engine.trackers.base`): per rollout step
-``start`` / ``explained`` / ``advance`` over N envs, reading the frozen models and thresholds from
+``start`` / ``indistinguishable`` / ``observe`` over N envs, reading the frozen models and thresholds from
 ``frozen.belief`` (:class:`FrozenBeliefs`); per update ``init`` (a :class:`BeliefMemory`),
 ``learn``, ``freeze``, ``metrics`` and ``audit``. Shapes: T steps, N envs, E entries, H hidden
 units, B frozen models, K adversaries, R recorded rollouts, L length buckets.
@@ -147,11 +147,11 @@ class BeliefTracker(Tracker):
                            match=self._judge(frozen, total, count, ref_total), ref_hidden=ref_hidden,
                            ref_total=ref_total)
 
-    def explained(self, state: BeliefState) -> jax.Array:
+    def indistinguishable(self, state: BeliefState) -> jax.Array:
         """bool[N]: some frozen model explains each env's prefix so far."""
         return jnp.any(state.match, axis=-1)
 
-    def advance(self, env, params, frozen, env_keys, state: BeliefState, action, next_obs, done) -> BeliefState:
+    def observe(self, env, params, frozen, env_keys, state: BeliefState, action, next_obs, done) -> BeliefState:
         """After the envs took ``action`` i32[N] and saw ``next_obs`` (the next episode's first
         observation where ``done`` bool[N])."""
         cats = self.model.coding.encode(next_obs)  # [N, E]

@@ -12,12 +12,12 @@ Two trackers compute that, over *slots* (each slot follows one frozen level, ``i
 * the **reference** tracker (:func:`tracker_reset`, :func:`tracker_step`) has one slot per
   frozen level and steps all F of them beside every rollout env at every step, restarting all
   of them at each episode start. Exact for any environment; its cost grows with F.
-* the **candidate** tracker (:func:`candidates_reset`, :func:`candidates_step`) needs a
+* the **candidate** tracker (:meth:`CandidateTracker.start`, :meth:`CandidateTracker.step`) needs a
   deterministic reset (``reset_to_level`` ignores its key, as in every UED environment whose
   level fixes the start). It computes the frozen levels' first observations once per rollout;
   a rollout env (whose restarts replay the same level, so every episode starts alike) keeps as
   slots only the first ``budget`` frozen levels whose first observation equals its own, and
-  steps those while they match (:func:`step_with_slots`: only the live slots, in a batch sized
+  steps those while they match (:meth:`CandidateTracker.step`: only the live slots, in a batch sized
   to them). Its per-step cost is at most ``budget`` environment steps per env, whatever F, and
   none where no frozen level shares the env's first observation. A frozen level
   that diverged never matches again within the episode, so this equals the reference whenever
@@ -32,8 +32,8 @@ produced it. It needs every frozen level stepped: the reference tracker only.
 The functions act on ONE rollout environment. The rollout uses them through the tracker
 components (:class:`ExactTracker`, :class:`CandidateTracker`; :func:`make_tracker` picks one),
 which vmap them over its N envs (the protocol: :mod:`remidi.engine.trackers.base`): ``start`` at
-the rollout's first step, ``explained`` (bool[N]: the prefix so far is indistinguishable from a
-frozen level) before each action, ``advance`` after each environment step. They keep no state
+the rollout's first step, ``indistinguishable`` (bool[N]: the prefix so far could have come from a
+frozen level) before each action, ``observe`` after each environment step. They keep no state
 across updates: the frozen levels are the adversary's.
 Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``), S = slots.
 """
@@ -64,7 +64,7 @@ class TrackerState:
     start_states: Any = None  # candidate tracker: the slots' first states (leaves [S, ...]) ...
     start_match: Any = None  # ... and matches (bool[S]), restored when the agent's episode restarts
     overflow: Any = None  # candidate tracker: i32[], frozen levels matching the first observation that did not fit
-    restarted: Any = None  # candidate tracker, stepped with the envs (step_with_slots): bool[], the env restarted
+    restarted: Any = None  # candidate tracker, stepped with the envs (CandidateTracker.step): bool[], the env restarted
     #                        at the last step, so its slots are at their first states (env_states not restored)
 
 
@@ -113,32 +113,13 @@ def frozen_starts(env, params, frozen_levels):
     return jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(jax.random.PRNGKey(0), frozen_levels, params)
 
 
-def candidates_reset(starts, valid, agent_obs, budget: int, compare=_compare) -> TrackerState:
-    """Slots for the first ``budget`` valid frozen levels (in index order: earlier buffers first)
-    whose first observation equals ``agent_obs``, the env's first observation."""
-    first_obs, first_states = starts
-    matches = valid & compare(first_obs, agent_obs)  # bool[F]
-    index = jnp.nonzero(matches, size=budget, fill_value=-1)[0]
-    match = index >= 0
-    states = jax.tree.map(lambda x: x[jnp.maximum(index, 0)], first_states)
-    overflow = jnp.maximum(jnp.sum(matches) - budget, 0).astype(jnp.int32)
-    return TrackerState(index=index, env_states=states, match=match, every_step=jnp.any(match),
-                        start_states=states, start_match=match, overflow=overflow, restarted=jnp.zeros((), bool))
-
-
 def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done,
                     compare=_compare) -> TrackerState:
     """Advance the slots as :func:`tracker_step` does (same keys); a restart restores the slots'
     first states, since the env's restart replays the same level from the same start."""
     rng_step, _ = jax.random.split(rng)
-    stepped = jax.vmap(env.step, in_axes=(None, 0, None, None))(rng_step, state.env_states, action, params)
-    return candidates_advance(state, stepped, agent_obs, agent_done, compare)
-
-
-def candidates_advance(state: TrackerState, stepped, agent_obs, agent_done, compare=_compare) -> TrackerState:
-    """The second half of :func:`candidates_step`, given the slots' environment step ``stepped =
-    (obs, env_states, reward, done, info)`` (leaves [S, ...]): compare, or restart the slots."""
-    obs_s, states, _, done_s, _ = stepped
+    obs_s, states, _, done_s, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
+        rng_step, state.env_states, action, params)
     same = compare(obs_s, agent_obs) & (done_s == agent_done)
     advanced = state.replace(env_states=states, match=state.match & same)
     restarted = state.replace(env_states=state.start_states, match=state.start_match)
@@ -146,15 +127,6 @@ def candidates_advance(state: TrackerState, stepped, agent_obs, agent_done, comp
 
 
 # ---------------------------------------------------------------------- reading a tracker
-def indistinguishable(state: TrackerState, mode: str = "prefix") -> jax.Array:
-    """bool[]: the current prefix could have come from a frozen level."""
-    if mode == "prefix":
-        return jnp.any(state.match)
-    if mode == "per_step":
-        return state.every_step
-    raise ValueError(f"tracker mode must be one of {MODES}, got {mode!r}")
-
-
 def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
     """bool[B]: some level of frozen buffer b produced the whole prefix (frozen levels are
     buffer-major: level f belongs to buffer f // capacity)."""
@@ -179,7 +151,7 @@ class ExactTracker(Tracker):
     def compare(self, obs_f, obs) -> jax.Array:
         """bool[F]: frozen observation f (leaves [F, ...]) is the agent's ``obs`` (exact equality;
         :mod:`~remidi.engine.trackers.tolerance` overrides it)."""
-        return _compare(obs_f, obs)
+        return jax.vmap(tree_equal, in_axes=(0, None))(obs_f, obs)
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
         """The state at the envs' first observations ``obs`` (reset with ``reset_keys`` [N])."""
@@ -187,11 +159,12 @@ class ExactTracker(Tracker):
         return jax.vmap(reset, in_axes=(None, None, 0, None, None, 0))(
             env, params, reset_keys, frozen.levels, frozen.valid, obs)
 
-    def explained(self, state: TrackerState) -> jax.Array:
-        """bool[N]: each env's prefix so far could have come from a frozen level."""
-        return jax.vmap(indistinguishable, in_axes=(0, None))(state, self.mode)
+    def indistinguishable(self, state: TrackerState) -> jax.Array:
+        """bool[N]: each env's prefix so far could have come from a frozen level (``prefix``: one
+        frozen level produced all of it; ``per_step``: some frozen level matched every step)."""
+        return state.every_step if self.mode == "per_step" else jnp.any(state.match, axis=-1)
 
-    def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
+    def observe(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
         """After the envs took ``action`` with ``env_keys`` [N] and saw ``next_obs``, ``done``."""
         return jax.vmap(functools.partial(tracker_step, compare=self.compare),
                         in_axes=(None, None, 0, 0, None, 0, 0, 0))(
@@ -223,15 +196,11 @@ class CandidateTracker(ExactTracker):
         if self.mode != "prefix" or self.budget < 1:
             raise ValueError("the candidate tracker computes the prefix mode only, with budget ≥ 1")
 
-    def _shares(self, envs) -> bool:
-        """The slots and the envs share one reset and one environment step per rollout step (each
-        further copy of the environment's reset or step in the program costs compile time:
-        seconds for Brax): the reset ignores its keys and the frozen levels play in the envs' own
-        environment."""
-        return envs.deterministic_reset and envs.tracker_env is envs.raw
-
     def reset(self, envs, frozen, reset_keys, levels):
-        if not self._shares(envs):
+        """The envs' reset and the frozen levels' in one batch where they share it (the reset
+        ignores its keys and the frozen levels play in the envs' own environment: each further
+        copy of the reset or step in the program costs compile time, seconds for Brax)."""
+        if not (envs.deterministic_reset and envs.tracker_env is envs.raw):
             return super().reset(envs, frozen, reset_keys, levels)
         num_envs = reset_keys.shape[0]
         both = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), levels, frozen.levels)
@@ -243,17 +212,42 @@ class CandidateTracker(ExactTracker):
         starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs, starts)
 
-    def step(self, envs, frozen, env_keys, state, tstate, action):
-        if not self._shares(envs):
-            return super().step(envs, frozen, env_keys, state, tstate, action)
-        return step_with_slots(envs, env_keys, state, tstate, action, self)
-
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
-        starts = frozen_starts(env, params, frozen.levels) if starts is None else starts
-        reset = functools.partial(candidates_reset, budget=self.budget, compare=self.compare)
-        return jax.vmap(reset, in_axes=(None, None, 0))(starts, frozen.valid, obs)
+        """Each env's slots: the first ``budget`` valid frozen levels (in index order: earlier
+        buffers first) whose first observation equals the env's (``obs``, leaves [N, ...])."""
+        first_obs, first_states = frozen_starts(env, params, frozen.levels) if starts is None else starts
+        matches = frozen.valid & jax.vmap(self.compare, in_axes=(None, 0))(first_obs, obs)  # bool[N, F]
+        index = jax.vmap(lambda m: jnp.nonzero(m, size=self.budget, fill_value=-1)[0])(matches)  # i32[N, S]
+        match = index >= 0
+        states = jax.tree.map(lambda x: x[jnp.maximum(index, 0)], first_states)
+        overflow = jnp.maximum(jnp.sum(matches, axis=1) - self.budget, 0).astype(jnp.int32)
+        return TrackerState(index=index, env_states=states, match=match, every_step=jnp.any(match, axis=1),
+                            start_states=states, start_match=match, overflow=overflow,
+                            restarted=jnp.zeros(index.shape[:1], bool))
 
-    def advance(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
+    def step(self, envs, frozen, env_keys, state, tstate, action):
+        """One step of the N envs and of their live slots together, as one batch [N + M]: each
+        slot takes its env's action and the key its env's own step takes (the first half of
+        ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env`), so the
+        results are theirs. Only live slots (``match``: their frozen level produced the whole
+        prefix) are stepped; a slot that diverged is read again only after its env restarts. M is
+        the smallest size of :func:`slot_ladder` that holds the live slots of every seed of the
+        program (``lax.switch``: where nothing matches the step costs the envs' alone)."""
+        if not (envs.deterministic_reset and envs.tracker_env is envs.raw):
+            return super().step(envs, frozen, env_keys, state, tstate, action)
+        num_envs, slots = tstate.match.shape
+        sizes = slot_ladder(num_envs, slots)
+        live = jnp.sum(tstate.match)
+        try:  # the most live slots over the seeds this program runs together: one branch for all of them
+            live = jax.lax.pmax(live, SEED_BATCH)
+        except NameError:  # no seed batch bound here
+            pass
+        rung = jnp.sum(live > jnp.asarray(sizes))  # the first size ≥ the count
+        step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
+        branches = [functools.partial(_step_live, envs, self, size) for size in sizes]
+        return jax.lax.switch(rung, branches, step_keys, state, tstate, action)
+
+    def observe(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
         return jax.vmap(functools.partial(candidates_step, compare=self.compare), in_axes=(None, None, 0, 0, 0, 0, 0))(
             env, params, env_keys, state, action, next_obs, done)
 
@@ -272,7 +266,7 @@ LADDER_FACTOR = 8
 
 
 def slot_ladder(num_envs: int, slots: int, factor: int = LADDER_FACTOR) -> tuple[int, ...]:
-    """The sizes M of the batch of live slots :func:`step_with_slots` may step, ascending: 0 (no
+    """The sizes M of the batch of live slots :meth:`CandidateTracker.step` may step, ascending: 0 (no
     slot live: the N envs alone), ``N·S`` (every slot) and between them ``N·S`` divided by
     ``factor`` again and again, down to about ``N / factor``. Each size is one copy of the
     environment's step in the program (compile time), each gap a factor of slots stepped in vain."""
@@ -285,53 +279,17 @@ def slot_ladder(num_envs: int, slots: int, factor: int = LADDER_FACTOR) -> tuple
     return tuple(sorted(sizes))
 
 
-def _most_over_seeds(count: jax.Array) -> jax.Array:
-    """``count`` of the seed that has the most among the seeds this program runs together (the
-    same value for every seed, so that a ``lax.switch`` on it stays a branch under the seed vmap:
-    :mod:`remidi.engine.core.seeds`), or ``count`` itself where no seeds are batched."""
-    try:
-        return jax.lax.pmax(count, SEED_BATCH)
-    except NameError:  # no seed batch bound here
-        return count
-
-
-def step_with_slots(envs, env_keys, state, tstate, action, tracker: CandidateTracker):
-    """One environment step of the N envs and of their candidate tracker's live slots together,
-    as one batch [N + M]: each slot takes its env's action and the key its env's own step takes
-    (the first half of ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env`
-    and :func:`candidates_step`), so the results are theirs. Returns ``(next_obs, state, reward,
-    done, tstate)``, leaves [N, ...].
-
-    Only live slots (``match``: their frozen level produced the whole prefix) are stepped: a slot
-    that diverged is read again only after its env restarts, from its first state. M is the
-    smallest size of :func:`slot_ladder` that holds the live slots of every seed of the program,
-    chosen by ``lax.switch``: where nothing matches the step costs the envs' alone, and the
-    tracker's cost grows with the live slots, not with the S slots per env."""
-    num_envs, slots = tstate.match.shape
-    sizes = slot_ladder(num_envs, slots)
-    rung = jnp.sum(_most_over_seeds(jnp.sum(tstate.match)) > jnp.asarray(sizes))  # the first size ≥ the count
-    step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
-    branches = [functools.partial(_step_live, envs, tracker, size) for size in sizes]
-    return jax.lax.switch(rung, branches, step_keys, state, tstate, action)
-
-
 def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tstate, action):
-    """:func:`step_with_slots` with a batch of ``size`` slots, which holds every live one: they
-    are picked (in (env, slot) order, the rest of the batch filled with the last slot and
+    """:meth:`CandidateTracker.step` with a batch of ``size`` slots, which holds every live one:
+    they are picked (in (env, slot) order, the rest of the batch filled with the last slot and
     dropped), stepped beside the envs, compared with their envs' next observations and episode
     ends, and put back; a restarting env's slots restart (``restarted``: from their first states
-    at the next step)."""
+    at the next step). ``size`` 0: the envs alone."""
     num_envs, slots = tstate.match.shape
-    if size == 0:
-        next_obs, state, reward, done, _ = _step_envs(envs, step_keys, state, action)
-        match = jnp.where(done[:, None], tstate.start_match, False)
-        return next_obs, state, reward, done, tstate.replace(match=match, restarted=done)
     pick = jnp.nonzero(tstate.match.reshape(-1), size=size, fill_value=num_envs * slots)[0]  # i32[M]
     owner = jnp.minimum(pick // slots, num_envs - 1)  # i32[M]: the env each picked slot follows
     fresh = tstate.restarted[owner]  # bool[M]: its env restarted at the last step
-
-    def flat(x):
-        return x.reshape((num_envs * slots,) + x.shape[2:])
+    flat = lambda x: x.reshape((num_envs * slots,) + x.shape[2:])  # noqa: E731  [N, S, ...] -> [N·S, ...]
 
     def picked(current, first):
         now, start = flat(current).at[pick].get(mode="clip"), flat(first).at[pick].get(mode="clip")
@@ -345,6 +303,9 @@ def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tst
     own = jax.tree.map(lambda x: x[:num_envs], stepped)
     next_obs, state, reward, done, _ = jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(
         state, own, envs.params)
+    if size == 0:
+        match = jnp.where(done[:, None], tstate.start_match, False)
+        return next_obs, state, reward, done, tstate.replace(match=match, restarted=done)
     obs_m, states_m, _, done_m, _ = jax.tree.map(lambda x: x[num_envs:], stepped)
     agent_obs = jax.tree.map(lambda x: x[owner], next_obs)
     same = jax.vmap(lambda o, a: tracker.compare(jax.tree.map(lambda x: x[None], o), a)[0])(obs_m, agent_obs)
@@ -354,12 +315,6 @@ def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tst
                               tstate.env_states, states_m)
     match = jnp.where(done[:, None], tstate.start_match, match)
     return next_obs, state, reward, done, tstate.replace(env_states=env_states, match=match, restarted=done)
-
-
-def _step_envs(envs, step_keys, state, action):
-    """The N envs' step alone (``step_keys``: the first halves of their keys)."""
-    stepped = jax.vmap(envs.raw.step, in_axes=(0, 0, 0, None))(step_keys, state.env_state, action, envs.params)
-    return jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(state, stepped, envs.params)
 
 
 def exact_budget(task, r, mode: str) -> int:

@@ -160,10 +160,10 @@ class SimulatedTracker(Tracker):
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> SimState:
         return self.start_coded(env, params, frozen, with_end(self.coding, obs, jnp.zeros(reset_keys.shape[:1], bool)))
 
-    def explained(self, state: SimState) -> jax.Array:
+    def indistinguishable(self, state: SimState) -> jax.Array:
         return jnp.any(state.match, axis=-1)
 
-    def advance_coded(self, env, params, frozen, env_keys, state: SimState, action, agent, done) -> SimState:
+    def observe_coded(self, env, params, frozen, env_keys, state: SimState, action, agent, done) -> SimState:
         """After the envs took ``action`` [N] with ``env_keys`` [N] and saw the coded observation
         ``agent`` i32[N, E + 1] (the next episode's first where ``done`` bool[N]: the slots restart)."""
         step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
@@ -188,10 +188,10 @@ class SimulatedTracker(Tracker):
         fresh = self._judge(frozen, state)
         return state.replace(match=jnp.where(done[:, None], fresh, state.match & fresh))
 
-    def advance(self, env, params, frozen, env_keys, state: SimState, action, next_obs, done) -> SimState:
+    def observe(self, env, params, frozen, env_keys, state: SimState, action, next_obs, done) -> SimState:
         # the agent's own end entry is 0: an ended episode restarts (as the exact tracker does)
         agent = with_end(self.coding, next_obs, jnp.zeros(done.shape, bool))
-        return self.advance_coded(env, params, frozen, env_keys, state, action, agent, done)
+        return self.observe_coded(env, params, frozen, env_keys, state, action, agent, done)
 
     def overflow(self, state: SimState) -> jax.Array:
         return jnp.zeros(state.count.shape, jnp.int32)
@@ -208,7 +208,7 @@ def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, action
 
     def body(state, inp):
         act, obs, restart, k = inp
-        state = tracker.advance_coded(env, params, frozen, jax.random.split(k, n), state, act, obs, restart)
+        state = tracker.observe_coded(env, params, frozen, jax.random.split(k, n), state, act, obs, restart)
         return state, tracker.scores(frozen, state)
 
     keys = jax.random.split(key, actions.shape[0] - 1)

@@ -256,10 +256,10 @@ def test_observation_statistics_survive_a_resume(tmp_path):
 
 
 def test_floors_play_the_evaluated_levels_with_zero_and_with_normal_actions():
-    """The floors of docs/results.md's Brax section (remidi.reporting.floors), on the toy
+    """The floors of docs/results.md's Brax section (tools.results.floors), on the toy
     task: zero action earns 1 − |target|² on each level; N(0, 1) actions lose their variance,
     2 more in expectation; the episodes after the first, inside the scan, do not count."""
-    from remidi.reporting.floors import floor_returns
+    from tools.results.floors import floor_returns
 
     levels = TASK.eval_sets["shown"]  # one-step episodes in a 3-step scan: the first episode's return only
     task = dataclasses.replace(TASK, eval_sets={"undisturbed": levels}, max_episode_steps=3)

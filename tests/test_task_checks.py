@@ -401,9 +401,9 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
 
 
 def test_the_floor_of_uniform_actions_plays_a_discrete_tasks_evaluation_sets(corridor):
-    """remidi.reporting.floors on a discrete task: uniform random actions, one return per level
+    """tools.results.floors on a discrete task: uniform random actions, one return per level
     and attempt (the corridor's returns lie in [-1, 1]); the continuous floors are refused."""
-    from remidi.reporting.floors import floor_returns
+    from tools.results.floors import floor_returns
 
     task = corridor.make_task()
     name = sorted(task.eval_sets)[0]

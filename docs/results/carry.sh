@@ -9,7 +9,7 @@
 # A run may be training while it is packed: checkpoint.npz is copied before the rest of the
 # folder (the run writes checkpoint.history.npz first, so the copied history holds every block
 # the copied checkpoint counts), and the copy is checked to load before it replaces the archive.
-# `results_page --collect` deletes a run's archive when it collects the finished run.
+# `python -m tools.results.page --collect` deletes a run's archive when it collects the finished run.
 set -eu
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 R=${1:?RUNS_DIR}; shift

@@ -13,7 +13,7 @@
 # unfinished runs before one ends). When a run has finished, copy its small outputs into the
 # page's data and regenerate the page (which deletes its archive):
 #
-#   python -m remidi.reporting.results_page --collect RUNS_DIR/<experiment>/<run>
+#   python -m tools.results.page --collect RUNS_DIR/<experiment>/<run>    # from the repository root
 #
 # (a committed run trained again, under RUNS_DIR/repeats/: --collect-repeat instead of --collect).
 #
@@ -120,7 +120,7 @@ for m in ant halfcheetah hopper walker2d; do
   for a in plr minimax-return remidi; do run "$a-s0" "brax-$m" "$a" 0 5 cpu; done
 done
 # (the floors of the Brax and maze sections, policies that learn nothing, are no run: `python -m
-# remidi.reporting.floors` writes docs/results/references/floors.json in minutes)
+# tools.results.floors` writes docs/results/references/floors.json in minutes)
 
 # issue #29: PAIRED and ReMiDi over PAIRED on the lever game. Their claims were stated at 76e7226
 # and first run there; both rerun at ab3ea79, where a generator's reservoir keeps a repeated

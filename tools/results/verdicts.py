@@ -11,9 +11,10 @@ import numpy as np
 
 from remidi import stats
 from remidi.errors import ConfigError
-from remidi.reporting.claims import Claim, stale_fix
-from remidi.reporting.data import metric_values
 from remidi.runs.compare import compare
+
+from tools.results.claims import Claim, stale_fix
+from tools.results.data import metric_values
 
 ALPHA = 0.05
 
@@ -137,7 +138,7 @@ def no_worse_test(experiment: str, a: str, b: str, margin: float, x: dict, y: di
 
 
 def verdict(tests: list[dict], min_seeds: int) -> str:
-    """The verdict rule (:mod:`remidi.reporting.results_page`) over a claim's tests. "partly" where no test passes
+    """The verdict rule (:mod:`tools.results.page`) over a claim's tests. "partly" where no test passes
     (every comparison holds in the mean only) reads "partly (no test passes)", so that it is not
     taken for a claim that holds in some settings."""
     if not tests or any(min(t["n"]) < min_seeds for t in tests):

@@ -1,9 +1,11 @@
 """The results page (``docs/results.md``): every table and figure generated from committed data.
 
-``python -m remidi.reporting.results_page`` reads the runs under ``docs/results/data`` and
-rewrites, in ``docs/results.md``, every block between ``<!-- generated:NAME -->`` and
-``<!-- /generated:NAME -->``, and the figures under ``docs/results/``; ``--check`` only says
-which blocks differ from what the data give (exit 1), as ``tests/test_results_page.py`` does.
+Run from the repository root (a development tool, not installed with the package):
+``python -m tools.results.page`` reads the runs under ``docs/results/data`` and rewrites, in
+``docs/results.md`` and ``README.md`` (its claims table), every block between
+``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->``, and the figures under
+``docs/results/``; ``--check`` only says which blocks differ from what the data give (exit 1), as
+``tests/test_results_page.py`` does.
 
 **Data.** ``DATA/<experiment>/<run>/`` is one ``remidi run`` of one algorithm (a part of its
 seeds): ``config.json``, ``summary.json``, ``evaluate.json`` (``remidi evaluate --attempts 30``)
@@ -12,8 +14,8 @@ an error), so seeds can be run in parts. ``REPEATS`` (``docs/results/repeats``, 
 is laid out alike and holds committed runs trained again, to measure what their folders did not
 keep; only the tables that set them beside their originals read it.
 
-**Claims and the verdict rule** (:data:`~remidi.reporting.claims.CLAIMS`,
-:func:`~remidi.reporting.verdicts.verdict`), stated before the runs: each
+**Claims and the verdict rule** (:data:`~tools.results.claims.CLAIMS`,
+:func:`~tools.results.verdicts.verdict`), stated before the runs: each
 claim of the paper has one primary metric, read from the final checkpoint (``evaluate.json``)
 or the final logged point (``summary.json``), and its comparisons "A's mean > B's" or bounds
 "A's mean lies in [lo, hi]". A comparison *passes* when the ordering holds in the mean and the
@@ -28,13 +30,13 @@ test "A's mean ≥ B's − δ" when the 95% bootstrap interval of the difference
 otherwise, and **pending** while an algorithm has fewer seeds than the claim requires. Everything
 else on the page is secondary and exploratory.
 
-Each verdict names the scale its runs trained at (:func:`~remidi.reporting.verdicts.run_scale`:
+Each verdict names the scale its runs trained at (:func:`~tools.results.verdicts.run_scale`:
 the preset, and its
 environment steps as a share of the paper preset's). A claim that reads runs made before a
-correction they need (:data:`~remidi.reporting.claims.FIXES`) shows "stale: ..." instead of its verdict until they are
+correction they need (:data:`~tools.results.claims.FIXES`) shows "stale: ..." instead of its verdict until they are
 made again.
 
-The page's parts, one module each in :mod:`remidi.reporting`: ``claims`` (what the page states,
+The page's parts, one module each in :mod:`tools.results`: ``claims`` (what the page states,
 and its sections), ``data`` (the committed runs, ``--collect``), ``verdicts`` (the rule applied),
 ``tables``, ``figures``, and ``floors`` (policies that learn nothing, measured once).
 """
@@ -48,14 +50,15 @@ from pathlib import Path
 
 from remidi.errors import ConfigError, RemidiError
 from remidi.experiments import outputs
-from remidi.reporting.claims import CLAIMS, EXTRA_TABLES, SECTIONS
-from remidi.reporting.data import DATA, REPEATS, ROOT, collect, collect_unfinished, load_runs, load_unfinished
-from remidi.reporting.figures import draw_figures
-from remidi.reporting.floors import OUT as FLOORS  # python -m remidi.reporting.floors writes it
-from remidi.reporting.tables import (claim_provenance_table, floors_table, maze_floors_table, metrics_table, mode_table,
-                                     per_seed_table, provenance_table, repeat_table, scale_gap_table, summary_lines,
-                                     unfinished_table, verdict_table)
-from remidi.reporting.verdicts import evaluate_claim
+
+from tools.results.claims import CLAIMS, EXTRA_TABLES, SECTIONS
+from tools.results.data import DATA, REPEATS, ROOT, collect, collect_unfinished, load_runs, load_unfinished
+from tools.results.figures import draw_figures
+from tools.results.floors import OUT as FLOORS  # python -m tools.results.floors writes it
+from tools.results.tables import (claim_provenance_table, claims_table, floors_table, maze_floors_table, metrics_table,
+                                  mode_table, per_seed_table, provenance_table, repeat_table, scale_gap_table,
+                                  unfinished_table, verdict_table)
+from tools.results.verdicts import evaluate_claim
 
 PAGE = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
@@ -63,11 +66,11 @@ README = ROOT / "README.md"
 
 def blocks(runs: dict, unfinished: dict | None = None, repeats: dict | None = None) -> tuple[dict[str, str], list[dict]]:
     """``{block name: Markdown}`` of every generated block, and the claims' results (``unfinished``:
-    :func:`~remidi.reporting.data.load_unfinished`, drawn beside the scale study, in no claim;
-    ``repeats``: :func:`~remidi.reporting.data.load_runs` of :data:`~remidi.reporting.data.REPEATS`,
+    :func:`~tools.results.data.load_unfinished`, drawn beside the scale study, in no claim;
+    ``repeats``: :func:`~tools.results.data.load_runs` of :data:`~tools.results.data.REPEATS`,
     set beside their originals, in no claim)."""
     results = [evaluate_claim(c, runs) for c in CLAIMS]
-    out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "summary": summary_lines(results),
+    out = {"verdicts": verdict_table(results), "provenance": provenance_table(runs), "claims": claims_table(results),
            "claim-provenance": claim_provenance_table(results, runs),
            "claim-figures": "\n".join(f"![{r['claim'].title}: {r['claim'].statement}](results/claim-{r['claim'].key}.png)"
                                        for r in results if r["verdict"] != "pending") or "_No verdict yet._"}
@@ -110,7 +113,7 @@ def stale_blocks(page: str, generated: dict[str, str]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m remidi.reporting.results_page", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m tools.results.page", description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, default=DATA)
     parser.add_argument("--page", type=Path, default=PAGE)
     parser.add_argument("--check", action="store_true", help="only report blocks that differ from the data (exit 1)")
@@ -143,7 +146,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"collected {collect_unfinished(run, args.data)} (unfinished)", file=sys.stderr)
     runs, unfinished = load_runs(args.data), load_unfinished(args.data)
     generated, results = blocks(runs, unfinished, load_runs(args.repeats))
-    pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's summary
+    pages = [args.page] + ([README] if args.page == PAGE else [])  # the README quotes the page's claims table
     if args.check:
         stale = [f"{p.name}:{name}" for p in pages for name in stale_blocks(p.read_text(), generated)]
         print("the page matches the data" if not stale else "stale blocks: " + ", ".join(stale))

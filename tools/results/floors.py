@@ -2,7 +2,7 @@
 that the results page's primary metrics are read against (a metric must tell a good agent from
 a bad one).
 
-    python -m remidi.reporting.floors [OUT]    # default docs/results/references/floors.json
+    python -m tools.results.floors [OUT]    # default docs/results/references/floors.json
 
 * Brax (Table 1's ``return/undisturbed``):
   - **zero action**: a policy that does nothing (every action 0). Brax's hopper, walker2d and ant
@@ -27,7 +27,7 @@ import json
 import sys
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parents[3] / "docs" / "results" / "references" / "floors.json"
+OUT = Path(__file__).resolve().parents[2] / "docs" / "results" / "references" / "floors.json"
 
 
 def floor_returns(task, name: str, policy: str, attempts: int, seed: int = 0):
@@ -87,7 +87,7 @@ def measure(attempts: int = 30, maze_attempts: int = 1000, seed: int = 0) -> dic
 
     out = {"config": {"backend": DEFAULT_BACKEND, "attempts": attempts, "maze_attempts": maze_attempts, "seed": seed,
                       "code": code_version(),
-                      "command": "python -m remidi.reporting.floors"}}
+                      "command": "python -m tools.results.floors"}}
     for m in MORPHOLOGIES:
         task = brax_task(m)
         zero = np.asarray(floor_returns(task, "undisturbed", "zero", 1, seed))[:, 0]

@@ -1,5 +1,5 @@
 """The results page's tables, as Markdown: the verdicts, each experiment's metrics and seeds, the
-README's summary, the runs' provenance, and the floors (policies that learn nothing) beside the
+README's claims table, the runs' provenance, and the floors (policies that learn nothing) beside the
 algorithms."""
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from remidi import stats
 from remidi.envs.maze_names import HELD_OUT_NAMES
 from remidi.errors import ConfigError
 from remidi.experiments.plots import seeds_text
-from remidi.reporting.claims import BRAX, SCALE_PRESETS, SCALE_TASKS, SECTIONS
-from remidi.reporting.data import EVAL_ATTEMPTS, lost_note, metric_values
-from remidi.reporting.verdicts import scale_gap, verdict_words
 from remidi.runs.compare import describe
 from remidi.runs.table import _cells as table_cells
 from remidi.runs.table import _digits as table_digits
+
+from tools.results.claims import BRAX, SCALE_PRESETS, SCALE_TASKS, SECTIONS, in_paper
+from tools.results.data import EVAL_ATTEMPTS, lost_note, metric_values
+from tools.results.verdicts import scale_gap, verdict_words
 
 
 def _f(x: float, digits: int = 2) -> str:
@@ -36,7 +37,7 @@ def _p(p: float) -> str:
 
 def metric_source(metric: str) -> str:
     """Where a claim's metric (``evaluate:NAME`` or ``summary:NAME``) comes from, as the verdict
-    table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`~remidi.reporting.data.EVAL_ATTEMPTS`
+    table names it: the evaluation sets' metrics of ``remidi evaluate`` take :data:`~tools.results.data.EVAL_ATTEMPTS`
     attempts per level, its CVaR and generator metrics its default generated levels and attempts;
     ``summary.json`` holds each metric's last logged point, the replay shares summed over the last
     10% of training."""
@@ -117,25 +118,43 @@ def per_seed_table(runs: dict, experiment: str, metric: str, algos: list[str]) -
     return "\n".join(lines)
 
 
-def summary_lines(results: list[dict]) -> str:
-    """The README's summary: per claim its verdict and, where there are data, each algorithm's mean
-    of the primary metric."""
-    lines = []
+def key_numbers(result: dict) -> str:
+    """A claim's primary metric and each algorithm's mean of it, where there are data, with the
+    smallest and largest seed count: ``"`solve_rate/mean`: remidi 0.25, plr 0.01 (10 seeds)"``
+    ("" without data)."""
+    claim = result["claim"]
+    d = _digits(claim.metric)
+    means = {}  # grouped by experiment, in the claim's order (Brax: by morphology)
+    for t in sorted(result["tests"], key=lambda t: claim.experiments.index(t["experiment"])):
+        if "mean" in t:
+            names = (t["algo"], t["baseline"]) if "baseline" in t else (t["algo"],)
+            where = f" ({t['experiment'].removeprefix('brax-')})" if len(claim.experiments) > 1 else ""
+            for name, mean in zip(names, t["mean"]):
+                means[f"{name}{where}"] = mean
+    if not means:
+        return ""
+    counts = [n for t in result["tests"] if "mean" in t for n in t["n"]]  # of the settings with data
+    seeds = f"{min(counts)}" + (f"–{max(counts)}" if max(counts) > min(counts) else "")
+    numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
+    return f"`{claim.metric.split(':', 1)[1]}`: {numbers} ({seeds} seeds)"
+
+
+#: the order the README's table counts the other claims' verdicts in
+VERDICT_ORDER = ("reproduced", "partly", "partly (no test passes)", "not reproduced", "pending", "stale")
+
+
+def claims_table(results: list[dict]) -> str:
+    """The README's results: one row per claim of the paper itself (:func:`~tools.results.claims.in_paper`)
+    with its verdict and key numbers, and one row counting the verdicts of the page's other claims."""
+    lines = ["| claim | verdict | key numbers |", "| --- | --- | --- |"]
     for r in results:
-        claim = r["claim"]
-        d = _digits(claim.metric)
-        means = {}
-        for t in r["tests"]:
-            if "mean" in t:
-                names = (t["algo"], t["baseline"]) if "baseline" in t else (t["algo"],)
-                where = f" ({t['experiment'].removeprefix('brax-')})" if len(claim.experiments) > 1 else ""
-                for name, mean in zip(names, t["mean"]):
-                    means[f"{name}{where}"] = mean
-        numbers = ", ".join(f"{k} {_f(v, d)}" for k, v in means.items())
-        counts = [n for t in r["tests"] if "mean" in t for n in t["n"]]  # of the settings with data
-        seeds = "" if not counts else f"{min(counts)}" + (f"–{max(counts)}" if max(counts) > min(counts) else "")
-        detail = f" — `{claim.metric.split(':', 1)[1]}`: {numbers} ({seeds} seeds)" if numbers else ""
-        lines.append(f"- {claim.title}: {claim.statement}: {verdict_words(r)}{detail}")
+        if in_paper(r["claim"]):
+            lines.append(f"| {r['claim'].title}: {r['claim'].statement} | {verdict_words(r)} | {key_numbers(r) or '—'} |")
+    others = [r["verdict"].split(":", 1)[0] for r in results if not in_paper(r["claim"])]
+    counts = ", ".join(f"{others.count(v)} {v}" for v in VERDICT_ORDER if v in others)
+    lines.append(f"| {len(others)} claims beyond the paper (its methods on other tasks, ReMiDi over other "
+                 f"algorithms, belief and tolerance trackers, a scale study, Kinetix) | {counts} | "
+                 f"[docs/results.md](docs/results.md) |")
     return "\n".join(lines)
 
 
@@ -231,7 +250,7 @@ def scale_gap_table(results: list[dict], runs: dict) -> str:
     as its runs are committed) and the difference of their means, the comparison ReMiDi > PLR⊥
     (at `cpu`: that test of the paper's held-out claim) with the seeds of each side, whether PLR⊥
     solves more than at `cpu` (the claim's verdict and its test), and the gap's reading
-    (:func:`~remidi.reporting.verdicts.scale_gap`)."""
+    (:func:`~tools.results.verdicts.scale_gap`)."""
     by_key = {r["claim"].key: r for r in results}
     lines = ["| task | scale | ReMiDi (mean [95% CI]) | PLR⊥ (mean [95% CI]) | ReMiDi − PLR⊥ (means) | "
              "ReMiDi > PLR⊥ | seeds (ReMiDi / PLR⊥) | PLR⊥ solves more than at `cpu` | the gap |",
@@ -257,7 +276,7 @@ def scale_gap_table(results: list[dict], runs: dict) -> str:
 
 
 def unfinished_table(unfinished: dict) -> str:
-    """One row per unfinished run (:func:`~remidi.reporting.data.load_unfinished`): its preset,
+    """One row per unfinished run (:func:`~tools.results.data.load_unfinished`): its preset,
     seeds, the updates and environment steps reached of the run's, devices and commit, and its
     held-out solve rate at its last training evaluation (mean over seeds with its 95% bootstrap
     interval, and the seeds above 0). A run whose folder was lost before it finished (``lost`` in its
@@ -287,7 +306,7 @@ BRAX_ALGOS = ("plr", "minimax-return", "remidi")
 
 def floors_table(runs: dict, floors: dict) -> str:
     """Per Brax morphology: the undisturbed return of the zero-action and the N(0, 1)-action
-    policy (``floors``: :mod:`remidi.reporting.floors`' document) beside each algorithm's
+    policy (``floors``: :mod:`tools.results.floors`' document) beside each algorithm's
     mean over seeds (the claim's metric), and the algorithms whose mean lies above zero action's
     ("—" without runs). ConfigError for a run on another Brax back end than the floors'."""
     algos = BRAX_ALGOS
@@ -304,7 +323,7 @@ def floors_table(runs: dict, floors: dict) -> str:
             ran = runs[exp, a].config.get("brax", {}).get("backend")
             if backend is not None and ran != backend:
                 raise ConfigError(f"data: {exp} {a} ran on the Brax back end {ran!r}, the floors on {backend!r}: "
-                                  f"python -m remidi.reporting.floors measures them again")
+                                  f"python -m tools.results.floors measures them again")
         above = ", ".join(a for a, m in means.items() if m > floor["zero_action"]) or ("none" if means else "—")
         lines.append(f"| {exp.removeprefix('brax-')} | {_f(floor['zero_action'], 1)} | {_f(floor['normal_actions'], 1)} | "
                      + " | ".join(_f(means[a], 1) if a in means else "—" for a in algos)
@@ -317,7 +336,7 @@ def mode_table(runs: dict, repeats: dict | None = None) -> str:
     ways: actions sampled from the policy (``evaluate:``, as it trained) and its most likely
     action, the Gaussian's mean (``evaluate-mode:``, ``remidi evaluate --action mode``): means over
     the seeds evaluated both ways, and which seeds those are ("—" for an algorithm with none). The
-    seeds of ``repeats`` (:data:`~remidi.reporting.data.REPEATS`, runs trained again) get a row of
+    seeds of ``repeats`` (:data:`~tools.results.data.REPEATS`, runs trained again) get a row of
     their own, marked "trained again", under their algorithm's."""
     lines = ["| morphology | algorithm | seeds | sampled actions | mean action |", "| --- | --- | --- | --- | --- |"]
     for exp in BRAX:
@@ -338,7 +357,7 @@ def mode_table(runs: dict, repeats: dict | None = None) -> str:
 def repeat_table(runs: dict, repeats: dict) -> str:
     """Per experiment and algorithm of ``repeats`` (runs trained again with the same experiment,
     algorithm, preset, seeds and commit as committed ones), how far the trained-again seeds' value
-    of the experiment's first :data:`~remidi.reporting.claims.SECTIONS` metric (Brax: the final
+    of the experiment's first :data:`~tools.results.claims.SECTIONS` metric (Brax: the final
     evaluation's undisturbed return) lies from the committed run's on the same seeds: both means, the largest difference of
     one seed, how many seeds give the same value to the last digit JSON keeps, and the commit and
     devices the repeat trained at (the committed run's are in the provenance table)."""
@@ -363,7 +382,7 @@ def repeat_table(runs: dict, repeats: dict) -> str:
 
 def maze_floors_table(runs: dict, floors: dict) -> str:
     """The held-out mazes' solve rate of uniform random actions (``floors["mazes"]``:
-    :mod:`remidi.reporting.floors`) beside the T-maze and blindfold algorithms' means over seeds
+    :mod:`tools.results.floors`) beside the T-maze and blindfold algorithms' means over seeds
     (Fig. 6's metric), per maze and their mean."""
     metrics = [f"solve_rate/{name}" for name in HELD_OUT_NAMES] + ["solve_rate/mean"]
     rows = [("uniform random actions", floors["mazes"]["uniform_actions"])]

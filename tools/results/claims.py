@@ -33,6 +33,12 @@ class Claim:
         return list(dict.fromkeys(compared + [b[0] for b in self.bounds]))
 
 
+def in_paper(claim: Claim) -> bool:
+    """A claim of the paper itself (its Figs. 3–8 and Table 1), as the README's table lists them;
+    the others (beyond the paper, the scale study, Kinetix) are this library's own."""
+    return claim.title.startswith(("Fig. ", "Figs. ", "Table "))
+
+
 BRAX = ("brax-ant", "brax-halfcheetah", "brax-hopper", "brax-walker2d")
 SCALE_TASKS = (("tmaze", "T-maze"), ("blindfold", "blindfold"))
 SCALE_PRESETS = ("cpu4x",)  # presets that differ from an experiment's claims' preset in training length only

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from remidi import stats
-from remidi.reporting.claims import SCALE_TASKS, SECTIONS
-from remidi.reporting.data import ROOT, lost_note, metric_values
+
+from tools.results.claims import SCALE_TASKS, SECTIONS
+from tools.results.data import ROOT, lost_note, metric_values
 
 FIGURES = ROOT / "docs" / "results"
 
@@ -69,7 +70,7 @@ def scale_curves(runs: dict, experiment: str, algo: str, unfinished: dict | None
     """``algo``'s held-out solve rate at each scale of the study (:func:`_curve`): per preset with
     finished runs, with ``final``, its final checkpoint's (``remidi evaluate``, 30 attempts) mean and
     interval at the last x; then an unfinished run of another preset (``unfinished``:
-    :func:`~remidi.reporting.data.load_unfinished`), with ``updates``: (reached, of)."""
+    :func:`~tools.results.data.load_unfinished`), with ``updates``: (reached, of)."""
     found = []
     for preset in ("cpu", "cpu4x"):
         name = algo if preset == "cpu" else f"{algo} @{preset}"

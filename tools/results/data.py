@@ -23,11 +23,12 @@ import numpy as np
 from remidi.errors import ConfigError
 from remidi.experiments import outputs
 from remidi.files import atomic_write
-from remidi.reporting.claims import EXTRA_TABLES, SCALE_PRESETS, SECTIONS
 from remidi.runs.evaluate import DEFAULTS, files_stem
 from remidi.runs.table import label  # how the page names an algorithm's runs
 
-ROOT = Path(__file__).resolve().parents[3]
+from tools.results.claims import EXTRA_TABLES, SCALE_PRESETS, SECTIONS
+
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "docs" / "results" / "data"
 #: committed runs trained again (same experiment, algorithm, preset, seeds and commit) to measure
 #: what the first run's folder did not keep, e.g. its final checkpoint for ``remidi evaluate
@@ -314,7 +315,7 @@ def _out(doc: dict) -> str | None:
 def collect(run: Path, data: Path = DATA) -> list[Path]:
     """Copy a finished run (one algorithm's folder, or a folder of them) into
     ``data/<experiment>/<algo>-s<first seed>/``: its ``config.json``, ``summary.json``,
-    ``evaluate.json`` (and ``evaluate-mode.json``) and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~remidi.reporting.claims.SECTIONS`'
+    ``evaluate.json`` (and ``evaluate-mode.json``) and, gzipped, the rows of ``metrics.csv`` the page draws (:data:`~tools.results.claims.SECTIONS`'
     curves, at most :data:`MAX_POINTS` evenly spaced log points), and deletes the run's
     :func:`inflight` archive. Returns the folders written."""
     run = Path(run)
@@ -342,7 +343,7 @@ def collect(run: Path, data: Path = DATA) -> list[Path]:
         if held not in (None, summary["preset"]):  # the page labels only some presets (SCALE_PRESETS)
             raise ConfigError(f"collect: {target} holds the {held!r} preset's run and {folder} is the "
                               f"{summary['preset']!r} preset's; nothing written (a preset the page compares "
-                              f"with its claims' runs needs its own label: reporting.claims.SCALE_PRESETS)")
+                              f"with its claims' runs needs its own label: tools/results/claims.py SCALE_PRESETS)")
         target.mkdir(parents=True, exist_ok=True)
         for name in ("config.json", "summary.json", *(f"{source}.json" for source in EVALUATIONS)):  # each whole or not
             if (folder / name).is_file():

@@ -1,34 +1,16 @@
-"""The package's layout stays readable: no module over 400 lines, no function with more than 8
-parameters (positional, keyword-only, ``*args`` and ``**kwargs``; ``self`` and ``cls`` not
-counted). Static configuration travels as one object (a frozen dataclass), not as loose
-arguments. The allow-lists below name every exception and why."""
+"""A backstop on the package's layout, well above its sizes: no module over 800 lines, no function
+with more than 12 parameters (positional, keyword-only, ``*args`` and ``**kwargs``; ``self`` and
+``cls`` not counted). Modules are split or merged by their content, not to meet these numbers;
+``python tests/test_layout.py`` prints the report a reader uses for that (the longest modules,
+the functions with the most parameters, the count of functions by parameters)."""
 
 import ast
+import collections
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "remidi"
-MAX_LINES = 400
-MAX_PARAMETERS = 8
-
-PUBLIC = "a documented Python entry point (README, docs/extending.md, examples): its keyword options are the user's call"
-
-#: module (relative to src/remidi) → why it may be longer
-LONG_MODULES = {
-    "engine/adversaries/level_buffer.py": "one job, the level buffer's pure functions (with a buffer of no slots for "
-                                          "DR); split only where the content says, not to meet a count",
-    "engine/run/task_checks.py": "one job, a task's checks before a run (solved from info, the tolerance tracker's "
-                                 "advice); the network's checks may move out with the layout rework",
-    "runs/evaluate.py": "one job, remidi evaluate (with CVaR's shares that hold no level left out); split only where "
-                        "the content says, not to meet a count",
-}
-
-#: "module:qualified.function" → why it may take more parameters
-MANY_PARAMETERS = {
-    "experiments/custom.py:run_ued": PUBLIC,
-    "envs/gymnax.py:gymnax_task": PUBLIC,
-    "engine/trackers/exact.py:tracker_step": "the reference tracker's step of one env (the rollout step's eight "
-                                             "values) and the component's comparison (exact, or the tolerance's)",
-}
+MAX_LINES = 800
+MAX_PARAMETERS = 12
 
 
 def modules():
@@ -53,23 +35,40 @@ def parameter_counts(tree: ast.AST):
     yield from visit(tree, "")
 
 
-def test_no_module_is_over_400_lines():
-    long = {p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines()) for p in modules()}
-    over = {name: n for name, n in long.items() if n > MAX_LINES and name not in LONG_MODULES}
-    assert not over, f"modules over {MAX_LINES} lines (split them by job): {over}"
-    fixed = [name for name in LONG_MODULES if long.get(name, 0) <= MAX_LINES]
-    assert not fixed, f"no longer over {MAX_LINES} lines: remove from LONG_MODULES: {fixed}"
+def module_lines() -> dict[str, int]:
+    return {p.relative_to(PACKAGE).as_posix(): len(p.read_text().splitlines()) for p in modules()}
 
 
-def test_no_function_takes_more_than_8_parameters():
-    counts = {f"{p.relative_to(PACKAGE).as_posix()}:{name}": n
-              for p in modules() for name, n in parameter_counts(ast.parse(p.read_text()))}
-    over = {name: n for name, n in counts.items() if n > MAX_PARAMETERS and name not in MANY_PARAMETERS}
+def function_parameters() -> dict[str, int]:
+    return {f"{p.relative_to(PACKAGE).as_posix()}:{name}": n
+            for p in modules() for name, n in parameter_counts(ast.parse(p.read_text()))}
+
+
+def test_no_module_is_over_the_backstop():
+    over = {name: n for name, n in module_lines().items() if n > MAX_LINES}
+    assert not over, f"modules over {MAX_LINES} lines (split them where their content says): {over}"
+
+
+def test_no_function_takes_more_parameters_than_the_backstop():
+    over = {name: n for name, n in function_parameters().items() if n > MAX_PARAMETERS}
     assert not over, f"functions over {MAX_PARAMETERS} parameters (pass the static setup as one object): {over}"
-    fixed = [name for name in MANY_PARAMETERS if counts.get(name, 0) <= MAX_PARAMETERS]
-    assert not fixed, f"no longer over {MAX_PARAMETERS} parameters: remove from MANY_PARAMETERS: {fixed}"
 
 
 def test_the_counts_see_every_kind_of_parameter():
     tree = ast.parse("class A:\n    def f(self, a, /, b, *c, d, **e):\n        def g(x): pass\n")
     assert dict(parameter_counts(tree)) == {"A.f": 5, "A.f.g": 1}
+
+
+def report(top: int = 12) -> str:
+    lines, params = module_lines(), function_parameters()
+    out = [f"{len(lines)} modules, {sum(lines.values())} lines; the longest:"]
+    out += [f"  {n:5d}  {name}" for name, n in sorted(lines.items(), key=lambda kv: -kv[1])[:top]]
+    out.append("functions by parameters: " + ", ".join(
+        f"{k}: {v}" for k, v in sorted(collections.Counter(params.values()).items())))
+    out.append("the most parameters:")
+    out += [f"  {n:3d}  {name}" for name, n in sorted(params.items(), key=lambda kv: -kv[1])[:top]]
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    print(report())

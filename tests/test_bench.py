@@ -54,7 +54,7 @@ def test_seeds_train_together_and_count_every_seeds_steps(monkeypatch):
     two = BENCHMARKS["lever-plr"].build()
     cfg = _shrink(paper_config())
     assert two.env_steps_per_call == 2 * 20 * cfg.num_envs * cfg.num_steps  # lever-plr: 20 updates per call
-    assert two.args[0].update.shape == (2,)
+    assert two.args[0].updates_done.shape == (2,)
 
 
 def test_ratios_compare_time_per_env_step():

@@ -19,7 +19,7 @@ def test_the_earlier_layout_loads_through_the_rename(tmp_path):
 
     setup = tr.make_setup(TASK, TINY, "accel")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
-    runner = runner.replace(update=jnp.asarray(7, jnp.int32))
+    runner = runner.replace(updates_done=jnp.asarray(7, jnp.int32))
     old_of = {new: old for old, new in RENAMES.items()}
     arrays = {}
     for path, leaf in jax.tree_util.tree_leaves_with_path(runner):
@@ -73,14 +73,14 @@ def test_a_dr_checkpoint_of_the_full_unused_buffer_still_resumes(tmp_path):
     from remidi.errors import ConfigError
 
     setup = tr.make_setup(TASK, TINY, "dr")
-    runner = tr.init_runner(setup, jax.random.PRNGKey(0)).replace(update=jnp.asarray(7, jnp.int32))
+    runner = tr.init_runner(setup, jax.random.PRNGKey(0)).replace(updates_done=jnp.asarray(7, jnp.int32))
     full = empty_buffers(setup, example_observation(TASK)[1])  # what DR's state held before: [1, 16, ...]
     assert full.valid.shape == (1, 16) and runner.adversary.buffers.valid.shape == (1, 0)
     old = runner.replace(adversary=runner.adversary.replace(buffers=full))
     path = tmp_path / "checkpoint.npz"
     save_checkpoint(path, old, {"done": 7})
     loaded, meta = load_checkpoint(path, runner)
-    assert meta == {"done": 7} and int(loaded.update) == 7
+    assert meta == {"done": 7} and int(loaded.updates_done) == 7
     assert jax.tree.structure(loaded) == jax.tree.structure(runner)
     for a, b in zip(jax.tree.leaves(runner), jax.tree.leaves(loaded)):
         assert a.shape == b.shape and a.dtype == b.dtype

@@ -82,7 +82,7 @@ def test_a_diverged_network_never_replaces_the_last_good_checkpoint(tmp_path, mo
 
     def diverging(setup, runner, length):
         runner, metrics = real(setup, runner, length)
-        if int(np.asarray(runner.update).max()) > 20:
+        if int(np.asarray(runner.updates_done).max()) > 20:
             params = jax.tree.map(lambda x: x * jnp.nan, runner.learner.train_state.params)
             runner = runner.replace(learner=runner.learner.replace(
                 train_state=runner.learner.train_state.replace(params=params)))

@@ -52,7 +52,7 @@ class Runner:
     one state per component."""
 
     rng: jax.Array
-    update: jax.Array  # i32[], train steps done
+    updates_done: jax.Array  # i32[], train steps done
     learner: lrn.LearnerState
     adversary: AdversaryState  # or the adversary's own subclass
     tracker: Any = None  # the tracker's state (None: the exact trackers keep none)
@@ -69,7 +69,7 @@ def make_setup(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm) -> Setup:
 def init_runner(setup: Setup, rng) -> Runner:
     rng, k_net, k_level = jax.random.split(rng, 3)
     example_obs, example_level = example_observation(setup.task, k_level)
-    return Runner(rng=rng, update=jnp.zeros((), jnp.int32), learner=lrn.init_learner(setup, k_net, example_obs),
+    return Runner(rng=rng, updates_done=jnp.zeros((), jnp.int32), learner=lrn.init_learner(setup, k_net, example_obs),
                   adversary=setup.algo.adversary.init(setup, example_level, example_obs, rng),
                   tracker=setup.tracker.init(setup, rng))
 
@@ -108,7 +108,7 @@ def train_step(setup: Setup, runner: Runner):
     # ADVANCE ADVERSARY
     runner = runner.replace(adversary=adversary_state, learner=learner)
     runner, advance_metrics = adversary.advance(setup, runner, proposal, outcome)
-    runner = runner.replace(rng=rng, update=runner.update + 1)
+    runner = runner.replace(rng=rng, updates_done=runner.updates_done + 1)
 
     # METRICS
     replayed = jnp.where(proposal.replay, 1.0, 0.0)

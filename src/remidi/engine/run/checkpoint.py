@@ -33,13 +33,13 @@ PREFIX = "leaf:"  # a runner array's name in checkpoint.npz: PREFIX + its tree p
 HISTORY = "checkpoint.history.npz"  # the metrics logged up to the checkpoint, beside it
 
 #: the runner's earlier layout (one field per feature) → this one (one state per component): a
-#: stored leaf path starting with a key here is read as the value's path (``.rng`` and ``.update`` kept)
+#: stored leaf path starting with a key here is read as the value's path (``.rng`` kept)
 RENAMES = {".train_state": ".learner.train_state", ".obs_stats": ".learner.obs_stats",
            ".frozen_params": ".learner.frozen_params", ".buffers": ".adversary.buffers",
            ".active": ".adversary.active", ".count": ".adversary.count", ".edit_next": ".adversary.edit_next",
            ".last_replayed": ".adversary.last_replayed", ".generator": ".adversary.generator",
            ".antagonist": ".adversary.antagonist", ".next_generators": ".adversary.next_generators",
-           ".belief": ".tracker"}
+           ".belief": ".tracker", ".update": ".updates_done"}
 
 
 #: parts of the runner, by tree path, that earlier versions allocated in full for runs that never

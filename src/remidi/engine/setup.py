@@ -37,7 +37,7 @@ class Setup:
     cfg: UEDConfig
     algo: Algorithm
     net: object = field(compare=False)
-    tracker: Tracker | None = field(compare=False, default=None)
+    tracker: Tracker | None = field(compare=False, default=None)  # None: no sequence, no tracker
     buffer: BufferConfig | None = field(compare=False, default=None)  # the level buffers' (buffer_config)
 
 

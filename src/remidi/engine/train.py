@@ -71,7 +71,7 @@ def init_runner(setup: Setup, rng) -> Runner:
     example_obs, example_level = example_observation(setup.task, k_level)
     return Runner(rng=rng, updates_done=jnp.zeros((), jnp.int32), learner=lrn.init_learner(setup, k_net, example_obs),
                   adversary=setup.algo.adversary.init(setup, example_level, example_obs, rng),
-                  tracker=setup.tracker.init(setup, rng))
+                  tracker=setup.tracker.init(setup, rng) if setup.tracker is not None else None)
 
 
 def fresh_levels(setup: Setup, rng) -> Any:
@@ -144,4 +144,5 @@ BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "s
 
 def buffer_tag_fractions(setup: Setup, runner: Runner) -> dict[str, jax.Array]:
     """What the adversary's buffers hold, and what the tracker reports of its state."""
-    return {**setup.algo.adversary.metrics(setup, runner), **setup.tracker.metrics(setup, runner)}
+    tracker = setup.tracker.metrics(setup, runner) if setup.tracker is not None else {}
+    return {**setup.algo.adversary.metrics(setup, runner), **tracker}

@@ -149,7 +149,7 @@ def sequence_frozen(setup, runner, proposal: Proposal):
     frozen levels for this update's rollout; a rehearsal's rollout explains no step (its levels
     are frozen levels: rehearsal trains on every step to keep what they taught)."""
     view = setup.tracker.frozen(setup, runner)
-    if view is None or proposal.rehearse is None:
+    if view is None or proposal is None or proposal.rehearse is None:
         return view
     return view.replace(rehearse=proposal.rehearse)
 

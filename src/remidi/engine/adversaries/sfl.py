@@ -133,7 +133,7 @@ class LearnabilityBuffers(Adversary):
         tracker against the frozen levels), the K most learnable kept (:func:`select_top`).
         Returns it with its rollouts' :func:`~remidi.engine.core.rollout.nonfinite` flags."""
         s = setup.cfg.sfl
-        frozen = setup.tracker.frozen(setup, runner)
+        frozen = self.frozen(setup, runner, None)
 
         def one_batch(key):
             k_levels, k_roll = jax.random.split(key)

@@ -151,4 +151,4 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
 def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
     """What the run's tracker reports of its judgement (:meth:`~remidi.engine.trackers.base.Tracker.audit`:
     a learned tracker against the exact one on one rollout; nothing for the exact trackers)."""
-    return setup.tracker.audit(setup, runner, rng)
+    return setup.tracker.audit(setup, runner, rng) if setup.tracker is not None else {}

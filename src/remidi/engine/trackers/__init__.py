@@ -45,12 +45,15 @@ def model_for(task, hidden: int) -> BeliefModel:
     return BeliefModel(coding_for(obs), num_actions=counts, hidden=hidden)
 
 
-def tracker_for(task, cfg, algo) -> Tracker:
-    """The tracker of a run of ``algo`` on ``task`` under ``cfg`` (``remidi.tracker``): the exact
-    one of ``remidi.tracker``'s mode unless a learned one judges, which it does only for a
-    sequence of at least two adversaries (nothing else freezes one)."""
+def tracker_for(task, cfg, algo) -> Tracker | None:
+    """The tracker of a run of ``algo`` on ``task`` under ``cfg`` (``remidi.tracker``): None for
+    an algorithm that is no sequence of adversaries (nothing is ever frozen: no tracker runs);
+    the exact one of ``remidi.tracker``'s mode unless a learned one judges, which it does only
+    for a sequence of at least two adversaries."""
+    if not algo.buffer_sequence:
+        return None
     r = cfg.remidi
-    sequence = algo.buffer_sequence and r.num_buffers >= 2
+    sequence = r.num_buffers >= 2
     if sequence and r.tracker == "tolerance":
         return make_tolerance_tracker(exact_budget(task, r, "prefix"), r.tracker_tolerance, r.tracker_rtol)
     if not sequence or r.tracker in MODES:

@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from remidi.cli import main
+from remidi.experiments import catalog
 
+CATALOG = catalog()  # the built-in experiments, with their algorithms and presets
 FAST = ["--set", "iterations=60", "--set", "iters_per_adversary=20", "--set", "log_every=10"]
 
 
@@ -52,9 +54,11 @@ def test_several_algorithms_get_subfolders_and_comparison_plots(tmp_path, capsys
 
 
 @pytest.mark.parametrize("argv, needle", [
-    (["run", "nope"], "experiment: unknown value 'nope'; allowed: tabular-distinct, tabular-shared"),
-    (["run", "tabular-shared", "--algo", "plr"], "--algo: unknown value 'plr'; allowed: mmr, remidi, all"),
-    (["run", "tabular-shared", "--preset", "huge"], "--preset: unknown value 'huge'; allowed: paper, smoke"),
+    (["run", "nope"], f"experiment: unknown value 'nope'; allowed: {', '.join(CATALOG)}"),
+    (["run", "tabular-shared", "--algo", "plr"],
+     f"--algo: unknown value 'plr'; allowed: {', '.join(CATALOG['tabular-shared']['algorithms'])}, all"),
+    (["run", "tabular-shared", "--preset", "huge"],
+     f"--preset: unknown value 'huge'; allowed: {', '.join(CATALOG['tabular-shared']['presets'])}"),
     (["run", "tabular-shared", "--set", "bogus=1"], "--set: unknown key 'bogus'; allowed: iterations"),
     (["run", "tabular-shared", "--set", "iterations=-5"], "iterations: must be an integer ≥ 1"),
     (["run", "tabular-shared", "--set", "policy_lr=abc"], "policy_lr: expected a number"),

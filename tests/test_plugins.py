@@ -96,7 +96,7 @@ def test_validation_checks_what_a_registered_score_needs():
     (lambda: remidi.register_algorithm("x", LevelBuffers), "adversary must be an instance, e.g. LevelBuffers()"),
     (lambda: remidi.register_algorithm("x", "plr"), "algorithm x: adversary must be a remidi.engine.adversaries.base"),
     (lambda: remidi.register_algorithm("x", LevelBuffers(), score="nope"),
-     "register_algorithm: x: score must be a registered score or None, got 'nope'; allowed: perfect_regret"),
+     f"register_algorithm: x: score must be a registered score or None, got 'nope'; allowed: {', '.join(sc.SCORES)}"),
 ])
 def test_a_taken_or_malformed_entry_is_one_line_and_registers_nothing(call, needle):
     before = dict(sc.SCORES), tuple(remidi.engine.algorithms.ALGORITHMS)

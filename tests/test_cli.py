@@ -663,6 +663,7 @@ def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_
 
 
 def test_run_help_names_each_experiments_default_algorithms_from_the_registry(capsys, monkeypatch):
+    from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
     from remidi.experiments import all_experiments
 
     monkeypatch.setenv("COLUMNS", "2000")  # one line per option: no word broken at a hyphen
@@ -676,8 +677,10 @@ def test_run_help_names_each_experiments_default_algorithms_from_the_registry(ca
         assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
         extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
         assert not extra or f"(all adds {', '.join(extra)})" in group
-    assert "module:function: dr, plr, minimax-return, remidi (all adds accel, remidi-accel, paired, remidi-paired, " \
-           "sfl, remidi-sfl that the task can run)" in line  # a user's task: its mutator, builder, solve criterion
+    # a user's task: the paper's algorithms, and all adds every other registered one its mutator, builder and
+    # solve criterion allow
+    others = ", ".join(a for a in ALGORITHMS if a not in PAPER_ALGORITHMS)
+    assert f"module:function: {', '.join(PAPER_ALGORITHMS)} (all adds {others} that the task can run)" in line
 
 
 def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, finished_tabular):

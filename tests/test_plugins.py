@@ -121,7 +121,10 @@ def test_the_command_line_imports_plugins_first(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv(ENV, "my_plugin_mod")
     assert main(["list", "lever"]) == 0
     out = capsys.readouterr().out
-    assert "remidi-sfl, plr-fresh (default" in out and "learnability, zero (--set score=NAME)" in out
+    # the plugin's names follow the built-in ones (the lever task can use every score)
+    algorithms = ", ".join(remidi.engine.algorithms.BUILTIN_ALGORITHMS + ("plr-fresh",))
+    assert f"  algorithms: {algorithms} (default" in out
+    assert f"  scores:     {', '.join(sc.BUILTIN_SCORES + ('zero',))} (--set score=NAME)" in out
     # accepted by --algo and score=, refused with the registered names listed
     assert main(["run", "lever", "--algo", "plr-fresh", "--set", "score=nope", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err

@@ -203,7 +203,7 @@ def test_unknown_morphology_or_backend_is_a_config_error():
 
 
 @pytest.mark.parametrize("setting, needle", [
-    ("brax.backend=foo", "brax.backend: unknown value 'foo'; allowed: generalized, positional, spring, mjx"),
+    ("brax.backend=foo", f"brax.backend: unknown value 'foo'; allowed: {', '.join(BACKENDS)}"),
     ("brax.type_b_prob=2", "brax.type_b_prob: must be in [0, 1], got 2.0"),
     ("brax.theta_low=3", "brax.theta_low: must be ≤ brax.theta_high (1.5), got 3.0"),
     ("reward_scale=0", "reward_scale: must be > 0"),

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from remidi.engine.adversaries import level_buffer as B
+from remidi.engine.config import PRIORITIZATIONS
 from remidi.errors import ConfigError
 
 
@@ -419,7 +420,7 @@ def test_select_and_replace_with_traced_index():
     [
         ("capacity", 0, r"^capacity: .*≥ 1"),
         ("capacity", 2.0, r"^capacity: "),
-        ("prioritization", "softmax", r"^prioritization: .*allowed: rank, topk"),
+        ("prioritization", "softmax", rf"^prioritization: .*allowed: {', '.join(PRIORITIZATIONS)}$"),
         ("temperature", 0.0, r"^temperature: .*> 0"),
         ("temperature", -1.0, r"^temperature: "),
         ("topk_k", 0, r"^topk_k: .*≥ 1"),

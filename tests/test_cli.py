@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from remidi.cli import main
+from remidi.experiments import catalog
 
+CATALOG = catalog()  # the built-in experiments, with their algorithms and presets
 FAST = ["--set", "iterations=60", "--set", "iters_per_adversary=20", "--set", "log_every=10"]
 
 
@@ -52,9 +54,11 @@ def test_several_algorithms_get_subfolders_and_comparison_plots(tmp_path, capsys
 
 
 @pytest.mark.parametrize("argv, needle", [
-    (["run", "nope"], "experiment: unknown value 'nope'; allowed: tabular-distinct, tabular-shared"),
-    (["run", "tabular-shared", "--algo", "plr"], "--algo: unknown value 'plr'; allowed: mmr, remidi, all"),
-    (["run", "tabular-shared", "--preset", "huge"], "--preset: unknown value 'huge'; allowed: paper, smoke"),
+    (["run", "nope"], f"experiment: unknown value 'nope'; allowed: {', '.join(CATALOG)}"),
+    (["run", "tabular-shared", "--algo", "plr"],
+     f"--algo: unknown value 'plr'; allowed: {', '.join(CATALOG['tabular-shared']['algorithms'])}, all"),
+    (["run", "tabular-shared", "--preset", "huge"],
+     f"--preset: unknown value 'huge'; allowed: {', '.join(CATALOG['tabular-shared']['presets'])}"),
     (["run", "tabular-shared", "--set", "bogus=1"], "--set: unknown key 'bogus'; allowed: iterations"),
     (["run", "tabular-shared", "--set", "iterations=-5"], "iterations: must be an integer ≥ 1"),
     (["run", "tabular-shared", "--set", "policy_lr=abc"], "policy_lr: expected a number"),
@@ -659,6 +663,7 @@ def test_a_run_too_large_for_memory_is_one_line_and_keeps_nothing_of_itself(tmp_
 
 
 def test_run_help_names_each_experiments_default_algorithms_from_the_registry(capsys, monkeypatch):
+    from remidi.engine.algorithms import ALGORITHMS, PAPER_ALGORITHMS
     from remidi.experiments import all_experiments
 
     monkeypatch.setenv("COLUMNS", "2000")  # one line per option: no word broken at a hyphen
@@ -672,8 +677,10 @@ def test_run_help_names_each_experiments_default_algorithms_from_the_registry(ca
         assert group.split(": ", 1)[1].startswith(default), (exp.name, group)
         extra = [a for a in exp.algorithms if a not in (exp.default_algorithms or exp.algorithms)]
         assert not extra or f"(all adds {', '.join(extra)})" in group
-    assert "module:function: dr, plr, minimax-return, remidi (all adds accel, remidi-accel, paired, remidi-paired, " \
-           "sfl, remidi-sfl that the task can run)" in line  # a user's task: its mutator, builder, solve criterion
+    # a user's task: the paper's algorithms, and all adds every other registered one its mutator, builder and
+    # solve criterion allow
+    others = ", ".join(a for a in ALGORITHMS if a not in PAPER_ALGORITHMS)
+    assert f"module:function: {', '.join(PAPER_ALGORITHMS)} (all adds {others} that the task can run)" in line
 
 
 def test_resuming_a_finished_run_says_so_and_trains_nothing(tmp_path, capsys, finished_tabular):

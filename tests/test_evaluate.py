@@ -13,6 +13,7 @@ from test_cli import LEVER_TINY
 from test_maze_env import brute_force_steps
 
 from remidi.cli import main
+from remidi.engine.core.distributions import ACTIONS
 from remidi.envs import maze as M
 from remidi.envs.perfect_mazes import perfect_maze_walls, perfect_mazes
 from remidi.runs.evaluate import cvar
@@ -139,7 +140,7 @@ def test_evaluate_with_the_most_likely_action_writes_its_own_files(lever_run, tm
     (["--perfect-sizes", "20"], "--perfect-sizes: each must be an odd integer"),
     (["--perfect-sizes", "x"], "--perfect-sizes: must be comma-separated odd integers"),
     (["--seed", "-1"], "--seed: must be an integer in"),
-    (["--action", "mean"], "--action: unknown value 'mean'; allowed: sample, mode"),
+    (["--action", "mean"], f"--action: unknown value 'mean'; allowed: {', '.join(ACTIONS)}"),
 ])
 def test_bad_evaluate_arguments_are_one_line(lever_run, capsys, argv, needle):
     assert main(["evaluate", str(lever_run), *argv]) == 2

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from remidi.cli import main
+from remidi.engine.adversaries.scores import SCORES
 from remidi.engine.run.evaluation import first_episode_return
 from remidi.engine.core.rollout import Policy, Stepping, rollout
 from remidi.engine.run.validation import validate_ued_config
@@ -136,8 +137,10 @@ def test_perfect_regret_is_refused_in_one_line_and_the_other_scores_are_valid():
         validate_ued_config(R(cfg, score="perfect_regret"), "plr", task)
     message = str(err.value)
     assert "\n" not in message and message.startswith("score: perfect_regret needs the environment's optimal return")
-    assert message.endswith("allowed: pvl, maxmc, neg_return, learnability")
-    for score in ("pvl", "maxmc", "neg_return", "learnability"):
+    # CartPole has a solve criterion but no optimum: every registered score that needs none is allowed
+    allowed = [name for name, score in SCORES.items() if not score.needs_optimum]
+    assert "perfect_regret" not in allowed and message.endswith(f"allowed: {', '.join(allowed)}")
+    for score in allowed:
         validate_ued_config(R(cfg, score=score), "plr", task)
     no_solve = gymnax_task("CartPole-v1", {"gravity": (5.0, 15.0)})
     with pytest.raises(ConfigError, match="score: learnability needs a solve criterion"):
@@ -235,8 +238,9 @@ def test_all_algorithms_of_a_gymnax_experiment_are_those_its_task_supports():
     assert "accel" in every and "paired" not in every and "remidi-paired" not in every
     assert "paired" in parse_algos(get_experiment("lever"), "all")
     # naming one says why it is left out, not that the name is unknown
+    allowed = ", ".join(every)
     with pytest.raises(ConfigError, match=r"^--algo: remidi-paired cannot run on cartpole: cartpole's task has no "
-                                          r"level-building MDP \(UEDTask.level_builder\).*; allowed: dr, plr"):
+                                          rf"level-building MDP \(UEDTask.level_builder\).*; allowed: {allowed}"):
         parse_algos(get_experiment("cartpole"), "dr,remidi-paired")
     with pytest.raises(ConfigError, match="^--algo: unknown value 'pared'"):
         parse_algos(get_experiment("cartpole"), "pared")

@@ -99,7 +99,7 @@ def test_missing_package_or_login_is_one_line_before_writing(tmp_path, capsys, m
     monkeypatch.setenv("HOME", str(tmp_path))  # no ~/.netrc
     assert main(["run", "lever", "--log", "wandb", "--out", str(out)]) == 2
     assert "WANDB_MODE=offline" in capsys.readouterr().err and not out.exists()
-    for text, needle in (("mlflow", "--log: unknown value 'mlflow'; allowed: wandb, tensorboard"),
+    for text, needle in (("mlflow", f"--log: unknown value 'mlflow'; allowed: {', '.join(loggers.BACKENDS)}"),
                          ("wandb,", "has an empty name")):
         assert main(["run", "lever", "--log", text, "--out", str(out)]) == 2
         assert needle in capsys.readouterr().err and not out.exists()

@@ -14,6 +14,7 @@ import pytest
 
 import remidi
 from remidi.engine.core.networks import NETWORKS, make_network
+from remidi.engine.core.networks import entity
 from remidi.engine.run import task_checks
 from remidi.errors import ConfigError
 
@@ -170,11 +171,22 @@ def refusal(monkeypatch, network, obs, **options):
     return message
 
 
+def allowed_networks(message: str) -> list[str]:
+    """The networks a refusal offers instead (after its last "; allowed: "): registered ones, in
+    the registry's order."""
+    allowed = message.rsplit("; allowed: ", 1)[1].split(", ")
+    assert allowed == [name for name in NETWORKS if name in allowed], allowed
+    return allowed
+
+
 def test_each_refusal_is_one_line_naming_what_the_network_reads(monkeypatch):
     flat = jnp.zeros(65)
     group = {"features": jnp.zeros((3, 4)), "mask": jnp.ones(3, bool)}
-    assert refusal(monkeypatch, "entity", flat).endswith(
-        "this task's observation is f32[65] (not a dict with a key entities); allowed: mlp, mlp_lstm")
+    message = refusal(monkeypatch, "entity", flat)
+    assert "this task's observation is f32[65] (not a dict with a key entities); allowed: " in message
+    # a flat vector: the networks with a fully-connected trunk read it, none that needs fields
+    assert {"mlp", "mlp_lstm"} <= set(allowed_networks(message))
+    assert not {"entity", "cnn", "maze_lstm"} & set(allowed_networks(message))
     message = refusal(monkeypatch, "entity", {"entities": {"a": {"features": group["features"], "mask": jnp.ones(3)}}})
     assert "entities.a.mask f32[3]" in message and "(its group a's mask is f32[3], not bool[3])" in message
     assert "(it has keys other than entities and globals: global)" in refusal(
@@ -182,16 +194,19 @@ def test_each_refusal_is_one_line_naming_what_the_network_reads(monkeypatch):
     assert "(its group a is not a dict with features and mask)" in refusal(
         monkeypatch, "entity", {"entities": {"a": {"features": jnp.zeros((3, 4))}}})
     message = refusal(monkeypatch, "cnn", flat)
-    assert "is f32[65] (its image is f32[65], not [H, W, C]); allowed: mlp, mlp_lstm" in message
+    assert "is f32[65] (its image is f32[65], not [H, W, C]); allowed: " in message
+    assert {"mlp", "mlp_lstm"} <= set(allowed_networks(message)) and "cnn" not in allowed_networks(message)
     message = refusal(monkeypatch, "maze_lstm", {"entities": {"a": group}})
-    assert message.endswith("(not a dict or object with a field image); allowed: mlp, mlp_lstm, entity")
+    assert "(not a dict or object with a field image); allowed: " in message
+    assert {"mlp", "mlp_lstm", "entity"} <= set(allowed_networks(message))  # MLPs read the flattened entities
+    assert not {"cnn", "maze_lstm"} & set(allowed_networks(message))
     assert "(its image is f32[2, 2, 3], not [H, W, C] with H, W ≥ 3)" in refusal(
         monkeypatch, "maze_lstm", {"image": jnp.zeros((2, 2, 3)), "agent_dir": jnp.zeros((), jnp.int32)})
 
 
 @pytest.mark.parametrize("options, needle", [
-    ({"encoder": "gnn"}, "network.encoder: unknown value 'gnn'; allowed: attention, pool"),
-    ({"pool": "sum"}, "network.pool: unknown value 'sum'; allowed: mean, max"),
+    ({"encoder": "gnn"}, f"network.encoder: unknown value 'gnn'; allowed: {', '.join(entity.ENCODERS)}"),
+    ({"pool": "sum"}, f"network.pool: unknown value 'sum'; allowed: {', '.join(entity.POOLS)}"),
     ({"qkv_features": 6}, "network.qkv_features: must be a multiple of num_heads (8), got 6"),
 ])
 def test_bad_entity_options_are_one_line(options, needle):

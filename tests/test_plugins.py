@@ -97,7 +97,7 @@ def test_validation_checks_what_a_registered_score_needs():
     (lambda: remidi.register_algorithm("x", LevelBuffers), "adversary must be an instance, e.g. LevelBuffers()"),
     (lambda: remidi.register_algorithm("x", "plr"), "algorithm x: adversary must be a remidi.engine.adversaries.base"),
     (lambda: remidi.register_algorithm("x", LevelBuffers(), score="nope"),
-     "register_algorithm: x: score must be a registered score or None, got 'nope'; allowed: perfect_regret"),
+     f"register_algorithm: x: score must be a registered score or None, got 'nope'; allowed: {', '.join(sc.SCORES)}"),
 ])
 def test_a_taken_or_malformed_entry_is_one_line_and_registers_nothing(call, needle):
     before = dict(sc.SCORES), tuple(remidi.engine.algorithms.ALGORITHMS)
@@ -122,7 +122,10 @@ def test_the_command_line_imports_plugins_first(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv(ENV, "my_plugin_mod")
     assert main(["list", "lever"]) == 0
     out = capsys.readouterr().out
-    assert "remidi-sfl, plr-fresh (default" in out and "learnability, zero (--set score=NAME)" in out
+    # the plugin's names follow the built-in ones (the lever task can use every score)
+    algorithms = ", ".join(remidi.engine.algorithms.BUILTIN_ALGORITHMS + ("plr-fresh",))
+    assert f"  algorithms: {algorithms} (default" in out
+    assert f"  scores:     {', '.join(sc.BUILTIN_SCORES + ('zero',))} (--set score=NAME)" in out
     # accepted by --algo and score=, refused with the registered names listed
     assert main(["run", "lever", "--algo", "plr-fresh", "--set", "score=nope", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err

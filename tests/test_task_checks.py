@@ -183,7 +183,9 @@ def test_every_score_that_reads_finished_episodes_warns_of_a_short_rollout(corri
     assert "score -inf and are never inserted" in warning and warning.endswith(", or --set score=pvl"), warning
     assert run_warnings(dataclasses.replace(short, score="pvl"), "plr", task) == []
     assert run_warnings(dataclasses.replace(TINY, num_steps=14), "plr", task) == []
-    assert [s.name for s in SCORES.values() if not s.needs_finished_episodes] == ["pvl", "maxmc"]
+    for name, score in SCORES.items():  # the registry's needs_finished_episodes says which scores are warned of
+        assert bool(run_warnings(dataclasses.replace(short, score=name), "plr", task)) == score.needs_finished_episodes
+    assert not SCORES["maxmc"].needs_finished_episodes
 
 
 def test_the_short_rollout_warning_is_said_once_per_run_for_all_its_algorithms(corridor, tmp_path, capsys, monkeypatch):
@@ -240,6 +242,8 @@ def test_list_offers_only_the_scores_the_task_can_use(tmp_path, capsys, monkeypa
     """remidi list names the level scores whose needs the task meets: an import-path task without
     an optimal return gets no perfect_regret, one without a solve criterion no learnability; so do
     gymnax's cartpole (no optimum) and Brax (no solve criterion), without building their tasks."""
+    from remidi.engine.adversaries.scores import SCORES
+
     extra = ("\n\ndef make_plain():\n    import dataclasses\n"
              "    return dataclasses.replace(make_task(), optimal_return=None, optimal_discounted_return=None)\n"
              "\n\ndef make_unsolved():\n    import dataclasses\n"
@@ -251,11 +255,16 @@ def test_list_offers_only_the_scores_the_task_can_use(tmp_path, capsys, monkeypa
         (line,) = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  scores:")]
         return line.split(":", 1)[1].split(" (")[0].strip().split(", ")
 
-    assert scores("scoreless_task_i30:make_task") == ["perfect_regret", "pvl", "maxmc", "neg_return", "learnability"]
-    assert scores("scoreless_task_i30:make_plain") == ["pvl", "maxmc", "neg_return", "learnability"]
-    assert scores("scoreless_task_i30:make_unsolved") == ["perfect_regret", "pvl", "maxmc", "neg_return"]
-    assert scores("cartpole") == ["pvl", "maxmc", "neg_return", "learnability"]
-    assert scores("brax-hopper") == ["perfect_regret", "pvl", "maxmc", "neg_return"]
+    def fitting(optimum: bool, solved: bool) -> list[str]:  # the registry's scores whose needs a task meets
+        return [name for name, s in SCORES.items()
+                if (optimum or not s.needs_optimum) and (solved or not s.needs_solved)]
+
+    assert "perfect_regret" not in fitting(False, True) and "learnability" not in fitting(True, False)
+    assert scores("scoreless_task_i30:make_task") == fitting(True, True) == list(SCORES)
+    assert scores("scoreless_task_i30:make_plain") == fitting(False, True)
+    assert scores("scoreless_task_i30:make_unsolved") == fitting(True, False)
+    assert scores("cartpole") == fitting(False, True)
+    assert scores("brax-hopper") == fitting(True, False)
 
 
 @pytest.mark.parametrize("name", ["lever", "lever-noisy", "tmaze", "blindfold-noisy", "cartpole", "acrobot", "pendulum",
@@ -388,15 +397,20 @@ def test_all_algorithms_of_a_users_task_are_those_it_can_run(corridor):
     from remidi.experiments.base import parse_algos
     from remidi.experiments.custom import task_experiment
 
+    from remidi.engine.adversaries.paired import LevelGenerator
+    from remidi.engine.algorithms import ALGORITHMS
+
     task = corridor.make_task()
     exp = task_experiment("corridor", lambda: task)
-    assert parse_algos(exp, "all") == ["dr", "plr", "minimax-return", "remidi", "sfl", "remidi-sfl"]
+    # the registry's algorithms that neither edit levels nor learn a level generator
+    runnable = [name for name, a in ALGORITHMS.items() if not (a.edits or isinstance(a.adversary, LevelGenerator))]
+    assert "plr" in runnable and "accel" not in runnable and "paired" not in runnable
+    assert parse_algos(exp, "all") == runnable
     with pytest.raises(ConfigError, match=r"^--algo: accel cannot run on corridor: accel edits levels, but this task "
-                                          r"has no level mutator .*; allowed: dr, plr, minimax-return, remidi, sfl, "
-                                          r"remidi-sfl, all$"):
+                                          rf"has no level mutator .*; allowed: {', '.join(runnable)}, all$"):
         parse_algos(exp, "accel")
     for algo in ("accel", "paired"):
-        with pytest.raises(ConfigError, match=r"; allowed: dr, plr, minimax-return, remidi, sfl, remidi-sfl$"):
+        with pytest.raises(ConfigError, match=rf"; allowed: {', '.join(runnable)}$"):
             validate_ued_config(TINY, algo, task)
 
 

@@ -8,9 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from remidi.engine.adversaries.scores import SCORES
 from remidi.engine.run import driver
 from remidi.engine.run.checkpoint import load_checkpoint, save_checkpoint
 from remidi.engine.run.validation import validate_ued_config
+from remidi.engine.trackers import TRACKERS
 from remidi.envs.interface import UEDTask
 from remidi.envs.lever import lever_task
 from remidi.errors import ConfigError
@@ -139,14 +141,12 @@ def test_remidi_second_buffer_never_holds_levels_overlapping_the_first():
 
 @pytest.mark.parametrize("change, needle", [
     (dict(num_updates=0), "num_updates: must be an integer ≥ 1"),
-    (dict(score="regret"), "score: unknown value 'regret'; allowed: perfect_regret, pvl, maxmc, neg_return, learnability"),
+    (dict(score="regret"), f"score: unknown value 'regret'; allowed: {', '.join(SCORES)}"),
     (dict(network="transformer"), "transformer"),
     (dict(buffer=R(BASE.buffer, capacity=-3)), "buffer.capacity"),
     (dict(buffer=R(BASE.buffer, replay_prob=1.5)), "buffer.replay_prob"),
     (dict(ppo=R(BASE.ppo, minibatches=5)), "ppo.minibatches"),
     (dict(remidi=R(BASE.remidi, num_buffers=5)), "remidi.num_buffers: must be small enough"),
-    (dict(remidi=R(BASE.remidi, tracker="loose")), "remidi.tracker: unknown value 'loose'; allowed: prefix (the exact "
-                                                   "tracker, the default), per_step"),
     # the belief model's keys are checked under the exact tracker too (a value there is a mistake either way)
     (dict(remidi=R(BASE.remidi, belief_false_rate=1.5)), "remidi.belief_false_rate: must be a number in [0, 1), got 1.5"),
 ])
@@ -154,6 +154,17 @@ def test_invalid_configs_name_the_key(change, needle):
     with pytest.raises(ConfigError) as err:
         validate_ued_config(R(BASE, **change), "remidi", TASK)
     assert needle in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_unknown_tracker_names_every_tracker():
+    """The refusal names each tracker with what it is: every name of the registry, in order."""
+    with pytest.raises(ConfigError) as err:
+        validate_ued_config(R(BASE, remidi=R(BASE.remidi, tracker="loose")), "remidi", TASK)
+    message = str(err.value)
+    assert message.startswith("remidi.tracker: unknown value 'loose'; allowed: prefix (the exact tracker, the default)")
+    allowed = message.split("; allowed: ", 1)[1]
+    where = [allowed.find(f"{name} (") for name in TRACKERS]  # each name, then what it is
+    assert -1 not in where and where == sorted(where) and "\n" not in message
 
 
 def test_unknown_algorithm_and_missing_optimal_return():
@@ -168,19 +179,17 @@ def test_unknown_algorithm_and_missing_optimal_return():
 def test_a_scores_declared_needs_are_what_validation_checks():
     """Each score declares what it needs (engine/adversaries/scores.py's SCORES); validation refuses a task
     without it and lists the scores that fit the task."""
-    from remidi.engine.adversaries.scores import SCORES
-
-    needs = {name: (s.needs_optimum, s.needs_solved, s.needs_finished_episodes) for name, s in SCORES.items()}
-    assert needs == {"perfect_regret": (True, False, True), "pvl": (False, False, False),
-                     "maxmc": (False, False, False), "neg_return": (False, False, True),
-                     "learnability": (False, True, True)}
+    assert SCORES["perfect_regret"].needs_optimum and SCORES["learnability"].needs_solved
     bare = dataclasses.replace(TASK, optimal_return=None, solved=None)
-    with pytest.raises(ConfigError, match=r"^score: learnability needs a solve criterion.*; allowed: pvl, maxmc, "
-                                          r"neg_return$"):
-        validate_ued_config(dataclasses.replace(BASE, score="learnability"), "plr", bare)
-    with pytest.raises(ConfigError, match=r"^score: perfect_regret needs the environment's optimal return.*; "
-                                          r"allowed: pvl, maxmc, neg_return$"):
-        validate_ued_config(BASE, "remidi", bare)
+    allowed = ", ".join(name for name, s in SCORES.items() if not (s.needs_optimum or s.needs_solved))
+    for name, score in SCORES.items():
+        cfg = dataclasses.replace(BASE, score=name)
+        if not (score.needs_optimum or score.needs_solved):
+            validate_ued_config(cfg, "plr", bare)
+            continue
+        what = "the environment's optimal return" if score.needs_optimum else "a solve criterion"
+        with pytest.raises(ConfigError, match=rf"^score: {name} needs {what}.*; allowed: {allowed}$"):
+            validate_ued_config(cfg, "plr", bare)
 
 
 def test_discounted_regret_needs_the_tasks_discounted_optimum():
@@ -346,8 +355,12 @@ def test_paired_needs_a_level_builder_and_resumes_exactly(tmp_path):
     """PAIRED's generator and antagonist live in the Runner: a run interrupted and resumed ends
     where an uninterrupted one does; a task without a level-building MDP is refused in one line."""
     no_builder = dataclasses.replace(TASK, level_builder=None)
+    from remidi.engine.adversaries.paired import LevelGenerator
+    from remidi.engine.algorithms import ALGORITHMS
+
+    allowed = ", ".join(name for name, a in ALGORITHMS.items() if not isinstance(a.adversary, LevelGenerator))
     with pytest.raises(ConfigError, match=r"^--algo: paired learns a level generator, but this task has no "
-                                          r"level-building MDP \(UEDTask.level_builder\); allowed: dr, plr"):
+                                          rf"level-building MDP \(UEDTask.level_builder\); allowed: {allowed}$"):
         validate_ued_config(TINY, "paired", no_builder)
     with pytest.raises(ConfigError, match="^paired.estimator: perfect needs the task's optimal return"):
         validate_ued_config(R(TINY, score="neg_return", paired=R(TINY.paired, estimator="perfect")), "paired",

@@ -239,8 +239,7 @@ class UEDConfig:
     num_steps: int = field(default=16, metadata={"help": "environment steps per env per rollout"})
     # one of scores.SCORES; minimax-return always uses neg_return (its Algorithm's score)
     score: str = field(default="perfect_regret", metadata={
-        "help": "level score of the PLR family: perfect_regret, pvl, maxmc, neg_return, learnability (SFL: "
-                "p(1 − p), p the level's solve rate in the rollout)"})
+        "help": "level score of the PLR family: a registered score (scores above: those this task can use)"})
     # perfect_regret against the paper's discounted utility U = E[Σ_t γ^t r_t] (γ = ppo.gamma) on
     # both sides; False: undiscounted returns on both sides
     discounted_regret: bool = field(default=True, metadata={

@@ -62,17 +62,18 @@ from flax import struct
 from remidi.errors import ConfigError, check_name
 
 
-def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: float = 1.0):
-    """Per env, over the episodes that ended: the sum and the max of each episode's total of ``x``
-    (its per-step mean with ``time_average``; with ``gamma`` < 1 the discounted total
-    Σ_k γ^k x_k, k counted from the episode's first step), their count, and the same for the
-    unfinished tail.
+def episode_returns(reward: jax.Array, done: jax.Array, gamma: float = 1.0, *, time_average: bool = False):
+    """Mean and max return of the episodes that ended, per env (discounted, Σ_k γ^k r_k with k
+    counted from each episode's first step, for ``gamma`` < 1; static). With ``time_average``
+    (static) each episode's per-step mean of ``reward`` takes the place of its return (any
+    per-step quantity: :func:`episode_mean`).
 
-    ``x`` f32[T, N], ``done`` bool[T, N] (the episode ended at step t) →
-    ``(sum f32[N], max f32[N] (-inf if none), count i32[N], tail f32[N] (0 if no step))``.
+    ``reward`` f32[T, N], ``done`` bool[T, N] (the episode ended at step t) →
+    ``(mean f32[N], max f32[N], count i32[N])``; with no finished episode, mean = max = the
+    partial return (its per-step mean with ``time_average``; 0 for no step) and count = 0.
     """
 
-    def step(carry, inp):
+    def step(carry, inp):  # running: the current episode's total so far, steps: its length
         running, steps, total, best, count = carry
         xt, d = inp
         weight = 1.0 if gamma == 1.0 else jnp.power(jnp.float32(gamma), steps.astype(jnp.float32))
@@ -83,22 +84,11 @@ def _episode_stats(x: jax.Array, done: jax.Array, *, time_average: bool, gamma: 
         count = count + d
         return (jnp.where(d, 0.0, running), jnp.where(d, 0, steps), total, best, count), None
 
-    n = x.shape[1]
+    n = reward.shape[1]
     zeros, izeros = jnp.zeros(n), jnp.zeros(n, jnp.int32)
     init = (zeros, izeros, zeros, jnp.full(n, -jnp.inf), izeros)
-    (running, steps, total, best, count), _ = jax.lax.scan(step, init, (x, done))
-    tail = running / jnp.maximum(steps, 1) if time_average else running
-    return total, best, count, tail
-
-
-def episode_returns(reward: jax.Array, done: jax.Array, gamma: float = 1.0):
-    """Mean and max return of the episodes that ended, per env (discounted, Σ_k γ^k r_k with k
-    counted from each episode's first step, for ``gamma`` < 1; static).
-
-    ``reward`` f32[T, N], ``done`` bool[T, N] → ``(mean f32[N], max f32[N], count i32[N])``;
-    with no finished episode, mean = max = the partial return and count = 0.
-    """
-    total, best, count, partial = _episode_stats(reward, done, time_average=False, gamma=gamma)
+    (running, steps, total, best, count), _ = jax.lax.scan(step, init, (reward, done))
+    partial = running / jnp.maximum(steps, 1) if time_average else running
     mean = jnp.where(count > 0, total / jnp.maximum(count, 1), partial)
     best = jnp.where(count > 0, best, partial)
     return mean, best, count
@@ -107,8 +97,8 @@ def episode_returns(reward: jax.Array, done: jax.Array, gamma: float = 1.0):
 def episode_mean(x: jax.Array, done: jax.Array, incomplete_value: float | jax.Array = -jnp.inf) -> jax.Array:
     """f32[N]: the mean over finished episodes of each episode's per-step mean of ``x`` f32[T, N];
     ``incomplete_value`` (a number, or f32[N]) for an env with no finished episode (module docstring)."""
-    total, _, count, _ = _episode_stats(x, done, time_average=True)
-    return jnp.where(count > 0, total / jnp.maximum(count, 1), incomplete_value)
+    mean, _, count = episode_returns(x, done, time_average=True)
+    return jnp.where(count > 0, mean, incomplete_value)
 
 
 def info_key(solved) -> str | None:

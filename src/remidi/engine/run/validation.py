@@ -32,12 +32,11 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
     of them: a run's algorithms, each warning said once for all of them) that would train
     degenerately without saying so:
 
-    * a score that needs finished episodes (``Score.needs_finished_episodes`` in the registry
-      ``engine/adversaries/scores.py``: every built-in one) on rollouts shorter than the task's episode limit: a
-      level whose episode does not end inside the rollout scores −inf (``pvl``, ``maxmc``,
-      ``learnability``: with every episode too long the buffer holds one level and replays only it)
-      or by its partial return (``perfect_regret``, ``neg_return``: ``Score.unfinished`` says which),
-      with the ``--set`` that scores every level by a finished episode; ``num_steps_from`` says who
+    * a score that reads finished episodes (``Score.needs_finished_episodes`` in the registry
+      ``engine/adversaries/scores.py``) on rollouts shorter than the task's episode limit: a level
+      whose episode does not end inside the rollout is scored as its ``Score.unfinished`` says (−inf:
+      with every episode too long the buffer holds one level and replays only it; or its partial
+      return), with the ``--set`` that scores every level by a finished episode; ``num_steps_from`` says who
       chose ``num_steps`` where it was not the user (``"the smoke preset"``);
     * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
       give different first observations): the tracker assumes an episode is a function of the

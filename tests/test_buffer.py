@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from remidi.engine.adversaries import level_buffer as B
-from remidi.engine.config import PRIORITIZATIONS
+from remidi.engine.adversaries.level_buffer import REPLAY_RULES
 from remidi.errors import ConfigError
 
 
@@ -420,7 +420,7 @@ def test_select_and_replace_with_traced_index():
     [
         ("capacity", 0, r"^capacity: .*≥ 1"),
         ("capacity", 2.0, r"^capacity: "),
-        ("prioritization", "softmax", rf"^prioritization: .*allowed: {', '.join(PRIORITIZATIONS)}$"),
+        ("prioritization", "softmax", rf"^prioritization: .*allowed: {', '.join(REPLAY_RULES)}$"),
         ("temperature", 0.0, r"^temperature: .*> 0"),
         ("temperature", -1.0, r"^temperature: "),
         ("topk_k", 0, r"^topk_k: .*≥ 1"),

@@ -1,6 +1,7 @@
 """The static set-up of a run (:class:`Setup`: the task, the config, the algorithm, and the
-components derived from them: the network and the tracker) and what is read off it before a
-runner exists (the network of a config, an example observation)."""
+components derived from them: the network, the tracker, the policy's distribution and the
+environments the agent's rollout steps) and what is read off it before a runner exists (the
+network of a config, an example observation)."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ from functools import partial
 import jax
 
 from remidi.engine.config import UEDConfig
-from remidi.engine.core import normalize as nrm
+from remidi.engine.adversaries.scores import info_key
 from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
+from remidi.engine.learner import Stepping
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 
@@ -24,13 +26,24 @@ class Setup:
     :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
     equality: the agent's network and the distinguishability tracker
     (:mod:`remidi.engine.trackers`). Hashable: a static argument under jit. Built by
-    :func:`remidi.engine.train.make_setup`."""
+    :func:`remidi.engine.train.make_setup`. Derived here, once, from the task: ``dist``, the
+    policy's action distribution (:func:`~remidi.engine.core.distributions.for_task`), and
+    ``envs``, the environments the agent's rollout steps (:class:`~remidi.engine.learner.Stepping`:
+    the task's env and parameters, its reset's determinism, the info key of its ``solved``)."""
 
     task: UEDTask
     cfg: UEDConfig
     algo: object
     net: object = field(compare=False)
     tracker: object = field(compare=False, default=None)
+    dist: object = field(init=False, compare=False, repr=False)
+    envs: Stepping = field(init=False, compare=False, repr=False)
+
+    def __post_init__(self):
+        task = self.task
+        object.__setattr__(self, "dist", for_task(task))
+        object.__setattr__(self, "envs", Stepping(task.env, task.params, task.deterministic_reset,
+                                                  solved_info=info_key(task.solved)))
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):
@@ -52,12 +65,6 @@ def network_for(cfg: UEDConfig, task: UEDTask):
         options[option] = (value,) * len(default) if isinstance(default, (tuple, list)) else value
     dist = for_task(task)
     return make_network(cfg.network, dist.network_actions, dist.continuous, **options)
-
-
-def policy_apply(setup: Setup, learner):
-    """The network's ``apply`` reading observations as the agent sees them (normalised with the
-    learner's running statistics under ``normalize_obs``)."""
-    return nrm.normalizing_apply(setup.net.apply, learner.obs_stats)
 
 
 def example_observation(task: UEDTask, key=None):

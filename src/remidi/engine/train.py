@@ -41,7 +41,7 @@ from remidi.engine import learner as lrn
 from remidi.engine.adversaries.base import Proposal, tag_counts
 from remidi.engine.algorithms import Algorithm, get_algorithm
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.rollout import Trajectory, nonfinite
+from remidi.engine.learner import Trajectory, nonfinite
 from remidi.engine.setup import Setup, example_observation, network_for
 from remidi.engine.trackers import tracker_for
 from remidi.envs.interface import UEDTask
@@ -85,12 +85,14 @@ def train_step(setup: Setup, runner: Runner):
     # 1. the adversary proposes the levels: a replay from its buffer, fresh random levels, or edits
     proposal = adversary.propose(setup, runner, k_branch, k_levels, k_sample)
     # 2. one rollout (with the tracker against the frozen levels), then score
-    traj, adv, targets, mean_ret, best_ret = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
-    traj = traj.replace(indist=proposal.explained(traj.indist))  # a rehearsal of frozen levels: no step explained
+    collection = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
+    mean_ret = collection.mean_return
+    traj = collection.traj.replace(indist=proposal.explained(collection.traj.indist))  # a rehearsal: no step explained
     # MaxMC's record takes only episodes that ended: an unfinished episode's partial return is no
     # return (with negative rewards it would beat every full one and stay in the record)
-    best_ret = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), best_ret, -jnp.inf))
-    scores = lrn.score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
+    best_ret = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), collection.best_return, -jnp.inf))
+    collection = collection.replace(traj=traj, best_return=best_ret)
+    scores = lrn.score_rollout(setup, proposal.levels, collection)
     overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: new level overlapping a frozen one completely
     # 3. the adversary takes the scores: replayed levels rescored, new ones inserted unless they overlap
     #    (PAIRED: the antagonist plays the levels, the generator is paid its regret estimate);
@@ -99,7 +101,7 @@ def train_step(setup: Setup, runner: Runner):
                                                                     best_ret, mean_ret, k_learn)
     tracker_state, tracker_metrics = tracker.learn(setup, runner, proposal, traj)
     # 4. train (masked PPO) if the proposal is trained on
-    learner, ppo_metrics = lrn.train(setup, runner.learner, proposal.train, k_learn, traj, adv, targets)
+    learner, ppo_metrics = lrn.train(setup, runner.learner, proposal.train, k_learn, collection)
     # 5. the adversary moves on (from the state its update left): a sequence's switch, ACCEL's
     #    memory of the replay, a fresh generator; at a switch the policy (Combine) and the
     #    tracker's model are frozen with the adversary

@@ -66,7 +66,7 @@ class Proposal:
     rehearse: bool[], the levels come from a frozen buffer (``remidi.rehearsal``, see
     :func:`~remidi.engine.adversaries.plr.rehearse_frozen`): trained on at every step, given to
     no buffer (None without rehearsal); nonfinite: the step metrics
-    (:func:`~remidi.engine.core.rollout.nonfinite`) of the rollouts the adversary ran to propose
+    (:func:`~remidi.engine.learner.nonfinite`) of the rollouts the adversary ran to propose
     (SFL's candidates, PAIRED's generator; None without).
     """
 

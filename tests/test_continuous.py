@@ -227,7 +227,8 @@ def test_scores_are_in_the_environments_units_whatever_the_reward_scale(score):
     collection = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)
     scaled = tr.make_setup(TASK, dataclasses.replace(plain, reward_scale=0.1), "plr")
     expected = lrn.score_rollout(setup, levels, collection)
-    got = lrn.score_rollout(scaled, levels, collection.replace(traj=collection.traj.replace(value=collection.traj.value * 0.1),
+    traj = collection.traj
+    got = lrn.score_rollout(scaled, levels, collection.replace(traj=traj.replace(value=traj.value * 0.1),
                                                                advantages=collection.advantages * 0.1))
     np.testing.assert_allclose(got, expected, rtol=1e-5)
     assert np.all(np.isfinite(np.asarray(expected)))

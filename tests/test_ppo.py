@@ -1,4 +1,5 @@
-"""Tests for PPO (remidi.engine.core.ppo, remidi.engine.learner): GAE, masking semantics, reference loss, a learning sanity check."""
+"""Tests for PPO (remidi.engine.core.ppo, remidi.engine.learner): GAE, masking semantics, reference loss, a
+learning sanity check."""
 
 import dataclasses
 import functools

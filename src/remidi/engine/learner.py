@@ -153,11 +153,12 @@ def policy_apply(setup: Setup, learner: LearnerState):
     return apply
 
 
-# ---------------------------------------------------------------------------- COLLECT TRAJECTORIES
+# ---------------------------------------------------------------------------- the rollout
 def collect(setup: Setup, learner: LearnerState, rng, levels, frozen) -> Collection:
     """Roll out on ``levels`` [N] (with the tracker of ``frozen`` beside the envs, None: none),
     then compute the advantages and each env's episode returns: a :class:`Collection`."""
     cfg = setup.cfg
+    # COLLECT TRAJECTORIES
     traj, last_value = play(setup, learner, rng, levels, cfg.num_steps, frozen)
     # CALCULATE ADVANTAGE, on the rewards PPO learns from (× reward_scale)
     advantages, targets = compute_gae(traj.reward * cfg.reward_scale, traj.value, traj.done, last_value, cfg.ppo.gamma,
@@ -286,7 +287,7 @@ def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: j
     return jnp.where(buffer_match.any(axis=-1)[:, None], chosen, logits)
 
 
-# ---------------------------------------------------------------------------- CALCULATE ADVANTAGE
+# ---------------------------------------------------------------------------- advantages and scores
 def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
     """Generalised advantage estimation.
 
@@ -298,12 +299,12 @@ def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
     next_values = jnp.concatenate([values[1:], last_value[None]], axis=0)
     deltas = rewards + gamma * not_done * next_values - values
 
-    def step(next_advantage, x):
+    def _get_advantages(next_advantage, x):
         delta, nd = x
         advantage = delta + gamma * lam * nd * next_advantage
         return advantage, advantage
 
-    _, advantages = jax.lax.scan(step, jnp.zeros_like(last_value), (deltas, not_done), reverse=True)
+    _, advantages = jax.lax.scan(_get_advantages, jnp.zeros_like(last_value), (deltas, not_done), reverse=True)
     return advantages, advantages + values
 
 
@@ -330,7 +331,7 @@ def score_rollout(setup: Setup, levels, collection: Collection):
         solved=setup.task.solved, solved_flags=traj.solved))
 
 
-# ---------------------------------------------------------------------------- UPDATE NETWORK
+# ---------------------------------------------------------------------------- masked PPO
 #: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs'
 #: minibatches that trained; NaN on updates that do not train or whose every step ReMiDi masked,
 #: left out of a block's mean)
@@ -344,6 +345,7 @@ def train(setup: Setup, learner: LearnerState, trained, rng, collection: Collect
     state as it was (every step masked). Then the observation statistics absorb the rollout's
     observations. Returns the learner with PPO's diagnostics (:data:`PPO_METRICS`, f32[]; NaN
     when nothing was trained)."""
+    # UPDATE NETWORK
     traj = collection.traj
     batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
                   values=traj.value, advantages=collection.advantages, targets=collection.targets,
@@ -351,6 +353,7 @@ def train(setup: Setup, learner: LearnerState, trained, rng, collection: Collect
     carry = setup.net.initialize_carry(setup.cfg.num_envs)
     train_state, metrics = ppo_update(learner.train_state, carry, batch, rng, setup.cfg.ppo,
                                       policy_apply(setup, learner), setup.dist)
+    # UPDATE OBSERVATION STATISTICS, with what this rollout saw
     obs_stats = learner.obs_stats
     if obs_stats is not None:
         obs_stats = nrm.update_stats(obs_stats, flatten_obs(traj.obs))
@@ -398,7 +401,7 @@ def ppo_update(train_state: TrainState, init_carry, batch: Batch, rng: jax.Array
     num_envs = batch.mask.shape[1]
     size = num_envs // cfg.minibatches
 
-    def update_minibatch(state, ids):
+    def _update_minibatch(state, ids):
         carry, minibatch = init_carry, batch
         if ids is not None:  # a group of envs, each with its whole sequence
             carry = jax.tree.map(lambda x: x[ids], init_carry)
@@ -412,14 +415,14 @@ def ppo_update(train_state: TrainState, init_carry, batch: Batch, rng: jax.Array
         metrics["trained"] = any_unmasked
         return state, metrics
 
-    def update_epoch(state, key):
+    def _update_epoch(state, key):
         if cfg.minibatches == 1:  # every env in the one minibatch: shuffling would only reorder sums
-            state, metrics = update_minibatch(state, None)
+            state, metrics = _update_minibatch(state, None)
             return state, jax.tree.map(lambda x: x[None], metrics)
         groups = jax.random.permutation(key, num_envs).reshape(cfg.minibatches, size)
-        return jax.lax.scan(update_minibatch, state, groups)
+        return jax.lax.scan(_update_minibatch, state, groups)
 
-    train_state, metrics = jax.lax.scan(update_epoch, train_state, jax.random.split(rng, cfg.epochs))
+    train_state, metrics = jax.lax.scan(_update_epoch, train_state, jax.random.split(rng, cfg.epochs))
     trained = metrics.pop("trained")  # bool[epochs, minibatches]
     count = jnp.sum(trained)
     out = {name: jnp.where(count > 0, jnp.sum(jnp.where(trained, v, 0.0)) / jnp.maximum(count, 1), jnp.nan)

@@ -31,7 +31,6 @@ from flax import struct
 from flax.training.train_state import TrainState
 
 from remidi.engine.adversaries import scores as sc
-from remidi.engine.config import score_name
 from remidi.engine.core import normalize as nrm
 from remidi.engine.core.networks import flatten_obs
 from remidi.engine.core.networks.base import CATEGORICAL
@@ -315,7 +314,7 @@ def score_rollout(setup: Setup, levels, collection: Collection):
     ``ppo.gamma`` (the paper's utility), or with ``discounted_regret`` off the undiscounted
     ``mean_return`` the rollout already gave. ``collection.best_return`` is MaxMC's."""
     traj, mean_return = collection.traj, collection.mean_return
-    score = sc.SCORES[score_name(setup.cfg, setup.algo)]
+    score = setup.score
     optimal = None
     if score.needs_optimum:
         if setup.cfg.discounted_regret:

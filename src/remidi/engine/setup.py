@@ -11,8 +11,8 @@ from functools import partial
 
 import jax
 
-from remidi.engine.config import UEDConfig
-from remidi.engine.adversaries.scores import info_key
+from remidi.engine.config import UEDConfig, score_name
+from remidi.engine.adversaries.scores import SCORES, info_key
 from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
 from remidi.engine.learner import Stepping
@@ -26,10 +26,12 @@ class Setup:
     :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
     equality: the agent's network and the distinguishability tracker
     (:mod:`remidi.engine.trackers`). Hashable: a static argument under jit. Built by
-    :func:`remidi.engine.train.make_setup`. Derived here, once, from the task: ``dist``, the
-    policy's action distribution (:func:`~remidi.engine.core.distributions.for_task`), and
-    ``envs``, the environments the agent's rollout steps (:class:`~remidi.engine.learner.Stepping`:
-    the task's env and parameters, its reset's determinism, the info key of its ``solved``)."""
+    :func:`remidi.engine.train.make_setup`. Derived here, once: ``dist``, the policy's action
+    distribution (:func:`~remidi.engine.core.distributions.for_task`), ``envs``, the environments
+    the agent's rollout steps (:class:`~remidi.engine.learner.Stepping`: the task's env and
+    parameters, its reset's determinism, the info key of its ``solved``), and ``score``, the
+    score levels are ranked by (:data:`~remidi.engine.adversaries.scores.SCORES`' entry for
+    :func:`~remidi.engine.config.score_name`; None for a name the config's validation refuses)."""
 
     task: UEDTask
     cfg: UEDConfig
@@ -38,12 +40,14 @@ class Setup:
     tracker: object = field(compare=False, default=None)
     dist: object = field(init=False, compare=False, repr=False)
     envs: Stepping = field(init=False, compare=False, repr=False)
+    score: object = field(init=False, compare=False, repr=False)
 
     def __post_init__(self):
         task = self.task
         object.__setattr__(self, "dist", for_task(task))
         object.__setattr__(self, "envs", Stepping(task.env, task.params, task.deterministic_reset,
                                                   solved_info=info_key(task.solved)))
+        object.__setattr__(self, "score", SCORES.get(score_name(self.cfg, self.algo)))
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):

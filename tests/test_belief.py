@@ -14,7 +14,7 @@ from conftest import optimizing
 from remidi.engine.trackers import belief as bl
 from remidi.engine.trackers import belief_model as bm
 from remidi.engine.trackers import calibration as cal
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.lever import LeverLevel, lever_task
@@ -124,7 +124,7 @@ def test_the_calibration_record_skips_the_untrained_models_first_replay():
     """learn(): the first replay after a switch is fitted on but its (untrained) scores are not
     recorded; from the second on each replay's pre-fit scores are; a replay-less update changes
     nothing; freeze() with fewer than two replays gives +inf (explain nothing)."""
-    from remidi.engine.core.rollout import Trajectory
+    from remidi.engine.learner import Trajectory
 
     model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
     opt = bm.make_optimizer()
@@ -149,7 +149,7 @@ def test_with_a_reference_the_freeze_calibrates_on_ratios_by_the_reference_froze
     """The recorded rollouts' ratios are computed at the freeze by the reference as it is then (the
     one frozen with the model, that will judge), not by the reference of each replay's time; the
     reference learns from fresh rollouts only."""
-    from remidi.engine.core.rollout import Trajectory
+    from remidi.engine.learner import Trajectory
 
     model = bm.BeliefModel(bm.ObsCoding((1.0,), (2,), (3,)), num_actions=2, hidden=4)
     opt = bm.make_optimizer()
@@ -625,7 +625,7 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
     setup = tr.make_setup(TASK, cfg, "remidi")
     plain = tr.make_setup(TASK, r(cfg, remidi=r(cfg.remidi, tracker="prefix")), "remidi")
     audit = jax.jit(evaluation.tracker_audit, static_argnums=0)
-    collect = jax.jit(lambda setup_, runner, key, levels, frozen: collect_(setup_, runner.learner, key, levels, frozen)[0],
+    collect = jax.jit(lambda setup_, runner, key, levels, frozen: collect_(setup_, runner.learner, key, levels, frozen).traj,
                       static_argnums=0)
     runner0 = tr.init_runner(setup, jax.random.PRNGKey(0))
     assert all(np.isnan(float(v)) for v in audit(setup, runner0, jax.random.PRNGKey(1)).values())

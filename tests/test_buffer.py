@@ -133,11 +133,12 @@ def test_empty_buffer_weights_are_zero():
 
 def test_can_replay_min_fill():
     cfg = config(capacity=10, min_fill=0.7)
-    assert B.min_replay_size(cfg) == 7  # not 8 from 0.7*10 = 7.000000000000001
-    for n_valid in range(11):
+    for n_valid in range(11):  # 7 suffice, not 8 from 0.7*10 = 7.000000000000001
         state = manual_state(cfg, np.ones(10), np.arange(10) < n_valid, np.zeros(10), 0)
         assert bool(B.can_replay(state, cfg)) == (n_valid >= 7)
-    assert B.min_replay_size(config(min_fill=0.0)) == 1
+    empty, one = config(min_fill=0.0), config(min_fill=0.0)
+    assert not B.can_replay(manual_state(empty, np.ones(4), np.zeros(4, bool), np.zeros(4), 0), empty)  # at least one
+    assert B.can_replay(manual_state(one, np.ones(4), np.arange(4) < 1, np.zeros(4), 0), one)
 
 
 # ----------------------------------------------------------------------------- insertion

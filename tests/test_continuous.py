@@ -18,7 +18,8 @@ from remidi.engine.config import ReMiDiConfig, UEDConfig
 from remidi.engine.run.validation import validate_ued_config
 from remidi.engine.core.distributions import ACTIONS, CATEGORICAL, GAUSSIAN, Greedy, acting, for_task
 from remidi.engine.core.networks import make_network
-from remidi.engine.core.ppo import Batch, PPOConfig, create_train_state, ppo_update
+from remidi.engine.learner import Batch, ppo_update
+from remidi.engine.core.ppo import PPOConfig, create_train_state
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, one_step_discounted
 
 
@@ -223,10 +224,12 @@ def test_scores_are_in_the_environments_units_whatever_the_reward_scale(score):
     setup = tr.make_setup(TASK, plain, "plr")
     runner = tr.init_runner(setup, jax.random.PRNGKey(0))
     levels = jax.vmap(TASK.sample_level)(jax.random.split(jax.random.PRNGKey(1), TINY.num_envs))
-    traj, adv, _, mean_ret, best_ret = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)
+    collection = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)
     scaled = tr.make_setup(TASK, dataclasses.replace(plain, reward_scale=0.1), "plr")
-    expected = lrn.score_rollout(setup, levels, traj, adv, mean_ret, best_ret)
-    got = lrn.score_rollout(scaled, levels, traj.replace(value=traj.value * 0.1), adv * 0.1, mean_ret, best_ret)
+    expected = lrn.score_rollout(setup, levels, collection)
+    traj = collection.traj
+    got = lrn.score_rollout(scaled, levels, collection.replace(traj=traj.replace(value=traj.value * 0.1),
+                                                               advantages=collection.advantages * 0.1))
     np.testing.assert_allclose(got, expected, rtol=1e-5)
     assert np.all(np.isfinite(np.asarray(expected)))
 

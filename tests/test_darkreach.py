@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import CandidateTracker
 from remidi.engine.trackers.tolerance import ToleranceCandidates

@@ -16,7 +16,7 @@ import pytest
 from remidi.cli import main
 from remidi.engine.adversaries.scores import SCORES
 from remidi.engine.run.evaluation import first_episode_return
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.run.validation import validate_ued_config
 from remidi.envs.gymnax import SEED, gymnax_task
 from remidi.errors import ConfigError

@@ -111,7 +111,7 @@ def test_the_tracker_masks_a_frozen_copy_and_tells_other_levels_apart_at_the_fir
     explained, under a uniformly random policy whose actions the tracker replays on the copy;
     env 1's level is frozen in no copy, and the first observation already tells it from the
     three frozen levels (Kinetix levels are fully observed)."""
-    from remidi.engine.core.rollout import Policy, Stepping, rollout
+    from remidi.engine.learner import Policy, Stepping, rollout
     from remidi.engine.trackers.base import Frozen
     from remidi.engine.trackers.exact import ExactTracker
 

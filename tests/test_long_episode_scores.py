@@ -12,7 +12,7 @@ from flax import struct
 
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.ppo import compute_gae
+from remidi.engine.learner import compute_gae
 from remidi.engine.run.validation import run_warnings
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv
 

@@ -14,7 +14,7 @@ import pytest
 from flax import struct
 
 from remidi.engine.core.distributions import CATEGORICAL, MultiCategorical, for_space, for_task
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.run.task_checks import validate_task
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import make_tracker

@@ -13,7 +13,7 @@ import pytest
 
 from conftest import optimizing
 from remidi.cli import main
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.lever import LeverLevel, lever_task
@@ -247,7 +247,7 @@ def test_reseed_plays_each_rollout_with_the_levels_randomness_drawn_afresh():
         setup = tr.make_setup(NOISY, cfg, "dr")
         runner = driver._init(setup, jax.random.PRNGKey(1)[None])
         runner = jax.tree.map(lambda x: x[0], runner)
-        traj = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None)[0]
+        traj = lrn.collect(setup, runner.learner, jax.random.PRNGKey(2), levels, None).traj
         same = [bool(jnp.array_equal(traj.obs[0, n], stored)) for n in range(4)]
         assert same == [not reseed] * 4, (reseed, same)
 

@@ -18,7 +18,7 @@ from test_ued_engine import TINY  # noqa: E402
 from remidi.cli import main  # noqa: E402
 from remidi.engine import train as tr  # noqa: E402
 from remidi.engine.algorithms import BUILTIN_ALGORITHMS  # noqa: E402
-from remidi.engine.core.rollout import Trajectory, nonfinite  # noqa: E402
+from remidi.engine.learner import Trajectory, nonfinite  # noqa: E402
 from remidi.engine.run import driver  # noqa: E402
 from remidi.engine.run.checkpoint import CHECKPOINT, load_checkpoint  # noqa: E402
 from remidi.envs.lever import LeverBuilder, LeverGame, lever_task  # noqa: E402

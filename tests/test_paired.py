@@ -7,7 +7,7 @@ import pytest
 
 from remidi.engine.adversaries import paired
 from remidi.engine.adversaries import scores as sc
-from remidi.engine.core.ppo import compute_gae
+from remidi.engine.learner import compute_gae
 
 # two levels, 6 steps each; episodes end where done is True
 PRO_REWARD = jnp.array([[0, 0], [1, 0], [0, 0], [3, 2], [0, 0], [0, 0]], jnp.float32)

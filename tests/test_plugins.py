@@ -33,14 +33,15 @@ def test_a_registered_score_ranks_the_buffers_levels():
     runner = tr.init_runner(setup, jax.random.PRNGKey(3))
     # the rollout train_step makes (its keys split as train_step splits them)
     _, k_branch, k_roll, k_levels, _, k_sample = jax.random.split(runner.rng, 6)
-    proposal = setup.algo.adversary.propose(setup, runner, tr.fresh_levels(setup, k_levels), k_branch, k_levels,
+    proposal = setup.algo.adversary.propose(setup, runner, jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs)), k_branch, k_levels,
                                             k_sample)
     assert not bool(proposal.replay)  # an empty buffer: fresh levels, scored and inserted
-    traj, adv, _, mean_ret, best_ret = lrn.collect(setup, runner.learner, k_roll, proposal.levels, None)
-    inputs = sc.ScoreInputs(mean_return=mean_ret, values=traj.value, advantages=adv, max_return=best_ret,
-                            done=traj.done, reward=traj.reward)
+    collection = lrn.collect(setup, runner.learner, k_roll, proposal.levels, None)
+    traj, advantages = collection.traj, collection.advantages
+    inputs = sc.ScoreInputs(mean_return=collection.mean_return, values=traj.value, advantages=advantages,
+                            max_return=collection.best_return, done=traj.done, reward=traj.reward)
     expected = np.sort(np.asarray(abs_gae(inputs)))
-    pvl = np.sort(np.asarray(sc.positive_value_loss(adv, traj.done)))
+    pvl = np.sort(np.asarray(sc.positive_value_loss(advantages, traj.done)))
     assert np.all(np.isfinite(expected)) and not np.allclose(expected, pvl)  # the test tells the scores apart
 
     after, _ = jax.jit(lambda r: tr.train_step(setup, r))(runner)

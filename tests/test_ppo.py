@@ -1,4 +1,5 @@
-"""Tests for remidi.engine.core.ppo: GAE, masking semantics, reference loss, a learning sanity check."""
+"""Tests for PPO (remidi.engine.core.ppo, remidi.engine.learner): GAE, masking semantics, reference loss, a
+learning sanity check."""
 
 import dataclasses
 import functools
@@ -10,17 +11,8 @@ import pytest
 from flax.training.train_state import TrainState
 
 from remidi.engine.core.networks import FeedForwardActorCritic, MazeLSTMActorCritic
-from remidi.engine.core.ppo import (
-    Batch,
-    PPOConfig,
-    compute_gae,
-    create_train_state,
-    make_optimizer,
-    normalize_advantages,
-    ppo_loss,
-    ppo_update,
-    validate_ppo_config,
-)
+from remidi.engine.core.ppo import PPOConfig, create_train_state, make_optimizer, validate_ppo_config
+from remidi.engine.learner import Batch, compute_gae, normalize_advantages, ppo_loss, ppo_update
 from remidi.errors import ConfigError
 
 T, N, OBS, ACTIONS = 4, 4, 4, 4

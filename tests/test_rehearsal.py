@@ -47,22 +47,22 @@ def test_with_p1_every_update_after_the_switch_trains_unmasked_on_frozen_levels_
     setup = rehearsing(1.0)
     seen, masks = {}, {}  # update -> the rollout's levels and the tracker's indist; the loss mask
 
-    real_collect, real_learn = lrn.collect, lrn.learn
+    real_collect, real_ppo = lrn.collect, lrn.ppo_update
     # the learner's functions see no update count: ordered callbacks number the updates (one
     # rollout each, its training after it)
 
     def spy_collect(setup_, learner, rng, levels, frozen):
         out = real_collect(setup_, learner, rng, levels, frozen)
         jax.debug.callback(lambda c, v, i: seen.__setitem__(len(seen), (np.asarray(c), np.asarray(v), np.asarray(i))),
-                           levels.correct, levels.visible, out[0].indist, ordered=True)
+                           levels.correct, levels.visible, out.traj.indist, ordered=True)
         return out
 
-    def spy_learn(setup_, learner, rng, traj, adv, targets):
-        jax.debug.callback(lambda m: masks.__setitem__(len(seen) - 1, np.asarray(m)), ~traj.indist, ordered=True)
-        return real_learn(setup_, learner, rng, traj, adv, targets)
+    def spy_ppo(state, carry, batch, *args):
+        jax.debug.callback(lambda m: masks.__setitem__(len(seen) - 1, np.asarray(m)), batch.mask, ordered=True)
+        return real_ppo(state, carry, batch, *args)
 
     monkeypatch.setattr(lrn, "collect", spy_collect)
-    monkeypatch.setattr(lrn, "learn", spy_learn)
+    monkeypatch.setattr(lrn, "ppo_update", spy_ppo)
     runner = start(setup, 1)
     # one program of SWITCH steps, run three times (its callbacks keep it out of the persistent
     # cache: each program compiles in every run of the suite)

@@ -107,7 +107,7 @@ def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
     import dataclasses
     from types import SimpleNamespace
 
-    from remidi.engine.learner import score_rollout
+    from remidi.engine.learner import Collection, score_rollout
     from remidi.engine.train import make_setup
     from remidi.envs import maze as M
     from remidi.experiments.maze import paper_config
@@ -125,8 +125,9 @@ def test_perfect_regret_of_a_maze_level_is_discounted_by_default():
     mean_return = jnp.asarray(reward.sum(0))
 
     def level_score(c):
-        return float(score_rollout(make_setup(task, c, "plr"), level, traj, jnp.zeros((steps, 1)), mean_return,
-                           mean_return)[0])
+        collection = Collection(traj=traj, advantages=jnp.zeros((steps, 1)), targets=jnp.zeros((steps, 1)),
+                                mean_return=mean_return, best_return=mean_return)
+        return float(score_rollout(make_setup(task, c, "plr"), level, collection)[0])
 
     discounted = g ** (n - 1) * (1 - 0.9 * n / 250) - g ** (steps - 1) * (1 - 0.9 * steps / 250)
     np.testing.assert_allclose(level_score(cfg), discounted, rtol=1e-4)
@@ -159,7 +160,7 @@ def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion
     import dataclasses
     from types import SimpleNamespace
 
-    from remidi.engine.learner import score_rollout
+    from remidi.engine.learner import Collection, score_rollout
     from remidi.engine.train import make_setup
     from remidi.envs.lever import lever_task
     from remidi.experiments.lever import paper_config
@@ -169,7 +170,9 @@ def test_the_engine_scores_levels_by_learnability_with_the_tasks_solve_criterion
     reward = jnp.asarray([[1.0, -10.0], [-1.0, -10.0], [1.0, 10.0], [1.0, -10.0]])  # one-step episodes
     traj = SimpleNamespace(reward=reward, done=jnp.ones((4, 2), bool), value=jnp.zeros((4, 2)), solved=None)
     levels = jax.tree.map(lambda x: x[:2], task.eval_sets["visible"])
-    got = score_rollout(make_setup(task, cfg, "plr"), levels, traj, jnp.zeros((4, 2)), jnp.zeros(2), jnp.zeros(2))
+    collection = Collection(traj=traj, advantages=jnp.zeros((4, 2)), targets=jnp.zeros((4, 2)),
+                            mean_return=jnp.zeros(2), best_return=jnp.zeros(2))
+    got = score_rollout(make_setup(task, cfg, "plr"), levels, collection)
     np.testing.assert_allclose(got, [0.75 * 0.25, 0.25 * 0.75])
 
 

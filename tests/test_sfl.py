@@ -84,7 +84,7 @@ def remidi_sfl():
     runner = jax.jit(lambda key: tr.init_runner(setup, key))(jax.random.PRNGKey(0))
     def propose(r, key):
         k_branch, k_levels, k_sample = jax.random.split(key, 3)
-        return setup.algo.adversary.propose(setup, r, tr.fresh_levels(setup, k_levels), k_branch, k_levels, k_sample)
+        return setup.algo.adversary.propose(setup, r, jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs)), k_branch, k_levels, k_sample)
 
     propose = jax.jit(propose)
     return setup, runner, propose
@@ -113,7 +113,7 @@ def test_advance_counts_every_update_and_a_sequence_switches(remidi_sfl):
     proposal = SimpleNamespace(replay=jnp.zeros(8, bool))
     sfl = tr.make_setup(remidi.task, remidi.cfg, "sfl")
     r = runner.replace(adversary=runner.adversary.replace(count=jnp.asarray(4, jnp.int32)))
-    outcome = SimpleNamespace(traj=None)
+    outcome = SimpleNamespace(collection=SimpleNamespace(traj=None))
     state = sfl.algo.adversary.advance(sfl, r, proposal, outcome)[0].adversary  # one buffer: counts on, never switches
     assert int(state.count) == 5 and int(state.active) == 0
     state = remidi.algo.adversary.advance(remidi, r, proposal, outcome)[0].adversary  # the 5th update: switch

@@ -13,7 +13,7 @@ from remidi.engine.trackers import belief_model as bm
 from remidi.engine.trackers import calibration as cal
 from remidi.engine.trackers import noise
 from remidi.engine.trackers import simulated as sm
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 
 pytestmark = pytest.mark.usefixtures("no_png")  # no test here reads a plot
 

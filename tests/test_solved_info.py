@@ -16,7 +16,7 @@ from remidi.engine import train as tr
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.sfl import learnability_of
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.run import evaluation
 from remidi.engine.run.task_checks import validate_task
 from remidi.envs.interface import UEDTask, UnderspecifiedEnv, info_flag

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from remidi.engine.config import ReMiDiConfig, UEDConfig
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers import REPLAYING
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import CandidateTracker, ExactTracker

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.interface import AutoReplay

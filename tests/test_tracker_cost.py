@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.core.seeds import SEED_BATCH
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import make_tracker, slot_ladder

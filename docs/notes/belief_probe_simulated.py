@@ -12,7 +12,7 @@ import jax, jax.numpy as jnp, numpy as np
 from remidi.engine.trackers import belief as bl
 from remidi.engine.trackers import belief_model as bm
 from remidi.engine.trackers import calibration as cal
-from remidi.engine.core.rollout import Policy, Stepping, rollout
+from remidi.engine.learner import Policy, Stepping, rollout
 from remidi.engine.trackers.base import Frozen
 from remidi.engine.trackers.exact import ExactTracker
 from remidi.envs.maze import maze_task

@@ -1,6 +1,7 @@
 """The static set-up of a run (:class:`Setup`: the task, the config, the algorithm, and the
-components derived from them: the network and the tracker) and what is read off it before a
-runner exists (the network of a config, an example observation)."""
+components derived from them: the network, the tracker, the policy's distribution and the
+environments the agent's rollout steps) and what is read off it before a runner exists (the
+network of a config, an example observation)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,11 @@ import jax
 
 from typing import TYPE_CHECKING
 
-from remidi.engine.config import BufferConfig, UEDConfig
-from remidi.engine.core import normalize as nrm
+from remidi.engine.adversaries.scores import SCORES, info_key
+from remidi.engine.config import BufferConfig, UEDConfig, buffer_config, score_name
 from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
+from remidi.engine.learner import Stepping
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 
@@ -29,16 +31,32 @@ class Setup:
     """Static pieces of a run: the task, the config, the algorithm (its adversary and score,
     :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
     equality: the agent's network and the distinguishability tracker
-    (:mod:`remidi.engine.trackers`) and the level buffers' settings
-    (:func:`~remidi.engine.config.buffer_config`). Hashable: a static argument under jit. Built by
-    :func:`remidi.engine.train.make_setup`."""
+    (:mod:`remidi.engine.trackers`; None for an algorithm that freezes nothing). Hashable: a static
+    argument under jit. Built by :func:`remidi.engine.train.make_setup`. Derived here, once:
+    ``dist``, the policy's action distribution
+    (:func:`~remidi.engine.core.distributions.for_task`), ``envs``, the environments the agent's
+    rollout steps (:class:`~remidi.engine.learner.Stepping`), ``score``, the score levels are
+    ranked by (:data:`~remidi.engine.adversaries.scores.SCORES`' entry; None for a name the
+    config's validation refuses), and ``buffer``, the level buffers' settings
+    (:func:`~remidi.engine.config.buffer_config`)."""
 
     task: UEDTask
     cfg: UEDConfig
     algo: Algorithm
     net: object = field(compare=False)
-    tracker: Tracker | None = field(compare=False, default=None)  # None: no sequence, no tracker
-    buffer: BufferConfig | None = field(compare=False, default=None)  # the level buffers' (buffer_config)
+    tracker: Tracker | None = field(compare=False, default=None)
+    dist: object = field(init=False, compare=False, repr=False)
+    envs: Stepping = field(init=False, compare=False, repr=False)
+    score: object = field(init=False, compare=False, repr=False)
+    buffer: BufferConfig = field(init=False, compare=False, repr=False)
+
+    def __post_init__(self):
+        task = self.task
+        object.__setattr__(self, "dist", for_task(task))
+        object.__setattr__(self, "envs", Stepping(task.env, task.params, task.deterministic_reset,
+                                                  solved_info=info_key(task.solved)))
+        object.__setattr__(self, "score", SCORES.get(score_name(self.cfg, self.algo)))
+        object.__setattr__(self, "buffer", buffer_config(self.cfg, self.algo))
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):
@@ -60,12 +78,6 @@ def network_for(cfg: UEDConfig, task: UEDTask):
         options[option] = (value,) * len(default) if isinstance(default, (tuple, list)) else value
     dist = for_task(task)
     return make_network(cfg.network, dist.network_actions, dist.continuous, **options)
-
-
-def policy_apply(setup: Setup, learner):
-    """The network's ``apply`` reading observations as the agent sees them (normalised with the
-    learner's running statistics under ``normalize_obs``)."""
-    return nrm.normalizing_apply(setup.net.apply, learner.obs_stats)
 
 
 def example_observation(task: UEDTask, key=None):

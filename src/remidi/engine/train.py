@@ -39,8 +39,8 @@ from typing import Any
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries.base import AdversaryState, Outcome
 from remidi.engine.algorithms import Algorithm, get_algorithm
-from remidi.engine.config import UEDConfig, buffer_config
-from remidi.engine.core.rollout import nonfinite
+from remidi.engine.config import UEDConfig
+from remidi.engine.learner import nonfinite
 from remidi.engine.setup import Setup, example_observation, network_for
 from remidi.engine.trackers import tracker_for
 from remidi.envs.interface import UEDTask
@@ -62,8 +62,7 @@ def make_setup(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm) -> Setup:
     """The set-up of a run of ``algo`` (a name or an :class:`Algorithm`): its network, its
     tracker and its buffers' settings chosen once, here."""
     algo = get_algorithm(algo)
-    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task), tracker=tracker_for(task, cfg, algo),
-                 buffer=buffer_config(cfg, algo))
+    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task), tracker=tracker_for(task, cfg, algo))
 
 
 def init_runner(setup: Setup, rng) -> Runner:
@@ -74,36 +73,34 @@ def init_runner(setup: Setup, rng) -> Runner:
                   tracker=setup.tracker.init(setup, rng) if setup.tracker is not None else None)
 
 
-def fresh_levels(setup: Setup, rng) -> Any:
-    """N fresh levels (leaves [N, ...]) from the task's generator, one key of ``rng`` each."""
-    return jax.vmap(setup.task.sample_level)(jax.random.split(rng, setup.cfg.num_envs))
-
-
 def train_step(setup: Setup, runner: Runner):
     """One update. Returns ``(runner, metrics)``, metrics a dict of f32[] scalars."""
     adversary = setup.algo.adversary
     rng, k_branch, k_roll, k_levels, k_learn, k_sample = jax.random.split(runner.rng, 6)
 
     # PROPOSE LEVELS
-    fresh = fresh_levels(setup, k_levels)
+    fresh = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, setup.cfg.num_envs))  # leaves [N, ...]
     proposal = adversary.propose(setup, runner, fresh, k_branch, k_levels, k_sample)
 
     # COLLECT TRAJECTORIES
-    frozen = adversary.frozen(setup, runner, proposal)  # None: no tracker beside the envs
-    traj, adv, targets, mean_ret, best_ret = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
+    # a sequence's tracker beside the envs, against its frozen levels (no tracker: the envs alone)
+    frozen = adversary.frozen(setup, runner, proposal) if setup.tracker is not None else None
+    collection = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
+    traj = collection.traj
 
     # SCORE LEVELS (MaxMC's record takes only episodes that ended: with negative rewards an
     # unfinished episode's partial return would beat every full one and stay in the record)
-    best_ret = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), best_ret, -jnp.inf))
-    scores = lrn.score_rollout(setup, proposal.levels, traj, adv, mean_ret, best_ret)
+    best = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), collection.best_return, -jnp.inf))
+    collection = collection.replace(best_return=best)
+    scores = lrn.score_rollout(setup, proposal.levels, collection)
     overlap = jnp.all(traj.indist, axis=0) & ~proposal.replay  # bool[N]: a new level a frozen one explains
-    outcome = Outcome(traj=traj, scores=scores, overlap=overlap, best_return=best_ret, mean_return=mean_ret)
+    outcome = Outcome(collection=collection, scores=scores, overlap=overlap)
 
     # UPDATE ADVERSARY
     adversary_state, inserted, adversary_metrics = adversary.update(setup, runner, proposal, outcome, k_learn)
 
     # UPDATE NETWORK
-    learner, ppo_metrics = lrn.train(setup, runner.learner, proposal.train, k_learn, traj, adv, targets)
+    learner, ppo_metrics = lrn.train(setup, runner.learner, proposal.train, k_learn, collection)
 
     # ADVANCE ADVERSARY
     runner = runner.replace(adversary=adversary_state, learner=learner)
@@ -114,7 +111,7 @@ def train_step(setup: Setup, runner: Runner):
     replayed = jnp.where(proposal.replay, 1.0, 0.0)
     metrics = {
         "replay": jnp.mean(proposal.replay.astype(jnp.float32)),  # per-env replay (SFL's mix): the share replayed
-        "mean_return": jnp.mean(mean_ret),
+        "mean_return": jnp.mean(collection.mean_return),
         "mean_score": jnp.mean(jnp.where(jnp.isfinite(scores), scores, 0.0)),
         "trained_fraction_masked": jnp.where(proposal.train, jnp.mean(traj.indist.astype(jnp.float32)), 0.0),
         "active_buffer": runner.adversary.active.astype(jnp.float32),

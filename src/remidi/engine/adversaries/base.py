@@ -65,7 +65,7 @@ class Proposal:
     rehearse: bool[], the levels come from a frozen buffer (``remidi.rehearsal``, see
     :func:`~remidi.engine.adversaries.plr.rehearse_frozen`): trained on at every step, given to
     no buffer (None without rehearsal); nonfinite: the step metrics
-    (:func:`~remidi.engine.core.rollout.nonfinite`) of the rollouts the adversary ran to propose
+    (:func:`~remidi.engine.learner.nonfinite`) of the rollouts the adversary ran to propose
     (SFL's candidates, PAIRED's generator; None without).
     """
 
@@ -82,19 +82,16 @@ class Proposal:
 
 @struct.dataclass
 class Outcome:
-    """What the rollout of a proposal says of each of its N levels, for the adversary's update.
+    """What the rollout of a proposal says of each of its N levels, for the adversary.
 
-    traj: the rollout (:class:`~remidi.engine.core.rollout.Trajectory`, leaves [T, N]); scores:
-    f32[N], the levels' scores; overlap: bool[N], a new level whose rollout a frozen level explains
-    at every step (never inserted); best_return: f32[N], MaxMC's record (−inf where no episode
-    ended); mean_return: f32[N], the agent's mean episodic return (the partial return where no
-    episode ended)."""
+    collection: the rollout and its returns (:class:`~remidi.engine.learner.Collection`; its
+    ``best_return`` is MaxMC's record, −inf where no episode ended); scores: f32[N], the levels'
+    scores; overlap: bool[N], a new level whose rollout a frozen level explains at every step
+    (never inserted)."""
 
-    traj: object
+    collection: object
     scores: jax.Array
     overlap: jax.Array
-    best_return: jax.Array
-    mean_return: jax.Array
 
 
 @dataclass(frozen=True)

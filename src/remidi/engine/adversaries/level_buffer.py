@@ -115,16 +115,11 @@ def size(state: BufferState) -> jax.Array:
     return jnp.sum(state.valid, dtype=jnp.int32)
 
 
-def min_replay_size(config: BufferConfig) -> int:
-    """Smallest number of valid entries that allows replay: ``max(1, ceil(min_fill·capacity))``
-    (a tolerance of 1e-9 absorbs float error: ``0.7 * 10`` counts as 7, not 8)."""
-    return max(1, math.ceil(config.min_fill * config.capacity - 1e-9))
-
-
 @partial(jax.jit, static_argnames=("config",))
 def can_replay(state: BufferState, config: BufferConfig) -> jax.Array:
-    """``bool[]``: the buffer holds at least :func:`min_replay_size` valid entries."""
-    return jnp.sum(state.valid, dtype=jnp.int32) >= min_replay_size(config)
+    """``bool[]``: the buffer holds enough valid entries to replay: ``max(1, ⌈min_fill·capacity⌉)``
+    (a tolerance of 1e-9 absorbs float error: ``0.7 * 10`` counts as 7, not 8)."""
+    return jnp.sum(state.valid, dtype=jnp.int32) >= max(1, math.ceil(config.min_fill * config.capacity - 1e-9))
 
 
 # ---------------------------------------------------------------------------- replay weights

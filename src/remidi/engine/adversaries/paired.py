@@ -37,8 +37,8 @@ from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, 
 from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
-from remidi.engine.core.ppo import Batch, compute_gae, create_train_state, ppo_update
-from remidi.engine.core.rollout import Policy, Stepping, nonfinite, rollout
+from remidi.engine.core.ppo import create_train_state
+from remidi.engine.learner import Batch, Policy, Stepping, compute_gae, nonfinite, ppo_update, rollout
 from remidi.errors import ConfigError
 
 ESTIMATORS = ("paired", "flexible", "perfect")
@@ -94,7 +94,7 @@ def generator_rewards(regret: jax.Array, num_steps: int) -> tuple[jax.Array, jax
     """The generator's episode as a reward signal: ``(rewards f32[T, N], dones bool[T, N])`` with
     T = ``num_steps`` (the level-building MDP's budget), the regret ``f32[N]`` on the last step and
     0 before, and the episode ending there, so GAE never bootstraps past the generator's episode
-    (:func:`remidi.engine.core.ppo.compute_gae` gives ``reward − V`` at its last step whatever value
+    (:func:`remidi.engine.learner.compute_gae` gives ``reward − V`` at its last step whatever value
     follows)."""
     n = regret.shape[0]
     last = jnp.arange(num_steps)[:, None] == num_steps - 1
@@ -193,12 +193,13 @@ class LevelGenerator(Adversary):
         # under normalize_obs the antagonist reads observations normalised by the protagonist's
         # running statistics (both play these levels), which only the protagonist's rollout updates
         as_antagonist = runner.learner.replace(train_state=state.antagonist)
-        traj, adv, targets, ant_mean, ant_best = lrn.collect(setup, as_antagonist, k_roll, proposal.levels, None)
-        antagonist, _ = lrn.learn(setup, as_antagonist, k_ant, traj, adv, targets)
+        played = lrn.collect(setup, as_antagonist, k_roll, proposal.levels, None)
+        traj, ant_mean, ant_best = played.traj, played.mean_return, played.best_return
+        antagonist = lrn.train(setup, as_antagonist, True, k_ant, played)[0].train_state
         optimal = jax.vmap(task.optimal_return)(proposal.levels) if task.optimal_return is not None else None
         p = cfg.paired
-        mean_return = outcome.mean_return
-        regret = regret_estimate(p.estimator, mean_return, outcome.best_return, ant_mean, ant_best, optimal,
+        mean_return = outcome.collection.mean_return
+        regret = regret_estimate(p.estimator, mean_return, outcome.collection.best_return, ant_mean, ant_best, optimal,
                                  p.clip_negative)
         paid = self._pay(setup, regret, outcome.overlap)
         # the generator: paid on its last step, no bootstrap past its episode

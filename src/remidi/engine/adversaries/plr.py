@@ -69,7 +69,7 @@ class LevelBuffers(Adversary):
         by score, never one whose rollout overlaps a frozen level completely (scored −inf); a
         rehearsal changes no buffer."""
         state, n, bcfg = runner.adversary, setup.cfg.num_envs, setup.buffer
-        record = {"max_return": outcome.best_return}
+        record = {"max_return": outcome.collection.best_return}
 
         def rescore(_):
             return buf.update_scores(proposal.buffer, proposal.slots, outcome.scores, record), jnp.zeros((n,), bool)
@@ -155,17 +155,19 @@ def sequence_frozen(setup, runner, proposal: Proposal):
 
 
 def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: Outcome):
-    """The end of a sequence's update, given its adversary ``state`` after counting: the tracker
-    learns from the rollout (a learned model); at a ``switch`` (bool[]) the active adversary is
-    frozen and the next takes over, and with it the policy (Combine, ``remidi.policy``) and the
-    tracker's model freeze. Returns ``(runner, the tracker's step metrics)``."""
-    tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.traj)
-    learner = freeze_policy(runner.learner, runner.adversary.active, switch)
-    runner = runner.replace(tracker=tracker)
-    tracker = setup.tracker.freeze(setup, runner, switch)
+    """The end of a sequence's update, given its adversary ``state`` after counting: a tracker
+    with a state (a learned model) learns from the rollout; at a ``switch`` (bool[]) the active
+    adversary is frozen and the next takes over, and with it Combine's policy (``remidi.policy``)
+    and the tracker's model freeze. Returns ``(runner, the tracker's step metrics)``."""
+    metrics = {}
+    if runner.tracker is not None:  # the exact trackers keep nothing across updates
+        tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.collection.traj)
+        runner = runner.replace(tracker=setup.tracker.freeze(setup, runner.replace(tracker=tracker), switch))
+    if runner.learner.frozen_params is not None:  # remidi.policy=combine
+        runner = runner.replace(learner=freeze_policy(runner.learner, runner.adversary.active, switch))
     state = state.replace(active=jnp.where(switch, state.active + 1, state.active),
                           count=jnp.where(switch, 0, state.count))
-    return runner.replace(adversary=state, learner=learner, tracker=tracker), metrics
+    return runner.replace(adversary=state), metrics
 
 
 def switches(setup, state, count) -> jax.Array:

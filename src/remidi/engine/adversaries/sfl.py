@@ -42,7 +42,7 @@ from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
 from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
 from remidi.engine.config import BufferConfig, num_buffers
-from remidi.engine.core.rollout import nonfinite, nonfinite_names
+from remidi.engine.learner import nonfinite, nonfinite_names
 from remidi.engine.core.seeds import cond_per_seed
 
 #: the name of the refresh's rollouts in their non-finite flags (``nonfinite/reward/candidates``)
@@ -131,7 +131,7 @@ class LearnabilityBuffers(Adversary):
         """The active buffer refilled: ``sfl.batch_size × sfl.num_batches`` fresh candidates, each
         played ``sfl.rollout_steps`` steps by the current policy (one batch at a time, with the
         tracker against the frozen levels), the K most learnable kept (:func:`select_top`).
-        Returns it with its rollouts' :func:`~remidi.engine.core.rollout.nonfinite` flags."""
+        Returns it with its rollouts' :func:`~remidi.engine.learner.nonfinite` flags."""
         s = setup.cfg.sfl
         frozen = self.frozen(setup, runner, None)
 

@@ -7,7 +7,8 @@ rollout's observations afterwards. The distinguishability tracker compares *raw*
 
 Observations are flattened: every leaf of the observation pytree, ``[..., D_leaf]`` after the
 batch axes, concatenated to ``f32[..., D]`` (:func:`remidi.engine.core.networks.flatten_obs`), so a
-normalising agent must read flat vector observations (the MLP networks do).
+normalising agent must read flat vector observations (the MLP networks do). The agent's network
+reads them through :func:`remidi.engine.learner.policy_apply`.
 """
 
 from __future__ import annotations
@@ -53,17 +54,3 @@ def update_stats(stats: ObsStats, x: jax.Array) -> ObsStats:
 def normalize(stats: ObsStats, x: jax.Array) -> jax.Array:
     """``clip((x − mean) / sqrt(var + 1e-8), ±10)`` for ``x`` ``f32[..., D]``."""
     return jnp.clip((x - stats.mean) / jnp.sqrt(stats.var + EPS), -CLIP, CLIP)
-
-
-def normalizing_apply(apply_fn, stats: ObsStats | None):
-    """``apply_fn`` reading observations normalised with ``stats`` (``apply_fn`` itself if None).
-
-    The wrapped function takes the network's arguments ``(variables, carry, obs, reset)``; the
-    observation pytree (leaves ``[T, N, ...]``) is flattened to ``f32[T, N, D]`` first."""
-    if stats is None:
-        return apply_fn
-
-    def apply(variables, carry, obs, reset):
-        return apply_fn(variables, carry, normalize(stats, flatten_obs(obs)), reset)
-
-    return apply

@@ -42,7 +42,7 @@ from remidi import preemption
 from remidi.engine import train as tr
 from remidi.engine.algorithms import Algorithm
 from remidi.engine.config import UEDConfig
-from remidi.engine.core.rollout import NONFINITE
+from remidi.engine.learner import NONFINITE
 from remidi.engine.run.validation import validate_ued_config
 from remidi.engine.run.checkpoint import (CHECKPOINT, HISTORY, check_run, load_checkpoint, load_history,
                                       remove_stale_temporaries, save_run)
@@ -93,7 +93,7 @@ def _check_finite(runner, done: int) -> None:
 def nonfinite_error(flags: dict[str, np.ndarray], start: int, seeds: list[int], kept: str) -> RemidiError | None:
     """The one-line error naming the first update (``start + 1`` is the block's first) and seed
     where a rollout's non-finite flag (``nonfinite/<metric>[/<rollout>]`` f[S, B],
-    :func:`~remidi.engine.core.rollout.nonfinite`) is set; None where none is. ``kept``: what the
+    :func:`~remidi.engine.learner.nonfinite`) is set; None where none is. ``kept``: what the
     message ends with (the checkpoint that stays)."""
     hits = [(int(np.argmax(v.any(axis=0))), name) for name, v in flags.items() if np.any(v)]
     if not hits:

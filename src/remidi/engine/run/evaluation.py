@@ -7,11 +7,10 @@ import jax
 import jax.numpy as jnp
 
 from remidi.engine.adversaries import scores as sc
-from remidi.engine.core.distributions import acting, for_task
-from remidi.engine.core.rollout import Policy, Stepping, combine, rollout
-from remidi.engine.learner import combines
+from remidi.engine.core.distributions import acting
+from remidi.engine.learner import Policy, Stepping, combine, combines, policy_apply, rollout
 from remidi.engine.run.buffer_eval import buffer_solve_rates
-from remidi.engine.setup import Setup, policy_apply
+from remidi.engine.setup import Setup
 from remidi.engine.train import Runner
 from remidi.envs.interface import UEDTask
 
@@ -49,7 +48,7 @@ def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
 def first_step_policy(setup: Setup, runner: Runner, env, levels, action: str = "sample") -> jax.Array:
     """f32[L, A]: the action probabilities at the first step of each level (leaves [L, ...]) of
     the policy that acts there (under ``remidi.policy=combine``, the combined policy:
-    :func:`~remidi.engine.core.rollout.combine`); with ``action="mode"`` one-hot on its most
+    :func:`~remidi.engine.learner.combine`); with ``action="mode"`` one-hot on its most
     likely action."""
     task, net = setup.task, setup.net
     n = jax.tree.leaves(levels)[0].shape[0]
@@ -69,7 +68,7 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels, action: str = "
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
         frozen_carry = jax.tree.map(lambda x: jnp.broadcast_to(x, (copies,) + x.shape), carry)
         _, logits = combine(frozen, tstate, apply_fn, frozen_carry, obs_in, reset, logits)
-    return acting(for_task(task), action).probs(logits)
+    return acting(setup.dist, action).probs(logits)
 
 
 def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng, action: str = "sample"):
@@ -95,7 +94,7 @@ def level_episodes(setup: Setup, runner: Runner, env, levels, attempts: int, rng
                                     solved_info=sc.info_key(task.solved)),
                       Policy(policy_apply(setup, runner.learner), runner.learner.train_state.params,
                              setup.net.initialize_carry(n)),
-                      tiled, task.max_episode_steps, frozen, dist=acting(for_task(task), action))
+                      tiled, task.max_episode_steps, frozen, dist=acting(setup.dist, action))
     returns = first_episode_return(traj.reward, traj.done).reshape(-1, attempts)
     discounted = first_episode_return(traj.reward, traj.done, setup.cfg.ppo.gamma).reshape(-1, attempts)
     flags = None if traj.solved is None else first_episode_flag(traj.done, traj.solved).reshape(-1, attempts)

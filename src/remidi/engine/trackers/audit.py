@@ -40,8 +40,8 @@ def audit_against_exact(tracker, setup, runner, rng) -> dict[str, jax.Array]:
     # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
     budget = exact_budget(setup.task, cfg.remidi, "prefix")
     exact = frozen.replace(belief=None, tracker=make_tracker("prefix", budget))
-    belief = collect(setup, runner.learner, k_roll, levels, frozen)[0].indist
-    reference = collect(setup, runner.learner, k_roll, levels, exact)[0].indist
+    belief = collect(setup, runner.learner, k_roll, levels, frozen).traj.indist
+    reference = collect(setup, runner.learner, k_roll, levels, exact).traj.indist
     nan = jnp.where(runner.adversary.active > 0, 0.0, jnp.nan)
     out = {"belief/explained": jnp.mean(belief.astype(jnp.float32)) + nan,
            "belief/exact_explained": jnp.mean(reference.astype(jnp.float32)) + nan,

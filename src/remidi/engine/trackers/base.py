@@ -14,7 +14,7 @@ Per update (the train step, :mod:`remidi.engine.train`):
 * :meth:`Tracker.freeze`: at an adversary switch, what it freezes with the adversary;
 * :meth:`Tracker.metrics` and :meth:`Tracker.audit`: what evaluation reports of it.
 
-Per rollout step (:func:`remidi.engine.core.rollout.rollout`, through ``frozen.tracker``):
+Per rollout step (:func:`remidi.engine.learner.rollout`, through ``frozen.tracker``):
 :meth:`Tracker.reset` and :meth:`Tracker.step` wrap the environments' reset and step (by default
 the plain ones, then :meth:`start` / :meth:`observe` beside them), :meth:`indistinguishable` says which
 envs' prefixes are indistinguishable before each action, :meth:`overflow` what the tracker could
@@ -107,7 +107,7 @@ class Tracker:
     # ------------------------------------------------------------------ per rollout step
     def reset(self, envs, frozen: Frozen, reset_keys, levels):
         """The N envs reset to ``levels`` with ``reset_keys`` [N] (``envs``: the rollout's
-        :class:`~remidi.engine.core.rollout.Stepping`): ``(obs, env state, tracker state)``."""
+        :class:`~remidi.engine.learner.Stepping`): ``(obs, env state, tracker state)``."""
         obs, state = jax.vmap(envs.auto.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, envs.params)
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs)
 

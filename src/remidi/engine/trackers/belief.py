@@ -247,7 +247,7 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     otherwise nothing changes): record the rollout's prefix scores under the model before the
     update (held out; not for the model's first rollout since the switch, whose scores are the
     untrained model's), then ``epochs`` :func:`fit_step` on all
-    its steps. ``traj``: a :class:`~remidi.engine.core.rollout.Trajectory` (leaves [T, N, ...]). Returns
+    its steps. ``traj``: a :class:`~remidi.engine.learner.Trajectory` (leaves [T, N, ...]). Returns
     ``(memory, loss f32[]: the first epoch's, NaN when not trained)``.
 
     With a reference (``memory.ref``, :func:`freeze` judges by the ratio over it): the rollout is

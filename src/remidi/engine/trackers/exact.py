@@ -151,7 +151,10 @@ class ExactTracker(Tracker):
     def compare(self, obs_f, obs) -> jax.Array:
         """bool[F]: frozen observation f (leaves [F, ...]) is the agent's ``obs`` (exact equality;
         :mod:`~remidi.engine.trackers.tolerance` overrides it)."""
-        return jax.vmap(tree_equal, in_axes=(0, None))(obs_f, obs)
+        same = jnp.ones(jax.tree.leaves(obs_f)[0].shape[:1], bool)
+        for frozen_leaf, leaf in zip(jax.tree.leaves(obs_f), jax.tree.leaves(obs)):
+            same = same & jnp.all((frozen_leaf == leaf).reshape(frozen_leaf.shape[0], -1), axis=1)
+        return same
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
         """The state at the envs' first observations ``obs`` (reset with ``reset_keys`` [N])."""
@@ -208,7 +211,7 @@ class CandidateTracker(ExactTracker):
         keys = jnp.concatenate([reset_keys, frozen_keys])
         obs_all, states_all = jax.vmap(envs.raw.reset_to_level, in_axes=(0, 0, None))(keys, both, envs.params)
         obs, raw_state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
-        state = jax.vmap(envs.auto.start_state)(obs, raw_state, levels)
+        state = envs.start(obs, raw_state, levels)
         starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs, starts)
 
@@ -301,8 +304,7 @@ def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tst
     actions = jnp.concatenate([action, action[owner]])
     stepped = jax.vmap(envs.raw.step, in_axes=(0, 0, 0, None))(keys, batch, actions, envs.params)
     own = jax.tree.map(lambda x: x[:num_envs], stepped)
-    next_obs, state, reward, done, _ = jax.vmap(envs.auto.restart_where_done, in_axes=(0, 0, None))(
-        state, own, envs.params)
+    next_obs, state, reward, done, _ = envs.restart_where_done(state, own, None)  # a deterministic reset
     if size == 0:
         match = jnp.where(done[:, None], tstate.start_match, False)
         return next_obs, state, reward, done, tstate.replace(match=match, restarted=done)

@@ -96,7 +96,7 @@ def recorded_codes(coding: ObsCoding, obs, resets) -> jax.Array:
 
 def count_rollout(counts, env, params, coding: ObsCoding, reseed, levels, traj, key) -> jax.Array:
     """``counts`` with a rollout's triples: each env's level (``levels`` leaves [N, ...]) replayed
-    twice with the rollout's (``traj``: a :class:`~remidi.engine.core.rollout.Trajectory`)
+    twice with the rollout's (``traj``: a :class:`~remidi.engine.learner.Trajectory`)
     actions i32[T, N] and resets bool[T, N], each copy's randomness drawn afresh (``reseed(key,
     level) -> level``, or None: the level as it is), beside the agent's observations (leaves
     [T, N, ...])."""

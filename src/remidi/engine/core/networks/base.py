@@ -1,5 +1,8 @@
 """The pieces every network is built from: initialisers, activations, reading an observation's
-fields, the policy and value heads, the LSTM over a rollout and the patch convolution.
+fields, the policy and value heads, the LSTM over a rollout and the patch convolution; and the
+action distributions the policy head's output parameterises (:class:`Categorical`,
+:class:`MultiCategorical`, :class:`DiagGaussian`; one is chosen per task by
+:mod:`remidi.engine.core.distributions`).
 
 Initialisation follows common PPO practice: orthogonal weights with gain ``sqrt(2)`` in hidden
 layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero biases.
@@ -7,6 +10,8 @@ layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero bias
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Any
 
 import flax.linen as nn
@@ -23,6 +28,7 @@ HIDDEN_INIT = nn.initializers.orthogonal(np.sqrt(2.0))
 POLICY_INIT = nn.initializers.orthogonal(0.01)
 VALUE_INIT = nn.initializers.orthogonal(1.0)
 ZEROS = nn.initializers.zeros
+_LOG_2PI = math.log(2.0 * math.pi)
 
 
 def activation_fn(name: str):
@@ -81,7 +87,7 @@ class ActorCriticHeads(nn.Module):
 
     @nn.compact
     def __call__(self, x):
-        act = activation_fn(self.activation)
+        act = ACTIVATIONS[self.activation]  # checked when the network is made (registry.make_network)
         d = x.shape[-1]
         (pk, pb), (vk, vb) = (_Kernel((d, self.hidden), HIDDEN_INIT, True, name=f"{head}_hidden")()
                               for head in ("policy", "value"))
@@ -217,3 +223,131 @@ def flat_problem(obs) -> str | None:
         if not hasattr(leaf, "shape") or np.dtype(leaf.dtype).kind not in "biuf":
             return f"a leaf is {type(leaf).__name__}, not a numeric array"
     return None
+
+
+# ---------------------------------------------------------------------------- the policy's distributions
+# what a policy head's output parameterises (chosen per action space by
+# :func:`remidi.engine.core.distributions.for_task`): sampled in the rollout, scored in PPO's loss
+
+
+@dataclass(frozen=True)
+class Categorical:
+    """Softmax over ``out`` (logits ``f32[..., A]``). ``n``: ``A``, the network's logits (None: a
+    distribution that only samples and scores, reading ``A`` from ``out``)."""
+
+    n: int | None = None
+    continuous = False
+
+    @property
+    def network_actions(self) -> int:
+        return self.n
+
+    @staticmethod
+    def sample(key: jax.Array, out: jax.Array) -> jax.Array:
+        """i32[...]: one action per batch entry."""
+        return jax.random.categorical(key, out)
+
+    @staticmethod
+    def log_prob(out: jax.Array, action: jax.Array) -> jax.Array:
+        """f32[...]: log π(action)."""
+        log_pi = jax.nn.log_softmax(out)
+        return jnp.take_along_axis(log_pi, action[..., None].astype(jnp.int32), axis=-1)[..., 0]
+
+    @staticmethod
+    def entropy(out: jax.Array) -> jax.Array:
+        """f32[...]: −Σ π log π."""
+        log_pi = jax.nn.log_softmax(out)
+        return -jnp.sum(jnp.exp(log_pi) * log_pi, axis=-1)
+
+    @staticmethod
+    def mode(out: jax.Array) -> jax.Array:
+        return jnp.argmax(out, axis=-1)
+
+    @staticmethod
+    def probs(out: jax.Array) -> jax.Array:
+        """f32[..., A]: the probability of each action."""
+        return jax.nn.softmax(out, axis=-1)
+
+
+@dataclass(frozen=True)
+class DiagGaussian:
+    """Independent Gaussians per action dimension: ``out = [mean f32[..., A], log_std f32[..., A]]``.
+    ``dims``: ``A`` (None: read from ``out``)."""
+
+    dims: int | None = None
+    continuous = True
+
+    @property
+    def network_actions(self) -> int:
+        return self.dims
+
+    @staticmethod
+    def split(out: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """``(mean, log_std)``, each ``f32[..., A]``."""
+        a = out.shape[-1] // 2
+        return out[..., :a], out[..., a:]
+
+    @staticmethod
+    def sample(key: jax.Array, out: jax.Array) -> jax.Array:
+        """f32[..., A]: ``mean + std · ε``."""
+        mean, log_std = DiagGaussian.split(out)
+        return mean + jnp.exp(log_std) * jax.random.normal(key, mean.shape, mean.dtype)
+
+    @staticmethod
+    def log_prob(out: jax.Array, action: jax.Array) -> jax.Array:
+        """f32[...]: Σ_d log N(action_d; mean_d, std_d²)."""
+        mean, log_std = DiagGaussian.split(out)
+        z = (action - mean) * jnp.exp(-log_std)
+        return jnp.sum(-0.5 * jnp.square(z) - log_std - 0.5 * _LOG_2PI, axis=-1)
+
+    @staticmethod
+    def entropy(out: jax.Array) -> jax.Array:
+        """f32[...]: Σ_d (log std_d + ½ log(2πe))."""
+        _, log_std = DiagGaussian.split(out)
+        return jnp.sum(log_std + 0.5 * (_LOG_2PI + 1.0), axis=-1)
+
+    @staticmethod
+    def mode(out: jax.Array) -> jax.Array:
+        return DiagGaussian.split(out)[0]
+
+
+@dataclass(frozen=True)
+class MultiCategorical:
+    """Independent categoricals, one per component: component ``i`` has ``nvec[i]`` choices and
+    its logits are the next ``nvec[i]`` entries of ``out`` (``f32[..., Σ nvec]``); an action is
+    ``i32[..., k]``. Its log-probability and entropy are the components' sums."""
+
+    nvec: tuple[int, ...]
+    continuous = False
+
+    @property
+    def network_actions(self) -> int:
+        return sum(self.nvec)
+
+    def split(self, out: jax.Array) -> list[jax.Array]:
+        """The components' logits, ``f32[..., nvec[i]]`` each."""
+        starts = [sum(self.nvec[:i]) for i in range(len(self.nvec))]
+        return [out[..., s:s + n] for s, n in zip(starts, self.nvec)]
+
+    def sample(self, key: jax.Array, out: jax.Array) -> jax.Array:
+        """i32[..., k]: each component drawn with its own key."""
+        keys = jax.random.split(key, len(self.nvec))
+        return jnp.stack([jax.random.categorical(k, logits) for k, logits in zip(keys, self.split(out))], axis=-1)
+
+    def log_prob(self, out: jax.Array, action: jax.Array) -> jax.Array:
+        """f32[...]: Σ_i log π_i(action[..., i])."""
+        return sum(Categorical.log_prob(logits, action[..., i]) for i, logits in enumerate(self.split(out)))
+
+    def entropy(self, out: jax.Array) -> jax.Array:
+        """f32[...]: Σ_i H(π_i)."""
+        return sum(Categorical.entropy(logits) for logits in self.split(out))
+
+    def mode(self, out: jax.Array) -> jax.Array:
+        """i32[..., k]: each component's most likely choice."""
+        return jnp.stack([jnp.argmax(logits, axis=-1) for logits in self.split(out)], axis=-1)
+
+
+#: size-free distributions: they sample and score any number of actions (the rollout's and PPO's
+#: defaults); :func:`~remidi.engine.core.distributions.for_task` gives the sized one a network is built for
+CATEGORICAL = Categorical()
+GAUSSIAN = DiagGaussian()

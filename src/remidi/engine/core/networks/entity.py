@@ -39,7 +39,7 @@ from collections.abc import Mapping
 import flax.linen as nn
 import jax.numpy as jnp
 
-from remidi.engine.core.networks.base import (activation_fn, dense, has_field, lstm_and_heads, lstm_carry_or_dummy,
+from remidi.engine.core.networks.base import (ACTIVATIONS, dense, has_field, lstm_and_heads, lstm_carry_or_dummy,
                                               obs_field, shape_text)
 from remidi.errors import ConfigError, choice
 
@@ -128,7 +128,7 @@ class EntityActorCritic(nn.Module):
 
     @nn.compact
     def __call__(self, carry, obs, reset):
-        act = activation_fn(self.activation)
+        act = ACTIVATIONS[self.activation]  # checked when the network is made (registry.make_network)
         groups = entity_groups(obs)
         tokens, masks = [], []
         for g, (_, features, mask) in enumerate(groups):

@@ -8,8 +8,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from remidi.engine.core.networks.base import (HIDDEN_INIT, ZEROS, ActorCriticHeads, PatchConv, ResetLSTM,
-                                              activation_fn, flat_problem, flatten_obs, has_field, obs_field,
+from remidi.engine.core.networks.base import (ACTIVATIONS, HIDDEN_INIT, ZEROS, ActorCriticHeads, PatchConv, ResetLSTM,
+                                              flat_problem, flatten_obs, has_field, obs_field,
                                               shape_text, zero_lstm_carry)
 
 
@@ -50,7 +50,7 @@ class FeedForwardActorCritic(nn.Module):
     @nn.compact
     def __call__(self, carry, obs, reset):
         del reset  # no state to reset
-        act = activation_fn(self.activation)
+        act = ACTIVATIONS[self.activation]  # checked when the network is made (registry.make_network)
         x = flatten_obs(obs)
         for i, width in enumerate(self.hidden):
             x = act(nn.Dense(width, kernel_init=HIDDEN_INIT, bias_init=ZEROS, name=f"trunk_{i}")(x))
@@ -146,7 +146,7 @@ class MLPLSTMActorCritic(nn.Module):
 
     @nn.compact
     def __call__(self, carry, obs, reset):
-        act = activation_fn(self.activation)
+        act = ACTIVATIONS[self.activation]  # checked when the network is made (registry.make_network)
         x = flatten_obs(obs)
         for i, width in enumerate(self.hidden):
             x = act(nn.Dense(width, kernel_init=HIDDEN_INIT, bias_init=ZEROS, name=f"trunk_{i}")(x))

@@ -128,13 +128,9 @@ class Adversary:
         return Proposal(replay=replay, levels=fresh, buffer=buf.select_buffer(state.buffers, state.active),
                         slots=None, train=replay | self.trains_on_fresh)
 
-    def frozen(self, setup, runner, proposal: Proposal):
+    def frozen(self, setup, runner, proposal: Proposal | None = None):
         """The rollout's :class:`~remidi.engine.trackers.base.Frozen` view (None: nothing is frozen
         and no tracker runs beside the environments)."""
-        return None
-
-    def frozen_levels(self, setup, runner):
-        """``(levels [F, ...], valid bool[F])``: the earlier adversaries' levels; None: none."""
         return None
 
     def active_levels(self, setup, runner):

@@ -34,7 +34,7 @@ from flax import struct
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers
-from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
+from remidi.engine.adversaries.plr import buffer_contents, sequence_advance, sequence_frozen
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
 from remidi.engine.core.ppo import create_train_state
@@ -276,11 +276,8 @@ class GeneratorSequence(LevelGenerator):
             raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
                               "LevelGenerator); allowed: buffer_sequence=True")
 
-    def frozen(self, setup, runner, proposal: Proposal):
+    def frozen(self, setup, runner, proposal: Proposal | None = None):
         return sequence_frozen(setup, runner, proposal)
-
-    def frozen_levels(self, setup, runner):
-        return earlier_buffers(setup, runner.adversary)
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
         """Every update plays the active generator's levels: a learned tracker's model learns from each."""
@@ -316,14 +313,15 @@ class GeneratorSequence(LevelGenerator):
         """After ``remidi.steps_per_buffer`` updates: freeze the generator's reservoir, move to the
         next and start a fresh generator (new parameters and optimiser state); the tracker and the
         policy freeze at the same switch (:func:`~remidi.engine.adversaries.plr.sequence_advance`)."""
-        runner, _ = super().advance(setup, runner, proposal, outcome)
-        state = runner.adversary
+        counted, _ = super().advance(setup, runner, proposal, outcome)
+        runner, metrics = sequence_advance(setup, counted, counted.adversary, proposal, outcome)
+        state, before = runner.adversary, counted.adversary
         if state.next_generators is None:  # remidi.num_buffers=1: one generator, never switched
-            return sequence_advance(setup, runner, state, jnp.asarray(False), proposal, outcome)
-        switch = switches(setup, state, state.count)
-        fresh = jax.tree.map(lambda x: x[jnp.minimum(state.active, x.shape[0] - 1)], state.next_generators)
+            return runner, metrics
+        switch = state.active != before.active
+        fresh = jax.tree.map(lambda x: x[jnp.minimum(before.active, x.shape[0] - 1)], state.next_generators)
         old = state.generator
         pick = lambda f, g: jax.tree.map(lambda a, b: jnp.where(switch, a, b), f, g)  # noqa: E731
         generator = old.replace(params=pick(fresh.params, old.params), opt_state=pick(fresh.opt_state, old.opt_state),
                                 step=pick(fresh.step, old.step))
-        return sequence_advance(setup, runner, state.replace(generator=generator), switch, proposal, outcome)
+        return runner.replace(adversary=state.replace(generator=generator)), metrics

@@ -7,7 +7,7 @@ levels sampled from it (by score rank or top-k, mixed with staleness:
 inserted by score. With ``buffer_sequence`` (ReMiDi) the adversary is a sequence of
 ``remidi.num_buffers`` buffers: after ``remidi.steps_per_buffer`` updates the active one is frozen
 and the next takes over (the last stays); the frozen ones' levels go to the tracker
-(:meth:`LevelBuffers.frozen_levels`), a fresh level a frozen one explains at every step (a
+(:func:`sequence_frozen`), a fresh level a frozen one explains at every step (a
 complete overlap) is never inserted, and with ``remidi.rehearsal`` an update may instead rehearse
 a frozen buffer's levels (:func:`rehearse_frozen`).
 """
@@ -51,13 +51,9 @@ class LevelBuffers(Adversary):
             proposal = rehearse_frozen(setup, state, proposal, jax.random.fold_in(k_branch, 1))
         return proposal
 
-    def frozen(self, setup, runner, proposal: Proposal):
+    def frozen(self, setup, runner, proposal: Proposal | None = None):
         """A sequence's tracker view of its earlier buffers (:func:`sequence_frozen`); None for one buffer."""
         return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
-
-    def frozen_levels(self, setup, runner):
-        """A sequence's earlier buffers (:func:`earlier_buffers`); nothing for a single buffer."""
-        return earlier_buffers(setup, runner.adversary) if self.buffer_sequence else None
 
     def best_return(self, proposal: Proposal, best_return):
         """For a replayed level, the buffer's record too."""
@@ -98,29 +94,17 @@ class LevelBuffers(Adversary):
                                                    if setup.cfg.remidi.count == "replays" else 1))
         if not self.buffer_sequence:
             return runner.replace(adversary=state), {}
-        return sequence_advance(setup, runner, state, switches(setup, state, state.count), proposal, outcome)
+        return sequence_advance(setup, runner, state, proposal, outcome)
 
     def metrics(self, setup, runner) -> dict:
         return buffer_contents(setup, runner.adversary)
-
-
-def earlier_buffers(setup, state):
-    """``(levels, valid)``: the levels of every buffer of a sequence before the active one, as one
-    batch of F = (K−1)·capacity (buffer-major; None with fewer than two buffers)."""
-    if setup.cfg.remidi.num_buffers < 2:
-        return None
-    earlier = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
-    k = earlier.valid.shape[0]
-    valid = earlier.valid & (jnp.arange(k) < state.active)[:, None]
-    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), earlier.levels)
-    return flat, valid.reshape(-1)
 
 
 def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
     """``remidi.rehearsal``: with that probability, once an earlier buffer of the sequence holds
     levels, ``proposal`` gives way to a rehearsal: N levels drawn uniformly (with replacement) from
     the valid levels of one of the non-empty earlier buffers, chosen uniformly. A rehearsal trains
-    on every step (:meth:`Proposal.explained`), is no replay of the active buffer (``replay``
+    on every step (:attr:`~remidi.engine.trackers.base.Frozen.rehearse`), is no replay of the active buffer (``replay``
     False: nothing is rescored, inserted or sampled, and ``remidi.count=replays`` does not count
     it), and reads the frozen buffers without changing them (no clock tick, no ``last_seen``).
 
@@ -144,21 +128,29 @@ def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
                             rehearse=rehearse)
 
 
-def sequence_frozen(setup, runner, proposal: Proposal):
+def sequence_frozen(setup, runner, proposal: Proposal | None = None):
     """The tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of a sequence's
-    frozen levels for this update's rollout; a rehearsal's rollout explains no step (its levels
-    are frozen levels: rehearsal trains on every step to keep what they taught)."""
-    view = setup.tracker.frozen(setup, runner)
+    frozen levels, every buffer before the active one as one batch of F = (K−1)·capacity
+    (buffer-major; nothing frozen with fewer than two buffers). A rehearsal's rollout explains no
+    step (its levels are frozen levels: rehearsal trains on every step to keep what they taught)."""
+    state, earlier = runner.adversary, None
+    if setup.cfg.remidi.num_buffers >= 2:
+        buffers = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
+        valid = buffers.valid & (jnp.arange(buffers.valid.shape[0]) < state.active)[:, None]
+        earlier = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), buffers.levels), valid.reshape(-1)
+    view = setup.tracker.frozen(setup, runner, earlier)
     if view is None or proposal is None or proposal.rehearse is None:
         return view
     return view.replace(rehearse=proposal.rehearse)
 
 
-def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: Outcome):
+def sequence_advance(setup, runner, state, proposal: Proposal, outcome: Outcome):
     """The end of a sequence's update, given its adversary ``state`` after counting: a tracker
-    with a state (a learned model) learns from the rollout; at a ``switch`` (bool[]) the active
-    adversary is frozen and the next takes over, and with it Combine's policy (``remidi.policy``)
-    and the tracker's model freeze. Returns ``(runner, the tracker's step metrics)``."""
+    with a state (a learned model) learns from the rollout; after ``remidi.steps_per_buffer``
+    counted updates (and unless the active adversary is the last) the active one is frozen and
+    the next takes over, and with it Combine's policy (``remidi.policy``) and the tracker's model
+    freeze. Returns ``(runner, the tracker's step metrics)``."""
+    switch = (state.count >= setup.cfg.remidi.steps_per_buffer) & (state.active + 1 < state.buffers.valid.shape[0])
     metrics = {}
     if runner.tracker is not None:  # the exact trackers keep nothing across updates
         tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.collection.traj)
@@ -168,13 +160,6 @@ def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: 
     state = state.replace(active=jnp.where(switch, state.active + 1, state.active),
                           count=jnp.where(switch, 0, state.count))
     return runner.replace(adversary=state), metrics
-
-
-def switches(setup, state, count) -> jax.Array:
-    """bool[]: a sequence moves to its next buffer (or generator): ``count`` (this update's count on
-    the active one) reached ``remidi.steps_per_buffer`` and the active one is not the last."""
-    k = state.buffers.valid.shape[0]
-    return (count >= setup.cfg.remidi.steps_per_buffer) & (state.active + 1 < k)
 
 
 def buffer_contents(setup, state) -> dict:

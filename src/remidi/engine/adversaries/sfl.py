@@ -17,7 +17,7 @@ With ``buffer_sequence`` (``remidi-sfl``) the adversary is a sequence of ``remid
 SFL buffers of ``remidi.buffer_capacity`` levels each, the active one refreshed every
 ``sfl.refresh_every`` updates *on it* (a new buffer is filled at its first update) and switched
 after ``remidi.steps_per_buffer`` updates; the frozen buffers' levels go to the tracker
-(:meth:`LearnabilityBuffers.frozen_levels`). The refresh's candidate rollouts run with the tracker
+(:meth:`LearnabilityBuffers.frozen`). The refresh's candidate rollouts run with the tracker
 beside them, against the same frozen levels as the update's rollout: a candidate whose rollout
 the frozen levels explain at every step (a complete overlap, as the train step's ``overlap``)
 scores −inf and is never kept. The learner's loss is masked where a frozen level explains the
@@ -40,7 +40,7 @@ from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
-from remidi.engine.adversaries.plr import buffer_contents, earlier_buffers, sequence_advance, sequence_frozen, switches
+from remidi.engine.adversaries.plr import buffer_contents, sequence_advance, sequence_frozen
 from remidi.engine.config import BufferConfig, num_buffers
 from remidi.engine.learner import nonfinite, nonfinite_names
 from remidi.engine.core.seeds import cond_per_seed
@@ -153,11 +153,7 @@ class LearnabilityBuffers(Adversary):
                            extras={"solve_rate": kept(rates)}, last_seen=jnp.zeros_like(old.last_seen),
                            time=old.time + 1), jax.tree.map(jnp.max, flags)
 
-    def frozen_levels(self, setup, runner):
-        """A sequence's earlier buffers; nothing for a single buffer."""
-        return earlier_buffers(setup, runner.adversary) if self.buffer_sequence else None
-
-    def frozen(self, setup, runner, proposal: Proposal):
+    def frozen(self, setup, runner, proposal: Proposal | None = None):
         """A sequence's tracker view of its earlier buffers; None for one buffer."""
         return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
 
@@ -178,7 +174,7 @@ class LearnabilityBuffers(Adversary):
         state = runner.adversary.replace(count=runner.adversary.count + 1)
         if not self.buffer_sequence:
             return runner.replace(adversary=state), {}
-        return sequence_advance(setup, runner, state, switches(setup, state, state.count), proposal, outcome)
+        return sequence_advance(setup, runner, state, proposal, outcome)
 
     def metrics(self, setup, runner) -> dict:
         return buffer_contents(setup, runner.adversary)

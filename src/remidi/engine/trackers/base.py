@@ -75,10 +75,9 @@ class Tracker:
         """The state carried across updates (``Runner.tracker``); ``rng``: the runner's key, folded."""
         return None
 
-    def frozen(self, setup, runner) -> Frozen | None:
-        """The earlier adversaries' levels (the adversary's ``frozen_levels``) for a rollout, with
-        the policies frozen with them under Combine."""
-        earlier = setup.algo.adversary.frozen_levels(setup, runner)
+    def frozen(self, setup, runner, earlier) -> Frozen | None:
+        """The rollout's view of the earlier adversaries' levels ``earlier = (levels [F, ...],
+        valid bool[F])`` (None: nothing frozen), with the policies frozen with them under Combine."""
         if earlier is None:
             return None
         levels, valid = earlier

@@ -1,16 +1,12 @@
-"""The PLR family's adversary (:class:`LevelBuffers`): PLR⊥, minimax return, and ReMiDi's
-sequence of level buffers.
+"""The PLR family's adversary (:class:`LevelBuffers`): PLR⊥, minimax return, ReMiDi's buffer sequence.
 
 With probability ``buffer.replay_prob``, once the active buffer can replay, an update replays N
-levels sampled from it (by score rank or top-k, mixed with staleness:
-:mod:`remidi.engine.adversaries.level_buffer`); otherwise it plays N fresh levels, scored and
-inserted by score. With ``buffer_sequence`` (ReMiDi) the adversary is a sequence of
-``remidi.num_buffers`` buffers: after ``remidi.steps_per_buffer`` updates the active one is frozen
-and the next takes over (the last stays); the frozen ones' levels go to the tracker
-(:meth:`LevelBuffers.frozen_levels`), a fresh level a frozen one explains at every step (a
-complete overlap) is never inserted, and with ``remidi.rehearsal`` an update may instead rehearse
-a frozen buffer's levels (:func:`rehearse_frozen`).
-"""
+levels sampled from it (:mod:`remidi.engine.adversaries.level_buffer`); otherwise it plays N
+fresh levels, scored and inserted. With ``buffer_sequence`` (ReMiDi) there are
+``remidi.num_buffers`` buffers: after ``remidi.steps_per_buffer`` updates the active one is
+frozen and the next takes over (the last stays). Frozen levels go to the tracker; a fresh level a
+frozen one explains at every step is never inserted; ``remidi.rehearsal`` may replay frozen levels
+instead (:func:`rehearse_frozen`)."""
 
 from __future__ import annotations
 
@@ -38,8 +34,8 @@ class LevelBuffers(Adversary):
         return super().init(setup, example_level, example_obs, rng).replace(buffers=empty_buffers(setup, example_level))
 
     def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
-        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``:
-        which) or the N ``fresh`` levels; a sequence may rehearse a frozen buffer instead."""
+        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``: which) or the
+        N ``fresh`` ones; a sequence may rehearse a frozen buffer instead."""
         state, bcfg = runner.adversary, setup.buffer
         active = buf.select_buffer(state.buffers, state.active)
         replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
@@ -65,9 +61,8 @@ class LevelBuffers(Adversary):
         return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
 
     def update(self, setup, runner, proposal: Proposal, outcome: Outcome, rng):
-        """Replayed levels get their new scores; fresh levels are inserted into the active buffer
-        by score, never one whose rollout overlaps a frozen level completely (scored −inf); a
-        rehearsal changes no buffer."""
+        """Replayed levels are rescored; fresh ones are inserted by score unless a frozen level explains
+        them completely; a rehearsal changes no buffer."""
         state, n, bcfg = runner.adversary, setup.cfg.num_envs, setup.buffer
         record = {"max_return": outcome.best_return}
 
@@ -91,8 +86,7 @@ class LevelBuffers(Adversary):
         return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted, {}
 
     def advance(self, setup, runner, proposal: Proposal, outcome: Outcome):
-        """Count the update on the active buffer (a replay only, with ``remidi.count=replays``);
-        a sequence switches after ``remidi.steps_per_buffer`` of them (:func:`sequence_advance`)."""
+        """Count the update (only replays with ``remidi.count=replays``); a sequence may switch."""
         state = runner.adversary
         state = state.replace(count=state.count + (proposal.replay.astype(jnp.int32)
                                                    if setup.cfg.remidi.count == "replays" else 1))
@@ -105,8 +99,8 @@ class LevelBuffers(Adversary):
 
 
 def earlier_buffers(setup, state):
-    """``(levels, valid)``: the levels of every buffer of a sequence before the active one, as one
-    batch of F = (K−1)·capacity (buffer-major; None with fewer than two buffers)."""
+    """``(levels [F, ...], valid bool[F])``: every buffer before the active one, F = (K−1)·capacity,
+    buffer-major; None with fewer than two buffers."""
     if setup.cfg.remidi.num_buffers < 2:
         return None
     earlier = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
@@ -117,16 +111,12 @@ def earlier_buffers(setup, state):
 
 
 def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
-    """``remidi.rehearsal``: with that probability, once an earlier buffer of the sequence holds
-    levels, ``proposal`` gives way to a rehearsal: N levels drawn uniformly (with replacement) from
-    the valid levels of one of the non-empty earlier buffers, chosen uniformly. A rehearsal trains
-    on every step (:meth:`Proposal.explained`), is no replay of the active buffer (``replay``
-    False: nothing is rescored, inserted or sampled, and ``remidi.count=replays`` does not count
-    it), and reads the frozen buffers without changing them (no clock tick, no ``last_seen``).
+    """``remidi.rehearsal``: with that probability, replace ``proposal`` by N levels from a frozen buffer.
 
-    Uniform, not by the frozen buffer's replay distribution: its scores stopped being updated when
-    it was frozen, and rehearsal is meant to keep the behaviour on the whole of an earlier
-    adversary's support, not on the levels that had the most regret then."""
+    The buffer is chosen uniformly among non-empty frozen ones, its levels uniformly with
+    replacement. A rehearsal trains on every step, is no replay (nothing rescored, inserted or
+    counted) and leaves the frozen buffers unchanged. Uniform, not by score: frozen scores are stale,
+    and rehearsal should keep behaviour on the whole earlier support."""
     n = setup.cfg.num_envs
     k_draw, k_buffer, k_slots = jax.random.split(rng, 3)
     valid = state.buffers.valid  # bool[K, C]
@@ -145,9 +135,7 @@ def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
 
 
 def sequence_frozen(setup, runner, proposal: Proposal):
-    """The tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of a sequence's
-    frozen levels for this update's rollout; a rehearsal's rollout explains no step (its levels
-    are frozen levels: rehearsal trains on every step to keep what they taught)."""
+    """The tracker's view of a sequence's frozen levels; a rehearsal's rollout explains no step."""
     view = setup.tracker.frozen(setup, runner)
     if view is None or proposal is None or proposal.rehearse is None:
         return view
@@ -155,10 +143,10 @@ def sequence_frozen(setup, runner, proposal: Proposal):
 
 
 def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: Outcome):
-    """The end of a sequence's update, given its adversary ``state`` after counting: the tracker
-    learns from the rollout (a learned model); at a ``switch`` (bool[]) the active adversary is
-    frozen and the next takes over, and with it the policy (Combine, ``remidi.policy``) and the
-    tracker's model freeze. Returns ``(runner, the tracker's step metrics)``."""
+    """``(runner, tracker metrics)``: end of a sequence's update, ``state`` already counted.
+
+    The tracker learns from the rollout; at ``switch`` (bool[]) the next adversary takes over and the
+    policy (``remidi.policy``) and tracker's model freeze."""
     tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.traj)
     learner = freeze_policy(runner.learner, runner.adversary.active, switch)
     runner = runner.replace(tracker=tracker)
@@ -169,15 +157,13 @@ def sequence_advance(setup, runner, state, switch, proposal: Proposal, outcome: 
 
 
 def switches(setup, state, count) -> jax.Array:
-    """bool[]: a sequence moves to its next buffer (or generator): ``count`` (this update's count on
-    the active one) reached ``remidi.steps_per_buffer`` and the active one is not the last."""
+    """bool[]: ``count`` reached ``remidi.steps_per_buffer`` and the active buffer is not the last."""
     k = state.buffers.valid.shape[0]
     return (count >= setup.cfg.remidi.steps_per_buffer) & (state.active + 1 < k)
 
 
 def buffer_contents(setup, state) -> dict:
-    """Share of each tag among the valid levels of every buffer (``buffer_fraction/<tag>/b<k>``)
-    and of the active one (``buffer_fraction/<tag>``); the active buffer's size."""
+    """``buffer_fraction/<tag>/b<k>`` and ``buffer_fraction/<tag>`` (active) tag shares, ``buffer_size``."""
     out = {}
     valid = state.buffers.valid  # bool[K, C]
     sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]

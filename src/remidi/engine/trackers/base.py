@@ -1,30 +1,16 @@
-"""The distinguishability tracker's protocol: what the train step and the rollout ask of it.
+"""The distinguishability tracker's protocol.
 
-ReMiDi needs to know, at every step of every rollout, whether the trajectory prefix so far could
-have come from an earlier (frozen) adversary. A *tracker* answers that. It is chosen once, when
-the run is set up (``Setup.tracker``, :func:`remidi.engine.trackers.tracker_for`), and is a static
-object: its state, if it keeps one across updates, is a pytree in ``Runner.tracker``.
+At every rollout step ReMiDi asks whether the prefix so far could have come from a frozen
+adversary; a tracker answers. It is a static object chosen at set-up (``Setup.tracker``); any
+state it keeps across updates is a pytree in ``Runner.tracker``.
 
-Per update (the train step, :mod:`remidi.engine.train`):
+Per update: :meth:`Tracker.init`, :meth:`Tracker.frozen` (the :class:`Frozen` view a rollout
+tracks against; None: nothing frozen), :meth:`Tracker.learn`, :meth:`Tracker.freeze` (at a
+switch), :meth:`Tracker.metrics`, :meth:`Tracker.audit`.
 
-* :meth:`Tracker.init`: the state it carries across updates (None: nothing);
-* :meth:`Tracker.frozen`: the :class:`Frozen` view of the earlier adversaries' levels a rollout
-  tracks against (None while nothing is frozen, and for an adversary that freezes nothing);
-* :meth:`Tracker.learn`: after a rollout, what it learns from it (a learned model);
-* :meth:`Tracker.freeze`: at an adversary switch, what it freezes with the adversary;
-* :meth:`Tracker.metrics` and :meth:`Tracker.audit`: what evaluation reports of it.
-
-Per rollout step (:func:`remidi.engine.core.rollout.rollout`, through ``frozen.tracker``):
-:meth:`Tracker.reset` and :meth:`Tracker.step` wrap the environments' reset and step (by default
-the plain ones, then :meth:`start` / :meth:`observe` beside them), :meth:`indistinguishable` says which
-envs' prefixes are indistinguishable before each action, :meth:`overflow` what the tracker could
-not follow, :meth:`buffer_match` which frozen buffer explains each prefix (ReMiDi's Combine).
-
-Implementations: :mod:`~remidi.engine.trackers.exact` (the default: the exact prefix tracker, its
-reference and candidate-slot variants, and the authors' per-step rule),
-:mod:`~remidi.engine.trackers.belief` (a learned model per adversary) and
-:mod:`~remidi.engine.trackers.simulated` (the frozen levels simulated with a learnt noise model).
-"""
+Per rollout step (through ``frozen.tracker``): :meth:`Tracker.reset` and :meth:`Tracker.step`
+wrap the envs' (calling :meth:`start` / :meth:`observe`); :meth:`indistinguishable` (before each
+action), :meth:`overflow`, :meth:`buffer_match` (Combine)."""
 
 from __future__ import annotations
 
@@ -37,14 +23,12 @@ from flax import struct
 
 @struct.dataclass
 class Frozen:
-    """The frozen adversaries' levels as one batch, what a rollout tracks against: ``levels``
-    leaves [F, ...], ``valid`` bool[F], buffer-major (F = B·C for B frozen buffers of capacity C).
-    With ``params`` (leaves [B, ...]: the policy frozen with each buffer, ReMiDi's ``Combine``),
-    a step whose prefix one of those buffers explains is acted on by the policy of the earliest
-    such buffer. ``belief``: what a learned tracker reads (its frozen models, thresholds).
-    ``rehearse`` (bool[], None: never): the rollout rehearses frozen levels, so no step counts as
-    explained (``remidi.rehearsal``: it trains on every step). ``tracker`` (static): the
-    component that steps beside the environments."""
+    """The frozen adversaries' levels as one batch, what a rollout tracks against.
+
+    ``levels`` leaves [F, ...], ``valid`` bool[F], buffer-major (F = B·C). ``params`` (leaves
+    [B, ...]; Combine): a step some buffer explains is acted on by the earliest such buffer's policy.
+    ``belief``: a learned tracker's frozen models. ``rehearse`` (bool[]; None: never): no step counts
+    as explained. ``tracker`` (static): the component stepping beside the envs."""
 
     levels: Any
     valid: jax.Array
@@ -55,8 +39,7 @@ class Frozen:
 
 
 def fresh_levels(proposal) -> jax.Array:
-    """bool[]: the update's levels are the task generator's fresh ones (no replay, no edit, no
-    rehearsal): what a reference model of the generator's trajectories learns from."""
+    """bool[]: the update's levels are the generator's fresh ones (no replay, edit or rehearsal)."""
     fresh = ~proposal.replay
     for other in (proposal.edit, proposal.rehearse):
         fresh = fresh if other is None else fresh & ~other
@@ -64,8 +47,7 @@ def fresh_levels(proposal) -> jax.Array:
 
 
 class Tracker:
-    """The protocol, with the behaviour of a tracker that keeps no state across updates (the
-    exact trackers). Subclasses are frozen dataclasses: static, hashable configuration."""
+    """The protocol, with a stateless tracker's behaviour. Subclasses are frozen dataclasses (static)."""
 
     #: judges by learned models (its work grows with them; evaluation audits it against the exact tracker)
     learns = False
@@ -76,8 +58,7 @@ class Tracker:
         return None
 
     def frozen(self, setup, runner) -> Frozen | None:
-        """The earlier adversaries' levels (the adversary's ``frozen_levels``) for a rollout, with
-        the policies frozen with them under Combine."""
+        """The adversary's ``frozen_levels`` for a rollout, with the policies frozen with them (Combine)."""
         earlier = setup.algo.adversary.frozen_levels(setup, runner)
         if earlier is None:
             return None
@@ -89,7 +70,7 @@ class Tracker:
         return runner.tracker, {}
 
     def freeze(self, setup, runner, switch):
-        """The state after an adversary switch (``switch`` bool[]; ``runner``: after the adversary's update)."""
+        """The state after a switch (``switch`` bool[]; ``runner`` after the adversary's update)."""
         return runner.tracker
 
     def metrics(self, setup, runner) -> dict:
@@ -106,14 +87,12 @@ class Tracker:
 
     # ------------------------------------------------------------------ per rollout step
     def reset(self, envs, frozen: Frozen, reset_keys, levels):
-        """The N envs reset to ``levels`` with ``reset_keys`` [N] (``envs``: the rollout's
-        :class:`~remidi.engine.core.rollout.Stepping`): ``(obs, env state, tracker state)``."""
+        """``(obs, env state, tracker state)``: the N envs reset to ``levels`` with ``reset_keys`` [N]."""
         obs, state = jax.vmap(envs.auto.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, envs.params)
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs)
 
     def step(self, envs, frozen: Frozen, env_keys, state, tstate, action):
-        """One step of the N envs with ``env_keys`` [N], and the tracker beside them:
-        ``(next_obs, env state, reward, done, tracker state)``."""
+        """``(next_obs, env state, reward, done, tracker state)``: one step with ``env_keys`` [N]."""
         next_obs, state, reward, done, _ = jax.vmap(envs.auto.step, in_axes=(0, 0, 0, None))(
             env_keys, state, action, envs.params)
         tstate = self.observe(envs.tracker_env, envs.params, frozen, env_keys, tstate, action, next_obs, done)

@@ -136,7 +136,8 @@ class UEDTask:
     compiled steps are reused per task).
 
     Attributes:
-        env: the (non-resetting) environment. params: its ``EnvParams``.
+        env: the (non-resetting) environment.
+    params: its ``EnvParams``.
         sample_level: ``rng -> level``, the random level generator.
         action_space: ``Discrete(n)`` (``i32[]``), ``MultiDiscrete(nvec)`` (``i32[k]``) or
             ``Box(dims)`` (``f32[dims]``, unbounded: the env clips), or the env's own space

@@ -36,7 +36,7 @@ def load_run_state(setup: Setup, seeds: list[int], path: Path, flag: str = "--re
 
 @partial(jax.jit, static_argnums=0)
 def _init(setup: Setup, keys):
-    # lax.map, not vmap: batched QR decompositions (orthogonal initialisers) hang jaxlib's CPU runtime.
+    # lax.map, not vmap: batched QR decompositions (orthogonal initialisers) hang jaxlib 0.10.2's CPU runtime.
     # Every leaf strongly typed, as a checkpoint restores it: else a resumed run would compile again.
     runner = jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
     return jax.tree.map(lambda x: jax.lax.convert_element_type(x, x.dtype), runner)

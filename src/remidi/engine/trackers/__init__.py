@@ -39,9 +39,10 @@ def model_for(task, hidden: int) -> BeliefModel:
 
 
 def tracker_for(task, cfg, algo) -> Tracker | None:
-    """The run's tracker; None for an algorithm that is no sequence of adversaries (nothing is frozen).
+    """The run's tracker (``remidi.tracker``); None for an algorithm that is no sequence of adversaries.
 
-    A learned tracker judges only for a sequence of at least two adversaries; otherwise the exact one."""
+    With a single adversary nothing is ever frozen, and the exact tracker (``prefix`` unless
+    ``per_step``) stands in for the choice."""
     if not algo.buffer_sequence:
         return None
     r = cfg.remidi

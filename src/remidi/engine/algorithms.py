@@ -1,10 +1,7 @@
-"""UED algorithms as data: what each one does in the shared train step (:mod:`remidi.engine.train`).
+"""UED algorithms as data: an adversary (:mod:`remidi.engine.adversaries.base`) and a score.
 
-The train step calls an :class:`Algorithm`'s adversary (the protocol:
-:mod:`remidi.engine.adversaries.base`), never its name or a flag, so an algorithm is an adversary (and a score) described here; a new kind of
-adversary is a new implementation of that interface, once for every domain.
-``docs/extending.md`` walks through one.
-"""
+The train step calls the adversary, never the algorithm's name or a flag, so a new kind of
+adversary is a new implementation of that protocol, once for every domain (``docs/extending.md``)."""
 
 from __future__ import annotations
 
@@ -22,25 +19,14 @@ from remidi.errors import ConfigError, check_name, one_of
 
 @dataclass(frozen=True)
 class Algorithm:
-    """One UED algorithm (hashable: part of the static set-up of a compiled train step).
+    """One UED algorithm (hashable: part of the compiled train step's static set-up).
 
     name: what ``--algo`` calls it.
     adversary: where its levels come from and what becomes of them (an
-        :class:`~remidi.engine.adversaries.base.Adversary`):
-        :class:`~remidi.engine.adversaries.base.RandomLevels` (DR), :class:`~remidi.engine.adversaries.plr.LevelBuffers`
-        (the PLR family; ``buffer_sequence=True``: ReMiDi's refinement, a sequence of
-        ``remidi.num_buffers`` buffers, levels a frozen one explains rejected and PPO's loss masked on
-        the steps a frozen level explains), :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL),
-        :class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
-        :class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED),
-        :class:`~remidi.engine.adversaries.sfl.LearnabilityBuffers` (SFL; ``buffer_sequence=True``:
-        ReMiDi over SFL).
-        Its ``trains_on_fresh``: PPO learns from rollouts on fresh levels too (robust PLR⊥ and its
-        relatives learn only from replays).
-    score: the level score it always uses (``minimax-return``: ``neg_return``); None: the config's
-        ``score``.
-    description: one line for ``remidi list`` and the docs.
-    """
+        :class:`~remidi.engine.adversaries.base.Adversary`; ``buffer_sequence=True``: ReMiDi's
+        sequence); its ``trains_on_fresh``: PPO learns from fresh levels too (PLR⊥ does not).
+    score: the score it always uses (``minimax-return``: ``neg_return``); None: the config's ``score``.
+    description: one line for ``remidi list`` and the docs."""
 
     name: str
     adversary: Adversary
@@ -114,19 +100,17 @@ BUILTIN_ALGORITHMS = tuple(ALGORITHMS)  # the library's own, in order
 
 
 class RegisteredNames(Sequence):
-    """The names in :data:`ALGORITHMS` now, in order: what an experiment's ``algorithms`` holds,
-    so algorithms registered after the experiment was built (:func:`register_algorithm`) are
-    allowed by ``--algo`` and listed by ``remidi list``. ``where(Algorithm) -> bool`` keeps the
-    ones the experiment's task supports (a task with no level-building MDP: no learned generator);
-    ``why``: the sentence that says why an algorithm ``where`` leaves out is not among them, or a
-    function of that algorithm giving it."""
+    """The names in :data:`ALGORITHMS` now, in order: an experiment's ``algorithms``.
+
+    Live, so algorithms registered later are accepted by ``--algo``. ``where(Algorithm) -> bool``
+    keeps those the task supports; ``why``: a sentence (or a function of the algorithm giving one)
+    saying why one is left out."""
 
     def __init__(self, where=None, why=None):  # why: str, or Algorithm -> str | None
         self.where, self.why = where, why
 
     def refusal(self, name: str) -> str | None:
-        """Why the registered algorithm ``name`` is left out here (None: it is not left out, or
-        no algorithm of that name is registered)."""
+        """Why registered algorithm ``name`` is left out here; None if it is not (or is not registered)."""
         if name in ALGORITHMS and self.where is not None and not self.where(ALGORITHMS[name]):
             why = self.why(ALGORITHMS[name]) if callable(self.why) else self.why
             return why or "this experiment's task does not support it"
@@ -159,17 +143,12 @@ class RegisteredNames(Sequence):
 
 def register_algorithm(name: str, adversary: Adversary, *, score: str | None = None,
                        description: str = "") -> Algorithm:
-    """Add an algorithm made of existing components to :data:`ALGORITHMS`: every UED experiment
-    then accepts ``--algo NAME`` (``remidi run``, ``remidi list``, ``remidi evaluate``), and
-    :func:`remidi.run_ued` and the driver accept the name.
+    """Add an algorithm of existing components to :data:`ALGORITHMS`, accepted by every UED experiment's
+    ``--algo`` and by :func:`remidi.run_ued`.
 
-    ``adversary``: an adversary of :mod:`remidi.engine.adversaries` (``plr``, ``accel``, ``paired``)
-    (e.g. ``LevelBuffers(trains_on_fresh=True)``, ``LevelBuffers(buffer_sequence=True)``);
-    ``score``: a registered score (:data:`remidi.engine.adversaries.scores.SCORES`, :func:`register_score`)
-    the algorithm always ranks levels by, or None for the config's ``score``; ``description``:
-    one line for ``remidi list``. Raises ConfigError (one line) for a name already taken or a
-    malformed entry. Returns the registered :class:`Algorithm`.
-    """
+    ``adversary``: an instance, e.g. ``LevelBuffers(trains_on_fresh=True)``; ``score``: a registered
+    score it always uses, or None for the config's. Raises ConfigError for a taken name or a
+    malformed entry."""
     check_name("algorithm", name)
     if name in ALGORITHMS:
         raise ConfigError(f"register_algorithm: an algorithm named {name!r} is already registered; "
@@ -193,8 +172,7 @@ PAPER_ALGORITHMS = ("dr", "plr", "minimax-return", "remidi")
 
 
 def get_algorithm(algo: str | Algorithm, key: str = "--algo") -> Algorithm:
-    """The algorithm named ``algo`` (an :class:`Algorithm` is returned as it is); ConfigError
-    naming ``key`` and the allowed names otherwise."""
+    """The algorithm named ``algo`` (an :class:`Algorithm` as is); ConfigError naming ``key`` otherwise."""
     if isinstance(algo, Algorithm):
         return algo
     if algo not in ALGORITHMS:

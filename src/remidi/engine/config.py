@@ -1,6 +1,6 @@
-"""A UED run's configuration: :class:`UEDConfig` (with the buffer, ReMiDi, ACCEL, PAIRED and SFL
-sections) and what it derives for an algorithm (its score, number of buffers, buffer settings). Each key's help text
-lives next to its field (``remidi list`` prints them)."""
+"""A UED run's configuration: :class:`UEDConfig` and its sections, and what it derives for an
+algorithm (score, number of buffers, buffer settings). Each key's help text is its field's
+metadata (``remidi list`` prints them)."""
 
 from __future__ import annotations
 
@@ -20,16 +20,15 @@ class BufferConfig:
 
     Attributes:
         capacity: number of slots.
-        prioritization: ``"rank"`` (weight ∝ (1/rank)^(1/temperature)) or ``"topk"`` (a softmax
-            of score/temperature over the ``topk_k`` highest-scored valid entries, zero elsewhere;
-            ``jaxued``'s ``topk`` at temperature 1).
-        temperature: β of rank prioritisation and of the top-k softmax, > 0.
-        topk_k: k of top-k prioritisation, ≥ 1 (clipped to the number of valid entries).
-        staleness_coef: ρ; replay weights = (1-ρ)·score weights + ρ·staleness weights.
-        replay_prob: probability of a replay step; used by the train loop, stored here.
-        min_fill: fraction of the capacity that must be valid before replay is allowed.
-        duplicate_check: if true, inserting a level equal to a valid entry updates that entry.
-    """
+        prioritization: a :data:`~remidi.engine.adversaries.level_buffer.REPLAY_RULES` name:
+            ``"rank"`` (∝ (1/rank)^(1/temperature)) or ``"topk"`` (softmax of score/temperature over
+            the ``topk_k`` best valid entries).
+        temperature: β of both, > 0.
+        topk_k: k of top-k, ≥ 1 (clipped to the valid entries).
+        staleness_coef: ρ; weights = (1-ρ)·score weights + ρ·staleness weights.
+        replay_prob: probability of a replay step (read by the train step).
+        min_fill: fraction of the capacity valid before replay is allowed.
+        duplicate_check: inserting a level equal to a valid entry updates that entry."""
 
     capacity: int = field(default=4000, metadata={"help": "PLR level buffer size (plr, minimax-return)"})
     prioritization: str = field(default="rank", metadata={"help": "replay rule: rank, topk, or one registered with remidi.register_replay_rule"})
@@ -82,10 +81,8 @@ class ReMiDiConfig:
         "help": "ReMiDi: size of each buffer"})
     steps_per_buffer: int = field(default=1000, metadata={
         "help": "ReMiDi: updates (train steps) on a buffer before it is frozen (replays with remidi.count=replays)"})
-    # what steps_per_buffer counts. Every preset counts "updates" (train steps, replay or not): the
-    # paper's text switches adversaries "every N iterations" and the authors' code counts every
-    # train step; the switch then falls on the same update for every seed and does not move with
-    # buffer.replay_prob. "replays" (only replay steps count) is kept for experimentation.
+    # "updates", as the paper and its authors' code: the switch falls on the same update for every
+    # seed, whatever buffer.replay_prob; "replays" is for experiments
     count: str = field(default="updates", metadata={
         "help": "ReMiDi: what steps_per_buffer counts: updates (every preset: the paper's and its authors' "
                 "unit) or replays"})
@@ -96,39 +93,26 @@ class ReMiDiConfig:
                 "(a learned model per buffer judges the prefix: for environments whose observations are random "
                 "given the level; engine/trackers/belief.py) or simulated (the frozen levels simulated under fresh randomness "
                 "with a learnt noise model, the belief_* keys as for belief; engine/trackers/simulated.py)"})
-    # slots per env of the candidate tracker (engine/trackers/exact.py): only frozen levels sharing the
-    # env's first observation are stepped, at most this many; 0 steps every frozen level (the
-    # reference tracker; also used for tracker=per_step and for tasks without a deterministic reset)
+    # the candidate tracker's slots per env (engine/trackers/exact.py); 0: the reference tracker
     tracker_budget: int = field(default=64, metadata={
         "help": "ReMiDi: frozen levels tracked per env (0: all, the reference tracker)"})
-    # remidi.tracker=tolerance (engine/trackers/tolerance.py): a float observation entry a is the
-    # frozen level's b while |a − b| ≤ tracker_tolerance + tracker_rtol·|b| (integer entries and
-    # episode ends: equal); in the observation's own units: wider than the observation noise,
-    # narrower than the differences that carry information (docs/tolerance.md)
+    # tracker=tolerance: |a − b| ≤ tracker_tolerance + tracker_rtol·|b| (engine/trackers/tolerance.py)
     tracker_tolerance: float = field(default=0.0, metadata={
         "help": "ReMiDi, tracker=tolerance: the absolute tolerance of a float observation entry, in the "
                 "observation's units (wider than its noise, narrower than what tells levels apart)"})
     tracker_rtol: float = field(default=0.0, metadata={
         "help": "ReMiDi, tracker=tolerance: the tolerance relative to the frozen level's |entry|, added to "
                 "tracker_tolerance"})
-    # remidi.tracker=belief (engine/trackers/belief.py): each adversary (buffer or generator) has a learned
-    # model of its trajectories, trained on the rollouts of its own levels (a buffer's replays, a
-    # generator's every update) and frozen with it; its threshold is the belief_false_rate quantile
-    # of the prefix scores of its last belief_calibration such rollouts, at most belief_spread's fence
+    # tracker=belief / simulated (engine/trackers/belief.py, calibration.py)
     belief_false_rate: float = field(default=0.05, metadata={
         "help": "ReMiDi, tracker=belief: share of the adversary's own trajectory prefixes its frozen model may call "
                 "distinguishable (the threshold is at most this quantile; belief_spread may lower it)"})
     belief_margin: float = field(default=1e-3, metadata={
         "help": "ReMiDi, tracker=belief: nats per step the threshold is lowered below the calibrated quantile "
                 "(a tolerance for score differences the model should not care about)"})
-    # the threshold is at most the held-out scores' median minus belief_spread robust standard
-    # deviations (engine/trackers/calibration.py, spread_fence): the held-out scores are the adversary's
-    # own few levels replayed, and the next adversary searches the tail of their kind (lever-noisy's
-    # noise codes) that their quantile cannot see; 0: the quantile alone (runs before this key). 6: at
-    # the lever-noisy switch (paper preset, seeds 100–101; smoke, seeds 0–1) it lies 0.4–2.1 nats below
-    # the lowest of 10⁴ fresh hidden levels' scores and 1.8–12.8 above the highest visible level's (4
-    # lets 0.6 % of fresh hidden levels through at smoke, 5 lets 3 in 10⁴ through, 8 lies 0.1 nats
-    # above visible ones)
+    # why 6 (calibration.spread_fence): at the lever-noisy switch (paper seeds 100–101, smoke 0–1) the
+    # fence lies 0.4–2.1 nats below the lowest of 10⁴ fresh hidden levels and 1.8–12.8 above the highest
+    # visible one; 4 lets 0.6 % of hidden levels through, 5 lets 3 in 10⁴, 8 lies 0.1 nats above visible
     belief_spread: float = field(default=6.0, metadata={
         "help": "ReMiDi, tracker=belief or simulated: the threshold is at most the median of the held-out scores "
                 "minus this many robust standard deviations of one model version's scores (the median over "
@@ -145,14 +129,11 @@ class ReMiDiConfig:
     belief_calibration: int = field(default=16, metadata={
         "help": "ReMiDi, tracker=belief: rollouts of the adversary's levels whose prefix scores (held out: scored "
                 "before the model fits on them) calibrate the threshold at the freeze"})
-    # "masked": one shared network, its loss masked on indistinguishable steps (the paper's
-    # practical ReMiDi); "combine": the paper's Algorithm 1, a frozen copy of the policy per
-    # buffer acts on the trajectories realisable under that buffer's levels
+    # "masked": one network, loss masked on indistinguishable steps (the paper's practical ReMiDi);
+    # "combine": Algorithm 1, a frozen policy per buffer acts where that buffer's levels explain the prefix
     policy: str = field(default="masked", metadata={
         "help": "ReMiDi: masked (one network) or combine (a frozen policy per buffer)"})
-    # rehearsal (the paper's §7 limitation): once a buffer is frozen, an update trains
-    # with this probability on N levels of a uniformly chosen earlier buffer, drawn uniformly from
-    # its levels, on every step (no mask); no buffer changes (adversary.py, rehearse_frozen)
+    # the paper's §7 limitation (adversaries/plr.py, rehearse_frozen)
     rehearsal: float = field(default=0.0, metadata={
         "help": "ReMiDi: probability that an update, once a buffer is frozen, trains unmasked on a batch of an "
                 "earlier (frozen) buffer's levels instead (0: the paper's ReMiDi)"})
@@ -193,12 +174,10 @@ class PairedConfig:
 
 @dataclass(frozen=True)
 class SFLConfig:
-    """SFL's learnability buffer (Rutherford et al., 2024, "No Regrets"; algorithms ``sfl``,
-    ``remidi-sfl``: :mod:`remidi.engine.adversaries.sfl`). The defaults are the published ones of
-    the authors' JaxUED maze configuration (``sfl/train/config/minigrid-sfl.yaml`` and
-    ``learning/ippo-minigrid.yaml`` in amacrutherford/sampling-for-learnability); Kinetix's
-    (``configs/ued/sfl.yaml`` in FLAIROx/Kinetix) are given beside each. The experiments' presets
-    scale them to their runs (``remidi list NAME``)."""
+    """SFL's learnability buffer (:mod:`remidi.engine.adversaries.sfl`).
+
+    Defaults: the authors' published JaxUED maze configuration (amacrutherford/sampling-for-learnability);
+    each help also gives Kinetix's. Presets scale them (``remidi list NAME``)."""
 
     batch_size: int = field(default=5000, metadata={
         "help": "SFL: fresh levels rolled out per batch of a buffer refresh (published: 5000 maze, 4096 Kinetix)"})
@@ -240,8 +219,6 @@ class UEDConfig:
     # one of scores.SCORES; minimax-return always uses neg_return (its Algorithm's score)
     score: str = field(default="perfect_regret", metadata={
         "help": "level score of the PLR family: a registered score (scores above: those this task can use)"})
-    # perfect_regret against the paper's discounted utility U = E[Σ_t γ^t r_t] (γ = ppo.gamma) on
-    # both sides; False: undiscounted returns on both sides
     discounted_regret: bool = field(default=True, metadata={
         "help": "perfect_regret on the paper's discounted utility Σ γ^t r_t (γ = ppo.gamma), both the "
                 "optimum and the agent's return; false: undiscounted on both sides"})
@@ -252,7 +229,6 @@ class UEDConfig:
         "help": "width of each fully-connected trunk layer (0: the network's default)"})
     lstm_size: int = field(default=0, metadata={
         "help": "units of the network's LSTM (0: the network's default)"})
-    # PPO learns from rewards × reward_scale (returns, scores and metrics stay unscaled)
     reward_scale: float = field(default=1.0, metadata={
         "help": "PPO learns from reward × reward_scale (returns and scores stay unscaled)"})
     reseed: bool = field(default=False, metadata={

@@ -1,19 +1,13 @@
-"""A task's action space, declared once on the :class:`~remidi.envs.interface.UEDTask`
-(``action_space=``), from which the engine picks the policy's distribution
-(:func:`remidi.engine.core.distributions.for_task`):
+"""A task's action space (``UEDTask.action_space``), from which the engine picks the policy's
+distribution (:func:`remidi.engine.core.distributions.for_task`):
 
-- :class:`Discrete` ``(n)``: one choice among ``n``; an action is ``i32[]``.
-- :class:`MultiDiscrete` ``(nvec)``: one choice per component, ``nvec[i]`` for component ``i``
-  (Kinetix: 3 per motor, 2 per thruster); an action is ``i32[k]``, ``k = len(nvec)``.
-- :class:`Box` ``(dims)``: ``dims`` unbounded floats (the environment clips); an action is
-  ``f32[dims]``.
+- :class:`Discrete` ``(n)``: an action is ``i32[]``;
+- :class:`MultiDiscrete` ``(nvec)``: one choice per component (Kinetix: 3 per motor, 2 per
+  thruster), ``i32[k]``;
+- :class:`Box` ``(dims)``: unbounded floats (the environment clips), ``f32[dims]``.
 
-:func:`from_env_space` reads one off an environment's own ``action_space(params)``: gymnax's,
-JaxMARL's and gymnasium's ``Discrete`` (``n``) and ``Box``, and any space that gives a choice count
-per dimension (gymnasium's ``nvec``, Kinetix's ``number_of_dims_per_distribution``, JaxMARL's
-``num_categories``). A task may be given such a space as its ``action_space`` directly:
-:func:`as_action_space` converts it when the task is built.
-"""
+:func:`from_env_space` reads one off an env's own space (gymnax, JaxMARL, gymnasium, Kinetix);
+:func:`as_action_space` converts one given as ``action_space`` when the task is built."""
 
 from __future__ import annotations
 
@@ -67,8 +61,8 @@ class Discrete:
 
 @dataclass(frozen=True)
 class MultiDiscrete:
-    """One choice per component, among ``nvec[i]`` for component ``i``: an action is ``i32[k]``
-    (``k = len(nvec)``), entry ``i`` in ``[0, nvec[i])``. ``nvec`` is kept as a tuple of ints."""
+    """One choice per component: ``i32[k]`` (``k = len(nvec)``), entry ``i`` in ``[0, nvec[i])``; ``nvec``
+    kept as a tuple."""
 
     nvec: tuple[int, ...]
 

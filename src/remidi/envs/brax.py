@@ -1,56 +1,29 @@
-"""Brax robotics: ant, halfcheetah, hopper, walker2d with two kinds of level.
+"""Brax robotics: ant, halfcheetah, hopper, walker2d with two kinds of level (:class:`BraxLevel`).
 
-A level (:class:`BraxLevel`) is one of
+- **type A**: a per-action-dimension multiplier ``theta f32[A]``: the simulator gets
+  ``theta * action`` of the unbounded Gaussian policy, unclipped before the multiplication, so
+  the agent can still reach full torque for ``theta < 1`` (the paper's argument that every type
+  A level has the same optimum). Brax's reward, so its control cost is on ``theta · a`` (our
+  choice: the paper does not say); the simulator clips ``theta · a`` to ``[-1, 1]``. Ends on
+  Brax's termination or at ``t + 1 >= 100``. Observation: Brax's, then the flag ``[1, 0]``.
+- **type B**: a one-step guessing game: reward ``+10000`` if ``(action[-1] > 0) == sign``, else
+  ``-10000``. Every type B level shows the same observation (ReMiDi's tracker compares exactly):
+  joint positions ``-1``, other entries ``0``, then the flag ``[0, 1]``.
 
-- **type A**: a per-action-dimension multiplier ``theta f32[A]``. The agent's action (from an
-  unbounded Gaussian policy) is multiplied by ``theta`` and handed to the simulator:
-  ``brax_env.step(state, theta * action)``, as the paper does; nothing clips it before the
-  multiplication, so for ``theta < 1`` the agent can still reach full torque by acting larger
-  (the paper's argument that the optimum is the same on every type A level). The
-  reward is Brax's own reward, so its control cost is computed on ``theta · a``: the
-  disturbance acts on the motor and the cost is what the motor spends (a choice: the paper
-  does not say, and its Brax code is not published); the simulator itself clips
-  the control ``theta · a`` to the actuator range ``[-1, 1]`` (MuJoCo's ``ctrlrange``), so
-  torque saturates there while the control cost keeps growing. The episode ends on
-  Brax's own termination (unhealthy hopper/walker/ant; halfcheetah never terminates) or at the
-  time limit (``t + 1 >= 100``). Observation: Brax's observation followed by the flag ``[1, 0]``.
-- **type B**: a one-step guessing game. The first action ends the episode with reward
-  ``+10000`` if the sign of the last action dimension matches the hidden ``sign``
-  (``(action[-1] > 0) == sign``), else ``-10000``. The observation is the same for every type B
-  level (whatever its seed, theta, sign: ReMiDi's tracker compares observations exactly): the
-  joint-position entries of Brax's observation are ``-1``, every other entry ``0``, followed by
-  the flag ``[0, 1]``.
+The level's ``seed u32[2]`` (threefry key data) draws Brax's reset noise; the reset ignores its
+key (``UEDTask.deterministic_reset``). A type B level still carries a valid, never-stepped Brax
+state, so the type A branch that ``vmap`` computes never runs physics on garbage.
 
-The level's ``seed u32[2]`` (threefry key data, e.g. ``jax.random.PRNGKey(i)``) draws Brax's
-reset noise: ``reset_env_to_level`` ignores its key, so an episode is a deterministic function
-of the level and the actions (``UEDTask.deterministic_reset``). A type B level still carries a
-valid Brax state (reset from its seed, never stepped), so the type A branch, which ``vmap``
-computes for every level, never runs physics on garbage; the branches are merged with
-``where``, which does not let a discarded branch's values through.
+Backend: ``mjx`` with Brax's fast MJX-ant solver options (Newton, 1 iteration, 4 line-search
+iterations, no Euler damping) for every morphology: about ``generalized``'s accuracy, faster on a
+CPU, and meant for accelerators (measurements: ``docs/performance.md``, "Brax backends").
 
-Backend: ``mjx`` (MuJoCo in JAX) with the fast solver options Brax sets for its MJX ant (Newton
-solver, ``iterations=1``, ``ls_iterations=4``, Euler damping disabled), for every morphology: MuJoCo's
-own dynamics at about ``generalized``'s accuracy, faster than ``generalized`` on a CPU, and the
-backend meant for accelerators. The measurements behind the choice (throughput and compile time
-of every backend, fidelity against MJX with the MJCF options, NaN checks) are in
-``docs/performance.md``, "Brax backends".
+Caveat: the same levels and actions in a batch of another size differ in the last bits (up to
+~2e-6 with ``mjx``, ~5e-4 ``positional``), so a type A level replayed in another batch layout may
+be judged distinguishable; the rollout steps envs and tracker slots in one batch, where they
+agreed bit for bit (``tests/test_brax_env.py``). Type B levels are unaffected.
 
-``backend=`` overrides the default in :func:`brax_task`.
-
-Bit-identity caveat (measured on this CPU, hopper, 20 steps, 4 levels): the *same* levels and
-actions stepped in a batch of another size give observations that differ in the last bits, from
-the first steps on: up to ~2e-6 with ``mjx`` (whose results can even depend on a level's position
-inside a batch of the same size), ~2e-5 ``generalized``, ~6e-6 ``spring``, ~5e-4 ``positional``.
-ReMiDi's tracker compares observations exactly, so a type A level replayed beside its frozen
-copy in another batch layout may be judged distinguishable after a few steps. The rollout steps
-each env and its tracker slots in one batch (``[N, 1 + S]``), so the copy differs only in its
-position; at other positions of a batch of 4 the observations agreed bit for bit in
-``tests/test_brax_env.py`` (this CPU, 20 steps). Type B levels (constant observation) and the
-type A/B flag are unaffected.
-
-Brax is imported lazily (``import brax`` takes ~1.5 s), so importing this module is cheap; its
-harmless "Failed to import warp" notice is kept off stdout.
-"""
+Brax is imported lazily (~1.5 s), its "Failed to import warp" notice kept off stdout."""
 
 from __future__ import annotations
 
@@ -76,11 +49,8 @@ DEFAULT_BACKEND = "mjx"
 EPISODE_LENGTH = 100
 TYPE_B_REWARD = 10000.0
 
-# Number of leading observation entries that are (joint) positions, with Brax's default
-# ``exclude_current_positions_from_observation=True``: the generalized coordinates ``q`` minus
-# the excluded root x (and y for ant). ant: q = 7 (free joint) + 8 hinges = 15, minus x, y -> 13;
-# halfcheetah: q = 3 root + 6 = 9, minus x -> 8; hopper: 3 root + 3 = 6, minus x -> 5;
-# walker2d: 3 root + 6 = 9, minus x -> 8. (Checked against ``sys.q_size()`` in the tests.)
+# leading observation entries that are positions: q minus the root x (and y for ant) Brax drops
+# (ant 15 − 2, halfcheetah 9 − 1, hopper 6 − 1, walker2d 9 − 1; checked against sys.q_size() in the tests)
 NUM_POSITIONS = {"ant": 13, "halfcheetah": 8, "hopper": 5, "walker2d": 8}
 # The q entries Brax drops from the observation (checked in the tests).
 NUM_EXCLUDED_POSITIONS = {"ant": 2, "halfcheetah": 1, "hopper": 1, "walker2d": 1}
@@ -117,18 +87,15 @@ def _check(morphology: str, backend: str) -> None:
 
 
 def make_brax_env(morphology: str, backend: str):
-    """The underlying Brax environment: ``brax.envs.get_environment`` with default options, and
-    for ``mjx`` the fast solver options of Brax's MJX ant (Newton, 1 iteration, 4 line-search
-    iterations, no Euler damping)."""
+    """The underlying Brax env (default options; for ``mjx`` the fast MJX-ant solver options)."""
     _check(morphology, backend)
     with contextlib.redirect_stdout(io.StringIO()):  # lazy: slow to import; keep its warp notice off stdout
         import brax.envs
 
     import mujoco
 
-    # MuJoCo's warnings while Brax loads its model files would go to MUJOCO_LOG.TXT in the user's
-    # working directory; route them to Python's warnings instead, except the deprecation notice
-    # about Brax's own files ('settotalmass'), which users cannot act on
+    # MuJoCo's warnings go to Python's (not MUJOCO_LOG.TXT in the user's folder), but for the
+    # 'settotalmass' notice about Brax's own files, which users cannot act on
     previous = mujoco.get_mju_user_warning()
     mujoco.set_mju_user_warning(lambda msg: None if "settotalmass" in msg else warnings.warn(f"MuJoCo: {msg}"))
     try:
@@ -158,7 +125,7 @@ def seed_data(i) -> jax.Array:
 
 
 class BraxUED(UnderspecifiedEnv):
-    """A Brax morphology as an underspecified environment (see the module docstring)."""
+    """A Brax morphology as an underspecified environment (module docstring)."""
 
     def __init__(self, morphology: str = "hopper", backend: str = DEFAULT_BACKEND):
         _check(morphology, backend)
@@ -218,9 +185,10 @@ class BraxUED(UnderspecifiedEnv):
 
     def sample_level(self, rng, theta_low: float = 0.5, theta_high: float = 1.5,
                      type_b_prob: float = 0.5) -> BraxLevel:
-        """theta ~ U[theta_low, theta_high]^A, type B with prob ``type_b_prob``, sign a fair coin,
-        seed from ``rng``. Unused fields are canonical (theta = 1 for type B, sign = False for
-        type A), so levels that play identically with the same seed are equal."""
+        """theta ~ U[theta_low, theta_high]^A, type B with prob ``type_b_prob``, sign a fair coin.
+
+        Unused fields are canonical (theta = 1 for type B, sign = False for type A), so levels that play
+        identically are equal."""
         k_theta, k_b, k_sign, k_seed = jax.random.split(rng, 4)
         type_b = jax.random.bernoulli(k_b, type_b_prob)
         theta = jax.random.uniform(k_theta, (self.num_actions,), jnp.float32, theta_low, theta_high)
@@ -231,10 +199,8 @@ class BraxUED(UnderspecifiedEnv):
 
     def mutate_level(self, rng, level: BraxLevel, num_edits: int, theta_low: float = 0.5,
                      theta_high: float = 1.5) -> BraxLevel:
-        """ACCEL's Brax editor. A type A level: each of ``num_edits`` edits moves θ of one random
-        action dimension by N(0, (0.1 (theta_high − theta_low))²), clipped to [theta_low,
-        theta_high]. A type B level stays type B (θ stays canonical): each edit flips its sign
-        with probability 1/2 (another guessing game, which plays identically until its one step)."""
+        """ACCEL's editor: each edit moves one random θ by N(0, (0.1 (high − low))²), clipped; a type B
+        level stays type B, each edit flipping its sign with probability 1/2."""
         def edit(lv: BraxLevel, key):
             k_dim, k_step, k_sign = jax.random.split(key, 3)
             dim = jax.random.randint(k_dim, (), 0, self.num_actions)
@@ -253,14 +219,11 @@ class BraxUED(UnderspecifiedEnv):
 
 
 class BraxBuilder(LevelBuilder):
-    """The Brax domain's level-building MDP, θ discretised: the first action ``a`` picks the
-    level's type from ``a mod 3`` (0: type A; 1: type B, positive sign wins; 2: type B, negative
-    sign wins); then one action per action dimension picks its multiplier from
-    ``bins`` evenly spaced values over ``[theta_low, theta_high]`` (ends included; action ``a <
-    bins`` gives ``theta_low + a·(theta_high − theta_low)/(bins − 1)``, any other changes nothing:
-    θ stays 1). A type B level's θ stays 1 (canonical, as the sampler's); the reset noise's seed
-    comes from the episode's key. The sampler's θ are continuous, so a sampled type A level is
-    built to within half a bin."""
+    """The Brax level-building MDP, θ discretised.
+
+    First action ``a mod 3``: 0 type A, 1 type B positive sign, 2 type B negative sign; then one
+    action per dimension picks θ from ``bins`` even values over ``[theta_low, theta_high]`` (an
+    action ≥ ``bins`` leaves θ = 1). Type B keeps θ = 1; the seed comes from the episode's key."""
 
     def __init__(self, num_dims: int, theta_low: float = 0.5, theta_high: float = 1.5, bins: int = 11):
         self.num_dims, self.low, self.high, self.bins = num_dims, theta_low, theta_high, bins
@@ -290,15 +253,12 @@ class BraxBuilder(LevelBuilder):
 def brax_task(morphology: str, backend: str = DEFAULT_BACKEND, theta_low: float = 0.5,
               theta_high: float = 1.5, type_b_prob: float = 0.5, reference_return: float | None = None,
               num_eval_levels: int = 16, reference_discounted_return: float | None = None) -> UEDTask:
-    """A Brax morphology as a UED task. Cached: the same arguments give the same task.
+    """A Brax morphology as a UED task (cached per arguments); ConfigError for an unknown morphology
+    or backend.
 
-    ``reference_return``: the return of a policy trained to convergence without disturbance (the
-    optimal return of a type A level); without it the perfect-regret score is unavailable.
-    ``reference_discounted_return``: that policy's discounted return Σ_t γ^t r_t (the optimum of
-    the paper's utility, for the default discounted perfect regret; measured at the γ the
-    reference was trained with, the experiments' ``ppo.gamma``).
-    Raises ``ConfigError`` for an unknown morphology or backend.
-    """
+    ``reference_return``: the return of a policy trained without disturbance (a type A level's
+    optimum; None: no perfect regret). ``reference_discounted_return``: its Σ_t γ^t r_t at the
+    experiments' ``ppo.gamma``."""
     _check(morphology, backend)
     env = BraxUED(morphology, backend)
     optimal_return = optimal_discounted = None

@@ -1,21 +1,14 @@
 """Level-building MDPs: the environment a learned level generator (PAIRED's adversary) acts in.
 
-A :class:`LevelBuilder` is an ordinary ``jaxued`` ``UnderspecifiedEnv`` (as JaxUED's
-``MazeEditor`` is), so the engine rolls it out like any environment: an episode starts from an
-empty design (``reset_to_level``; the "level" it is reset to is ignored, pass ``None``), each
-action places one part of a level, and the episode ends after exactly :attr:`num_steps` actions
-(its budget), when :meth:`built` reads the finished level off the state. A design action that
-is invalid at its step (a wall on an occupied cell, a lever index out of range) changes nothing.
-The reward is always 0: PAIRED pays the generator its regret estimate on its last step.
+A :class:`LevelBuilder` is an ordinary ``UnderspecifiedEnv`` (as JaxUED's ``MazeEditor``): an
+episode starts from an empty design (``reset_to_level`` ignores its level: pass ``None``), each
+action places one part, and it ends after exactly :attr:`num_steps` actions, when :meth:`built`
+reads the level off the state. An action invalid at its step changes nothing; the reward is
+always 0 (PAIRED pays on the last step).
 
-The generator's observation is a dict: ``design`` (what the task shows of the design so far),
-``time`` (one-hot f32[num_steps], the step), ``noise`` (f32[noise_dim], uniform on [0, 1),
-drawn at every reset: a generator with a deterministic policy can still produce many levels;
-one reference library zeroes it unless asked, here it is never zero).
-
-A task offers its builder as ``UEDTask.level_builder``; a task without one cannot run the
-generator algorithms.
-"""
+Observation: ``design`` (what the task shows of it), ``time`` (one-hot f32[num_steps]) and
+``noise`` (f32[noise_dim], uniform on [0, 1) per reset, never zeroed, so a deterministic policy
+can still make many levels)."""
 
 from __future__ import annotations
 
@@ -39,10 +32,9 @@ class BuilderState:
 
 
 class LevelBuilder(UnderspecifiedEnv):
-    """The base of a task's level-building MDP. A subclass defines :attr:`num_steps`,
-    :attr:`num_actions`, :meth:`empty` (the design at the start, from the episode's key),
-    :meth:`place` (one action at step ``t``), :meth:`show` (the design as the generator sees it)
-    and :meth:`built` (the level of a finished design)."""
+    """The base of a level-building MDP: subclasses define :attr:`num_steps`, :attr:`num_actions`,
+    :meth:`empty` (from the episode's key), :meth:`place` (one action at step ``t``), :meth:`show`
+    and :meth:`built`."""
 
     num_steps: int
     num_actions: int

@@ -1,25 +1,16 @@
-"""Dark reach: a point in the unit square reaches a goal that "lit" levels show and "dark" ones hide,
-seen through noisy float observations.
+"""Dark reach: a point in the unit square reaches a goal that "lit" levels show and "dark" ones
+hide, seen through noisy float observations.
 
-The agent moves on a lattice of ``grid × grid`` points of the unit square (spacing
-``1/(grid − 1)``; 0.1 for the default 11) with four actions: up, right, down, left (a move off the
-square stays put). A level is (start point, goal position in ``[0.05, 0.95]²``, lit?, noise seed).
-The episode ends when the agent comes within ``radius`` of the goal, paying ``1 − 0.9·(t+1)/T``
-(t the step index, T = ``max_steps``), or after T steps with 0.
+The agent moves on a ``grid × grid`` lattice (spacing 0.1 for 11) with four actions (off the
+square: stays). A level: start, goal in ``[0.05, 0.95]²``, lit?, noise seed. Reaching within
+``radius`` pays ``1 − 0.9·(t+1)/T`` and ends the episode; else 0 after T = ``max_steps``.
 
-The observation is ``f32[4]``: the agent's position plus Gaussian noise of deviation ``noise``,
-then the goal's position on a lit level and zeros on a dark one. The noise is drawn from the
-level's seed and the episode's step counter (:func:`~remidi.envs.noisy.noise_words`), so the
-environment is deterministic given the level (the reset and the step ignore their keys), yet two
-levels never show the same float: the exact tracker matches nothing here. Every dark level with the
-same start plays alike up to the noise until one of them reaches its goal, so the best a policy can
-do there is search (irreducible regret), and a tracker that compares observations up to a tolerance
-wider than the noise (:mod:`remidi.engine.trackers.tolerance`) finds them a complete overlap of
-the frozen dark levels. Lit levels show where to go: learnable, and told apart by the goal.
-
-``darkreach_task(lit_prob=1, random_start=True)`` is the variant where every level is lit and the
-start varies: every level differs from every other in what it shows.
-"""
+Observation ``f32[4]``: position plus Gaussian noise of deviation ``noise`` (from the level's
+seed and the step: :func:`~remidi.envs.noisy.noise_words`, so deterministic given the level),
+then the goal (lit) or zeros (dark). No float repeats, so the exact tracker matches nothing;
+dark levels with one start play alike up to the noise (irreducible regret), which a tolerance
+tracker wider than the noise (:mod:`remidi.engine.trackers.tolerance`) sees as a complete
+overlap. ``darkreach_task(lit_prob=1, random_start=True)``: every level lit, starts vary."""
 
 from __future__ import annotations
 

@@ -1,19 +1,15 @@
 """Dark room: a small grid whose goal is shown on "lit" levels and hidden on "dark" ones.
 
-A ``size × size`` grid; ``num_goals`` candidate goal cells spread over the border (corners
-excluded); the agent starts on an interior cell. A level is (start cell, goal index, lit?).
-Actions: up, right, down, left (a move off the grid stays put). Entering any candidate cell ends
-the episode: the true goal pays ``1 − 0.9·(t+1)/T`` (t the step index, T = ``max_steps``), any
-other candidate 0; T steps without one end it with 0.
+``size × size`` grid; ``num_goals`` candidate goals on the border (no corners); the agent starts
+inside. A level: (start, goal index, lit?). Actions up, right, down, left (off the grid: stays).
+Entering a candidate ends the episode: the true goal pays ``1 − 0.9·(t+1)/T`` (T =
+``max_steps``), others 0; 0 after T steps.
 
-The observation is ``f32[size² + num_goals + 1]``: the agent's cell one-hot, then the goal one-hot
-at ``1 + goal`` on a lit level and at 0 on a dark one. Every dark level with the same start plays
-identically (same observations, same episode ends) whatever its goal, so the best a policy can do
-there is a guess (solve rate ``1/num_goals``): irreducible regret, which a regret adversary keeps
-replaying. Lit levels are learnable, and there are few of them (``(size−2)² · num_goals``): the
-small level space where a frozen buffer of ReMiDi may hold most of them (docs/retention.md).
-Deterministic given the level (the reset and the step ignore their keys).
-"""
+Observation ``f32[size² + num_goals + 1]``: the agent's cell one-hot, then the goal one-hot at
+``1 + goal`` (lit) or at 0 (dark). Dark levels with one start play identically whatever the
+goal (solve rate ``1/num_goals`` at best: irreducible regret); lit levels are learnable and few
+(``(size−2)² · num_goals``), so a frozen ReMiDi buffer may hold most of them
+(docs/retention.md). Reset and step ignore their keys."""
 
 from __future__ import annotations
 

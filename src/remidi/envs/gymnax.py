@@ -1,5 +1,5 @@
-"""Any gymnax environment as a UED task: some of its ``EnvParams`` fields (and optionally the
-start state's seed) are the level.
+"""Any gymnax environment as a UED task: some ``EnvParams`` fields (and optionally the start seed)
+are the level.
 
     from remidi.envs.gymnax import gymnax_task
 
@@ -7,32 +7,16 @@ start state's seed) are the level.
                        level={"gravity": (5.0, 15.0), "masspole": (0.05, 0.5), "length": (0.25, 1.0)},
                        eval_grid={"gravity": (5.0, 9.8, 15.0), "length": (0.25, 0.5, 1.0)})
 
-A level is a dict ``{field: f32[]}`` over the named fields, plus ``"seed": u32[2]`` (the key of
-gymnax's ``reset_env``) when ``seed_in_level``. :class:`GymnaxUED` delegates to gymnax's own
-``reset_env`` and ``step_env`` with the environment's params, the level's fields written in
-(and the fields derived from them recomputed, e.g. CartPole's ``total_mass``:
-:data:`DERIVED`). An episode ends where gymnax ends it: its ``step_env``'s termination or its
-time limit (``is_truncated``: ``max_steps_in_episode``).
+A level is ``{field: f32[]}`` plus ``"seed": u32[2]`` (``reset_env``'s key) with
+``seed_in_level``. :class:`GymnaxUED` calls gymnax's ``reset_env``/``step_env`` with the level's
+fields written in and derived fields recomputed (:data:`DERIVED`); episodes end where gymnax
+ends them. The task offers: uniform ``sample_level``; ``<field>_high`` tags plus ``tags``;
+ACCEL edits of ±``edit_size`` of a field's range; one ``eval_sets`` entry per ``eval_grid``
+point (``eval_seeds`` levels differing only in seed); no optimal return (``perfect_regret``
+refused), ``learnability`` with ``solved_at``.
 
-What the task offers the engine:
-
-* ``sample_level``: each field uniform in ``[low, high]``, a fresh seed;
-* ``level_tags``: ``<field>_high`` (the value lies in the upper half of its range) for every
-  field whose range is not a point, plus any named predicates ``tags={name: level -> bool[]}``:
-  reported as replay and buffer shares, they show which part of the range the adversary prefers;
-* ``mutate_level`` (ACCEL): each edit moves one field, drawn at random, by ±``edit_size`` of its
-  range, clipped to the range; the seed is kept;
-* ``eval_sets``: one set per point of ``eval_grid`` (fields left out of the grid at gymnax's
-  default), named ``field=value_field=value``, holding ``eval_seeds`` levels that differ only in
-  their start seed (one level when the seed is not part of the level): the engine reports
-  ``return/<point>`` (and ``solve_rate/<point>`` with ``solved_at``) for each;
-* no optimal return: ``perfect_regret`` is refused; ``pvl``, ``maxmc`` and ``neg_return`` work,
-  and ``learnability`` with ``solved_at`` (an episode is solved when its return is ≥ it).
-
-Determinism: with the seed in the level, a level's episode is a function of the level and the
-actions wherever gymnax's ``step_env`` ignores its key (CartPole, Pendulum, and Acrobot without
-torque noise), as ReMiDi's tracker assumes (``deterministic_reset``).
-"""
+With the seed in the level an episode is a function of level and actions wherever ``step_env``
+ignores its key (CartPole, Pendulum, Acrobot without torque noise), as ReMiDi's tracker assumes."""
 
 from __future__ import annotations
 
@@ -65,11 +49,10 @@ class GymnaxState:
 
 
 class GymnaxUED(UnderspecifiedEnv):
-    """A gymnax environment whose level sets some of its params (see the module's docstring).
+    """A gymnax env whose level sets some of its params.
 
-    ``fields``: the level's params fields; ``base``: gymnax's ``EnvParams`` the level writes
-    into; ``derive``: ``params -> params`` recomputing fields derived from the level's (or None).
-    The engine passes ``base`` as its ``params``."""
+    ``fields``: the level's params fields; ``base``: the ``EnvParams`` written into (the engine's
+    ``params``); ``derive``: ``params -> params`` recomputing derived fields, or None."""
 
     def __init__(self, env, base, fields: Sequence[str], seed_in_level: bool, derive=None):
         self.gymnax_env = env
@@ -125,8 +108,7 @@ class LevelSpace:
         return level
 
     def mutate(self, rng, level: dict, num_edits: int, edit_size: float = 0.1) -> dict:
-        """ACCEL's editor: each of ``num_edits`` edits moves one field (drawn uniformly) by
-        ±``edit_size``·(high − low), clipped to its range; the seed is kept."""
+        """ACCEL's editor: each edit moves one random field by ±``edit_size``·(high − low), clipped; seed kept."""
         names = list(self.ranges)
         lows = jnp.asarray([self.ranges[n][0] for n in names], jnp.float32)  # [F]
         highs = jnp.asarray([self.ranges[n][1] for n in names], jnp.float32)
@@ -138,15 +120,12 @@ class LevelSpace:
         return {**level, **{n: values[i].astype(level[n].dtype) for i, n in enumerate(names)}}
 
     def tags(self, level: dict) -> dict[str, jax.Array]:
-        """``{<field>_high: bool[]}``: the field lies in the upper half of its range (fields with
-        a range of one point have no tag)."""
+        """``{<field>_high: bool[]}``: the field is in its range's upper half (none for a one-point range)."""
         return {f"{n}_high": level[n] > (lo + hi) / 2 for n, (lo, hi) in self.ranges.items() if hi > lo}
 
     def grid(self, points: Mapping[str, Sequence[float]], defaults, seeds: int, rng) -> dict[str, dict]:
-        """``{name: levels}``, one batch per point of the grid (the product of ``points``), each
-        of ``seeds`` levels (leaves [seeds]; one level without the seed in the level) sharing
-        the point's values, with the same seeds at every point. Fields of the level space left
-        out of ``points`` take their value in ``defaults`` (gymnax's ``EnvParams``)."""
+        """``{point name: levels}``: per grid point, ``seeds`` levels (leaves [seeds]; one without a seed in
+        the level) with the same seeds at every point; fields outside ``points`` take ``defaults``."""
         count = seeds if self.seed_in_level else 1
         seed_data = jax.random.bits(rng, (count, 2), jnp.uint32)
         sets = {}
@@ -161,8 +140,7 @@ class LevelSpace:
 
 
 def _numbers(values, what: str, allowed: str, pair: bool = False) -> tuple[float, ...]:
-    """``values`` (a tuple, list, range or 1-D array of real numbers; two for a ``pair``) as a
-    tuple of floats; ConfigError naming ``what`` otherwise."""
+    """``values`` (1-D real numbers; two for a ``pair``) as floats; ConfigError naming ``what``."""
     try:
         array = np.asarray(values)
         ok = (array.ndim == 1 and array.size >= 1 and (array.size == 2 or not pair)
@@ -178,18 +156,13 @@ def gymnax_task(env_name: str, level: Mapping[str, tuple[float, float]], *, seed
                 params: Mapping[str, Any] | None = None, eval_grid: Mapping[str, Sequence[float]] | None = None,
                 eval_seeds: int = 4, tags: Mapping[str, Callable[[dict], jax.Array]] | None = None,
                 edit_size: float = 0.1, solved_at: float | None = None, derive=None) -> UEDTask:
-    """The gymnax environment ``env_name`` (``gymnax.make``) as a UED task whose level is the
-    params fields of ``level`` (``{field: (low, high)}``, float fields, each drawn uniformly) and, with
-    ``seed_in_level``, the start seed.
+    """gymnax's ``env_name`` as a UED task whose level is ``level``'s params fields (``{field: (low, high)}``,
+    float scalars drawn uniformly) and, with ``seed_in_level``, the start seed.
 
-    ``params``: other params fields, fixed (e.g. ``{"max_steps_in_episode": 200}``);
-    ``eval_grid``: ``{field: values}``, the held-out grid (:meth:`LevelSpace.grid`) of
-    ``eval_seeds`` levels per point; ``tags``: named predicates on a level added to the
-    ``<field>_high`` tags; ``edit_size``: an ACCEL edit's step, a share of the field's range;
-    ``solved_at``: an evaluation episode with a return ≥ this is solved (None: the task has no
-    solve rate and no learnability score); ``derive``: ``params -> params`` recomputing fields
-    derived from the level's (default: :data:`DERIVED`'s entry for the environment).
-    ConfigError (one line) for an unknown environment or field or an empty range."""
+    ``params``: fixed params fields; ``eval_grid``: ``{field: values}`` (:meth:`LevelSpace.grid`);
+    ``tags``: extra named predicates; ``edit_size``: ACCEL's step as a share of the range;
+    ``solved_at``: return ≥ this is solved (None: no solve rate, no learnability); ``derive``:
+    defaults to :data:`DERIVED`'s entry. ConfigError for an unknown env or field, or a bad range."""
     import gymnax
 
     try:

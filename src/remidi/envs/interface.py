@@ -1,14 +1,10 @@
 """The environment interface: ``jaxued``'s ``UnderspecifiedEnv``, plus what UED needs around it.
 
-An environment is a ``jaxued.environments.UnderspecifiedEnv`` (bring your own: any subclass
-works): ``obs, state = env.reset_to_level(rng, level, params)`` and ``obs, state, reward,
-done, info = env.step(rng, state, action, params)``, levels are pytrees, and the environment
-never resets by itself. :class:`AutoReplay` restarts the *same* level when an episode ends.
-
-A :class:`UEDTask` bundles an environment with the level generator and the extras the engine
-uses: the optimal return of a level (for the perfect-regret score), named evaluation level
-sets, and boolean level tags to report (e.g. which levels hide the answer).
-"""
+An environment is any ``jaxued.environments.UnderspecifiedEnv``: ``obs, state =
+env.reset_to_level(rng, level, params)``, ``obs, state, reward, done, info = env.step(rng, state,
+action, params)``; levels are pytrees and the environment never resets itself
+(:class:`AutoReplay` restarts the *same* level). A :class:`UEDTask` bundles it with its level
+generator and what the engine uses beside."""
 
 from __future__ import annotations
 
@@ -24,12 +20,11 @@ from remidi.envs.actions import ActionSpace, Box, Discrete, as_action_space
 
 
 def _jaxued_interface():
-    """``jaxued.environments.underspecified_env``, the module of the interface we share with
-    jaxued, without running ``jaxued.environments``' ``__init__`` until something else needs it:
-    that imports jaxued's maze, which imports gymnax's every environment and seaborn, seconds of
-    start-up for every process (the CLI's included) that never touches a maze. The module is
-    registered under its own name, so a later import of the package finds it there and jaxued's
-    classes stay the same objects (``tests/test_interface_import.py``)."""
+    """``jaxued.environments.underspecified_env``, loaded without running ``jaxued.environments``'
+    ``__init__``.
+
+    Why: that imports jaxued's maze, gymnax's every env and seaborn, seconds of start-up for every
+    process. Registered under its own name, so jaxued's classes stay the same objects."""
     import importlib.util
     import sys
 
@@ -69,19 +64,12 @@ class AutoReplayState:
 class AutoReplay(UnderspecifiedEnv):
     """Restart the same level when an episode ends.
 
-    On a terminal step the returned observation and state are those of the fresh episode on the
-    same level; ``done`` is still True for that step, and the reward is the terminal reward.
-
-    With ``deterministic_reset`` (the wrapped ``reset_to_level`` ignores its key, as
-    ``UEDTask.deterministic_reset`` promises) the first observation and state are kept from the
-    reset and restored on restart, instead of resetting again at every step: the same result,
-    without a reset in the step's program (for Brax, a forward-kinematics pass per step and
-    several seconds of compilation).
-
-    With ``solved_info`` (the info key a task's ``solved`` names) the state keeps that key's value
-    at the last step as ``state.solved`` (:func:`info_flag`), which a restart leaves as it was:
-    the rollout records it (``Trajectory.solved``) where the terminal step's info is gone.
-    """
+    On a terminal step the observation and state are the fresh episode's; ``done`` is True and the
+    reward is the terminal one. ``deterministic_reset`` (the reset ignores its key): the first
+    observation and state are kept and restored, so the step's program holds no reset (for Brax, a
+    kinematics pass per step and seconds of compilation). ``solved_info`` (the info key of a task's
+    ``solved``): ``state.solved`` keeps that key's last-step value (:func:`info_flag`), which
+    outlives the terminal step's info."""
 
     def __init__(self, env: UnderspecifiedEnv, deterministic_reset: bool = False, solved_info: str | None = None):
         self._env = env
@@ -100,8 +88,7 @@ class AutoReplay(UnderspecifiedEnv):
         return obs, self.start_state(obs, state, level)
 
     def start_state(self, obs, state, level) -> AutoReplayState:
-        """The wrapper's state at the start of an episode whose first observation and state the
-        wrapped environment's reset returned."""
+        """The wrapper's state at an episode's start, from the wrapped reset's ``obs`` and ``state``."""
         start = (obs, state) if self._deterministic_reset else None
         solved = jnp.asarray(False) if self._solved_info is not None else None
         return AutoReplayState(env_state=state, level=level, start=start, solved=solved)
@@ -112,10 +99,8 @@ class AutoReplay(UnderspecifiedEnv):
         return self.restart_where_done(state, stepped, params, rng_reset)
 
     def restart_where_done(self, state: AutoReplayState, stepped, params, rng_reset=None):
-        """The second half of :meth:`step_env`: given the wrapped environment's ``stepped =
-        (obs, env_state, reward, done, info)`` (from ``state.env_state``, with the first half of
-        ``split(rng)``), restart the level where the episode ended. ``rng_reset`` (the second
-        half) is unused with ``deterministic_reset``."""
+        """The second half of :meth:`step_env`: restart the level where the wrapped ``stepped = (obs,
+        env_state, reward, done, info)`` ended; ``rng_reset`` is unused with ``deterministic_reset``."""
         obs, env_state, reward, done, info = stepped
         if self._deterministic_reset:
             obs_re, env_state_re = state.start
@@ -130,8 +115,7 @@ class AutoReplay(UnderspecifiedEnv):
 
 
 def info_flag(info, key: str) -> jax.Array:
-    """bool[]: the step's ``info[key]`` read as a flag: truthy (nonzero), and for an array (e.g.
-    one flag per agent) every entry truthy."""
+    """bool[]: ``info[key]`` as a flag: truthy, every entry for an array (e.g. one flag per agent)."""
     return jnp.all(jnp.asarray(info[key]).astype(bool))
 
 
@@ -148,65 +132,43 @@ def tree_equal(a, b) -> jax.Array:
 
 @dataclass(frozen=True, eq=False)
 class UEDTask:
-    """Everything the UED engine needs to know about a domain.
-
-    Compared and hashed by identity, so that compiled train steps are reused for the same task.
+    """Everything the UED engine needs to know about a domain (compared and hashed by identity, so
+    compiled steps are reused per task).
 
     Attributes:
         env: the (non-resetting) environment.
-        params: its ``EnvParams``.
-        sample_level: ``rng -> level``, the random level generator (domain randomisation).
-        action_space: the actions (:mod:`remidi.envs.actions`): ``Discrete(n)`` (``i32[]``),
-            ``MultiDiscrete(nvec)`` (``i32[k]``, one choice per component) or ``Box(dims)``
-            (``f32[dims]``, unbounded: the environment clips); or the environment's own space
-            (gymnax's, Kinetix's, JaxMARL's, gymnasium's), converted to one of those
-            (:func:`~remidi.envs.actions.from_env_space`). Or the shorthand:
-        num_actions: ``Discrete(num_actions)``, or with ``continuous`` ``Box(num_actions)``. Given
-            beside ``action_space``, the two must agree (``Discrete``/``Box`` only). Read the
-            space as :attr:`actions` (set for either declaration).
+    params: its ``EnvParams``.
+        sample_level: ``rng -> level``, the random level generator.
+        action_space: ``Discrete(n)`` (``i32[]``), ``MultiDiscrete(nvec)`` (``i32[k]``) or
+            ``Box(dims)`` (``f32[dims]``, unbounded: the env clips), or the env's own space
+            (gymnax, Kinetix, JaxMARL, gymnasium; :func:`~remidi.envs.actions.from_env_space`).
+        num_actions: shorthand: ``Discrete(num_actions)``, or ``Box`` with ``continuous``; must agree
+            with ``action_space`` if both are given. Read either as :attr:`actions`.
         max_episode_steps: an upper bound on an episode's length (evaluation rolls this long).
-        optimal_return: ``level -> f32[]`` best achievable (undiscounted) return, or None if
-            unknown (then the perfect-regret score is unavailable).
-        optimal_discounted_return: ``(level, gamma) -> f32[]``, the best achievable discounted
-            return E[Σ_t γ^t r_t] (t counted from the episode's first step, ``gamma`` a static
-            float): the optimum of the paper's utility, which the default perfect-regret score
-            uses (``UEDConfig.discounted_regret``). For a one-step task it is ``optimal_return``
-            (:func:`one_step_discounted`).
-        eval_sets: name → level batch (leading dim = number of levels) to report solve rates on.
-        eval_envs: name → the environment that plays that evaluation set, where it is not ``env``
-            (e.g. a held-out maze larger than the training grid); same ``params``.
-        level_tags: ``level -> dict[str, bool[]]``, properties reported as replay/buffer
-            fractions (e.g. ``{"hidden": ...}``).
-        solved: when an episode counts as solved (``solve_rate/<set>``, the learnability score,
-            SFL): a function of its return, ``f32[N] -> bool[N]`` (default: return > 0); or the
-            name of a key of the step's info dict (``env.step``'s fifth output) whose value at the
-            episode's last step says so (truthy; an array, e.g. one flag per agent, when all its
-            entries are: :func:`info_flag`), for an environment that reports success itself where
-            the return does not tell (JaxNav's goal flag); the return then does not enter. None for a
-            task without a notion of solving (no ``solve_rate`` metric, no learnability score).
-        expected_return: for a one-step task with ``Discrete(n)`` actions, ``(level, probs f32[n]) -> f32[]``, the
-            exact expected return of a policy with those action probabilities; makes the
-            evaluation's regret exact (instead of sampled) and adds the policy's entropy.
-        mutate_level: ``(rng, level, num_edits: int) -> level``, ACCEL's level editor: at most
-            ``num_edits`` small changes (e.g. a wall added or removed), returning a valid level of
-            the same shapes; None for a task without one (ACCEL cannot run on it).
-        easy_level: ``rng -> level``, the generator of ACCEL's "easy start" (e.g. mazes without
-            walls, ``accel.easy_start``); None for a task without one.
-        level_builder: the task's level-building MDP (:class:`remidi.envs.builder.LevelBuilder`),
-            the environment a learned level generator (PAIRED) acts in; None for a task without
-            one (the generator algorithms cannot run on it).
-        reseed_level: ``(rng, level) -> level``, the level with its own randomness drawn afresh
-            (a level that carries its environment's random seed, so that the environment is
-            deterministic given the level: :mod:`remidi.envs.noisy`); with the ``reseed`` config
-            key every rollout plays its levels so, as the stochastic environment would. None:
-            the task has no such randomness.
-        deterministic_reset: ``env.reset_to_level`` ignores its key (the level fixes the start,
-            as in every environment of this package). Lets ReMiDi use the candidate tracker,
-            whose cost per step does not grow with the number of frozen levels; leave False for
-            an environment that draws its start at random (the reference tracker then runs).
+        optimal_return: ``level -> f32[]``, best undiscounted return; None: no perfect regret.
+        optimal_discounted_return: ``(level, gamma) -> f32[]``, best E[Σ_t γ^t r_t] from the
+            episode's first step (``gamma`` static), used by default perfect regret
+            (``UEDConfig.discounted_regret``); one-step tasks: :func:`one_step_discounted`.
+        eval_sets: name → level batch (leading dim: levels) to report on.
+        eval_envs: name → the env that plays that set where it is not ``env`` (same ``params``).
+        level_tags: ``level -> dict[str, bool[]]``, reported as replay/buffer fractions.
+        solved: when an episode counts as solved (solve rates, learnability, SFL): ``f32[N] ->
+            bool[N]`` of the return (default: return > 0), or an info key whose value at the
+            episode's last step says so (:func:`info_flag`; the return then does not enter); None:
+            no notion of solving.
+        expected_return: one-step ``Discrete(n)`` tasks: ``(level, probs f32[n]) -> f32[]``, the
+            exact expected return; makes evaluation's regret exact and adds the policy's entropy.
+        mutate_level: ``(rng, level, num_edits) -> level``, ACCEL's editor (at most ``num_edits``
+            small changes, same shapes); None: no ACCEL.
+        easy_level: ``rng -> level``, ACCEL's easy start (``accel.easy_start``); None: none.
+        level_builder: the level-building MDP (:class:`remidi.envs.builder.LevelBuilder`) a learned
+            generator acts in; None: no PAIRED.
+        reseed_level: ``(rng, level) -> level`` with the level's own randomness redrawn
+            (:mod:`remidi.envs.noisy`); the ``reseed`` key applies it every rollout. None: none.
+        deterministic_reset: ``reset_to_level`` ignores its key; lets ReMiDi use the candidate
+            tracker, whose cost does not grow with the frozen levels. False for random starts.
         continuous: with ``num_actions``, the actions are ``Box(num_actions)``.
-        actions: (derived, not a constructor argument) the action space either declaration gives.
-    """
+        actions: (derived) the action space either declaration gives."""
 
     env: UnderspecifiedEnv
     params: Any
@@ -243,6 +205,5 @@ class UEDTask:
 
 
 def one_step_discounted(optimal_return: Callable[[Any], jax.Array]) -> Callable[[Any, float], jax.Array]:
-    """``UEDTask.optimal_discounted_return`` of a task whose episodes last one step: its reward
-    comes at t = 0, undiscounted (γ^0 = 1), so the discounted optimum is the optimum."""
+    """``UEDTask.optimal_discounted_return`` of a one-step task: the reward comes at t = 0 (γ^0 = 1)."""
     return lambda level, gamma: optimal_return(level)

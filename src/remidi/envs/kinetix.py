@@ -1,41 +1,23 @@
 """Kinetix (Matthews et al., ICLR 2025) as a UED domain: 2-D physics tasks on Kinetix's own levels.
 
-Needs the optional extra (``pip install -e ".[kinetix]"``: ``kinetix-env``, which caps JAX at
-0.9.0; the core stays on the newest JAX, so the extra lives in an environment of its own). This
-module imports Kinetix at its top: import it only where a Kinetix task is built.
+Needs the optional extra (``pip install -e ".[kinetix]"``; it caps JAX at 0.9.0, so it lives in
+its own environment); this module imports Kinetix at its top. A level is Kinetix's ``EnvState``;
+sizes ``s``, ``m``, ``l`` differ in how many shapes, joints and thrusters it holds. The task:
 
-A level is Kinetix's ``EnvState`` (shapes, joints, thrusters, their roles), as Kinetix's own
-environment resets to it; sizes ``s``, ``m`` and ``l`` (Kinetix's ``static_env_params_from_size``)
-differ in how many polygons, circles, joints and thrusters a level holds. What the task offers:
+* ``sample_level``: Kinetix's random level behind its no-op filter (``filter_ratio`` candidates
+  played ``filter_steps`` no-op steps, one the no-op solved drawn with weight 0.001), as
+  Kinetix's PLR, ACCEL and SFL do;
+* :class:`KinetixUED`: Kinetix's step without auto-reset; +1 when green touches blue, −1 for red
+  (either ends the episode), plus the dense shaping whose episode sum is kept within
+  ±:data:`SHAPING_BOUND` (Kinetix's is unbounded), so the return alone says whether the goal was
+  reached (``solved``: return > 0.5); 256 steps;
+* ``eval_sets``: Kinetix's hand-made held-out levels of the training size and every smaller one
+  (``s_h0_weak_thrust``), cached as arrays (:mod:`remidi.envs.kinetix_levels`);
+* ``mutate_level``: Kinetix's own mutator (``make_mutate_env``);
+* ``level_tags``: ``has_motor``, ``has_thruster``, ``has_red`` and free-shape-count buckets;
+* ``deterministic_reset``: the level is the start state and the physics is deterministic.
 
-* ``sample_level``: Kinetix's random level (``sample_kinetix_level``) behind Kinetix's own filter
-  of levels that doing nothing already solves (``create_vmapped_filtered_distribution``, one
-  level per call: ``filter_ratio`` candidates, each played by the no-op action for
-  ``filter_steps`` steps, one drawn with weight 0.001 for a candidate the no-op solved and 1
-  otherwise), as Kinetix's PLR, ACCEL and SFL do;
-* the environment (:class:`KinetixUED`): Kinetix's step (``frame_skip`` physics substeps) without
-  its auto-reset; reward +1 when a green shape touches a blue one, −1 when it touches a red one
-  (either ends the episode), plus Kinetix's dense shaping, −``dense_reward_scale`` × the change
-  in the green–blue distance, whose sum over the episode is kept within ±:data:`SHAPING_BOUND`
-  (Kinetix's is unbounded): so the return alone says whether the goal was reached (``solved``:
-  return > 0.5), as the engine's solve rates and learnability score read it; episodes end after
-  256 steps;
-* ``eval_sets``: Kinetix's hand-made held-out levels (the lists of its ``configs/eval``), each
-  level a set ``<size>_<name>`` (``s_h0_weak_thrust``): those of the training size and of every
-  smaller one (padded to the training size by Kinetix's ``expand_env_state``), loaded from
-  Kinetix's JSON files once and cached as arrays (:mod:`remidi.envs.kinetix_levels`);
-* ``mutate_level`` (ACCEL): Kinetix's own mutator (``make_mutate_env``: add, move, resize,
-  rotate a shape, swap roles, add or remove a thruster, toggle a fixture);
-* ``level_tags``: ``has_motor`` (an active joint with its motor on), ``has_thruster``,
-  ``has_red`` (a red shape, floor included, to avoid) and the number of free shapes in buckets
-  (``shapes_2-3``, ``shapes_4-6``, ``shapes_7-12``; one tag per count where the size allows
-  three or fewer: ``shapes_2``, ``shapes_3``);
-* ``deterministic_reset``: the level is the start state and the physics is deterministic, so
-  ReMiDi's exact candidate tracker applies.
-
-Observations and actions are components (:mod:`remidi.envs.kinetix_obs`): ``symbolic_flat`` or
-``entity`` observations, ``discrete`` actions.
-"""
+Observation and action components: :mod:`remidi.envs.kinetix_obs`."""
 
 from __future__ import annotations
 
@@ -68,10 +50,9 @@ class KinetixState:
 
 
 class KinetixUED(UnderspecifiedEnv):
-    """Kinetix's environment (``kinetix_env``: a ``KinetixEnv`` built with ``auto_reset=False``,
-    played on params whose ``dense_reward_scale`` is 0) with Kinetix's dense shaping at
-    ``dense_reward_scale`` added here, its episode sum bounded (the module's docstring), and the
-    observation ``observation.adapt`` makes of Kinetix's."""
+    """Kinetix's env (``auto_reset=False``, its own shaping off) with the dense shaping at
+    ``dense_reward_scale`` added here, bounded per episode, and the observation ``observation.adapt``
+    makes."""
 
     def __init__(self, kinetix_env, params, observation: Observation, dense_reward_scale: float):
         self.kinetix_env = kinetix_env
@@ -112,15 +93,15 @@ class KinetixUED(UnderspecifiedEnv):
 
 
 def shape_buckets(capacity: int) -> list[tuple[int, int]]:
-    """The ``(low, high)`` counts of free shapes each ``shapes_*`` tag covers, for a size holding at
-    most ``capacity`` free shapes (a level has at least two: the green and the blue one)."""
+    """The ``(low, high)`` free-shape counts of the ``shapes_*`` tags for a size of ``capacity`` free
+    shapes (a level has at least two)."""
     if capacity <= 3:
         return [(n, n) for n in range(2, capacity + 1)]
     return [(lo, min(hi, capacity)) for lo, hi in ((2, 3), (4, 6), (7, 12)) if lo <= capacity]
 
 
 def level_tags(level, capacity: int) -> dict[str, jax.Array]:
-    """``{tag: bool[]}`` of a level (the module's docstring); ``capacity``: free shape slots."""
+    """``{tag: bool[]}`` of a level (module docstring); ``capacity``: free shape slots."""
     free = jnp.sum(level.polygon.active[NUM_STATIC:]) + jnp.sum(level.circle.active)
     red = jnp.any((level.polygon_shape_roles == ROLE_RED) & level.polygon.active) | jnp.any(
         (level.circle_shape_roles == ROLE_RED) & level.circle.active)
@@ -132,10 +113,8 @@ def level_tags(level, capacity: int) -> dict[str, jax.Array]:
 
 
 def filtered_sampler(sample_one, env_params, static, ued_params, filter_env, ratio: int, steps: int):
-    """``rng -> level``: Kinetix's no-op filter (``create_vmapped_filtered_distribution``) drawing
-    one level of ``ratio`` candidates from ``sample_one``, each played ``steps`` steps by the no-op
-    (``filter_env``: multi-discrete actions, whose all-zero action is the no-op); ``steps`` 0: the
-    raw sampler."""
+    """``rng -> level``: Kinetix's no-op filter over ``ratio`` candidates of ``sample_one``, each played
+    ``steps`` no-op steps (``filter_env``: multi-discrete, all-zero is the no-op); ``steps`` 0: raw."""
     if steps == 0:
         return sample_one
 
@@ -150,12 +129,12 @@ def filtered_sampler(sample_one, env_params, static, ued_params, filter_env, rat
 def kinetix_task(size: str = "s", observation: str = "symbolic_flat", actions: str = "discrete",
                  dense_reward_scale: float = 0.2, filter_steps: int = 64, filter_ratio: int = 2,
                  held_out: bool = True) -> UEDTask:
-    """The Kinetix task of ``size`` (the module's docstring): ``observation`` and ``actions``
-    components (:mod:`remidi.envs.kinetix_obs`), Kinetix's dense shaping ``dense_reward_scale``
-    (its configs: 0.2), the no-op filter's ``filter_steps`` (0: none) and ``filter_ratio``
-    (Kinetix's ``level_filter_n_steps`` 64, ``level_filter_sample_ratio`` 2); ``held_out``: the
-    held-out levels as evaluation sets (loading them costs seconds to minutes the first time).
-    ConfigError (one line, naming the field) for a value out of range."""
+    """The Kinetix task of ``size`` (module docstring).
+
+    ``observation``, ``actions``: components (:mod:`remidi.envs.kinetix_obs`); ``dense_reward_scale``
+    (Kinetix's configs: 0.2); ``filter_steps`` (0: none) and ``filter_ratio`` (Kinetix: 64, 2);
+    ``held_out``: load the held-out sets (seconds to minutes the first time). ConfigError for a value
+    out of range."""
     if size not in SIZES:
         raise one_of("kinetix.size", size, SIZES)
     if observation not in OBSERVATIONS:

@@ -1,12 +1,9 @@
 """Kinetix's hand-made held-out levels, loaded once and cached as arrays.
 
-Kinetix ships them as JSON files (``kinetix/levels/{s,m,l}/*.json``: 10, 24 and 40 levels, the
-lists of its ``configs/eval``). Its loader rebuilds each level with eager JAX operations, seconds
-per level (measured on a loaded 2-core CPU: 71 s for the s set, 341 s for the l set), so the
-stacked levels are written to ``<cache>/kinetix-<version>-<train size>-<level size>.npz`` on first
-use and read from there afterwards (``<cache>``: ``$REMIDI_KINETIX_CACHE``, else
-``~/.cache/remidi/kinetix``; a file that does not match the levels' shapes is rebuilt).
-"""
+Kinetix's loader rebuilds each JSON level eagerly, seconds per level (71 s for the s set, 341 s
+for l on a loaded 2-core CPU), so stacked levels are cached in
+``<cache>/kinetix-<version>-<train size>-<level size>.npz`` (``$REMIDI_KINETIX_CACHE``, else
+``~/.cache/remidi/kinetix``; a file of other shapes is rebuilt)."""
 
 from __future__ import annotations
 
@@ -40,8 +37,7 @@ def _load_json(names: list[str], level_size: str, static):
 
 
 def stacked_levels(train_size: str, level_size: str, static):
-    """The held-out levels of ``level_size`` as one Kinetix ``EnvState`` (leaves ``[L, ...]``), padded
-    to the training size's ``static`` params; from the cache when it holds them."""
+    """The held-out levels of ``level_size`` as one ``EnvState`` (leaves ``[L, ...]``) padded to ``static``."""
     names = list(HELD_OUT[level_size])
     example = jax.eval_shape(lambda: create_empty_env(static))
     leaves, treedef = jax.tree.flatten(example)

@@ -1,7 +1,5 @@
-"""The names of Kinetix's hand-made held-out levels per size (Kinetix's ``configs/eval/{s,m,l}.yaml``,
-the JSON files of ``kinetix/levels/<size>/``), without importing Kinetix: the experiment's metrics
-and plots are known before the optional extra is needed (tests/test_kinetix.py checks them against
-the installed package's files)."""
+"""Kinetix's held-out level names per size, without importing Kinetix, so metrics and plots are
+known before the extra is installed (tests/test_kinetix.py checks them against its files)."""
 
 HELD_OUT = {
     "s": ("h0_weak_thrust", "h1_thrust_over_ball", "h2_one_wheel_car", "h3_point_the_thruster", "h4_thrust_aim",

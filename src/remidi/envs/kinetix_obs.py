@@ -1,21 +1,12 @@
-"""Kinetix's observations as the agent reads them, and its action types.
+"""Kinetix's observations as the agent reads them, and its action types (components chosen at set-up).
 
-An *observation* component turns what Kinetix's environment returns into what remidi's network
-reads; each is chosen once at set-up (``kinetix.observation``):
+Observations (``kinetix.observation``): ``symbolic_flat`` (Kinetix's ``SYMBOLIC_FLAT``, ``f32[D]``,
+D = 140 on size s, for ``mlp``); ``entity`` (``SYMBOLIC_ENTITY`` as remidi's entity convention,
+:func:`entity_observation`).
 
-* ``symbolic_flat``: Kinetix's ``SYMBOLIC_FLAT`` vector (``f32[D]``, D = 140 on size s), read by
-  the ``mlp`` network as it is;
-* ``entity``: Kinetix's ``SYMBOLIC_ENTITY`` observation (an ``EntityObservation``) as remidi's
-  entity convention, ``{"entities": {group: {"features": f32[n, F], "mask": bool[n]}}}``
-  (:func:`entity_observation`), for a network over sets of entities.
-
-An *action* component names Kinetix's action type and declares the task's action space
-(``kinetix.actions``, :mod:`remidi.envs.actions`): ``discrete`` is Kinetix's ``DISCRETE``
-(``Discrete(11)`` on size s: a motor binding and direction, a thruster binding, or nothing:
-2·4 + 2 + 1); ``multi_discrete`` is Kinetix's default ``MULTI_DISCRETE``, one choice per motor
-binding (forward, backward, off) and per thruster binding (on, off): ``MultiDiscrete((3, 3, 3,
-3, 2, 2))`` on size s, its all-zero action the no-op.
-"""
+Actions (``kinetix.actions``): ``discrete`` (``DISCRETE``, ``Discrete(11)`` on size s: motor
+binding × direction, thruster, or nothing); ``multi_discrete`` (Kinetix's default, one choice per
+motor and thruster binding: ``MultiDiscrete((3, 3, 3, 3, 2, 2))`` on size s; all-zero: no-op)."""
 
 from __future__ import annotations
 
@@ -31,21 +22,14 @@ SHAPE_GROUPS = ("polygons", "circles")
 
 
 def entity_observation(obs: Any) -> dict:
-    """Kinetix's ``EntityObservation`` (P polygons, C circles, J joints, T thrusters) as
-    ``{"entities": {group: {"features": f32[n_g, F_g], "mask": bool[n_g]}}}``, keeping what the
-    observation says:
+    """Kinetix's ``EntityObservation`` as ``{"entities": {group: {"features": f32[n_g, F_g], "mask": bool[n_g]}}}``.
 
-    * ``polygons`` ``f32[P, 27 + 2(P+C)]``, ``circles`` ``f32[C, 19 + 2(P+C)]``: Kinetix's shape
-      features (gravity included), then the shape's rows of two of Kinetix's attention masks over
-      the P + C shapes (polygons first): the shapes it is connected to through joints, and the
-      shapes it touches now;
-    * ``joints`` ``f32[2J, 22 + 2(P+C)]``: Kinetix's joint features (each joint twice, a→b and
-      b→a), then one-hots of the two shapes it links;
-    * ``thrusters`` ``f32[T, 8 + P+C]``: Kinetix's thruster features, then a one-hot of its shape;
+    * ``polygons`` ``f32[P, 27 + 2(P+C)]``, ``circles`` ``f32[C, 19 + 2(P+C)]``: shape features, then
+      the shape's rows of two attention masks over the P + C shapes (joined by joints; touching now);
+    * ``joints`` ``f32[2J, 22 + 2(P+C)]``: features (each joint both ways), one-hots of its two shapes;
+    * ``thrusters`` ``f32[T, 8 + P+C]``: features, one-hot of its shape;
 
-    each with Kinetix's mask (the entity is active). The masks' remaining two views (every active
-    shape; one-hop joint links) are what the masks and the joints' one-hots already say. No batch
-    axis; vmap it for a batch."""
+    each with Kinetix's active mask. The other two mask views add nothing. Unbatched."""
     num_polygons = obs.polygons.shape[0]
     num_shapes = num_polygons + obs.circles.shape[0]
     relations = jnp.concatenate([obs.attention_mask[1], obs.attention_mask[3]], axis=-1).astype(jnp.float32)
@@ -63,8 +47,7 @@ def entity_observation(obs: Any) -> dict:
 
 @dataclass(frozen=True)
 class Observation:
-    """An observation component: Kinetix's ``ObservationType`` (its name) and ``adapt``, what
-    the environment returns → what the network reads (unbatched)."""
+    """An observation component: Kinetix's ``ObservationType`` name and ``adapt`` (env output → network input)."""
 
     kinetix_type: str
     adapt: Callable[[Any], Any]
@@ -72,8 +55,7 @@ class Observation:
 
 @dataclass(frozen=True)
 class Actions:
-    """An action component: Kinetix's ``ActionType`` (its name) and ``declare``, Kinetix's action
-    space → the task's action space (``UEDTask.action_space``)."""
+    """An action component: Kinetix's ``ActionType`` name and ``declare`` (its space → ``UEDTask.action_space``)."""
 
     kinetix_type: str
     declare: Callable[[Any], Any]

@@ -87,9 +87,8 @@ class LeverGame(UnderspecifiedEnv):
 
 
 class LeverBuilder(LevelBuilder):
-    """The lever game's level-building MDP: one action ``a`` in ``[0, 2·num_levers)`` builds the
-    level: correct lever ``a mod num_levers``, visible when ``a < num_levers``, hidden otherwise.
-    The generator sees only the time step and its noise (``design`` is empty)."""
+    """The lever game's level-building MDP: one action ``a`` in ``[0, 2·num_levers)``: lever
+    ``a mod num_levers``, visible iff ``a < num_levers``; ``design`` is empty."""
 
     num_steps = 1
 

@@ -1,40 +1,21 @@
 """The maze domain (paper §6.3): MiniGrid-style mazes, T-mazes, blindfolded mazes, held-out mazes.
 
-The environment is ``jaxued``'s :class:`~jaxued.environments.Maze` (the UED reference
-implementation), wrapped by :class:`MazeEnv`, which adds two kinds of level the ReMiDi paper
-needs. On an ordinary level :class:`MazeEnv` *is* ``jaxued``'s ``Maze`` (observations, rewards
-and dones agree step for step, see ``tests/test_maze_env.py``):
-
-* a ``size × size`` grid (13 for training), walls, a goal and an agent with a direction;
-* actions ``0`` left, ``1`` right, ``2`` forward (``3..6`` do nothing), so 7 discrete actions;
-* an egocentric 5×5 view (object, colour, state channels, divided by 10) plus the direction;
-* reward ``1 − 0.9·(t+1)/T`` on the step ``t`` (0-based) that moves into the goal, which ends
-  the episode; ``T = 250`` steps at most.
+:class:`MazeEnv` wraps ``jaxued``'s :class:`~jaxued.environments.Maze` and on an ordinary level
+*is* it, step for step (``tests/test_maze_env.py``): a ``size × size`` grid (13 for training);
+7 actions (``0`` left, ``1`` right, ``2`` forward, ``3..6`` nothing); an egocentric 5×5 view
+(channels / 10) plus the direction; reward ``1 − 0.9·(t+1)/T`` on reaching the goal, ``T = 250``.
 
 Level kinds (flags of :class:`MazeLevel`):
 
-* **T-maze** (``tmaze``): the agent stands at the junction of a T facing its top wall; the goal
-  sits at the end of the left or the right arm and is drawn as an empty cell, so it cannot be
-  seen. The first action that changes the agent's position ends the episode with ``+1`` if it
-  moved towards the goal (the Manhattan distance to the goal fell) and ``−1`` otherwise (the
-  other arm, or the stem). Every cell the agent can never see from the junction is a wall with
-  probability 1/2, so T-mazes are distinct levels that all play identically. Optimal return 1
-  (discounted: ``γ``, a turn, then the move); any policy that cannot see the goal has regret ≥ 1
-  on one of the two sides.
-* **Blind** (``blind``): an ordinary maze whose observations are all zeros (image and direction).
+* **T-maze** (``tmaze``): the agent at a T's junction facing its top wall, the goal at the end of
+  one arm drawn as an empty cell. The first move ends the episode: ``+1`` if it got closer to the
+  goal, else ``−1``. Cells never visible from the junction are random walls, so T-mazes are
+  distinct levels that play identically. Optimal return 1 (discounted ``γ``); any policy that
+  cannot see the goal has regret ≥ 1 on one side.
+* **Blind** (``blind``): an ordinary maze whose observations are all zeros.
 
-Optimal return (:func:`optimal_return`): an exact shortest path over (position, direction)
-states, see its docstring for the convention.
-
-Held-out test mazes (:func:`held_out_sets`): eight ``jaxued`` prefabs, loaded from
-``jaxued.environments.maze.level.prefabs`` at run time, and the two corridor mazes of
-:func:`corridor_levels`. Each is played at its own size (LargeCorridor is 19×19) by the same
-network, since the observation is always the 5×5 view.
-
-The levels and their generators live in :mod:`remidi.envs.maze_levels`, the exact optimal
-returns in :mod:`remidi.envs.maze_paths`, the generator's MDP in :mod:`remidi.envs.maze_builder`;
-this module holds the environment and the task, and names them all (``__all__``).
-"""
+Levels and generators: :mod:`remidi.envs.maze_levels`; exact optima:
+:mod:`remidi.envs.maze_paths`; the generator's MDP: :mod:`remidi.envs.maze_builder`."""
 
 from __future__ import annotations
 
@@ -69,8 +50,8 @@ class MazeState:
 
 
 class MazeEnv(UnderspecifiedEnv):
-    """``jaxued``'s ``Maze`` (normalised observations, time-penalised reward) plus T-mazes and
-    blindfolds. ``size``: the grid side this instance plays (levels must be ``size × size``)."""
+    """``jaxued``'s ``Maze`` (normalised observations) plus T-mazes and blindfolds; levels must be
+    ``size × size``."""
 
     def __init__(self, size: int = TRAIN_SIZE, view: int = VIEW):
         self.size = size
@@ -127,13 +108,10 @@ KINDS = ("maze", "tmaze", "blindfold")
 
 @functools.lru_cache(maxsize=None)
 def maze_task(kind: str = "tmaze", prob: float = 0.5, num_walls: int = NUM_WALLS) -> UEDTask:
-    """The maze domain as a UED task. Cached: the same arguments give the same task (and reuse its
-    compiled train steps).
+    """The maze domain as a UED task (cached per arguments, so compiled steps are reused).
 
-    ``kind``: ``"tmaze"`` (each generated level is a T-maze with probability ``prob``, tag
-    ``tmaze``), ``"blindfold"`` (each is blind with probability ``prob``, tag ``blind``) or
-    ``"maze"`` (ordinary mazes only). Evaluation sets: the ten held-out mazes.
-    """
+    ``kind``: ``"tmaze"`` (a T-maze with probability ``prob``, tag ``tmaze``), ``"blindfold"`` (blind
+    with probability ``prob``, tag ``blind``) or ``"maze"``. Evaluation sets: the ten held-out mazes."""
     if kind not in KINDS:
         raise ValueError(f"maze kind must be one of {KINDS}, got {kind!r}")
     env = MazeEnv(TRAIN_SIZE)

@@ -24,23 +24,18 @@ class MazeDesign:
 
 
 class MazeBuilder(LevelBuilder):
-    """The maze's level-building MDP. Actions are cell indices ``y·size + x`` (``size²`` of
-    them); the steps, in order:
+    """The maze's level-building MDP; actions are cell indices ``y·size + x``. Steps, in order:
 
-    1. the level's kind, where the task has special levels (``kind`` ``tmaze`` or ``blindfold``):
-       action ``a`` with ``a mod 2`` = 0 an ordinary maze, 1 a T-maze (a blind maze): a generator
-       acting uniformly makes each kind half of the time, as the task's sampler does;
+    1. the kind (``tmaze`` or ``blindfold`` tasks): ``a mod 2`` = 1 special, so a uniform generator
+       matches the sampler's half;
     2. the goal's cell (default: cell 0);
-    3. the agent's cell; on the goal's cell it changes nothing; an agent never placed stands on
-       the first cell that is neither the goal nor a wall;
-    4. the agent's direction: ``a mod 4`` (right, down, left, up);
-    5. ``num_walls`` wall placements (the sampler's 25): a wall on the goal, the agent or a wall
-       changes nothing.
+    3. the agent's cell (none on the goal; unplaced: the first free cell);
+    4. the direction ``a mod 4``;
+    5. ``num_walls`` walls (none on the goal, the agent or a wall).
 
-    A T-maze is the task's T-maze (:func:`tmaze_level`, its never-seen cells drawn from the
-    episode's key); the goal step picks its goal arm (the cell of one of the two arm ends; any
-    other cell keeps the side drawn from the key) and the other steps change nothing. Every level
-    the task's sampler produces can be built (``tests/test_builder.py``)."""
+    A T-maze is :func:`tmaze_level` from the episode's key; its goal step picks the arm (another
+    cell keeps the key's side), other steps change nothing. Every sampler level can be built
+    (``tests/test_builder.py``)."""
 
     def __init__(self, kind: str = "tmaze", num_walls: int = NUM_WALLS, size: int = TRAIN_SIZE):
         self.kind, self.size, self.num_walls = kind, size, num_walls

@@ -95,18 +95,12 @@ def tmaze_level(rng, size: int = TRAIN_SIZE, view: int = VIEW) -> MazeLevel:
 
 
 def mutate_maze(rng, level: MazeLevel, num_edits: int, view: int = VIEW) -> MazeLevel:
-    """ACCEL's maze editor (minimax's and jaxued's ``move_goal_flip_walls``): ``num_edits`` edits,
-    each drawing one of three kinds with equal odds: nothing (a no-op), flipping one wall cell
-    (adding or removing a wall; never on the agent's or the goal's cell) or moving the goal to a
-    free cell other than the agent's. The agent never moves, so at most ``num_edits`` wall cells
-    change and the goal always stands on a free cell.
+    """ACCEL's maze editor (minimax's and jaxued's ``move_goal_flip_walls``): ``num_edits`` edits.
 
-    A T-maze stays a T-maze and a blind level stays blind (the flags are kept): an edit of a level
-    whose regret is irreducible is again one. A T-maze's edits flip only cells the agent cannot
-    see from the junction and never move the goal (a goal move is a no-op there), so an edited
-    T-maze plays exactly like the original (same observations, same one-move outcome): ReMiDi
-    over ACCEL rejects it.
-    """
+    Each, with equal odds: nothing, flip one wall (never the agent's or goal's cell), or move the
+    goal to a free cell. The agent never moves. Flags are kept, and a T-maze's edits flip only
+    cells invisible from the junction and never move the goal, so an edited T-maze plays exactly
+    like the original and ReMiDi over ACCEL rejects it."""
     size = level.wall_map.shape[0]
     cells = jnp.arange(size * size)
     _, visible = _tmaze_layout(size, view)
@@ -142,17 +136,12 @@ def prefab_level(name: str) -> MazeLevel:
 
 
 def corridor_levels(size: int) -> MazeLevel:
-    """The corridor maze of side ``size`` (odd), one level per goal placement (leading dim = number
-    of dead ends); the goal is drawn uniformly per episode, so a solve rate over the batch is the
-    expected solve rate.
+    """The corridor maze of odd side ``size``, one level per goal placement (leading dim: dead ends),
+    so a solve rate over the batch is the expected one under a uniform goal.
 
-    Layout: a ring corridor along the border; the middle row is a wall except at its two ends;
-    every even interior column holds two dead-end corridors, one running from the top border down
-    towards the middle row and one from the bottom border up towards it; every other cell is a
-    wall. The agent starts at the left end of the middle row facing right, into the middle row's
-    wall (as DCD's and minimax's corridors do); the goal sits at the inner end of one dead end (the
-    cell next to the middle row).
-    """
+    A ring corridor along the border; the middle row a wall except at its ends; each even interior
+    column holds two dead ends towards the middle row. The agent starts at the middle row's left
+    end facing its wall (as DCD's and minimax's); the goal is at a dead end's inner end."""
     assert size % 2 == 1 and size >= 5, size
     mid = size // 2
     walls = np.ones((size, size), bool)

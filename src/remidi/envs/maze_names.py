@@ -1,6 +1,5 @@
-"""The maze domain's names and sizes, in a module of their own: an experiment registers its
-metrics by them without importing :mod:`remidi.envs.maze`, whose jaxued base imports gymnax
-(every environment) and seaborn, seconds that a process which never builds a maze need not pay."""
+"""The maze domain's names and sizes, importable without :mod:`remidi.envs.maze` (whose jaxued
+base imports gymnax and seaborn: seconds of start-up)."""
 
 TRAIN_SIZE = 13  # the training mazes' side
 MAX_STEPS = 250  # an episode's steps at most

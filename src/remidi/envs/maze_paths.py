@@ -1,6 +1,5 @@
 """Exact optimal returns of maze levels: a shortest path over (position, direction) states
-(:func:`cost_to_go`), and the undiscounted and discounted returns it gives (SPEC §3's
-convention: an n-action path's reward arrives at step index n−1)."""
+(:func:`cost_to_go`); an n-action path's reward arrives at step index n−1."""
 
 from __future__ import annotations
 
@@ -13,12 +12,10 @@ from remidi.envs.maze_names import MAX_STEPS
 
 # ----------------------------------------------------------------------------- optimal return
 def cost_to_go(level: MazeLevel) -> jax.Array:
-    """f32[4, H, W]: from each state (facing ``d``, at ``(x, y)`` → index ``[d, y, x]``), the fewest
-    actions after which the agent receives the goal reward (the last one is the forward move into
-    the goal); ``inf`` where the goal is unreachable, and on walls. Exact: a shortest path over
-    (position, direction) states — turn left, turn right, or forward (blocked by walls and the
-    grid's edge) — as the fixed point of the Bellman equation, iterated until nothing changes
-    (jit-able, vmappable)."""
+    """f32[4, H, W]: from each state (index ``[d, y, x]``) the fewest actions until the goal reward
+    (the last the forward move into the goal); ``inf`` where unreachable and on walls.
+
+    Exact: the Bellman fixed point over turn left/right and forward, iterated until nothing changes."""
     h, w = level.wall_map.shape
     is_goal = (jnp.arange(h)[:, None] == level.goal_pos[1]) & (jnp.arange(w)[None, :] == level.goal_pos[0])
     # the goal cell counts as reached (0); walls can never be stood on (inf)
@@ -48,28 +45,19 @@ def shortest_path_steps(level: MazeLevel) -> jax.Array:
 
 
 def optimal_return(level: MazeLevel, max_steps: int = MAX_STEPS) -> jax.Array:
-    """f32[]: the best return achievable on ``level``.
+    """f32[]: the best return on ``level``: ``1 − 0.9·n/T`` for ``n`` = :func:`shortest_path_steps`
+    (0 if unreachable or ``n > T``); a T-maze's is ``1``; blindness does not change it.
 
-    Convention: an ordinary (or blind) maze's goal reached with the ``n``-th action pays
-    ``1 − 0.9·n/T`` (the reward the environment gives at step ``t = n − 1``), so the optimal
-    return is that value for ``n`` = :func:`shortest_path_steps`, and ``0`` when the goal is
-    unreachable or ``n > T``. (``jaxued``'s ``MazeSolved.optimal_value`` uses ``n + 1``, one step
-    too many.) A T-maze's optimal return is ``1``: an agent that could see the goal would turn
-    towards it and step into its arm. Blindness does not change the level's optimum.
-    """
+    (``jaxued``'s ``MazeSolved.optimal_value`` uses ``n + 1``, one step too many.)"""
     return optimal_discounted_return(level, 1.0, max_steps)
 
 
 def optimal_discounted_return(level: MazeLevel, gamma: float, max_steps: int = MAX_STEPS) -> jax.Array:
-    """f32[]: the best discounted return E[Σ_t γ^t r_t] on ``level`` (t = 0 at the first action).
+    """f32[]: the best E[Σ_t γ^t r_t] on ``level`` (t = 0 at the first action).
 
-    The goal reached with the ``n``-th action pays ``1 − 0.9·n/T`` at ``t = n − 1``, so the
-    optimum is ``γ^(n−1)·(1 − 0.9·n/T)`` for ``n`` = :func:`shortest_path_steps` (a shorter path
-    is both discounted less and paid more, so the shortest path is optimal for every γ), and
-    ``0`` when the goal is unreachable or ``n > T``. A T-maze's agent faces the top wall, so the
-    best it can do is a turn, then the move into the goal arm, paid ``1`` at ``t = 1``: its optimum
-    is ``γ``. ``gamma = 1`` gives :func:`optimal_return`.
-    """
+    ``γ^(n−1)·(1 − 0.9·n/T)`` for the shortest path's ``n`` (optimal for every γ: a shorter path is
+    discounted less and paid more); 0 if unreachable or ``n > T``. A T-maze's agent faces the wall,
+    so a turn then the move pays 1 at t = 1: ``γ``."""
     n = shortest_path_steps(level)
     reachable = n <= max_steps
     steps = jnp.where(reachable, n, 1.0)

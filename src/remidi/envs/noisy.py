@@ -1,27 +1,17 @@
 """Stochastic test domains: observation noise that ReMiDi's exact tracker cannot see through.
 
-ReMiDi's tracker (:mod:`remidi.engine.trackers.exact`) is exact for environments that are
-deterministic given the level. Randomness outside the level can be brought inside it, as a
-*seed* the level carries ("seed in the level"): the environment stays deterministic given the
-level and the tracker stays exact. Where the randomness is in what the agent *sees*, that is
-of no use: two draws of the same irreducible situation show different observations, so no
-level is ever a complete overlap of another and ReMiDi's later buffers accept the irreducible
-levels again (it falls back to PLR⊥). Two such domains:
+Randomness brought into the level as a *seed* keeps the env deterministic given the level, so
+the exact tracker stays exact; but where the randomness is in what the agent *sees*, two draws
+of one irreducible situation differ, no level ever overlaps another completely, and ReMiDi falls
+back to PLR⊥. Two such domains:
 
-* ``lever-noisy`` (:func:`noisy_lever_task`): the lever game whose observation also carries a
-  noise code, ``noise_bits`` random bits (16: 65536 codes) drawn from the level's seed, saying
-  nothing about the answer.
-* ``blindfold-noisy`` (:func:`noisy_blindfold_task`): the blindfold mazes whose blind levels show
-  a "noisy TV" instead of zeros: every cell's channels (object, colour, state, in their ranges,
-  divided by 10 as the maze's observations are) and the direction drawn at random at each step,
-  from a hash of the level's seed, the episode's step counter and the entry (:func:`noise_words`).
+* ``lever-noisy`` (:func:`noisy_lever_task`): the lever game plus a ``noise_bits``-bit code
+  (16: 65536 codes) drawn from the level's seed;
+* ``blindfold-noisy`` (:func:`noisy_blindfold_task`): blind maze levels show a "noisy TV": every
+  cell's channels and the direction redrawn each step from a hash of (seed, step, entry).
 
-A level of these tasks is a :class:`SeededLevel` (the plain task's level and a u32 seed, drawn
-by the sampler independently of the level); :func:`seeded_task` lifts a plain task's sampler,
-optimal returns, tags, editor, easy levels, evaluation sets and level builder onto them. The
-noise never depends on the answer (the correct lever, the goal), only on the seed (and the
-step), so hidden levels stay irreducible and visible levels stay solvable.
-"""
+A level is a :class:`SeededLevel`; :func:`seeded_task` lifts a plain task onto them. The noise
+never depends on the answer, so hidden levels stay irreducible and visible ones solvable."""
 
 from __future__ import annotations
 
@@ -40,8 +30,7 @@ __all__ = ["SeededLevel", "SeededState", "SeededEnv", "SeededBuilder", "NoisyLev
            "seeded_task", "noisy_lever_task", "noisy_blindfold_task", "draw_seed", "noise_words", "NOISE_BITS"]
 
 NOISE_BITS = 16
-# the maze's observation channels (object, colour, state) take integer values below these
-# (MiniGrid's 11 object types, 6 colours, 3 states), divided by 10 in the normalised observation
+# upper bounds of the maze's channels (MiniGrid's 11 objects, 6 colours, 3 states), shown / 10
 MAZE_CHANNELS = (11, 6, 3)
 
 
@@ -72,19 +61,17 @@ def _mix(x) -> jax.Array:
 
 
 def noise_words(seed, step, count: int) -> jax.Array:
-    """u32[count]: the noise of a level's ``seed`` at ``step``, a counter-based hash of
-    (seed, step, entry). Deterministic, and a fraction of the cost of ``jax.random``'s threefry
-    (the tracker draws it for every frozen level it follows, at every step; measured per
-    1024 blindfold maze steps on a 2-core CPU: 0.45 ms without noise, 0.57 ms with this hash,
-    4.1 ms with threefry)."""
+    """u32[count]: the noise of ``seed`` at ``step``, a counter-based hash of (seed, step, entry).
+
+    Why not ``jax.random``: the tracker draws it per frozen level per step; per 1024 blindfold maze
+    steps (2-core CPU) 0.45 ms without noise, 0.57 ms with this hash, 4.1 ms with threefry."""
     key = _mix(_mix(jnp.asarray(seed, jnp.uint32) ^ jnp.uint32(0x9E3779B9)) + jnp.asarray(step, jnp.uint32))
     return _mix(key ^ _mix(jnp.arange(1, count + 1, dtype=jnp.uint32) * jnp.uint32(0x27D4EB2F)))
 
 
 class SeededEnv(UnderspecifiedEnv):
-    """A plain environment whose levels carry a seed; subclasses add noise to the observations
-    with :meth:`noisy` (a function of the seed and the plain state only: deterministic given the
-    level)."""
+    """A plain env whose levels carry a seed; subclasses add :meth:`noisy` observation noise (a
+    function of the seed and plain state only: deterministic given the level)."""
 
     def __init__(self, base: UnderspecifiedEnv):
         self.base = base
@@ -117,8 +104,7 @@ class SeededEnv(UnderspecifiedEnv):
 
 
 class NoisyLeverGame(SeededEnv):
-    """The lever game (:class:`~remidi.envs.lever.LeverGame`) whose observation ends with
-    ``noise_bits`` entries in {0, 1}: the level's noise code, drawn from its seed."""
+    """The lever game whose observation ends with ``noise_bits`` entries in {0, 1} from the level's seed."""
 
     def __init__(self, base, noise_bits: int = NOISE_BITS):
         super().__init__(base)
@@ -139,9 +125,7 @@ class NoisyLeverGame(SeededEnv):
 
 
 class NoisyMazeEnv(SeededEnv):
-    """The maze (:class:`~remidi.envs.maze.MazeEnv`) whose blind levels show a noisy TV: each
-    cell's channels and the direction drawn at random at each step, from the key
-    :func:`noise_words` of (seed, step); other levels are the plain maze's."""
+    """The maze whose blind levels show a noisy TV from :func:`noise_words` of (seed, step)."""
 
     def noisy(self, obs, state: SeededState):
         shape = obs.image.shape  # [view, view, 3]
@@ -155,8 +139,7 @@ class NoisyMazeEnv(SeededEnv):
 
 
 class SeededBuilder(LevelBuilder):
-    """A plain task's level-building MDP whose finished levels carry a seed drawn from the
-    building episode's key (no design action chooses it)."""
+    """A plain level-building MDP whose levels get a seed from the building episode's key."""
 
     def __init__(self, base: LevelBuilder):
         self.base = base
@@ -193,11 +176,10 @@ def _seeded(sampler: Callable | None):
 
 
 def seeded_task(task: UEDTask, wrap: Callable[[UnderspecifiedEnv], SeededEnv]) -> UEDTask:
-    """``task`` on :class:`SeededLevel`: its environments wrapped by ``wrap``, each sampled level
-    given a fresh seed (independent of the level), every level function reading the plain level.
-    An edited level (ACCEL) is a new level and draws a new seed; evaluation sets get fixed seeds.
-    ``reseed_level`` draws a new seed for the same plain level (the ``reseed`` config key: the
-    noise of a stochastic environment, never the same twice)."""
+    """``task`` on :class:`SeededLevel`: envs wrapped by ``wrap``, level functions read the plain level.
+
+    Sampled and edited levels draw a fresh seed; evaluation sets get fixed ones; ``reseed_level``
+    redraws the seed of the same plain level (the ``reseed`` key)."""
     mutate = None
     if task.mutate_level is not None:
         def mutate(rng, level: SeededLevel, num_edits: int) -> SeededLevel:

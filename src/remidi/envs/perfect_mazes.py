@@ -8,9 +8,8 @@ import numpy as np
 
 
 def perfect_maze_walls(rng: np.random.Generator, size: int) -> np.ndarray:
-    """bool[size, size] walls of a perfect maze: the cells at odd coordinates are rooms, a
-    randomised depth-first search from a random room opens the wall between a room and an unvisited
-    neighbour, so the open cells form a tree (one path between any two). ``size`` odd ≥ 5."""
+    """bool[size, size] walls of a perfect maze (odd ``size`` ≥ 5): a randomised depth-first search
+    over the odd-coordinate rooms, so open cells form a tree."""
     walls = np.ones((size, size), bool)
     rooms = [(x, y) for y in range(1, size - 1, 2) for x in range(1, size - 1, 2)]
     start = rooms[rng.integers(len(rooms))]
@@ -31,9 +30,8 @@ def perfect_maze_walls(rng: np.random.Generator, size: int) -> np.ndarray:
 
 
 def perfect_mazes(size: int, count: int, seed: int):
-    """``count`` perfect mazes of side ``size`` as one :class:`~remidi.envs.maze.MazeLevel` batch
-    (leading dim ``count``), deterministic in ``seed``: walls by :func:`perfect_maze_walls`, the
-    agent (random direction) and the goal on two different random open cells."""
+    """``count`` perfect mazes of side ``size`` as one :class:`~remidi.envs.maze.MazeLevel` batch,
+    deterministic in ``seed``; agent and goal on two random open cells."""
     from remidi.envs.maze_levels import MazeLevel, _stack
 
     rng = np.random.default_rng([seed, size])

@@ -15,9 +15,9 @@ from remidi.engine.adversaries.plr import LevelBuffers
 
 @struct.dataclass
 class EditingState(AdversaryState):
-    """:class:`~remidi.engine.adversaries.base.AdversaryState` and ACCEL's memory of the last
-    replay: ``edit_next`` (bool[], the next update edits the levels this one replayed) and
-    ``last_replayed`` (the levels of the last replay, leaves [N, ...])."""
+    """:class:`~remidi.engine.adversaries.base.AdversaryState` plus ACCEL's memory of the last replay.
+
+    ``edit_next`` bool[]: the next update edits this one's replay; ``last_replayed``: its levels [N, ...]."""
 
     edit_next: jax.Array = None
     last_replayed: object = None
@@ -25,11 +25,10 @@ class EditingState(AdversaryState):
 
 @dataclass(frozen=True)
 class EditingBuffers(LevelBuffers):
-    """ACCEL's adversary: :class:`~remidi.engine.adversaries.plr.LevelBuffers` whose update after
-    a replay edits the levels it replayed (``accel.num_edits`` edits each by the task's mutator)
-    and offers the edits to the buffer like fresh levels, without training on them; with
-    ``accel.easy_start``, fresh levels come from the task's easy generator. With a buffer
-    sequence, edits a frozen level explains are rejected like fresh levels."""
+    """ACCEL's adversary: after a replay, the next update edits the replayed levels.
+
+    ``accel.num_edits`` mutator edits each; the edits are offered to the buffer like fresh levels,
+    not trained on. ``accel.easy_start``: fresh levels from the task's easy generator."""
 
     def init(self, setup, example_level, example_obs, rng) -> EditingState:
         base = super().init(setup, example_level, example_obs, rng)

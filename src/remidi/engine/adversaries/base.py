@@ -1,29 +1,17 @@
-"""The adversary's protocol: where an update's levels come from, and what becomes of them once
-scored; and DR's adversary, the protocol's default behaviour.
+"""The adversary protocol (where an update's levels come from, what becomes of them) and DR's adversary.
 
-The train step (:mod:`remidi.engine.train`) asks the algorithm's adversary
-(:attr:`~remidi.engine.algorithms.Algorithm.adversary`), never its flags:
+The train step asks the algorithm's adversary, never its flags:
 
-* :meth:`Adversary.init`: its state (``Runner.adversary``; :class:`AdversaryState` or a subclass);
-* :meth:`Adversary.propose`: the N levels of this update, from the fresh levels the step drew (a
-  :class:`Proposal`: where they come from, whether the learner trains on them);
-* :meth:`Adversary.frozen`: what the rollout's tracker compares against, a sequence's earlier
-  adversaries' levels (None: nothing frozen, no tracker runs);
-* :meth:`Adversary.update`: after scoring (an :class:`Outcome`): the buffer's new scores or
-  insertions (a level a frozen level explains completely is never inserted);
-* :meth:`Adversary.advance`: after the learner, the end of the update: a sequence's switch (its
-  tracker and the policy frozen with the active adversary), ACCEL's memory of the last replay, a
-  fresh generator;
-* :meth:`Adversary.metrics`: what its buffers hold (tag shares, size).
+* :meth:`Adversary.init`: its state (``Runner.adversary``);
+* :meth:`Adversary.propose`: this update's N levels (a :class:`Proposal`);
+* :meth:`Adversary.frozen`: what the tracker compares against (None: no tracker runs);
+* :meth:`Adversary.update`: after scoring (an :class:`Outcome`): new scores or insertions;
+* :meth:`Adversary.advance`: the end of the update (a sequence's switch, ACCEL's memory);
+* :meth:`Adversary.metrics`: what its buffers hold.
 
-Implementations, each the one before plus what it adds: :class:`RandomLevels` (DR, here);
-:class:`~remidi.engine.adversaries.plr.LevelBuffers` (the PLR family and ReMiDi's sequence of
-buffers); :class:`~remidi.engine.adversaries.accel.EditingBuffers` (ACCEL);
-:class:`~remidi.engine.adversaries.sfl.LearnabilityBuffers` (SFL and ReMiDi over SFL); and
-:class:`~remidi.engine.adversaries.paired.LevelGenerator` (PAIRED) and
-:class:`~remidi.engine.adversaries.paired.GeneratorSequence` (ReMiDi over PAIRED), built on this
-base directly.
-"""
+Implementations: :class:`RandomLevels` (DR), :class:`~remidi.engine.adversaries.plr.LevelBuffers`
+(PLR family), ACCEL's and SFL's built on it, and PAIRED's
+:class:`~remidi.engine.adversaries.paired.LevelGenerator`."""
 
 from __future__ import annotations
 
@@ -40,11 +28,11 @@ from remidi.errors import ConfigError
 
 @struct.dataclass
 class AdversaryState:
-    """What every adversary carries: ``buffers`` (K stacked level buffers, leaves [K, capacity,
-    ...]: the PLR family's, a generator sequence's reservoirs (:func:`empty_buffers`); for DR, which
-    keeps no level, one buffer without a slot, leaves [1, 0, ...], :func:`no_buffers`),
-    ``active`` (i32[], the index of the buffer being filled and replayed) and ``count`` (i32[],
-    updates, or replays, spent on the active one)."""
+    """What every adversary carries.
+
+    ``buffers``: K stacked level buffers, leaves [K, capacity, ...] (:func:`empty_buffers`; DR's
+    have no slot, [1, 0, ...], :func:`no_buffers`); ``active`` i32[]: the buffer being filled and
+    replayed; ``count`` i32[]: updates (or replays) spent on it."""
 
     buffers: buf.BufferState
     active: jax.Array
@@ -96,11 +84,9 @@ class Outcome:
 
 @dataclass(frozen=True)
 class Adversary:
-    """The protocol, with DR's behaviour: N fresh levels from the task's generator every update,
-    all trained on, nothing kept.
+    """The protocol, with DR's behaviour: N fresh levels every update, all trained on, none kept.
 
-    ``trains_on_fresh``: the learner trains on rollouts of fresh levels too (DR, PLR without the
-    robust ⊥); False: only on replays (an adversary that replays)."""
+    ``trains_on_fresh``: the learner trains on fresh levels too; False: only on replays."""
 
     trains_on_fresh: bool = True
 
@@ -114,15 +100,14 @@ class Adversary:
     replays = False
 
     def init(self, setup, example_level, example_obs, rng) -> AdversaryState:
-        """The initial state: buffers without a slot (:func:`no_buffers`: DR keeps no level; an
-        adversary that keeps levels replaces them with :func:`empty_buffers`), the first one
-        active; ``rng`` (the runner's key, which an adversary that needs one folds, never splits)."""
+        """The initial state: slotless buffers (an adversary that keeps levels uses :func:`empty_buffers`).
+
+        ``rng``: the runner's key; an adversary that needs one folds it, never splits."""
         zero = jnp.zeros((), jnp.int32)
         return AdversaryState(buffers=no_buffers(setup, example_level), active=zero, count=zero)
 
     def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
-        """The N levels of this update: here the ``fresh`` ones (leaves [N, ...], the task
-        generator's, drawn by the step with ``k_levels``)."""
+        """This update's N levels: here the ``fresh`` ones (leaves [N, ...], drawn by the step with ``k_levels``)."""
         state = runner.adversary
         replay = jnp.asarray(False)
         return Proposal(replay=replay, levels=fresh, buffer=buf.select_buffer(state.buffers, state.active),
@@ -134,30 +119,26 @@ class Adversary:
         return None
 
     def active_levels(self, setup, runner):
-        """``(levels [C, ...], valid bool[C])``: the active buffer's levels (a simulated tracker
-        calibrates against them at the switch)."""
+        """``(levels [C, ...], valid bool[C])``: the active buffer's (a simulated tracker calibrates on them)."""
         active = buf.select_buffer(runner.adversary.buffers, runner.adversary.active)
         return active.levels, active.valid
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
-        """bool[]: this update's rollout shows the active adversary's own levels: a replay of the
-        active buffer (its fresh levels are the task generator's, not the adversary's)."""
+        """bool[]: this rollout shows the active adversary's own levels (here: a replay)."""
         return proposal.replay
 
     def best_return(self, proposal: Proposal, best_return):
-        """f32[N]: MaxMC's record, the best return ever seen on each level: this rollout's
-        (``best_return``: the best return of an episode that ended in it, −inf where none did)."""
+        """f32[N]: MaxMC's record per level; here this rollout's ``best_return`` (−inf where none ended)."""
         return best_return
 
     def update(self, setup, runner, proposal: Proposal, outcome: Outcome, rng):
-        """After scoring: ``(state, inserted bool[N], step metrics)``; nothing is kept. ``rng``
-        for an adversary that learns."""
+        """``(state, inserted bool[N], step metrics)`` after scoring; here nothing is kept."""
         return runner.adversary, jnp.zeros((setup.cfg.num_envs,), bool), {}
 
     def advance(self, setup, runner, proposal: Proposal, outcome: Outcome):
-        """The end of the update (``runner``: after :meth:`update` and the learner's training):
-        ``(runner, step metrics)``. Counts the update on the active buffer (a replay with
-        ``remidi.count=replays``)."""
+        """``(runner, step metrics)`` at the end of the update: counts it on the active buffer.
+
+        With ``remidi.count=replays`` only replays count."""
         state = runner.adversary
         count = state.count + (proposal.replay.astype(jnp.int32) if setup.cfg.remidi.count == "replays" else 1)
         return runner.replace(adversary=state.replace(count=count)), {}
@@ -173,18 +154,16 @@ class RandomLevels(Adversary):
 
 
 def empty_buffers(setup, example_level) -> buf.BufferState:
-    """K empty level buffers (leaves [K, capacity, ...]) of levels like ``example_level``, with
-    MaxMC's ``max_return`` record: ``remidi.num_buffers`` of ``remidi.buffer_capacity`` for a
-    sequence, else one of ``buffer.capacity`` (:func:`~remidi.engine.config.buffer_config`)."""
+    """K empty buffers (leaves [K, capacity, ...]) with MaxMC's ``max_return`` extra.
+
+    K, capacity: ``remidi.num_buffers``, ``remidi.buffer_capacity`` for a sequence, else 1,
+    ``buffer.capacity`` (:func:`~remidi.engine.config.buffer_config`)."""
     one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
     return buf.stack_buffers([one] * num_buffers(setup.cfg, setup.algo))
 
 
 def no_buffers(setup, example_level) -> buf.BufferState:
-    """:func:`empty_buffers` without a slot (leaves [K, 0, ...], :func:`~remidi.engine.adversaries.
-    level_buffer.without_slots`): the state of an adversary that keeps no level (DR), with the
-    fields of every adversary's and nothing stored (a checkpoint of DR held ``buffer.capacity``
-    empty levels it never read)."""
+    """:func:`empty_buffers` without slots (leaves [K, 0, ...]): an adversary that keeps no level (DR)."""
     one = buf.init_buffer(buffer_config(setup.cfg, setup.algo), example_level, extra_names=("max_return",))
     return buf.stack_buffers([buf.without_slots(one)] * num_buffers(setup.cfg, setup.algo))
 

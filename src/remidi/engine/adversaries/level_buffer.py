@@ -1,41 +1,32 @@
-"""A pure-functional, jit-able PLR⊥ level buffer (robust prioritized level replay).
+"""A pure-functional, jit-able PLR⊥ level buffer.
 
-The buffer is a fixed-capacity table of levels with a score, a last-seen time stamp, a validity
-flag and optional per-level extras. Every function is pure and jit-able with the
-:class:`~remidi.engine.config.BufferConfig` static; no Python control flow depends on traced
-values, so a :class:`BufferState` can be ``vmap``-ed over seeds and K of them stacked along a
-leading axis and indexed with a traced integer (ReMiDi's sequence: :func:`stack_buffers`,
-:func:`select_buffer`, :func:`replace_buffer`). The public functions are ``jax.jit``-wrapped
-(``config``, ``n`` static): compiled once per config and shapes, inlined under an outer jit.
+A fixed-capacity table of levels, each with a score, a last-seen stamp, a validity flag and
+optional extras. No Python control flow depends on traced values, so a :class:`BufferState` can
+be ``vmap``-ed over seeds, and K of them stacked and indexed with a traced integer
+(:func:`stack_buffers`, :func:`select_buffer`, :func:`replace_buffer`). Public functions are
+``jax.jit``-wrapped with ``config`` and ``n`` static.
 
 Empty slots
-    ``valid = False``, score 0, ``last_seen = 0``, zero extras and level; never sampled, ignored.
+    ``valid = False``, all zeros; never sampled.
 
 Clock
-    ``state.time`` counts the train steps that touched the buffer. :func:`sample_replay` (a
-    replay step) and :func:`insert_batch` (fresh levels) advance it by one, then stamp every entry
-    they touch (sampled, inserted, updated as a duplicate) with it: staleness ``time - last_seen``
-    0. :func:`insert` (one level; stamps the current time) and :func:`update_scores` do not.
+    ``state.time`` counts the train steps that touched the buffer. :func:`sample_replay` and
+    :func:`insert_batch` advance it by one, then stamp every entry they touch (staleness 0).
+    :func:`insert` (stamps the current time) and :func:`update_scores` do not advance it.
 
 Extras
-    Per-level extras (``extra_names`` of :func:`init_buffer`) are written by :func:`insert` and
-    :func:`update_scores`. An extra whose name starts with ``max_`` (e.g. ``max_return``, MaxMC's
-    record of the best return ever seen on a level) is a running maximum: when an existing entry
-    is updated (a duplicate re-insertion or :func:`update_scores`) it keeps the element-wise
-    maximum of its stored and new values (over every occurrence in one :func:`update_scores`
-    call), so the record never goes down while the entry lives. Every other extra is overwritten
-    by the new value. A new entry simply takes the given values.
+    Written by :func:`insert` and :func:`update_scores`. An extra named ``max_*`` (MaxMC's
+    ``max_return``) is a running maximum: updating an existing entry keeps the maximum of the
+    stored and every new value, so the record never goes down while the entry lives. Other
+    extras are overwritten; a new entry takes the given values.
 
 Scores
-    Higher is replayed more. A level scored ``-inf`` or NaN is never inserted (``+inf`` is); an
-    entry later set to NaN by :func:`update_scores` ranks like ``-inf``.
+    Higher is replayed more. ``-inf`` or NaN is never inserted (``+inf`` is); an entry later set
+    to NaN ranks like ``-inf``.
 
 Replay rule
-    How scores become replay weights is a :class:`ReplayRule`, named by ``buffer.prioritization``
-    (:data:`REPLAY_RULES`: ``rank``, ``topk``; :func:`register_replay_rule` adds one, e.g.
-    ``examples/my_replay_rule.py``). The rule's weights are normalised over the valid entries and
-    mixed with staleness: ``(1-ρ)·rule + ρ·staleness`` (:func:`replay_weights`).
-"""
+    A :class:`ReplayRule` named by ``buffer.prioritization`` (:data:`REPLAY_RULES`) turns scores
+    into weights, normalised over valid entries and mixed ``(1-ρ)·rule + ρ·staleness``."""
 
 from __future__ import annotations
 
@@ -55,17 +46,15 @@ RUNNING_MAX_PREFIX = "max_"  # extras named max_* keep their maximum on updates 
 
 @flax.struct.dataclass
 class BufferState:
-    """The buffer's contents; a pytree whose leaves are all JAX arrays.
+    """The buffer's contents (all leaves JAX arrays).
 
     Attributes:
-        levels: level pytree, every leaf with leading dim ``[capacity]``.
+        levels: level pytree, leaves ``[capacity, ...]``.
         scores: ``f32[capacity]``.
-        last_seen: ``i32[capacity]``, the clock value at which each entry was last inserted,
-            updated as a duplicate, or sampled.
+        last_seen: ``i32[capacity]``, the clock when each entry was last inserted, updated or sampled.
         valid: ``bool[capacity]``.
-        extras: ``{name: f32[capacity]}`` per-level extras, e.g. ``{"max_return": ...}``.
-        time: ``i32[]``, the buffer's clock.
-    """
+        extras: ``{name: f32[capacity]}``.
+        time: ``i32[]``, the clock."""
 
     levels: Any
     scores: jax.Array
@@ -76,11 +65,9 @@ class BufferState:
 
 
 def init_buffer(config: BufferConfig, example_level, extra_names: Sequence[str] = ()) -> BufferState:
-    """An empty buffer whose levels have the structure, shapes and dtypes of ``example_level``.
+    """An empty buffer for levels shaped like ``example_level`` (leaves ``[capacity, *leaf.shape]``).
 
-    Validates ``config`` first. Every level leaf becomes zeros of shape ``[capacity, *leaf.shape]``;
-    scores, ``last_seen``, extras and ``time`` start at 0 and ``valid`` at False.
-    """
+    Validates ``config``; everything starts at 0 / False."""
     validate_buffer_config(config)
     if isinstance(extra_names, str):
         raise TypeError(f"extra_names must be a sequence of names, not the string {extra_names!r}")
@@ -101,8 +88,8 @@ def init_buffer(config: BufferConfig, example_level, extra_names: Sequence[str] 
 
 
 def without_slots(state: BufferState) -> BufferState:
-    """``state`` with none of its slots (every per-level leaf [0, ...]; the clock kept): the buffer
-    of an adversary that keeps no level, the fields of a buffer without its storage."""
+    """``state`` with zero slots (leaves [0, ...], clock kept): the buffer of an adversary that keeps
+    no level."""
     cut = lambda x: x[:0]  # noqa: E731
     return state.replace(levels=jax.tree.map(cut, state.levels), scores=cut(state.scores),
                          last_seen=cut(state.last_seen), valid=cut(state.valid),
@@ -124,12 +111,11 @@ def can_replay(state: BufferState, config: BufferConfig) -> jax.Array:
 
 # ---------------------------------------------------------------------------- replay weights
 class ReplayRule:
-    """How the scores of a buffer become its replay weights, before staleness is mixed in.
+    """How a buffer's scores become replay weights, before staleness is mixed in.
 
-    One method: ``weights(state, config, ranks) -> f32[capacity]``, non-negative where valid (the
-    buffer normalises them over the valid entries; all zero: uniform). ``ranks`` i32[capacity]:
-    1 = the highest score among valid entries (ties by lower index, NaN like −inf, invalid
-    entries after the valid ones). Subclasses are frozen dataclasses (static under jit)."""
+    ``weights(state, config, ranks) -> f32[capacity]``, non-negative where valid (normalised by the
+    buffer; all zero: uniform). ``ranks`` i32[capacity]: 1 = best valid score (ties by lower index,
+    NaN like −inf, invalid last). Subclasses are frozen dataclasses (static under jit)."""
 
     def weights(self, state: BufferState, config: BufferConfig, ranks: jax.Array) -> jax.Array:
         raise NotImplementedError
@@ -145,8 +131,8 @@ class RankReplay(ReplayRule):
 
 @dataclass(frozen=True)
 class TopKReplay(ReplayRule):
-    """A softmax of score/temperature over the ``topk_k`` best valid entries, zero elsewhere
-    (``jaxued``'s ``topk`` at temperature 1); uniform over them if none has a finite score."""
+    """Softmax of score/temperature over the ``topk_k`` best valid entries, zero elsewhere; uniform
+    over them if none has a finite score."""
 
     def weights(self, state, config, ranks):
         top = (ranks <= config.topk_k) & state.valid  # ranks of valid entries are 1..size: k clipped to size
@@ -169,7 +155,7 @@ def register_replay_rule(name: str, rule: ReplayRule) -> None:
 
 
 def _normalise(x: jax.Array, valid: jax.Array) -> jax.Array:
-    """``x`` on the valid entries over its sum (uniform over them if the sum is 0; zeros if none is valid)."""
+    """``x`` on valid entries over its sum (uniform if the sum is 0; zeros if none is valid)."""
     x = jnp.where(valid, x, 0.0)
     total = jnp.sum(x)
     uniform = valid / jnp.maximum(jnp.sum(valid), 1)
@@ -177,9 +163,7 @@ def _normalise(x: jax.Array, valid: jax.Array) -> jax.Array:
 
 
 def _weights(state: BufferState, config: BufferConfig) -> tuple[jax.Array, jax.Array]:
-    """``(weights f32[capacity], ranks i32[capacity])``: the replay distribution
-    ``(1-ρ)·rule + ρ·staleness`` (zero on invalid entries; sums to 1 if any is valid) and the
-    ranks it was computed from (:class:`ReplayRule`)."""
+    """``(weights f32[capacity], ranks i32[capacity])``: :func:`replay_weights` and its ranks."""
     cap = state.scores.shape[0]
     index = jnp.arange(cap)
     # lexsort: the last key is primary -> valid first, then descending score, then ascending index
@@ -193,19 +177,17 @@ def _weights(state: BufferState, config: BufferConfig) -> tuple[jax.Array, jax.A
 
 @partial(jax.jit, static_argnames=("config",))
 def replay_weights(state: BufferState, config: BufferConfig) -> jax.Array:
-    """``f32[capacity]`` replay distribution ``(1-ρ)·rule + ρ·staleness``: zero on invalid
-    entries, summing to 1 when any entry is valid, all zeros otherwise."""
+    """``f32[capacity]``: ``(1-ρ)·rule + ρ·staleness``, zero on invalid entries, sums to 1 if any is valid."""
     return _weights(state, config)[0]
 
 
 # ---------------------------------------------------------------------------- replay
 @partial(jax.jit, static_argnames=("config", "n"))
 def sample_replay(state: BufferState, config: BufferConfig, rng: jax.Array, n: int):
-    """``n`` entries drawn with replacement from :func:`replay_weights` (``n`` static); the clock
-    advances by one and stamps them. Meaningful only when :func:`can_replay` (an empty buffer
-    gives arbitrary invalid entries, so it can be traced inside ``lax.cond``/``vmap``).
+    """``(state, idxs i32[n], levels [n, ...])``: ``n`` draws with replacement from :func:`replay_weights`.
 
-    Returns ``(state, idxs i32[n], levels)``, every level leaf of leading dim ``[n]``."""
+    Advances the clock and stamps them. Meaningful only when :func:`can_replay`; an empty buffer
+    gives arbitrary entries rather than failing, so it traces inside ``lax.cond``/``vmap``."""
     weights = _weights(state, config)[0]
     cap = state.scores.shape[0]
     probs = jnp.where(jnp.any(state.valid), weights, 1.0 / cap)
@@ -231,11 +213,10 @@ def _known_extras(state: BufferState, extras) -> dict:
 
 @jax.jit
 def update_scores(state: BufferState, idxs: jax.Array, scores: jax.Array, extras=None) -> BufferState:
-    """The scores ``f32[n]`` (and the given extras ``{name: f32[n]}``) of the entries ``idxs``
-    ``i32[n]`` after they were replayed. A negative index (the ``-1`` of a rejected insertion) is
-    ignored; of a repeated index the last occurrence wins, except for ``max_*`` extras, which
-    keep the maximum of the stored value and every given one. The clock and ``last_seen`` stay
-    (:func:`sample_replay` stamped them)."""
+    """Set the scores ``f32[n]`` (and extras ``{name: f32[n]}``) of replayed entries ``idxs`` i32[n].
+
+    A negative index (a rejected insertion's ``-1``) is ignored; of a repeated index the last wins,
+    except ``max_*`` extras (maximum of all). Clock and ``last_seen`` unchanged."""
     extras = _known_extras(state, extras)
     idxs = jnp.asarray(idxs, jnp.int32)
     n, cap = idxs.shape[0], state.scores.shape[0]
@@ -255,8 +236,7 @@ def update_scores(state: BufferState, idxs: jax.Array, scores: jax.Array, extras
 
 # ---------------------------------------------------------------------------- insertion
 def _insert(config: BufferConfig, keep_higher: bool, state: BufferState, item):
-    """:func:`insert` of ``item = (level, score, extras)`` (a ``lax.scan`` body): ``(state,
-    (inserted bool[], idx i32[]))``."""
+    """:func:`insert` as a ``lax.scan`` body: ``(state, (inserted bool[], idx i32[]))``."""
     level, score, extras = item
     extras = _known_extras(state, extras)
     score = jnp.asarray(score, jnp.float32)
@@ -309,28 +289,27 @@ def _insert(config: BufferConfig, keep_higher: bool, state: BufferState, item):
 
 @partial(jax.jit, static_argnames=("config", "keep_higher"))
 def insert(state: BufferState, config: BufferConfig, level, score, extras=None, keep_higher: bool = False):
-    """Try to insert one level (no leading capacity axis) with ``score`` f32[] and ``extras``
-    ``{name: f32[]}``; a written entry is stamped with the current time (no clock tick). In order:
+    """``(state, inserted bool[], idx i32[])``: try to insert one level (``score`` f32[]).
 
-      * a score of ``-inf`` or NaN is never written (not even into an empty slot);
-      * with ``duplicate_check``, a level equal (all leaves) to a valid entry updates that entry's
-        score (``keep_higher``: to the higher of the two), given extras (``max_*``: their
-        maximum) and ``last_seen`` instead (``inserted = False``, ``idx`` = that entry);
-      * into the first empty slot if there is one;
-      * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked), only if its
-        score is strictly higher than that entry's.
+    ``extras`` ``{name: f32[]}``. Stamped with the current time (no tick). In order:
 
-    On a new entry missing extras are 0, on a duplicate update they are kept. Returns
-    ``(state, inserted bool[], idx i32[])``, ``idx`` -1 if nothing was written."""
+      * ``-inf`` or NaN is never written;
+      * with ``duplicate_check``, an equal valid entry is updated instead: its score (``keep_higher``:
+        the higher), given extras (``max_*``: maximum) and ``last_seen``; ``inserted = False``;
+      * else the first empty slot;
+      * if full, it replaces the entry of lowest replay weight (ties: lowest-ranked) only if its
+        score is strictly higher.
+
+    Missing extras are 0 on a new entry, kept on a duplicate. ``idx`` -1 if nothing was written."""
     state, (inserted, idx) = _insert(config, keep_higher, state, (level, score, extras))
     return state, inserted, idx
 
 
 @partial(jax.jit, static_argnames=("config", "keep_higher"))
 def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extras=None, keep_higher: bool = False):
-    """Advance the clock by one, then :func:`insert` the ``n`` levels (leaves [n, ...]) with
-    ``scores`` f32[n] and ``extras`` ``{name: f32[n]}`` one after another (``lax.scan``: later
-    insertions see earlier ones). Returns ``(state, inserted bool[n], idxs i32[n])``."""
+    """Tick the clock, then :func:`insert` ``n`` levels (leaves [n, ...]) in order (later see earlier).
+
+    ``scores`` f32[n], ``extras`` ``{name: f32[n]}`` -> ``(state, inserted bool[n], idxs i32[n])``."""
     scores = jnp.asarray(scores, jnp.float32)
     state, (inserted, idxs) = jax.lax.scan(partial(_insert, config, keep_higher), state.replace(time=state.time + 1),
                                            (levels, scores, _known_extras(state, extras)))
@@ -339,7 +318,7 @@ def insert_batch(state: BufferState, config: BufferConfig, levels, scores, extra
 
 # ---------------------------------------------------------------------------- K buffers
 def valid_levels(state: BufferState):
-    """``(levels [capacity, ...], valid bool[capacity])``: every stored level and whether it is one."""
+    """``(levels [capacity, ...], valid bool[capacity])``."""
     return state.levels, state.valid
 
 

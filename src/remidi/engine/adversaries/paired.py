@@ -1,26 +1,16 @@
-"""PAIRED's pieces (Dennis et al., 2020): the regret estimate a learned level generator is paid,
-and the generator's sparse reward.
+"""PAIRED (Dennis et al., 2020): the regret a learned level generator is paid, and its adversary.
 
-PAIRED trains three policies: a *generator* that builds levels action by action in the task's
-level-building MDP (:mod:`remidi.envs.builder`), a *protagonist* (the agent UED trains) and an
-*antagonist* that estimates what is achievable on each generated level. After both agents play a
-level, the generator receives a regret estimate on its episode's last step, and nothing before:
+A *generator* builds levels in the task's level-building MDP (:mod:`remidi.envs.builder`); the
+*protagonist* (the trained agent) and an *antagonist* play them; the generator is paid a regret
+estimate on its episode's last step only:
 
-* ``paired``: the antagonist's best episodic return minus the protagonist's mean (the original);
-* ``flexible``: the better agent's best episodic return minus the other agent's mean, the
-  better being the one with the higher best return, the protagonist on a tie (Jiang et al.,
-  2021's "flexible PAIRED", as DCD computes it: neither agent is tied to a role);
-* ``perfect``: the task's exact optimal return minus the protagonist's mean (the paper's
-  "antagonist that is optimal on each level and does not learn"; needs ``UEDTask.optimal_return``).
+* ``paired``: antagonist's best episodic return − protagonist's mean;
+* ``flexible``: the better agent's best − the other's mean (better: higher best return,
+  protagonist on a tie; DCD's "flexible PAIRED");
+* ``perfect``: the task's optimal return − protagonist's mean (needs ``UEDTask.optimal_return``).
 
-All three are in undiscounted episodic returns (``optimal_return``, not the discounted optimum
-that PLR's ``perfect_regret`` score uses under ``discounted_regret``), as the references pay
-PAIRED's generator.
-
-Negative regret (the protagonist beats the antagonist's best) is passed on as it is, unless
-``clip_negative`` asks for 0: clipping hides from the generator which levels the antagonist has
-not learned yet. All functions are pure, shapes in their docstrings.
-"""
+All in undiscounted returns, as the references pay the generator. Negative regret is passed on
+unless ``clip_negative``: clipping hides which levels the antagonist has not learned yet."""
 
 from __future__ import annotations
 
@@ -46,14 +36,11 @@ ESTIMATORS = ("paired", "flexible", "perfect")
 
 def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagonist_mean=None, antagonist_best=None,
                     optimal=None, clip_negative: bool = False) -> jax.Array:
-    """f32[N]: the generator's regret estimate per level.
+    """f32[N]: the generator's regret estimate per level (``estimator``, ``clip_negative`` static).
 
-    ``protagonist_mean``, ``protagonist_best``: f32[N], the protagonist's mean and best episodic
-    return on each level (``scores.episode_returns``: the partial return where no episode
-    ended; a best of −inf, the train step's MaxMC record where no episode ended, reads as that
-    partial return, the mean, as the antagonist's is read); ``antagonist_mean``,
-    ``antagonist_best``: the antagonist's (``paired``, ``flexible``); ``optimal``: f32[N], the
-    task's optimal return (``perfect``). ``estimator`` and ``clip_negative`` are static."""
+    Means and bests f32[N] are per-level episodic returns (``scores.episode_returns``: the partial
+    return where no episode ended); a protagonist best of −inf (no finished episode) reads as its
+    mean. ``antagonist_*`` for ``paired``/``flexible``, ``optimal`` f32[N] for ``perfect``."""
     protagonist_best = jnp.where(jnp.isneginf(protagonist_best), protagonist_mean, protagonist_best)
     if estimator == "paired":
         regret = antagonist_best - protagonist_mean
@@ -68,15 +55,11 @@ def regret_estimate(estimator: str, protagonist_mean, protagonist_best, antagoni
 
 
 def regret_by_tag(tags, regret, antagonist_luck, optimal, protagonist_mean) -> dict[str, jax.Array]:
-    """Where the estimate's regret comes from, per tag of the generated levels (``tags``: the task's
-    ``level_tags`` of the N levels, ``{name: bool[N]}``) and for the levels with no tag
-    (``untagged``); NaN where no generated level has it:
+    """``{metric: f32[]}``: per level tag (``tags`` ``{name: bool[N]}``, plus ``untagged``), NaN if none:
 
-    * ``paired/regret/<tag>``: the estimate the generator was paid (before overlap handling);
-    * ``paired/antagonist_luck/<tag>``: the antagonist's best episodic return minus its mean, the
-      part of ``paired``'s estimate that a lucky episode adds (a guessed hidden lever);
-    * ``paired/exact_regret/<tag>``: the task's optimal return minus the protagonist's mean, where
-      the task has an optimum (what ``perfect`` pays), to read the estimate against."""
+    * ``paired/regret/<tag>``: the estimate paid (before overlap handling);
+    * ``paired/antagonist_luck/<tag>``: antagonist best − mean, what a lucky episode adds;
+    * ``paired/exact_regret/<tag>``: optimal − protagonist mean, where the task has an optimum."""
     groups = dict(tags)
     groups["untagged"] = ~jnp.any(jnp.stack(list(tags.values())), axis=0) if tags else jnp.ones_like(regret, bool)
     values = {"regret": regret, "antagonist_luck": antagonist_luck}
@@ -107,12 +90,10 @@ GENERATOR_NETWORKS = ("mlp", "reference")
 
 
 def generator_net(setup):
-    """The generator's actor-critic, one logit per design action; ``paired.generator_network``:
+    """The generator's actor-critic (``paired.generator_network``).
 
-    * ``mlp`` (default, sized for a CPU): an MLP over its flattened observation (design, time
-      step, noise), ``paired.generator_hidden`` units per trunk layer;
-    * ``reference``: the reference libraries' adversary (JaxUED, DCD): a 128-channel conv over a
-      maze design, an embedded time step and the noise into a 256-unit LSTM
+    * ``mlp`` (default, CPU-sized): an MLP over the flattened observation, ``paired.generator_hidden`` units;
+    * ``reference``: JaxUED's/DCD's adversary, conv + embedded time step + noise into a 256-unit LSTM
       (:class:`remidi.engine.core.networks.GeneratorLSTMActorCritic`)."""
     builder, p = setup.task.level_builder, setup.cfg.paired
     if p.generator_network == "reference":
@@ -121,18 +102,17 @@ def generator_net(setup):
 
 
 def generator_ppo(setup):
-    """The generator's PPO settings: the run's, with ``paired.generator_lr`` and
-    ``paired.generator_ent_coef``."""
+    """The run's PPO settings with ``paired.generator_lr`` and ``paired.generator_ent_coef``."""
     p = setup.cfg.paired
     return dataclasses.replace(setup.cfg.ppo, lr=p.generator_lr, ent_coef=p.generator_ent_coef)
 
 
 @struct.dataclass
 class GeneratorState(AdversaryState):
-    """:class:`~remidi.engine.adversaries.base.AdversaryState` (the buffers: a generator
-    sequence's reservoirs) and PAIRED's learners: the ``generator``'s and the ``antagonist``'s
-    TrainState; ``next_generators``: a sequence's fresh generators of the later buffers (leaves
-    [K−1, ...]; None for one generator)."""
+    """:class:`~remidi.engine.adversaries.base.AdversaryState` plus PAIRED's learners.
+
+    ``generator``, ``antagonist``: TrainStates; ``next_generators``: a sequence's fresh generators
+    for the later buffers (leaves [K−1, ...]; None for one generator)."""
 
     generator: object = None
     antagonist: object = None
@@ -141,12 +121,10 @@ class GeneratorState(AdversaryState):
 
 @dataclass(frozen=True)
 class LevelGenerator(Adversary):
-    """PAIRED's adversary: a generator policy builds the N levels of each update in the task's
-    level-building MDP (one episode of ``level_builder.num_steps`` design actions each); the
-    protagonist (the agent) trains on all of them; then an antagonist, an agent of the same
-    network with its own parameters, plays them once and learns by PPO, and the generator is paid
-    :func:`regret_estimate` on its last step and learns by PPO (its own network and settings:
-    :func:`generator_net`, :func:`generator_ppo`). All three learn in the same jitted step."""
+    """PAIRED's adversary: a generator builds each update's N levels, all trained on.
+
+    The antagonist (the agent's network, own parameters) plays them once and learns by PPO; the
+    generator is paid :func:`regret_estimate` and learns by PPO, all in the same jitted step."""
 
     trains_on_fresh: bool = True
 
@@ -185,8 +163,7 @@ class LevelGenerator(Adversary):
                         nonfinite=nonfinite(traj, "generator"))
 
     def update(self, setup, runner, proposal: Proposal, outcome, rng):
-        """The antagonist plays the levels and learns (the agent's rollout and masked PPO, with
-        its parameters and nothing frozen); the generator is paid and learns."""
+        """The antagonist plays the levels and learns; the generator is paid and learns."""
         cfg, task, state = setup.cfg, setup.task, runner.adversary
         n = cfg.num_envs
         k_roll, k_ant, k_gen = (jax.random.fold_in(rng, i) for i in (21, 22, 23))
@@ -225,11 +202,11 @@ class LevelGenerator(Adversary):
         return state, inserted, metrics
 
     def _pay(self, setup, regret, overlap):
-        """f32[N]: what the generator is paid for each level: its regret estimate."""
+        """f32[N]: what the generator is paid per level (here its regret estimate)."""
         return regret
 
     def _keep(self, setup, state, proposal: Proposal, rng):
-        """``(state, inserted bool[N])``: what the adversary keeps of the levels: nothing."""
+        """``(state, inserted bool[N])``: the levels kept (here none)."""
         return state, jnp.zeros((setup.cfg.num_envs,), bool)
 
 
@@ -238,35 +215,22 @@ OVERLAP_REGRETS = ("lowest", "zero")
 
 @dataclass(frozen=True)
 class GeneratorSequence(LevelGenerator):
-    """ReMiDi over PAIRED (Algorithm 1 with generators as its adversaries): a sequence of
-    ``remidi.num_buffers`` generators, each used for ``remidi.steps_per_buffer`` updates, then
-    frozen, and a fresh one started (the last stays); one protagonist, trained only on the steps
-    no frozen generator's support explains (the loss mask), and one antagonist for all of them.
+    """ReMiDi over PAIRED: a sequence of ``remidi.num_buffers`` generators, one protagonist and antagonist.
 
-    A generator's empirical support is a reservoir of the levels it generated: the active
-    buffer of ``runner.buffers`` (``remidi.buffer_capacity`` levels), filled by reservoir
-    sampling (every generated level gets an i.i.d. uniform key and the reservoir keeps the levels
-    with the highest keys: without ``buffer.duplicate_check`` a uniform sample of all it
-    generated; with it, on in every preset, a level generated again keeps the highest of its keys
-    in its one entry instead of taking a second slot, so the reservoir holds the distinct levels
-    whose best draw is highest: a level generated m times is kept as if any of its m copies had
-    been, a sample weighted by how often the generator makes it). The frozen generators'
-    reservoirs are the tracker's frozen levels. A generated level whose rollout a frozen level
-    explains at every step (a complete overlap) gives the protagonist no gradient (every step is
-    masked) and pays the generator ``paired.overlap_regret`` (``lowest``: the lowest regret
-    estimate of the update's levels; ``zero``), so later generators learn to leave earlier
-    supports.
+    Each generator runs ``remidi.steps_per_buffer`` updates, then is frozen and a fresh one starts.
+    The protagonist trains only on steps no frozen generator's support explains (the loss mask).
 
-    With a learned tracker (:mod:`remidi.engine.trackers.belief`) a model of each generator's
-    trajectories judges instead of its reservoir (the paper's appendix sketch, P(h | Λᵢ) learnt
-    with Λᵢ: every update's rollout shows the active generator's levels, :meth:`own_levels`); the
-    reservoir is still kept, for the audit against the exact tracker.
+    A generator's support is a reservoir of its levels (the active buffer, ``remidi.buffer_capacity``):
+    each level gets a uniform key and the highest keys are kept; with ``buffer.duplicate_check`` a
+    repeated level keeps its highest key in one entry, so the sample is weighted by how often the
+    generator makes it. A level a frozen reservoir explains at every step trains nothing and pays
+    ``paired.overlap_regret`` (``lowest`` regret of the update, or ``zero``), so later generators
+    learn to leave earlier supports. With a learned tracker, a model of each generator's
+    trajectories judges instead (:meth:`own_levels`); the reservoir is kept for the audit.
 
-    Where it approximates Algorithm 1: the support is a finite sample of the generator's
-    distribution (a level the generator rarely makes may be missing from it, and a later level
-    identical to it is then not recognised); the generator is a policy trained by PPO, not an
-    exact best response; the antagonist's best return estimates the optimum (``perfect`` uses the
-    exact one); one masked protagonist stands for the per-adversary policies and Combine."""
+    Approximations of Algorithm 1: the support is a finite sample (a rare level may be missing and
+    then not recognised); the generator is PPO-trained, not a best response; the antagonist's best
+    return estimates the optimum; one masked protagonist stands for per-adversary policies."""
 
     buffer_sequence: bool = True
 
@@ -280,11 +244,11 @@ class GeneratorSequence(LevelGenerator):
         return sequence_frozen(setup, runner, proposal)
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
-        """Every update plays the active generator's levels: a learned tracker's model learns from each."""
+        """Every update plays the active generator's levels, so a learned tracker learns from each."""
         return jnp.asarray(True)
 
     def metrics(self, setup, runner) -> dict:
-        """What each generator's reservoir holds (``buffer_fraction/<tag>/b<k>``)."""
+        """``buffer_fraction/<tag>/b<k>``: what each generator's reservoir holds."""
         return buffer_contents(setup, runner.adversary)
 
     def _pay(self, setup, regret, overlap):
@@ -300,9 +264,10 @@ class GeneratorSequence(LevelGenerator):
         return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted
 
     def init(self, setup, example_level, example_obs, rng) -> GeneratorState:
-        """The first generator and the antagonist, and the fresh generators of the later buffers
-        (initialised here, once: initialising in the step would put batched QR decompositions,
-        orthogonal initialisers, into the vmapped program, which hangs jaxlib's CPU runtime)."""
+        """The first generator and antagonist, and the later buffers' fresh generators.
+
+        Initialised here, once: in the step, batched QR decompositions (orthogonal initialisers) in the
+        vmapped program hang jaxlib's CPU runtime."""
         state = super().init(setup, example_level, example_obs, rng)
         later = [self._learners(setup, example_obs, jax.random.fold_in(rng, 100 + k), antagonist=False)["generator"]
                  for k in range(1, setup.cfg.remidi.num_buffers)]

@@ -1,5 +1,4 @@
-"""The PLR family's adversary (:class:`LevelBuffers`): PLR⊥, minimax return, and ReMiDi's
-sequence of level buffers.
+"""The PLR family's adversary (:class:`LevelBuffers`): PLR⊥, minimax return, ReMiDi's buffer sequence.
 
 With probability ``buffer.replay_prob``, once the active buffer can replay, an update replays N
 levels sampled from it (by score rank or top-k, mixed with staleness:
@@ -38,8 +37,8 @@ class LevelBuffers(Adversary):
         return super().init(setup, example_level, example_obs, rng).replace(buffers=empty_buffers(setup, example_level))
 
     def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
-        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``:
-        which) or the N ``fresh`` levels; a sequence may rehearse a frozen buffer instead."""
+        """A replay of N levels from the active buffer (``k_branch``: whether; ``k_sample``: which) or the
+        N ``fresh`` ones; a sequence may rehearse a frozen buffer instead."""
         state, bcfg = runner.adversary, setup.buffer
         active = buf.select_buffer(state.buffers, state.active)
         replay = buf.can_replay(active, bcfg) & (jax.random.uniform(k_branch) < bcfg.replay_prob)
@@ -61,9 +60,8 @@ class LevelBuffers(Adversary):
         return jnp.where(proposal.replay, jnp.maximum(best_return, record), best_return)
 
     def update(self, setup, runner, proposal: Proposal, outcome: Outcome, rng):
-        """Replayed levels get their new scores; fresh levels are inserted into the active buffer
-        by score, never one whose rollout overlaps a frozen level completely (scored −inf); a
-        rehearsal changes no buffer."""
+        """Replayed levels are rescored; fresh ones are inserted by score unless a frozen level explains
+        them completely; a rehearsal changes no buffer."""
         state, n, bcfg = runner.adversary, setup.cfg.num_envs, setup.buffer
         record = {"max_return": outcome.collection.best_return}
 
@@ -87,8 +85,7 @@ class LevelBuffers(Adversary):
         return state.replace(buffers=buf.replace_buffer(state.buffers, state.active, new_buf)), inserted, {}
 
     def advance(self, setup, runner, proposal: Proposal, outcome: Outcome):
-        """Count the update on the active buffer (a replay only, with ``remidi.count=replays``);
-        a sequence switches after ``remidi.steps_per_buffer`` of them (:func:`sequence_advance`)."""
+        """Count the update (only replays with ``remidi.count=replays``); a sequence may switch."""
         state = runner.adversary
         state = state.replace(count=state.count + (proposal.replay.astype(jnp.int32)
                                                    if setup.cfg.remidi.count == "replays" else 1))
@@ -108,9 +105,10 @@ def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
     False: nothing is rescored, inserted or sampled, and ``remidi.count=replays`` does not count
     it), and reads the frozen buffers without changing them (no clock tick, no ``last_seen``).
 
-    Uniform, not by the frozen buffer's replay distribution: its scores stopped being updated when
-    it was frozen, and rehearsal is meant to keep the behaviour on the whole of an earlier
-    adversary's support, not on the levels that had the most regret then."""
+    The buffer is chosen uniformly among non-empty frozen ones, its levels uniformly with
+    replacement. A rehearsal trains on every step, is no replay (nothing rescored, inserted or
+    counted) and leaves the frozen buffers unchanged. Uniform, not by score: frozen scores are stale,
+    and rehearsal should keep behaviour on the whole earlier support."""
     n = setup.cfg.num_envs
     k_draw, k_buffer, k_slots = jax.random.split(rng, 3)
     valid = state.buffers.valid  # bool[K, C]
@@ -163,8 +161,7 @@ def sequence_advance(setup, runner, state, proposal: Proposal, outcome: Outcome)
 
 
 def buffer_contents(setup, state) -> dict:
-    """Share of each tag among the valid levels of every buffer (``buffer_fraction/<tag>/b<k>``)
-    and of the active one (``buffer_fraction/<tag>``); the active buffer's size."""
+    """``buffer_fraction/<tag>/b<k>`` and ``buffer_fraction/<tag>`` (active) tag shares, ``buffer_size``."""
     out = {}
     valid = state.buffers.valid  # bool[K, C]
     sizes = jnp.maximum(jnp.sum(valid, axis=1), 1)  # [K]

@@ -1,17 +1,11 @@
-"""SFL's adversary (Rutherford et al., 2024, "No Regrets: Investigating and Improving Regret
-Approximations for Curriculum Discovery"): Sampling For Learnability, and ReMiDi over it.
+"""SFL's adversary (Rutherford et al., 2024, "No Regrets"): Sampling For Learnability, and ReMiDi over it.
 
-Every ``sfl.refresh_every`` updates (and before the first), the adversary refreshes its buffer
-(:meth:`LearnabilityBuffers.refresh`): it draws ``sfl.batch_size × sfl.num_batches`` fresh
-levels from the task's generator, rolls the *current* policy out on each for
-``sfl.rollout_steps`` steps (several episodes; :func:`remidi.engine.learner.play`, no gradient),
-scores each by its learnability p·(1 − p), p its solve rate over the episodes that ended
-(:func:`~remidi.engine.adversaries.scores.solve_rate`, the task's ``solved``), and keeps the K
-highest (:func:`select_top`). Every update then trains on N envs of which
-round(``sfl.sampled_envs_ratio`` · N) are drawn uniformly, with replacement, from the buffer (as
-the published code draws them, ``jax.random.randint`` over the kept levels) and the rest are
-fresh levels; the learner trains on all of them (:class:`~remidi.engine.adversaries.base.Proposal`'s
-``replay`` is per env: bool[N]).
+Every ``sfl.refresh_every`` updates (and before the first) the buffer is refreshed
+(:meth:`LearnabilityBuffers.refresh`): ``sfl.batch_size × sfl.num_batches`` fresh levels are
+played ``sfl.rollout_steps`` steps by the current policy (no gradient), scored by learnability
+p·(1 − p), and the K best kept (:func:`select_top`). Each update trains on N envs, the last
+round(``sfl.sampled_envs_ratio`` · N) drawn uniformly from the buffer, the rest fresh
+(``Proposal.replay`` is bool[N]).
 
 With ``buffer_sequence`` (``remidi-sfl``) the adversary is a sequence of ``remidi.num_buffers``
 SFL buffers of ``remidi.buffer_capacity`` levels each, the active one refreshed every
@@ -23,11 +17,9 @@ the frozen levels explain at every step (a complete overlap, as the train step's
 scores −inf and is never kept. The learner's loss is masked where a frozen level explains the
 prefix (the train step's ``traj.indist``), on buffer and fresh envs alike.
 
-Departures from the published code, each on purpose: a level none of whose episodes ended inside
-the rollout is never kept (the published code gives it a NaN solve rate, which its sort ranks
-highest); ties in learnability go to the higher solve rate (Kinetix's ``+ 0.001 · p``, taken
-lexicographically so it never outranks a real difference), then to the earlier candidate.
-"""
+Deliberate departures from the published code: a level with no finished episode is never kept
+(the original's NaN solve rate sorts highest); learnability ties go to the higher solve rate
+(Kinetix's ``+ 0.001 · p``, applied lexicographically), then to the earlier candidate."""
 
 from __future__ import annotations
 
@@ -50,19 +42,18 @@ CANDIDATES = "candidates"
 
 
 def select_top(scores: jax.Array, solve_rates: jax.Array, k: int) -> tuple[jax.Array, jax.Array]:
-    """SFL's selection: the ``k`` candidates with the highest learnability ``scores`` f32[M]
-    (−inf: no finished episode, or explained by a frozen level), ties to the higher
-    ``solve_rates`` f32[M], then to the lower index. Returns ``(indices i32[k], valid bool[k])``,
-    best first; ``valid`` is False where the chosen score is −inf (fewer than ``k`` candidates
-    can be kept)."""
+    """``(indices i32[k], valid bool[k])``, best first: the ``k`` highest ``scores`` f32[M].
+
+    Ties to higher ``solve_rates`` f32[M], then lower index. ``valid`` is False where the score is
+    −inf (no finished episode, or explained by a frozen level)."""
     order = jnp.lexsort((-solve_rates, -scores))  # primary: score descending; stable: index ascending
     top = order[:k]
     return top, jnp.isfinite(scores[top])
 
 
 def learnability_of(setup, traj) -> tuple[jax.Array, jax.Array]:
-    """Each candidate's ``(learnability f32[B], solve rate f32[B])`` from its rollout ``traj``
-    [T, B]: −inf where no episode ended or where the frozen levels explain every step."""
+    """``(learnability f32[B], solve rate f32[B])`` of rollouts ``traj`` [T, B]; −inf where no episode
+    ended or frozen levels explain every step."""
     solved = setup.task.solved
     score = sc.learnability(traj.reward, traj.done, solved, flags=traj.solved)
     p, _ = sc.solve_rate(traj.reward, traj.done, solved, traj.solved)
@@ -81,17 +72,16 @@ def valid_mean(valid: jax.Array, x: jax.Array) -> jax.Array:
 
 
 def mix_mask(num_envs: int, ratio: float) -> jax.Array:
-    """bool[N]: the envs an update fills from the buffer, the last round(``ratio`` · N) (the
-    published code puts the fresh levels first)."""
+    """bool[N]: the envs filled from the buffer, the last round(``ratio`` · N) (as the published code)."""
     return jnp.arange(num_envs) >= num_envs - round(ratio * num_envs)
 
 
 @dataclass(frozen=True)
 class LearnabilityBuffers(Adversary):
-    """SFL's adversary (module docstring). State:
-    :class:`~remidi.engine.adversaries.base.AdversaryState` (``count``: updates on the active
-    buffer, which times the refreshes; each buffer's ``scores`` its levels' learnability and its
-    ``solve_rate`` extra their solve rate at the refresh that kept them)."""
+    """SFL's adversary (module docstring).
+
+    State ``count``: updates on the active buffer (times the refreshes); buffer ``scores``:
+    learnability, extra ``solve_rate``: solve rate at the refresh that kept them."""
 
     trains_on_fresh: bool = True
     buffer_sequence: bool = False
@@ -108,9 +98,8 @@ class LearnabilityBuffers(Adversary):
                               count=zero)
 
     def propose(self, setup, runner, fresh, k_branch, k_levels, k_sample) -> Proposal:
-        """Refresh the active buffer if due (``k_branch``), then N levels: round(ratio · N) drawn
-        uniformly from its valid levels (``k_sample``), the rest ``fresh``; all fresh
-        while it holds none."""
+        """Refresh the active buffer if due, then N levels: :func:`mix_mask` ones from it, the rest
+        ``fresh`` (all fresh while it is empty)."""
         state, cfg = runner.adversary, setup.cfg
         active = buf.select_buffer(state.buffers, state.active)
         due = state.count % cfg.sfl.refresh_every == 0
@@ -158,9 +147,8 @@ class LearnabilityBuffers(Adversary):
         return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
 
     def update(self, setup, runner, proposal: Proposal, outcome, rng):
-        """The refreshed buffer (the proposal's) becomes the active one; nothing else is kept.
-        Reports the learnability and solve rate of its levels (``sfl/buffer_learnability``,
-        ``sfl/buffer_solve_rate``; NaN while empty)."""
+        """The refreshed buffer becomes the active one; reports ``sfl/buffer_learnability`` and
+        ``sfl/buffer_solve_rate`` (NaN while empty)."""
         state, active = runner.adversary, proposal.buffer
         metrics = {"sfl/buffer_learnability": valid_mean(active.valid, active.scores),
                    "sfl/buffer_solve_rate": valid_mean(active.valid, active.extras["solve_rate"])}
@@ -168,9 +156,8 @@ class LearnabilityBuffers(Adversary):
         return state, jnp.zeros((setup.cfg.num_envs,), bool), metrics
 
     def advance(self, setup, runner, proposal: Proposal, outcome):
-        """Every update counts on the active buffer (whatever ``remidi.count``: each trains on
-        it); a sequence moves on after ``remidi.steps_per_buffer``, its next buffer refreshed at
-        its first update (count 0)."""
+        """Every update counts (whatever ``remidi.count``: each trains on the buffer); a sequence may
+        switch, its next buffer refreshed at its first update."""
         state = runner.adversary.replace(count=runner.adversary.count + 1)
         if not self.buffer_sequence:
             return runner.replace(adversary=state), {}

@@ -1,13 +1,9 @@
-"""``buffer_solve_rate/b<k>``: the current policy's solve rate on the levels of each buffer of a
-buffer sequence (ReMiDi), so that a curve shows what the agent keeps of a frozen buffer after
-the switch (docs/retention.md).
+"""``buffer_solve_rate/b<k>``: the current policy's solve rate on each buffer of a buffer sequence,
+to show what the agent keeps of a frozen buffer (docs/retention.md).
 
-Each buffer's valid levels (at most :data:`MAX_LEVELS` of them, drawn uniformly without
-replacement when it holds more) are played as the evaluation sets are: ``eval_attempts`` sampled
-episodes each, the first episode's return judged by the task's ``solved``; the rate is the mean
-over the buffer's levels and attempts. NaN for a buffer without a valid level (a buffer not yet
-reached). Nothing for an algorithm without a buffer sequence or a task without ``solved``.
-"""
+Up to :data:`MAX_LEVELS` valid levels per buffer (a uniform draw without replacement), played
+as the evaluation sets are (``eval_attempts`` episodes, first episode judged by ``solved``). NaN
+for a buffer with no valid level; nothing without a buffer sequence or ``solved``."""
 
 from __future__ import annotations
 
@@ -16,17 +12,15 @@ import jax.numpy as jnp
 
 from remidi.engine.adversaries.scores import episode_solved
 
-#: levels played per buffer at most (a buffer of PLR⊥'s published 4,000 would cost 40,000
-#: episodes per evaluation; 256 give the rate to about ±0.03)
+#: levels played per buffer at most (256 give the rate to about ±0.03; 4,000 would cost 40,000 episodes)
 MAX_LEVELS = 256
 
 
 def buffer_solve_rates(setup, runner, rng, level_episodes, action: str = "sample") -> dict[str, jax.Array]:
-    """``{"buffer_solve_rate/b<k>": f32[]}`` for each of the K buffers of ``runner.adversary``,
-    the episodes played by ``level_episodes(setup, runner, env, levels, attempts, rng, action) ->
-    (returns, discounted, flags | None)`` (:func:`remidi.engine.run.evaluation.level_episodes`,
-    as the evaluation sets are: under ``remidi.policy=combine`` the combined policy) and judged by
-    the task's ``solved``."""
+    """``{"buffer_solve_rate/b<k>": f32[]}`` for each of the K buffers.
+
+    ``level_episodes``: :func:`remidi.engine.run.evaluation.level_episodes` (the combined policy
+    under ``remidi.policy=combine``)."""
     task = setup.task
     if not setup.algo.buffer_sequence or task.solved is None:
         return {}

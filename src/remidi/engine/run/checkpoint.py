@@ -1,18 +1,11 @@
-"""Checkpoints of a UED run: the runner (``checkpoint.npz``) and the metrics logged so far
-(``checkpoint.history.npz``), written atomically, read back with one-line errors for every way
-a file can be damaged or belong to another run.
+"""Checkpoints of a UED run: the runner (``checkpoint.npz``) and the metrics so far
+(``checkpoint.history.npz``), written atomically, read back with one-line errors for damaged
+files and files of another run.
 
-The runner's arrays are stored by their tree path (``leaf:.train_state.params['params']...``,
-``jax.tree_util.keystr``), so a checkpoint names what it holds and a mismatch names the part of
-the state that differs. Checkpoints of remidi before this format stored arrays by position
-(``leaf_0``, ``leaf_1``, ...); they are refused with a one-line error saying so.
-
-The runner holds one state per component (``.learner``, ``.adversary``, ``.tracker``). A
-checkpoint of the earlier layout, one runner field per feature (``.train_state``, ``.buffers``,
-``.belief``, ...), loads through one rename, :data:`RENAMES` (:func:`current_name`). A part of
-the state that earlier versions allocated and this one leaves empty (:data:`UNUSED`: DR's level
-buffer, which it never fills) is read as this run's empty part where the checkpoint holds it
-unfilled (every value zero)."""
+Runner arrays are stored by tree path (``leaf:.train_state.params['params']...``), so a mismatch
+names the differing part; positional checkpoints (``leaf_0``, ...) are refused. Older layouts
+with one runner field per feature load through :data:`RENAMES`; an all-zero copy of a part now
+left empty (:data:`UNUSED`) is read as this run's empty part."""
 
 from __future__ import annotations
 
@@ -42,25 +35,21 @@ RENAMES = {".train_state": ".learner.train_state", ".obs_stats": ".learner.obs_s
            ".belief": ".tracker", ".update": ".updates_done"}
 
 
-#: parts of the runner, by tree path, that earlier versions allocated in full for runs that never
-#: fill them: DR's adversary held one empty buffer of ``buffer.capacity`` levels (a checkpoint of
-#: a maze run's 4000 levels: most of its size); it now holds the buffer without a slot
-#: (``engine/adversaries/base.py``, ``no_buffers``). Such a checkpoint's unfilled (all-zero) leaves
-#: there are read as this run's empty ones.
+#: runner parts, by tree path, that older checkpoints store in full though the run never fills them
+#: (DR's buffer, now slotless: ``no_buffers``); their all-zero leaves are read as this run's empty ones
 UNUSED = (".adversary.buffers",)
 
 
 def _unused(name: str, stored: np.ndarray, want) -> bool:
-    """The stored leaf ``name`` (``PREFIX`` + tree path) is an earlier version's unfilled copy of
-    a part :data:`UNUSED` that this run's state ``want`` leaves empty (no element)."""
+    """The stored leaf ``name`` is an older version's unfilled copy of an :data:`UNUSED` part that
+    ``want`` leaves empty."""
     path = name[len(PREFIX):]
     return (any(path == p or path.startswith((p + ".", p + "[")) for p in UNUSED) and np.size(want) == 0
             and stored.dtype == want.dtype and not np.any(stored))
 
 
 def current_name(path: str) -> str:
-    """A runner leaf's tree path (``jax.tree_util.keystr``) in this layout: one of the earlier
-    layout renamed by :data:`RENAMES`, any other unchanged."""
+    """A runner leaf's tree path in this layout (renamed by :data:`RENAMES`, else unchanged)."""
     first = re.match(r"\.[A-Za-z_]+", path)
     if first is not None and first.group(0) in RENAMES:
         return RENAMES[first.group(0)] + path[first.end():]
@@ -80,8 +69,7 @@ def save_checkpoint(path: Path, runner, meta: dict) -> None:
 
 
 def _plain(value):
-    """JSON for what ``json`` does not know in a meta: NumPy and JAX scalars and arrays (a config
-    given through the Python API with ``np.float32`` values), anything else by its text."""
+    """JSON for NumPy/JAX scalars and arrays in a meta (``tolist``), anything else by its text."""
     return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
@@ -90,8 +78,7 @@ _UNREADABLE = (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZi
 
 
 def unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigError:
-    """The one-line error for a checkpoint file that ``err`` (one of :data:`_UNREADABLE`) kept from
-    being read, starting with ``flag`` (with ``--resume``: how to start the run again)."""
+    """The one-line error for a checkpoint ``err`` kept from being read, starting with ``flag``."""
     detail = str(err).strip().splitlines()[0] if str(err).strip() else ""
     advice = f"; it is damaged: delete {CHECKPOINT} and {HISTORY} to train the run from the start" \
         if flag == "--resume" else ""
@@ -100,8 +87,7 @@ def unreadable(path: Path, err: Exception, flag: str = "--resume") -> ConfigErro
 
 
 def _read(path: Path, flag: str, names=()) -> tuple[dict, list[str], dict[str, np.ndarray]]:
-    """``(meta, the names of the stored arrays, {name: array} for those of ``names`` stored)`` from a
-    checkpoint file; ConfigError (:func:`unreadable`) when it cannot be read or its meta is no dict."""
+    """``(meta, stored array names, {name: array} for those of ``names``)``; ConfigError if unreadable."""
     try:
         with np.load(path) as data:
             meta = json.loads(str(data["meta"]))
@@ -115,17 +101,15 @@ def _read(path: Path, flag: str, names=()) -> tuple[dict, list[str], dict[str, n
 
 
 def read_meta(path: Path, flag: str = "--resume") -> dict:
-    """The ``meta`` a checkpoint was saved with (``done``, ``steps``, ``parts``, ...), without reading
-    its arrays; ConfigError (one line, starting with ``flag``) when the file cannot be read."""
+    """A checkpoint's ``meta`` (``done``, ``steps``, ``parts``, ...) without its arrays."""
     return _read(path, flag)[0]
 
 
 def load_checkpoint(path: Path, template, flag: str = "--resume"):
-    """Restore a runner with the structure of ``template`` from ``path``; returns ``(runner, meta)``.
+    """``(runner, meta)``: a runner of ``template``'s structure restored from ``path``.
 
-    Raises ConfigError (one line, starting with ``flag`` and naming the file) when the file cannot
-    be read, or when it does not hold a runner of ``template``'s structure, shapes and dtypes (a
-    checkpoint of another run, or a config.json edited since: seeds, algorithm or network sizes)."""
+    ConfigError (one line, starting with ``flag``) when unreadable, or when structure, shapes or
+    dtypes differ (another run's checkpoint, or an edited config.json)."""
     wanted = _named_leaves(template)
     meta, stored, leaves = _read(path, flag, wanted)
     renamed = {PREFIX + current_name(name[len(PREFIX):]): name for name in stored if name.startswith(PREFIX)}
@@ -161,15 +145,13 @@ def load_checkpoint(path: Path, template, flag: str = "--resume"):
 
 
 def remove_stale_temporaries(ckpt: Path) -> list[Path]:
-    """Delete the hidden temporary files a killed checkpoint write left beside ``ckpt``
-    (:func:`remidi.files.remove_temporaries`). Called when a run starts or resumes, before it
-    writes; returns what was removed."""
+    """Delete the temporaries a killed write left beside ``ckpt`` (before a run writes); returns them."""
     return remove_temporaries(ckpt.parent, (ckpt.name, HISTORY))
 
 
 def load_history(path: Path, meta: dict):
-    """The metrics a checkpoint's run logged so far (``checkpoint.history.npz``): ``(history,
-    per_step)``, lists of per-block dicts. ConfigError (one line) when missing or unreadable."""
+    """``(history, per_step)``: per-block metric dicts of ``checkpoint.history.npz``; ConfigError if
+    missing, unreadable or incomplete."""
     if not all(key in meta for key in ("done", "steps", "num_blocks")):
         raise unreadable(path.with_name(CHECKPOINT), KeyError("its meta lacks done, steps or num_blocks"))
     if not path.exists():
@@ -196,12 +178,10 @@ def load_history(path: Path, meta: dict):
 
 
 def check_run(path: Path, meta: dict, run: dict | None) -> None:
-    """ConfigError (one line) when the run a checkpoint was written for (``meta["run"]``: its
-    algorithm, seeds and config, :func:`save_run`) differs from ``run``, the one config.json
-    describes now: an edited config.json would otherwise resume silently wherever the state's
-    shapes still match (relabelled seeds, a learning rate, ``num_updates``, dr for plr). Keys
-    only one side has are not compared (a version of remidi that added a config key reads an
-    older run with its default); checkpoints written before runs were recorded are not checked."""
+    """ConfigError when ``meta["run"]`` (algorithm, seeds, config) differs from ``run``.
+
+    Why: an edited config.json would otherwise resume silently wherever shapes still match. Keys on
+    one side only are skipped (added config keys); checkpoints without a recorded run are not checked."""
     if run is None or not isinstance(meta.get("run"), dict):
         return
     was, now = flat_keys(meta["run"]), flat_keys(json.loads(json.dumps(run, default=_plain)))
@@ -213,10 +193,10 @@ def check_run(path: Path, meta: dict, run: dict | None) -> None:
 
 
 def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run: dict | None = None) -> None:
-    """Write a run's state at ``done`` updates: the metrics logged so far (``steps``, ``history``
-    and ``per_step``, lists of per-block dicts) to :data:`HISTORY`, then the runner to ``ckpt``
-    (its meta also holds ``parts``, the run's parts so far: :func:`remidi.engine.run.driver.drive`,
-    and ``run``, the algorithm, seeds and config it trains: :func:`check_run`)."""
+    """Write the run at ``done`` updates: metrics to :data:`HISTORY` first, then the runner to ``ckpt``.
+
+    The runner is last because it marks the history complete. Its meta holds ``parts`` and ``run``
+    (:func:`check_run`)."""
     arrays = {}
     for i, h in enumerate(history):
         arrays.update({f"h{i}|{k}": v for k, v in h.items()})
@@ -233,9 +213,8 @@ def save_run(ckpt: Path, runner, done, steps, history, per_step, parts=None, run
 
 
 def history_blocks(path: Path) -> list[dict[str, np.ndarray]]:
-    """Every block's metrics (``{name: f[S]}``, in block order) that a ``checkpoint.history.npz``
-    holds, read without its checkpoint (an unfinished run whose checkpoint stayed elsewhere);
-    ConfigError (one line) when it cannot be read or a block is missing."""
+    """Every block's metrics (``{name: f[S]}``) of a history file read alone; ConfigError if unreadable
+    or a block is missing."""
     try:
         with np.load(path) as saved:
             count = 1 + max((int(k.split("|", 1)[0][1:]) for k in saved.files if k.startswith("h")), default=-1)

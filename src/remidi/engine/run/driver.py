@@ -1,27 +1,17 @@
 """Driving a UED run: all seeds in one compiled program, evaluation, progress and checkpoints.
 
-:func:`train_seeds` is the entry point: it validates the config, builds the run's compiled
-programs (:mod:`remidi.engine.run.programs`: init, run a block, evaluate; on one device or
-sharded over several) and hands them to :func:`drive`, which returns a :class:`TrainResult`. The
-run is cut into blocks of ``eval_every`` updates. After each block the driver evaluates, records
-the block's metrics (reduced as :data:`~remidi.engine.train.BLOCK_REDUCTIONS` says), updates the
-progress bar and, every ``checkpoint_every`` updates, writes a checkpoint
-(:mod:`remidi.engine.run.checkpoint`) atomically, so a killed run never leaves a corrupt
-checkpoint. A block whose rollouts met a NaN or infinite reward or observation stops the run
-(:func:`nonfinite_error`) before anything of it is written. ``resume`` continues from the last
-checkpoint and ends in exactly the state an uninterrupted run reaches (same blocks, same keys). Each invocation records its part of the run
-(:class:`PartClock`): the updates it trained, its wall time and the time of its blocks after the
-first (which compiles), from which ``remidi status`` tells the time left.
+:func:`train_seeds` validates the config, builds the compiled programs
+(:mod:`remidi.engine.run.programs`) and hands them to :func:`drive`. The run is cut into blocks
+of ``eval_every`` updates; after each the driver evaluates, records the block's metrics (reduced
+per :data:`~remidi.engine.train.BLOCK_REDUCTIONS`) and, every ``checkpoint_every`` updates,
+writes a checkpoint atomically. A block that met a non-finite reward or observation stops the
+run before anything of it is written. ``resume`` ends in exactly the state an uninterrupted run
+reaches. Each invocation records its part (:class:`PartClock`) for ``remidi status``.
 
-A sharded run's results match the one-device run's to floating-point rounding, not bit for bit,
-and only for a while: XLA compiles the vmapped program for S/N seeds per device instead of S, and
-the rounding of some reductions depends on that batch size (the same happens between CPU and GPU,
-or between jaxlib versions). Seeds, keys and programs are otherwise the same, so early updates
-agree to rounding (``tests/test_sharding.py``), but training turns a rounding difference into a
-different sampled action or buffer decision after a few updates, and from then on a seed's run
-differs as runs on different hardware do. A sharded run is itself deterministic and resumes
-exactly. ``docs/devices.md`` has the multi-host set-up.
-"""
+A sharded run matches the one-device run only to rounding, and only early on: XLA compiles the
+vmapped program for S/N seeds per device, some reductions round differently at that batch size,
+and training soon turns a rounding difference into a different action. A sharded run is itself
+deterministic and resumes exactly (``docs/devices.md``)."""
 
 from __future__ import annotations
 
@@ -54,8 +44,8 @@ from remidi.files import code_version
 
 
 def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
-    """``replay_fraction/<tag>`` f[S]: the tag's share among the levels replayed in the given
-    steps (``replay`` and ``replayed/<tag>`` are f[S, steps]); NaN where nothing was replayed."""
+    """``replay_fraction/<tag>`` f[S]: the tag's share among replayed levels (``replay`` and
+    ``replayed/<tag>`` are f[S, steps]); NaN where nothing was replayed."""
     replays = step_metrics["replay"].sum(axis=1)
     return {f"replay_fraction/{name.split('/', 1)[1]}":
             np.where(replays > 0, counts.sum(axis=1) / np.maximum(replays * num_envs, 1), np.nan)
@@ -63,15 +53,14 @@ def replay_fractions(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict
 
 
 def _nanmean(values: np.ndarray) -> np.ndarray:
-    """f[S]: the mean over axis 1 of the defined values, NaN where none is (no warning)."""
+    """f[S]: mean over axis 1 of the non-NaN values; NaN where none (no warning)."""
     defined = ~np.isnan(values)
     return np.where(defined.any(axis=1), np.where(defined, values, 0.0).sum(axis=1) / np.maximum(defined.sum(axis=1), 1),
                     np.nan)
 
 
 def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[str, np.ndarray]:
-    """Aggregate per-step metrics f[S, B] of one block into f[S]; ``replayed/<tag>`` counts
-    become :func:`replay_fractions` of the block."""
+    """One block's step metrics f[S, B] reduced to f[S]; ``replayed/<tag>`` become :func:`replay_fractions`."""
     out = replay_fractions(step_metrics, num_envs)
     reduce = {"sum": lambda v: v.sum(axis=1), "last": lambda v: v[:, -1], "mean": lambda v: v.mean(axis=1),
               "nanmean": _nanmean}
@@ -82,8 +71,8 @@ def _block_metrics(step_metrics: dict[str, np.ndarray], num_envs: int) -> dict[s
 
 
 def _check_finite(runner, done: int) -> None:
-    """RemidiError (one line) when the agent's network parameters hold a NaN or an infinity:
-    training diverged, and writing the checkpoint would overwrite the last good one with it."""
+    """RemidiError when the agent's parameters are not finite, so a diverged network never
+    overwrites the last good checkpoint."""
     if not all(np.isfinite(np.asarray(leaf)).all() for leaf in jax.tree.leaves(runner.learner.train_state.params)):
         raise RemidiError(f"training diverged: the agent's network parameters are not finite after update {done} "
                           f"(NaN or inf; e.g. a NaN reward, or a learning rate too high); the last checkpoint before "
@@ -107,18 +96,17 @@ def nonfinite_error(flags: dict[str, np.ndarray], start: int, seeds: list[int], 
 
 
 def _kept(ckpt: Path | None, kept: int | None) -> str:
-    """What a run stopped before its checkpoint keeps, as the end of its error message."""
+    """The end of a stopped run's error message: which checkpoint is kept."""
     if ckpt is None:
         return ""
     return "; no checkpoint was written" if kept is None else f"; the last checkpoint before it (update {kept}) is kept"
 
 
 def _in_any_process(flag: bool) -> bool:
-    """Whether ``flag`` holds in any process of the run. In a multi-process run (``jax.distributed``)
-    this is a collective that every process calls at the same point (after each block): a SIGTERM
-    that one process has seen stops them all at the same block, so they take the checkpoint's
-    gather together. Decided by each process alone, the signalled one gathered the runner while the
-    others gathered the next block's metrics, and the job aborted on the mismatched collective."""
+    """Whether ``flag`` holds in any process (a collective every process calls after each block).
+
+    Why: a SIGTERM one process saw must stop all at the same block, or they run mismatched
+    collectives (checkpoint gather against next block's metrics) and the job aborts."""
     if jax.process_count() == 1:
         return flag
     from jax.experimental import multihost_utils
@@ -127,8 +115,7 @@ def _in_any_process(flag: bool) -> bool:
 
 
 def _to_host(tree):
-    """NumPy copies of ``tree``'s arrays; arrays spread over several hosts are gathered first
-    (a collective: every process must call it)."""
+    """NumPy copies of ``tree``'s arrays, gathered first if spread over hosts (a collective)."""
     if all(getattr(x, "is_fully_addressable", True) for x in jax.tree.leaves(tree)):
         return jax.tree.map(np.asarray, tree)
     from jax.experimental import multihost_utils
@@ -139,11 +126,12 @@ def _to_host(tree):
 
 @dataclass(frozen=True)
 class TrainResult:
-    """A finished run: ``steps`` i[T] (the update count at the end of each block), ``history``
-    {name: f[S, T]} (each block's reduced step metrics and the evaluation at its end),
-    ``per_step`` {name: f[S, num_updates]} (the raw replay counters of every update), the
-    final ``runner`` (leaves ``[S, ...]``; sharded along the seed axis for a sharded run) and
-    ``parts``: the invocations that trained it (:func:`drive`; empty without a run folder)."""
+    """A finished run.
+
+    ``steps`` i[T]: updates at each block's end; ``history`` {name: f[S, T]}: block metrics and
+    evaluations; ``per_step`` {name: f[S, num_updates]}: raw replay counters; ``runner``: leaves
+    ``[S, ...]`` (sharded for a sharded run); ``parts``: the invocations that trained it (empty
+    without a run folder)."""
 
     steps: np.ndarray
     history: dict[str, np.ndarray]
@@ -163,16 +151,12 @@ class RunFolder:
 def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm, seeds: list[int],
                 out: Path | RunFolder | None = None, progress: bool = True,
                 on_block: Callable[[int, dict], None] | None = None, devices: int = 1) -> TrainResult:
-    """Train ``algo`` (a name or an :class:`~remidi.engine.algorithms.Algorithm`) for every seed
-    and return the :class:`TrainResult`. With ``out`` (a folder, or a :class:`RunFolder` that
-    may resume), checkpoints go there every ``checkpoint_every`` updates and at the end, and a
-    resume continues from the last one. ``on_block(updates done, block metrics)`` is called after
-    each block, once its checkpoint is written.
+    """Train ``algo`` (name or :class:`~remidi.engine.algorithms.Algorithm`) for every seed.
 
-    ``devices=N`` shards the seeds over the first N of ``jax.devices()`` (N must divide the
-    number of seeds; :func:`check_devices`). In a multi-process run (``jax.distributed``) every
-    process calls this with the same arguments, all get the full results, and only process 0
-    writes checkpoints."""
+    ``out`` (a folder, or a :class:`RunFolder` that may resume): checkpoints every
+    ``checkpoint_every`` updates and at the end. ``on_block(updates done, block metrics)`` runs after
+    each block's checkpoint. ``devices=N`` shards the seeds over N devices (N divides the seed
+    count). Multi-process: every process calls it alike, all get the results, process 0 writes."""
     validate_ued_config(cfg, algo, task)  # the CLI's checks, for Python callers too
     check_devices(devices, len(seeds))
     setup = tr.make_setup(task, cfg, algo)
@@ -186,11 +170,10 @@ def train_seeds(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm, seeds: lis
 def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolder | None = None,
           progress: str | None = "", on_block: Callable[[int, dict], None] | None = None,
           run: dict | None = None) -> TrainResult:
-    """Run ``programs`` for every seed in blocks of ``cfg.eval_every`` updates (see
-    :func:`train_seeds`; ``cfg.num_envs`` turns replay counts into replay fractions), with a
-    progress bar described by ``progress`` (None: none). ``run``: the algorithm, seeds and config
-    trained, recorded in each checkpoint and checked on resume
-    (:func:`~remidi.engine.run.checkpoint.check_run`)."""
+    """Run ``programs`` for every seed in blocks of ``cfg.eval_every`` (see :func:`train_seeds`).
+
+    ``progress``: the bar's description (None: no bar). ``run``: algorithm, seeds and config, stored
+    in each checkpoint and checked on resume."""
     num_updates, eval_every, checkpoint_every = cfg.num_updates, cfg.eval_every, cfg.checkpoint_every
     num_envs, out, resume = cfg.num_envs, folder.path if folder else None, bool(folder and folder.resume)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
@@ -230,12 +213,8 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
             block_started = time.perf_counter()
             runner, step_metrics = programs.run_block(runner, length)
             if ckpt is not None and not armed:
-                # Python runs a signal handler only between bytecodes, so a SIGTERM that comes
-                # while XLA compiles or runs a block is handled when that call returns. The call
-                # above returns once the block is compiled and dispatched (asynchronously: it runs
-                # while _to_host waits for it), so from here on a SIGTERM keeps the block under
-                # way; before (tracing, compiling) nothing newer than the last checkpoint exists
-                # and the handler exits at once.
+                # a signal is handled only when XLA's call returns: once the first block is dispatched
+                # a SIGTERM keeps it; before, nothing is newer than the last checkpoint: exit at once
                 stack.enter_context(preemption.checkpointing())
                 armed = True
             step_metrics = _to_host(step_metrics)
@@ -279,15 +258,12 @@ def drive(programs: Programs, seeds: list[int], cfg: UEDConfig, folder: RunFolde
 
 
 class PartClock:
-    """This invocation's part of a run, from update ``start``: :meth:`record` gives ``{"updates":
-    [start, done], "wall_s": seconds since it began, "train_s": the seconds of its blocks after the
-    first, "train_updates": their updates, "code": remidi.files.code_version()}`` (commit, device,
-    JAX). The first block of an invocation compiles the programs (minutes for a large task) and a
-    block of another length compiles again, so only later blocks of the first block's length are
-    timed: ``train_s / train_updates`` is the steady rate ``remidi status`` tells the time left
-    at. A run resumed elsewhere (another machine, device or commit) records each part, so its
-    provenance needs no hand-written note; ``code`` None: a part trained before parts were
-    recorded."""
+    """This invocation's part of a run, from update ``start``.
+
+    :meth:`record`: ``{"updates": [start, done], "wall_s", "train_s", "train_updates", "code"}``.
+    Only blocks after the first and of its length are timed (the first compiles, another length
+    compiles again), so ``train_s / train_updates`` is the steady rate. ``code`` None: a part from
+    before parts were recorded."""
 
     def __init__(self, start: int):
         self.start, self.started, self.code = start, time.perf_counter(), code_version()
@@ -295,7 +271,7 @@ class PartClock:
         self.train_s, self.train_updates = 0.0, 0
 
     def block(self, length: int, seconds: float) -> None:
-        """Count a block of ``length`` updates that took ``seconds`` (its evaluation included)."""
+        """Count a block of ``length`` updates that took ``seconds`` (evaluation included)."""
         if self.first_length is None:
             self.first_length = length
         elif length == self.first_length:

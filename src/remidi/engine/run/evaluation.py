@@ -16,23 +16,21 @@ from remidi.envs.interface import UEDTask
 
 
 def first_episode_return(reward: jax.Array, done: jax.Array, gamma: float = 1.0) -> jax.Array:
-    """f32[N]: return of the first episode of each env (``reward``, ``done``: [T, N]; the rollout
-    starts the episode), discounted Σ_t γ^t r_t for ``gamma`` < 1."""
+    """f32[N]: return of each env's first episode (``reward``, ``done`` [T, N]), discounted Σ_t γ^t r_t
+    for ``gamma`` < 1."""
     ended_before = jnp.cumsum(done, axis=0) - done  # episodes finished before step t
     discount = jnp.power(jnp.float32(gamma), jnp.arange(reward.shape[0], dtype=jnp.float32))[:, None]
     return jnp.sum(jnp.where(ended_before == 0, discount * reward, 0.0), axis=0)
 
 
 def first_episode_flag(done: jax.Array, flags: jax.Array) -> jax.Array:
-    """bool[N]: ``flags`` bool[T, N] (the rollout's ``Trajectory.solved``) at the last step of each
-    env's first episode; False where it did not end inside the rollout."""
+    """bool[N]: ``flags`` bool[T, N] at the last step of each env's first episode; False if it did not end."""
     first_end = done & (jnp.cumsum(done, axis=0) - done == 0)
     return jnp.any(first_end & flags, axis=0)
 
 
 def eval_groups(task: UEDTask) -> list[tuple[object, list[str]]]:
-    """The evaluation sets grouped by the environment that plays them (``task.eval_envs``, else
-    ``task.env``), each group's names sorted: one rollout per group."""
+    """The evaluation sets grouped by the env that plays them (one rollout per group), names sorted."""
     groups: list[tuple[object, list[str]]] = []
     for name in sorted(task.eval_sets):
         env = task.eval_envs.get(name, task.env)
@@ -77,15 +75,13 @@ def level_returns(setup: Setup, runner: Runner, env, levels, attempts: int, rng,
 
 
 def level_episodes(setup: Setup, runner: Runner, env, levels, attempts: int, rng, action: str = "sample"):
-    """The first-episode return of ``attempts`` episodes on each of ``levels`` (leaves [L, ...],
-    played by ``env``; under ``remidi.policy=combine`` by the combined policy), the actions drawn
-    from the policy or, with ``action="mode"``, its most likely ones
-    (:func:`~remidi.engine.core.distributions.acting`):
-    ``(returns f32[L, attempts], discounted f32[L, attempts], flags bool[L, attempts] | None)``,
-    ``discounted`` Σ_t γ^t r_t with γ = ``ppo.gamma``, ``flags`` the first episode's last-step info
-    flag for a task whose ``solved`` names an info key (None otherwise; judge the episodes with
-    :func:`~remidi.engine.adversaries.scores.episode_solved`). One rollout of
-    ``task.max_episode_steps`` on L·attempts envs."""
+    """``(returns, discounted, flags)`` f32/bool[L, attempts]: first-episode results of ``attempts``
+    episodes on each of ``levels`` (leaves [L, ...]).
+
+    One rollout of ``task.max_episode_steps`` on L·attempts envs; actions sampled, or the mode with
+    ``action="mode"``; the combined policy under ``remidi.policy=combine``. ``discounted`` uses
+    ``ppo.gamma``; ``flags``: the last-step info flag where ``solved`` names an info key, else None
+    (judge with :func:`~remidi.engine.adversaries.scores.episode_solved`)."""
     task = setup.task
     frozen = setup.algo.adversary.frozen(setup, runner) if combines(setup) else None  # act as the combined policy
     tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
@@ -102,14 +98,12 @@ def level_episodes(setup: Setup, runner: Runner, env, levels, attempts: int, rng
 
 
 def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[str, jax.Array]:
-    """Metrics on each evaluation set ``<set>``: ``eval_attempts`` episodes per level, acting by
-    ``action`` (:func:`level_returns`; the first episode of each; the sets one environment plays are rolled out together,
-    :func:`level_returns`) give ``solve_rate/<set>``, ``return/<set>`` and
-    ``discounted_return/<set>`` (Σ_t γ^t r_t, γ = ``ppo.gamma``). With the task's optimal return,
-    the regret per level gives ``regret/<set>/mean`` and ``regret/<set>/worst`` (over the set's
-    levels): the *expected* regret ``optimal − E[return]`` (undiscounted), exact for a one-step
-    task that knows its ``expected_return`` (which adds ``entropy/<set>``, the mean entropy of the
-    policy over the set's levels), estimated from the sampled episodes otherwise."""
+    """Metrics on each evaluation set: ``solve_rate/<set>``, ``return/<set>``, ``discounted_return/<set>``.
+
+    ``eval_attempts`` first episodes per level, acting by ``action``. With an optimal return:
+    ``regret/<set>/mean`` and ``/worst`` of the expected regret ``optimal − E[return]``
+    (undiscounted), exact with the task's ``expected_return`` (which adds ``entropy/<set>``), else
+    estimated from the episodes. Plus :func:`buffer_solve_rates`."""
     task, cfg = setup.task, setup.cfg
     out = {}
     for i, (env, names) in enumerate(eval_groups(task)):
@@ -148,6 +142,5 @@ def evaluate(setup: Setup, runner: Runner, rng, action: str = "sample") -> dict[
 
 
 def tracker_audit(setup: Setup, runner: Runner, rng) -> dict[str, jax.Array]:
-    """What the run's tracker reports of its judgement (:meth:`~remidi.engine.trackers.base.Tracker.audit`:
-    a learned tracker against the exact one on one rollout; nothing for the exact trackers)."""
+    """The tracker's :meth:`~remidi.engine.trackers.base.Tracker.audit` (nothing for exact trackers)."""
     return setup.tracker.audit(setup, runner, rng) if setup.tracker is not None else {}

@@ -1,16 +1,10 @@
-"""The compiled programs of a UED run, for every seed at once: initialise the runner, run a block
-of train steps, evaluate (:class:`Programs`, built by :func:`ued_programs`), on one device or
-sharded over several.
+"""The compiled programs of a UED run for every seed at once (:class:`Programs`, :func:`ued_programs`).
 
-One block is a single jit-compiled ``lax.scan`` of :func:`~remidi.engine.train.train_step`,
-vmapped over seeds (:func:`over_seeds`). ``devices=N`` shards the seeds over N devices: a 1-D
-:class:`~jax.sharding.Mesh` with axis ``"seed"``, the runner's leading (seed) axis and the per-seed
-keys placed with ``NamedSharding(mesh, P("seed"))``, and each compiled program run under
-:func:`jax.shard_map`, so every device runs the unchanged per-seed program on its own S/N seeds
-with no communication. The programs are jitted with the (hashable) set-up as a static argument, so
-every run of one set-up in a process (training, a resume, the next algorithm's evaluation)
-reuses them.
-"""
+A block is one jit-compiled ``lax.scan`` of :func:`~remidi.engine.train.train_step` over seeds
+(:func:`over_seeds`). ``devices=N`` shards the seed axis over a 1-D mesh ``"seed"`` under
+:func:`jax.shard_map`: each device runs the unchanged per-seed program on S/N seeds, no
+communication. The set-up is a static argument, so every run of one set-up in a process reuses
+the programs."""
 
 from __future__ import annotations
 
@@ -34,34 +28,25 @@ from remidi.errors import ConfigError
 SEED_AXIS = "seed"
 
 def load_run_state(setup: Setup, seeds: list[int], path: Path, flag: str = "--resume"):
-    """``(runner, meta)``: the training state of every seed (leaves with the seed axis first) from
-    the checkpoint ``path`` of a run of ``setup``, checked against the structure :func:`_init`
-    gives (traced, not compiled); errors as :func:`load_checkpoint`'s."""
+    """``(runner, meta)``: every seed's state from checkpoint ``path``, checked against :func:`_init`'s
+    structure (traced, not compiled)."""
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds, jnp.uint32))
     return load_checkpoint(path, jax.eval_shape(lambda k: _init(setup, k), keys), flag)
 
 
 @partial(jax.jit, static_argnums=0)
 def _init(setup: Setup, keys):
-    # lax.map, not vmap: several *batched* QR decompositions (orthogonal initialisers) in one
-    # program hang the CPU runtime of jaxlib 0.10.2 (reproduced with 2+ seeds); initialising
-    # one seed after another avoids them, and runs once per run.
-    # Every leaf strongly typed, as a checkpoint restores it: a weak-typed leaf (``jnp.full(shape,
-    # jnp.inf)``) would give a resumed run's runner other types, so its programs would be traced
-    # and compiled again, under other persistent-cache keys (a no-op on strongly typed leaves)
+    # lax.map, not vmap: batched QR decompositions (orthogonal initialisers) hang jaxlib 0.10.2's CPU runtime.
+    # Every leaf strongly typed, as a checkpoint restores it: else a resumed run would compile again.
     runner = jax.lax.map(lambda k: tr.init_runner(setup, k), keys)
     return jax.tree.map(lambda x: jax.lax.convert_element_type(x, x.dtype), runner)
 
 
 def over_seeds(fn):
-    """``fn`` (one seed's arguments -> its results) over the arguments' leading seed axis ``S``:
-    vmapped, or for ``S = 1`` called on the arguments without that axis (results given it back).
+    """``fn`` over the arguments' leading seed axis S: vmapped, or for S = 1 called without the axis.
 
-    A vmapped axis of size 1 is not free: XLA keeps it in the network's matrix products and
-    turns the train step's ``lax.cond`` into selects (the measurements are in
-    ``docs/performance.md``, "A seed axis of size 1"; rare branches use
-    :func:`~remidi.engine.core.seeds.cond_per_seed`, which reads the axis name). ``S`` is the
-    axis's size where ``fn`` runs: under ``shard_map`` a device's share of the seeds."""
+    Why: a vmapped axis of size 1 is not free (XLA keeps it in matmuls and turns ``lax.cond`` into
+    selects; ``docs/performance.md``). Under ``shard_map`` S is a device's share."""
 
     def mapped(*args):
         if jax.tree.leaves(args)[0].shape[0] != 1:
@@ -73,8 +58,7 @@ def over_seeds(fn):
 
 
 def run_steps(setup: Setup, runner, length: int):
-    """``length`` train steps for every seed of ``runner`` (leaves ``[S, ...]``):
-    ``(runner, per-step metrics f[S, length])``."""
+    """``(runner, per-step metrics f[S, length])``: ``length`` train steps for every seed."""
     return over_seeds(lambda r: jax.lax.scan(lambda c, _: tr.train_step(setup, c), r, None, length=length))(runner)
 
 
@@ -90,8 +74,7 @@ def _evaluate(setup: Setup, runner, keys):
 
 
 def check_devices(devices: int, num_seeds: int) -> None:
-    """Raise :class:`ConfigError` unless ``devices`` is ≥ 1, at most ``jax.device_count()`` (all
-    hosts' devices) and divides ``num_seeds``; the message names the allowed values."""
+    """ConfigError unless ``devices`` ≥ 1, at most ``jax.device_count()``, and divides ``num_seeds``."""
     if devices == 1 and not isinstance(devices, bool):
         return  # today's path: every machine has one device
     available = jax.device_count()
@@ -108,7 +91,7 @@ def check_devices(devices: int, num_seeds: int) -> None:
 
 
 def seed_mesh(devices: int) -> jax.sharding.Mesh:
-    """A 1-D mesh of the first ``devices`` of ``jax.devices()`` (every host's) with axis ``"seed"``."""
+    """A 1-D mesh ``"seed"`` of the first ``devices`` of ``jax.devices()`` (all hosts')."""
     return jax.make_mesh((devices,), (SEED_AXIS,), axis_types=(jax.sharding.AxisType.Auto,),
                          devices=jax.devices()[:devices])
 
@@ -135,8 +118,7 @@ def _evaluate_sharded(mesh, setup: Setup, runner, keys):
 
 
 def _put(tree, sharding):
-    """Place host (or single-device) arrays on ``sharding``; works across hosts, where every
-    process holds the same full values and supplies the shards of its own devices."""
+    """Place host arrays on ``sharding`` (multi-host: each process supplies its devices' shards)."""
     def one(x):
         host = np.asarray(x)
         return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
@@ -145,12 +127,10 @@ def _put(tree, sharding):
 
 @dataclass(frozen=True)
 class Programs:
-    """What the driver runs, for every seed at once (runner leaves ``[S, ...]``, keys ``[S, 2]``):
+    """What the driver runs for every seed (runner leaves ``[S, ...]``, keys ``[S, 2]``).
 
-    init(keys) -> runner; run_block(runner, length) -> (runner, per-step metrics {name: f[S,
-    length]}); evaluate(runner, keys) -> {name: f[S]}. :func:`ued_programs` builds them for the
-    shared UED train step, on one device or sharded over several.
-    """
+    init(keys) -> runner; run_block(runner, length) -> (runner, {name: f[S, length]});
+    evaluate(runner, keys) -> {name: f[S]}."""
 
     init: Callable
     run_block: Callable

@@ -31,24 +31,23 @@ def _user_error(err: Exception) -> str:
 
 
 def _shapes(tree, most: int | None = None) -> str:
-    """A pytree's leaves as ``dtype[shape]``, comma-separated (for messages), the first ``most``
-    (all if None) and how many more; a leaf that is no array (a Python number) by its type's name."""
+    """A pytree's leaves as ``dtype[shape]`` (non-arrays by type name), comma-separated; the first
+    ``most`` (None: all) and how many more."""
     leaves = [_leaf(leaf) for leaf in jax.tree.leaves(tree)]
     more = len(leaves) - most if most is not None and len(leaves) > most else 0
     return ", ".join(leaves[:len(leaves) - more]) + (f" and {more} more" if more else "")
 
 
 def _leaf(leaf) -> str:
-    """``dtype[shape]`` of an array leaf, the type's name of any other (for messages)."""
+    """``dtype[shape]`` of an array leaf, else the type's name."""
     if not hasattr(leaf, "shape") or not hasattr(leaf, "dtype"):
         return type(leaf).__name__
     return f"{leaf.dtype}{list(leaf.shape)}"
 
 
 def _difference(expected, given, what: str = "expected") -> str | None:
-    """Where pytree ``given`` differs from ``expected`` in its leaves' paths, shapes or dtypes:
-    the first such leaf, ``".path (f32[3] WHAT, i32[3] here)"``, and how many more; None where
-    they agree (leaves and structure)."""
+    """The first leaf where ``given`` differs from ``expected`` in path, shape or dtype (``".path (f32[3]
+    WHAT, i32[3] here)"``) and how many more; None where they agree."""
     def table(tree):
         return {jax.tree_util.keystr(path): _leaf(x) for path, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
 
@@ -62,9 +61,8 @@ def _difference(expected, given, what: str = "expected") -> str | None:
 
 
 def _batch_problem(level, levels) -> str | None:
-    """Where ``levels`` is no batch of levels like ``level`` (a leading axis of one length ≥ 1
-    on every leaf, then the leaf's rank; an evaluation environment may play larger levels): the
-    first leaf that is not, and how many more; None where it is."""
+    """The first leaf where ``levels`` is no batch of levels like ``level`` (one leading axis of a
+    common length ≥ 1, then the leaf's rank) and how many more; None where it is."""
     paths = jax.tree_util.keystr
     rank = {paths(p): len(x.shape) for p, x in jax.tree_util.tree_flatten_with_path(level)[0]}
     got = {paths(p): np.shape(x) for p, x in jax.tree_util.tree_flatten_with_path(levels)[0]}
@@ -83,10 +81,8 @@ def _batch_problem(level, levels) -> str | None:
 
 
 def _check_actions(task) -> None:
-    """The task's action declaration (:mod:`remidi.envs.actions`), then the space against the
-    environment's ``action_space(params)`` where that is one of the supported kinds: an action
-    the environment does not have would be taken silently (CartPole with 5 actions pushes 3, 5
-    and 7 times as hard)."""
+    """Check the task's action declaration, and the space against the env's ``action_space(params)``
+    where supported: an action the env lacks would be taken silently."""
     declared = task.action_space
     if declared is None:
         _task_size("task.num_actions", task.num_actions)
@@ -119,8 +115,7 @@ def _check_actions(task) -> None:
 
 
 def _traced(field: str, what: str, fn, *args, hint: str = ""):
-    """``jax.eval_shape(fn, *args)``; ConfigError ``task.FIELD: WHAT failed: Type: message`` (one
-    line, ``hint`` appended) when the user's code raises."""
+    """``jax.eval_shape(fn, *args)``; ConfigError ``task.FIELD: WHAT failed: ...`` when the user's code raises."""
     try:
         return jax.eval_shape(fn, *args)
     except Exception as err:  # noqa: BLE001 (the user's code: report its own error in one line)
@@ -128,7 +123,7 @@ def _traced(field: str, what: str, fn, *args, hint: str = ""):
 
 
 def _is_scalar(x, kind: str) -> bool:
-    """``x`` (a ShapeDtypeStruct) is a scalar of ``kind``: "float" or "bool"."""
+    """``x`` (a ShapeDtypeStruct) is a scalar of ``kind`` ("float" or "bool")."""
     if getattr(x, "shape", None) != ():
         return False
     dtype = jnp.dtype(x.dtype)
@@ -136,24 +131,23 @@ def _is_scalar(x, kind: str) -> bool:
 
 
 def _task_size(field: str, value) -> None:
-    """ConfigError unless ``value`` is an integer ≥ 1 (a Python or NumPy integer, not a bool)."""
+    """ConfigError unless ``value`` is an integer ≥ 1 (not a bool)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ConfigError(f"{field}: must be an integer ≥ 1, got {value!r}")
 
 
 def _reset_reads_its_key(task: UEDTask, rng, level) -> bool:
-    """Whether the outputs of ``task.env.reset_to_level`` depend on its key, read from its traced
-    program (JAX's dead-code elimination keeps the inputs an output uses; nothing is compiled). A
-    task that claims ``deterministic_reset`` falsely would be replayed from one start per level
-    and judged wrongly by ReMiDi's trackers. False where this JAX lacks the (internal) pass."""
+    """Whether ``reset_to_level``'s outputs depend on its key (read from the traced program).
+
+    Why: a false ``deterministic_reset`` would replay one start per level and mislead the trackers."""
     return _reads_key(lambda k, lv: task.env.reset_to_level(k, lv, task.params), rng, level)
 
 
 def _reads_key(fn, key, *args, kept=lambda out: True) -> bool:
-    """Whether the outputs of ``fn(key, *args)`` that ``kept`` (the output pytree -> a pytree of
-    bools, or one bool for all) marks depend on ``key``: JAX's dead-code elimination of the traced
-    program keeps the inputs those outputs use (nothing is compiled; arrays or ShapeDtypeStructs).
-    False where this JAX lacks the (internal) pass, or ``fn`` does not trace this way."""
+    """Whether the outputs of ``fn(key, *args)`` that ``kept`` marks depend on ``key``.
+
+    Read by JAX's dead-code elimination of the traced program (nothing compiled). False where JAX
+    lacks that internal pass or ``fn`` does not trace."""
     try:
         from jax.interpreters import partial_eval as pe
 
@@ -168,17 +162,12 @@ def _reads_key(fn, key, *args, kept=lambda out: True) -> bool:
 
 
 def validate_task(task: UEDTask) -> None:
-    """Raise ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot
-    train: field types and ranges (``max_episode_steps`` ≥ 1, the functions callable), the action
-    space (``num_actions`` ≥ 1 or a valid ``action_space``, the environment's own where it says),
-    then, traced abstractly (``jax.eval_shape``: nothing compiled or run), one sampled
-    level, a reset to it and one step: the step's observation has the reset's shapes, its reward is
-    a float scalar and its done a boolean scalar; the level tags are boolean scalars, the optimal
-    returns float scalars, edited, easy and reseeded levels and a level the ``level_builder``
-    builds from a whole design have the sampled level's shapes; every evaluation
-    set is a batch of such levels (a leading level axis, the same on every leaf) that its
-    environment resets to an observation of the training observation's shapes. Checked once per
-    task object."""
+    """ConfigError (one line naming the ``UEDTask`` field) for a task the engine cannot train.
+
+    Checks field types and ranges and the action space, then traces abstractly (nothing compiled)
+    one sampled level, its reset and a step: step and reset agree in shapes, reward is a float
+    scalar and done a bool scalar; tags, optima, edited/easy/reseeded/built levels and evaluation
+    sets have the right shapes and types. Once per task object."""
     if not isinstance(task, UEDTask):
         raise ConfigError(f"task: must be a remidi UEDTask, got {a_type(task)}")
     if task in _VALIDATED:
@@ -324,9 +313,9 @@ def validate_task(task: UEDTask) -> None:
 
 
 def _observation_batch(task: UEDTask, flat: bool):
-    """The task's first observation as a ``[1, 1, ...]`` batch (flattened to one vector if
-    ``flat``), shapes only. Raises ConfigError, once, with the environment's own error when its
-    level generator or reset fails (a network cannot be judged on an environment that does not run)."""
+    """The task's first observation as a ``[1, 1, ...]`` batch (flattened if ``flat``), shapes only.
+
+    ConfigError with the env's own error if sampling or resetting fails."""
     def first():
         obs = jax.tree.map(lambda x: x[None, None], example_observation(task)[0])
         return flatten_obs(obs) if flat else obs
@@ -341,9 +330,8 @@ def _observation_batch(task: UEDTask, flat: bool):
 
 
 def _read_error(net, obs) -> str | None:
-    """None if ``net`` can read the observation batch ``obs`` (``[1, 1, ...]`` leaves), else why:
-    first by its own ``check_observation`` of one observation, then by initialising it on the
-    batch (traced abstractly: nothing is compiled or run)."""
+    """None if ``net`` reads the batch ``obs`` (leaves ``[1, 1, ...]``), else why (its
+    ``check_observation``, then an abstract init)."""
     problem = observation_problem(net, jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[2:], x.dtype), obs))
     if problem is not None:
         return problem
@@ -356,7 +344,7 @@ def _read_error(net, obs) -> str | None:
 
 
 def _fits(name: str, task: UEDTask, obs) -> bool:
-    """Whether the network ``name`` at its default options reads the observation batch ``obs``."""
+    """Whether network ``name`` at its defaults reads ``obs``."""
     try:
         return _read_error(make_network(name, for_task(task).network_actions, for_task(task).continuous), obs) is None
     except Exception:  # noqa: BLE001 (a registered network that cannot even be built fits nothing)
@@ -364,11 +352,8 @@ def _fits(name: str, task: UEDTask, obs) -> bool:
 
 
 def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool = False) -> None:
-    """Raise ConfigError unless ``net`` can read the task's observations (flattened to one vector
-    if ``flat``, as ``normalize_obs`` does): its ``check_observation``, then an abstract trace. The
-    one-line error names what the network reads, what the task gives, why, and the networks that
-    can read it; an environment that fails to produce an observation gets its own one-line error
-    instead (:func:`_observation_batch`)."""
+    """ConfigError unless ``net`` reads the task's observations (flattened if ``flat``, as
+    ``normalize_obs`` does); the message names the networks that can."""
     obs = _observation_batch(task, flat)
     problem = _read_error(net, obs)
     if problem is None:
@@ -381,11 +366,10 @@ def check_network_reads_observations(net, name: str, task: UEDTask, flat: bool =
 
 
 def step_reads_its_key(task: UEDTask) -> bool:
-    """Whether the observation, state or end that ``task.env.step_env`` returns depend on its key
-    (a step that draws its own randomness; a random reward or info alone does not change what the
-    tracker compares), read from its traced program as :func:`_reset_reads_its_key` reads the
-    reset's, at a sampled level's first state and a zero action. False where this JAX lacks the pass.
-    Traced once per task."""
+    """Whether ``step_env``'s observation, state or done depend on its key (traced once per task).
+
+    A random reward or info alone does not count: the tracker does not compare them. False where JAX
+    lacks the pass."""
     if task not in _STEP_READS_KEY:
         _STEP_READS_KEY[task] = _trace_step_key_use(task)
     return _STEP_READS_KEY[task]

@@ -1,8 +1,6 @@
-"""Validation of a run before anything is written: the task itself
-(:mod:`remidi.engine.run.task_checks`), every key of :class:`UEDConfig` against its allowed values
-and the task (one-line ConfigError naming the key; the tracker's keys:
-:func:`remidi.engine.trackers.validate_tracker`), whether the network reads the task's
-observations, and warnings about valid runs that would train degenerately."""
+"""Validation of a run before anything is written: the task, every :class:`UEDConfig` key (one-line
+ConfigError naming it), whether the network reads the observations, and warnings about valid
+runs that would train degenerately."""
 
 from __future__ import annotations
 
@@ -28,29 +26,18 @@ from remidi.errors import COMMAND_LINE, ConfigError, Naming, choice, positive_in
 
 def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
                  num_steps_from: str | None = None, naming: Naming = COMMAND_LINE) -> list[str]:
-    """One-line warnings about a valid run of ``algos`` (a name or an :class:`Algorithm`, or a list
-    of them: a run's algorithms, each warning said once for all of them) that would train
-    degenerately without saying so:
+    """One-line warnings about a valid run of ``algos`` (one, or a list: each warning once) that would
+    train degenerately without saying so:
 
-    * a score that reads finished episodes (``Score.needs_finished_episodes`` in the registry
-      ``engine/adversaries/scores.py``) on rollouts shorter than the task's episode limit: a level
-      whose episode does not end inside the rollout is scored as its ``Score.unfinished`` says (−inf:
-      with every episode too long the buffer holds one level and replays only it; or its partial
-      return), with the ``--set`` that scores every level by a finished episode; ``num_steps_from`` says who
-      chose ``num_steps`` where it was not the user (``"the smoke preset"``);
-    * ReMiDi on a task whose reset depends on its random key (two resets of one level with two keys
-      give different first observations): the tracker assumes an episode is a function of the
-      level and the actions, so it may judge identical levels distinguishable;
-    * with ``check_step`` (a user's task: tracing a step costs seconds for Brax, whose steps are
-      known to ignore their key), ReMiDi's exact tracker on a task whose step draws from its key:
-      it steps each frozen level with the agent's own draws, so a prefix another draw of that level
-      would give counts as distinguishable (the noisy domains of docs/results.md show the effect);
-      it recommends only the trackers that can read the task's observations
-      (:func:`~remidi.engine.trackers.readable_trackers`: tolerance for float ones, belief or
-      simulated for categorical ones).
+    * a score that needs finished episodes on rollouts shorter than the episode limit (such levels
+      are scored as ``Score.unfinished`` says), with the ``--set`` that fixes it; ``num_steps_from``
+      names who chose ``num_steps`` if not the user;
+    * ReMiDi on a task whose reset depends on its key: the tracker assumes an episode is a function
+      of level and actions, so identical levels may look distinguishable;
+    * with ``check_step`` (costly to trace, so for users' tasks only): ReMiDi's exact tracker on a
+      task whose step draws from its key, recommending the trackers that can read its observations.
 
-    ``naming``: the caller's words for the settings a warning suggests (``run_ued``'s ``config``).
-    """
+    ``naming``: the caller's words for suggested settings."""
     algos = [get_algorithm(a) for a in ([algos] if isinstance(algos, (str, Algorithm)) else algos)]
     short = short_rollout_warning(cfg, algos, task, num_steps_from, naming)
     out = [short] if short is not None else []
@@ -61,9 +48,7 @@ def run_warnings(cfg: UEDConfig, algos, task: UEDTask, check_step: bool = False,
 
 def short_rollout_warning(cfg: UEDConfig, algos: list[Algorithm], task: UEDTask,
                           num_steps_from: str | None = None, naming: Naming = COMMAND_LINE) -> str | None:
-    """:func:`run_warnings`' first: one line for every algorithm of ``algos`` whose score reads
-    finished episodes on rollouts (``num_steps``) shorter than the task's episode limit, naming the
-    algorithms each score ranks levels for when there are several; None where none does."""
+    """:func:`run_warnings`' short-rollout line (naming each score's algorithms when several), or None."""
     if cfg.num_steps >= task.max_episode_steps:
         return None
     users: dict[str, list[str]] = {}  # score → the algorithms whose buffers it ranks
@@ -115,13 +100,12 @@ def _algorithm_warnings(cfg: UEDConfig, algo: Algorithm, task: UEDTask, check_st
 
 
 def rehearses(algo: Algorithm) -> bool:
-    """``algo`` can take ``remidi.rehearsal``: a sequence of level buffers (ReMiDi, ReMiDi over ACCEL)."""
+    """``algo`` can take ``remidi.rehearsal``: a sequence of level buffers."""
     return isinstance(algo.adversary, LevelBuffers) and algo.buffer_sequence
 
 
 def validate_section(prefix: str, validate) -> None:
-    """Call ``validate()`` (a nested config's validator, whose errors name its keys without the
-    section) and raise its ConfigError with the keys' full dotted names (``prefix`` + key)."""
+    """Call ``validate()`` and re-raise its ConfigError with the keys' full names (``prefix`` + key)."""
     try:
         validate()
     except ConfigError as err:
@@ -130,8 +114,7 @@ def validate_section(prefix: str, validate) -> None:
 
 
 def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
-    """Why ``task`` cannot run ``algo`` (None: it can): an algorithm that edits levels needs a
-    level mutator, one that learns a level generator a level-building MDP."""
+    """Why ``task`` cannot run ``algo`` (missing mutator, level builder or solve criterion); None if it can."""
     if algo.edits and task.mutate_level is None:
         return f"{algo.name} edits levels, but this task has no level mutator (UEDTask.mutate_level)"
     if isinstance(algo.adversary, LevelGenerator) and task.level_builder is None:
@@ -144,7 +127,7 @@ def task_refusal(algo: Algorithm, task: UEDTask) -> str | None:
 
 
 def validate_sfl(cfg: UEDConfig, algo: Algorithm, task: UEDTask) -> None:
-    """ConfigError (one line) for a run of SFL (``sfl``, ``remidi-sfl``) the task or the keys refuse."""
+    """ConfigError for an SFL run (``sfl``, ``remidi-sfl``) the task or keys refuse."""
     if task.solved is None:
         raise ConfigError(f"--algo: {task_refusal(algo, task)}; allowed: {', '.join(supported_algorithms(task))}")
     validate_section("sfl.", lambda: validate_sfl_config(cfg.sfl))
@@ -160,12 +143,12 @@ def validate_sfl(cfg: UEDConfig, algo: Algorithm, task: UEDTask) -> None:
 
 
 def supported_algorithms(task: UEDTask) -> list[str]:
-    """The registered algorithms ``task`` can run (:func:`task_refusal`), in their order."""
+    """The registered algorithms ``task`` can run, in order."""
     return [name for name, algo in ALGORITHMS.items() if task_refusal(algo, task) is None]
 
 
 def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) -> None:
-    """Raise ConfigError (one line, naming the key and what is allowed) for an invalid run."""
+    """ConfigError (one line naming the key and what is allowed) for an invalid run."""
     algo = get_algorithm(algo)
     validate_task(task)
     for key in ("num_updates", "num_envs", "num_steps", "eval_every", "eval_attempts", "checkpoint_every"):
@@ -201,8 +184,7 @@ def validate_ued_config(cfg: UEDConfig, algo: str | Algorithm, task: UEDTask) ->
         require(isinstance(getattr(cfg, key), int) and getattr(cfg, key) >= 0, key,
                 "an integer ≥ 0 (0: the network's default)", getattr(cfg, key))
     require(cfg.reward_scale > 0, "reward_scale", "> 0", cfg.reward_scale)
-    # the network kind first (at its default sizes), then the sizes: a preset's hidden_size must not
-    # hide that the network picked cannot read the task's observations
+    # the network kind first (default sizes), so a preset's hidden_size cannot hide that it cannot read the task
     check_network_reads_observations(network_for(dataclasses.replace(cfg, hidden_size=0, lstm_size=0), task),
                                      cfg.network, task, cfg.normalize_obs)
     network_for(cfg, task)  # ConfigError if the network has no layer for hidden_size / lstm_size

@@ -1,17 +1,10 @@
-"""ReMiDi's distinguishability trackers, one module each (the protocol:
-:mod:`~remidi.engine.trackers.base`), and the choice of one for a run (:func:`tracker_for`).
+"""ReMiDi's distinguishability trackers (protocol: :mod:`~remidi.engine.trackers.base`) and the choice of one.
 
-``remidi.tracker`` names it: ``prefix`` (the default, :mod:`~remidi.engine.trackers.exact`: one
-frozen level produced the whole prefix; candidate slots per env, ``remidi.tracker_budget``, where
-the reset allows, else every frozen level stepped), ``per_step`` (the authors' looser rule, same
-module), ``tolerance`` (the prefix rule with float observations compared up to
-``remidi.tracker_tolerance`` and ``remidi.tracker_rtol``, :mod:`~remidi.engine.trackers.tolerance`),
-``belief`` (:mod:`~remidi.engine.trackers.belief`) and ``simulated``
-(:mod:`~remidi.engine.trackers.simulated`). :func:`readable_trackers` says which judge a task's
-observations beyond exact equality (what the start-up warnings recommend). The keys keep their names in ``remidi.*`` (run folders'
-``config.json`` files use them); only this package reads the ``remidi.tracker*`` and
-``remidi.belief_*`` keys.
-"""
+``remidi.tracker``: ``prefix`` (default, :mod:`~remidi.engine.trackers.exact`: one frozen level
+produced the whole prefix), ``per_step`` (the authors' looser rule), ``tolerance`` (prefix rule,
+floats compared up to a tolerance, :mod:`~remidi.engine.trackers.tolerance`), ``belief`` and
+``simulated`` (learned models). Only this package reads the ``remidi.tracker*`` and
+``remidi.belief_*`` keys."""
 
 from __future__ import annotations
 
@@ -46,10 +39,10 @@ def model_for(task, hidden: int) -> BeliefModel:
 
 
 def tracker_for(task, cfg, algo) -> Tracker | None:
-    """The tracker of a run of ``algo`` on ``task`` under ``cfg`` (``remidi.tracker``): None for
-    an algorithm that is no sequence of adversaries (nothing is ever frozen: no tracker runs);
-    the exact one of ``remidi.tracker``'s mode unless a learned one judges, which it does only
-    for a sequence of at least two adversaries."""
+    """The run's tracker (``remidi.tracker``); None for an algorithm that is no sequence of adversaries.
+
+    With a single adversary nothing is ever frozen, and the exact tracker (``prefix`` unless
+    ``per_step``) stands in for the choice."""
     if not algo.buffer_sequence:
         return None
     r = cfg.remidi
@@ -124,12 +117,11 @@ def validate_tracker(cfg, algo, task) -> None:
 
 
 def readable_trackers(task) -> tuple[str, ...]:
-    """The trackers beyond exact equality that can read ``task``'s observations, for the start-up
-    warnings to recommend: ``tolerance`` where an observation holds floats that are no categories
-    (positions, lidar, pixels: the belief model's coding cannot read them), else ``belief`` for
-    discrete actions (and ``simulated``, whose model follows the frozen levels from their fixed
-    starts, where the reset ignores its key); a tolerance below a category's step would judge
-    categorical observations exactly, so it is not recommended there."""
+    """The trackers beyond exact equality that can read ``task``'s observations (for start-up advice).
+
+    ``tolerance`` where observations hold non-categorical floats; else ``belief`` for discrete
+    actions (and ``simulated`` where the reset ignores its key). Tolerance is not recommended for
+    categorical observations: below a category's step it is exact equality."""
     obs = example_observation(task)[0]
     floats = any(jnp.issubdtype(jnp.result_type(leaf), jnp.inexact) for leaf in jax.tree.leaves(obs))
     if floats and coding_problem(coding_for(obs), obs) is not None:
@@ -140,8 +132,7 @@ def readable_trackers(task) -> tuple[str, ...]:
 
 
 def tracker_advice(task, naming: Naming = COMMAND_LINE) -> str | None:
-    """The words that recommend :func:`readable_trackers` (in the caller's words, ``naming``), or
-    None where no tracker can read ``task`` beyond exact equality."""
+    """Words recommending :func:`readable_trackers` (in ``naming``'s words); None where there is none."""
     names = readable_trackers(task)
     if names == ("tolerance",):
         return (f"judge with {naming.setting('remidi.tracker', 'tolerance')} and "
@@ -152,22 +143,17 @@ def tracker_advice(task, naming: Naming = COMMAND_LINE) -> str | None:
     return "judge with " + " or ".join(naming.setting("remidi.tracker", name) for name in names)
 
 
-# a rollout that steps the environment at least this many times per env step (the env and the
-# tracker's frozen levels) is said at the start of a run on an environment that is not cheap: the
-# slots multiply the environment's work, which on an expensive environment at a batch that fills
-# the machine is the rollout's cost (docs/performance.md, "The tracker's cost": on the maze 64
-# slots cost 0.3 of a rollout; on Brax hopper with 64 envs, 20.7 rollouts)
+# env steps per rollout env step (env + frozen levels) from which a run on a costly env is told:
+# the slots multiply the env's work (docs/performance.md, "The tracker's cost")
 COSTLY_STEPS = 9
 LOWER_BUDGET = 8  # the budget a note suggests (9 environment steps per env step)
 
 
 def tracker_cost_note(task, cfg, algo, naming: Naming = COMMAND_LINE) -> str | None:
-    """One line for a run whose exact tracker will step the environment at least
-    :data:`COSTLY_STEPS` times per rollout env step once an adversary is frozen (``remidi.tracker``
-    prefix or per_step on a sequence of at least two buffers; ``tracker_budget`` slots per env, or
-    every frozen level for the reference tracker), naming the option that lowers it and what
-    lowering costs (in the caller's words, ``naming``); None otherwise. The caller says it only
-    where the environment's step is not cheap beside the agent's network (``UEDSpec.cheap_step``)."""
+    """One line for a run whose exact tracker steps the env at least :data:`COSTLY_STEPS` times per
+    env step once an adversary is frozen, naming the option that lowers it and its cost; else None.
+
+    The caller says it only where the env's step is not cheap (``UEDSpec.cheap_step``)."""
     r = cfg.remidi
     if not (algo.buffer_sequence and r.num_buffers >= 2) or r.tracker not in REPLAYING:
         return None

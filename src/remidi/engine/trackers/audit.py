@@ -1,6 +1,4 @@
-"""What evaluation reports of a learned tracker (:mod:`~remidi.engine.trackers.belief`,
-:mod:`~remidi.engine.trackers.simulated`): its thresholds, and its judgement against the exact
-tracker's on the same rollout."""
+"""What evaluation reports of a learned tracker: its thresholds and its judgement against the exact tracker's."""
 
 from __future__ import annotations
 
@@ -12,11 +10,10 @@ from remidi.engine.trackers.exact import exact_budget, make_tracker
 
 
 def threshold_metrics(threshold, active) -> dict:
-    """``belief/threshold`` and ``belief/threshold/long``: the last frozen model's thresholds
-    (``threshold`` f32[K, L], per adversary and prefix-length bucket) for one-step prefixes and
-    for the longest bucket (which holds the longest bucket's with enough held-out prefixes,
-    :func:`~remidi.engine.trackers.calibration.calibrate_by_length`), in nats per step; NaN before
-    the first switch (``active`` i32[]: the active adversary)."""
+    """``belief/threshold``, ``belief/threshold/long``: the last frozen model's thresholds (nats/step).
+
+    ``threshold`` f32[K, L] (adversary, prefix-length bucket): the first and the last bucket; NaN
+    before the first switch (``active`` i32[])."""
     last = threshold[jnp.maximum(active - 1, 0)]  # f32[L]
     frozen = active > 0
     return {"belief/threshold": jnp.where(frozen, last[0], jnp.nan),
@@ -24,15 +21,12 @@ def threshold_metrics(threshold, active) -> dict:
 
 
 def audit_against_exact(tracker, setup, runner, rng) -> dict[str, jax.Array]:
-    """The learned ``tracker``'s judgement against the exact tracker's on the same rollout, one
-    batch of ``num_envs`` fresh levels of the task's generator played by the current policy for
-    ``num_steps`` steps (both rollouts take the same key and the trackers do not act, so their
-    steps are the same): ``belief/explained`` and ``belief/exact_explained`` (the share of steps
-    whose prefix each tracker calls indistinguishable from an earlier adversary's) and
-    ``belief/agreement`` (the share of steps they judge alike); per level tag of the task the two
-    shares over the levels of that kind and of the others (``belief/explained/<tag>``,
-    ``belief/explained/not-<tag>``, ``belief/exact_explained/...``; NaN where the batch holds no
-    such level); NaN while no buffer is frozen."""
+    """The learned ``tracker`` against the exact one on one rollout of ``num_envs`` fresh levels.
+
+    Both rollouts share the key and trackers do not act, so the steps are the same. Reports
+    ``belief/explained``, ``belief/exact_explained`` (share of steps each calls indistinguishable),
+    ``belief/agreement``, and per level tag ``belief/explained/<tag>``, ``.../not-<tag>`` (NaN where
+    the batch has none); all NaN while nothing is frozen."""
     cfg = setup.cfg
     k_levels, k_roll = jax.random.split(rng)
     levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))

@@ -1,11 +1,12 @@
-"""The distinguishability tracker's protocol: what the train step and the rollout ask of it.
+"""The distinguishability tracker's protocol.
 
-ReMiDi needs to know, at every step of every rollout, whether the trajectory prefix so far could
-have come from an earlier (frozen) adversary. A *tracker* answers that. It is chosen once, when
-the run is set up (``Setup.tracker``, :func:`remidi.engine.trackers.tracker_for`), and is a static
-object: its state, if it keeps one across updates, is a pytree in ``Runner.tracker``.
+At every rollout step ReMiDi asks whether the prefix so far could have come from a frozen
+adversary; a tracker answers. It is a static object chosen at set-up (``Setup.tracker``); any
+state it keeps across updates is a pytree in ``Runner.tracker``.
 
-Per update (the train step, :mod:`remidi.engine.train`):
+Per update: :meth:`Tracker.init`, :meth:`Tracker.frozen` (the :class:`Frozen` view a rollout
+tracks against; None: nothing frozen), :meth:`Tracker.learn`, :meth:`Tracker.freeze` (at a
+switch), :meth:`Tracker.metrics`, :meth:`Tracker.audit`.
 
 * :meth:`Tracker.init`: the state it carries across updates (None: nothing);
 * :meth:`Tracker.frozen`: the :class:`Frozen` view of the earlier adversaries' levels a rollout
@@ -37,14 +38,12 @@ from flax import struct
 
 @struct.dataclass
 class Frozen:
-    """The frozen adversaries' levels as one batch, what a rollout tracks against: ``levels``
-    leaves [F, ...], ``valid`` bool[F], buffer-major (F = B·C for B frozen buffers of capacity C).
-    With ``params`` (leaves [B, ...]: the policy frozen with each buffer, ReMiDi's ``Combine``),
-    a step whose prefix one of those buffers explains is acted on by the policy of the earliest
-    such buffer. ``belief``: what a learned tracker reads (its frozen models, thresholds).
-    ``rehearse`` (bool[], None: never): the rollout rehearses frozen levels, so no step counts as
-    explained (``remidi.rehearsal``: it trains on every step). ``tracker`` (static): the
-    component that steps beside the environments."""
+    """The frozen adversaries' levels as one batch, what a rollout tracks against.
+
+    ``levels`` leaves [F, ...], ``valid`` bool[F], buffer-major (F = B·C). ``params`` (leaves
+    [B, ...]; Combine): a step some buffer explains is acted on by the earliest such buffer's policy.
+    ``belief``: a learned tracker's frozen models. ``rehearse`` (bool[]; None: never): no step counts
+    as explained. ``tracker`` (static): the component stepping beside the envs."""
 
     levels: Any
     valid: jax.Array
@@ -55,8 +54,7 @@ class Frozen:
 
 
 def fresh_levels(proposal) -> jax.Array:
-    """bool[]: the update's levels are the task generator's fresh ones (no replay, no edit, no
-    rehearsal): what a reference model of the generator's trajectories learns from."""
+    """bool[]: the update's levels are the generator's fresh ones (no replay, edit or rehearsal)."""
     fresh = ~proposal.replay
     for other in (proposal.edit, proposal.rehearse):
         fresh = fresh if other is None else fresh & ~other
@@ -64,8 +62,7 @@ def fresh_levels(proposal) -> jax.Array:
 
 
 class Tracker:
-    """The protocol, with the behaviour of a tracker that keeps no state across updates (the
-    exact trackers). Subclasses are frozen dataclasses: static, hashable configuration."""
+    """The protocol, with a stateless tracker's behaviour. Subclasses are frozen dataclasses (static)."""
 
     #: judges by learned models (its work grows with them; evaluation audits it against the exact tracker)
     learns = False
@@ -88,7 +85,7 @@ class Tracker:
         return runner.tracker, {}
 
     def freeze(self, setup, runner, switch):
-        """The state after an adversary switch (``switch`` bool[]; ``runner``: after the adversary's update)."""
+        """The state after a switch (``switch`` bool[]; ``runner`` after the adversary's update)."""
         return runner.tracker
 
     def metrics(self, setup, runner) -> dict:
@@ -111,8 +108,7 @@ class Tracker:
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs)
 
     def step(self, envs, frozen: Frozen, env_keys, state, tstate, action):
-        """One step of the N envs with ``env_keys`` [N], and the tracker beside them:
-        ``(next_obs, env state, reward, done, tracker state)``."""
+        """``(next_obs, env state, reward, done, tracker state)``: one step with ``env_keys`` [N]."""
         next_obs, state, reward, done, _ = jax.vmap(envs.auto.step, in_axes=(0, 0, 0, None))(
             env_keys, state, action, envs.params)
         tstate = self.observe(envs.tracker_env, envs.params, frozen, env_keys, tstate, action, next_obs, done)

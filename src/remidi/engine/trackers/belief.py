@@ -1,21 +1,14 @@
 """The belief tracker (``remidi.tracker=belief``): a learned model P(h | Λᵢ) per adversary judges
-whether a trajectory prefix could have come from an earlier adversary, for environments whose
-observations are random given the level (the paper's appendix).
+whether a prefix could have come from an earlier adversary, for envs whose observations are
+random given the level (the paper's appendix).
 
-Each adversary (a buffer of the sequence, or a generator) has a model of its trajectories
-(:mod:`remidi.engine.trackers.belief_model`), trained on the rollouts of its own levels (a
-buffer's replays, a generator's every update: the adversary's ``own_levels``) and frozen with it;
-its thresholds are calibrated at the freeze on held-out prefix scores of its last
-``remidi.belief_calibration`` such rollouts (:mod:`remidi.engine.trackers.calibration`). A prefix
-is explained when its score under SOME valid frozen model reaches that model's threshold for its
-length (and every shorter prefix's did).
+Each adversary's model (:mod:`remidi.engine.trackers.belief_model`) learns from rollouts of its
+own levels and is frozen with it; its thresholds are calibrated at the freeze on held-out prefix
+scores of its last ``remidi.belief_calibration`` rollouts. A prefix is explained when some valid
+frozen model scores it, and every shorter prefix, at or above its length's threshold.
 
-:class:`BeliefTracker` is the component (:mod:`remidi.engine.trackers.base`): per rollout step
-``start`` / ``indistinguishable`` / ``observe`` over N envs, reading the frozen models and thresholds from
-``frozen.belief`` (:class:`FrozenBeliefs`); per update ``init`` (a :class:`BeliefMemory`),
-``learn``, ``freeze``, ``metrics`` and ``audit``. Shapes: T steps, N envs, E entries, H hidden
-units, B frozen models, K adversaries, R recorded rollouts, L length buckets.
-"""
+Shapes: T steps, N envs, E entries, H hidden units, B frozen models, K adversaries, R recorded
+rollouts, L length buckets."""
 
 from __future__ import annotations
 
@@ -40,9 +33,8 @@ from remidi.engine.trackers.calibration import calibrate_monotone, length_bucket
 # ---------------------------------------------------------------------------- the tracker
 @struct.dataclass
 class FrozenBeliefs:
-    """The frozen adversaries' models: ``params`` leaves [B, ...], ``threshold`` f32[B, L] (per
-    prefix-length bucket, :func:`length_bucket`) or f32[B] (one for all lengths), ``valid``
-    bool[B] (the adversary has been frozen)."""
+    """The frozen adversaries' models: ``params`` leaves [B, ...], ``threshold`` f32[B, L] (per length
+    bucket) or f32[B], ``valid`` bool[B] (frozen)."""
 
     params: Any
     threshold: jax.Array
@@ -52,7 +44,7 @@ class FrozenBeliefs:
 
 @struct.dataclass
 class BeliefState:
-    """The tracker state of one env (leaves [N, ...] in the component) over B frozen models."""
+    """One env's tracker state (leaves [N, ...] in the component) over B frozen models."""
 
     hidden: jax.Array  # f32[B, H]: each model's state before the current observation
     total: jax.Array  # f32[B]: the episode's summed log-likelihood so far under each model
@@ -65,14 +57,11 @@ class BeliefState:
 
 @dataclass(frozen=True)
 class BeliefTracker(Tracker):
-    """The tracker component judging distinguishability by learned belief models (the frozen
-    adversaries' models in ``frozen.belief``, :class:`FrozenBeliefs`): env n's prefix is
-    explained by model b when its mean log-likelihood per step under b, and that of every shorter
-    prefix of the episode, reaches b's threshold for its length (monotone, as realisability is:
-    once distinguishable, the rest of the episode is); explained when some valid model explains
-    it. Rollout methods on leaves [N, ...]; the frozen levels themselves are not stepped.
+    """Judges distinguishability by the frozen belief models in ``frozen.belief``; frozen levels are not stepped.
 
-    Its settings are the ``remidi.belief_*`` keys (:class:`LearnedSettings`)."""
+    Model b explains env n's prefix when the mean per-step log-likelihood under b of it and every
+    shorter prefix of the episode reaches b's threshold for its length (monotone, as realisability
+    is). Settings: the ``remidi.belief_*`` keys (:class:`LearnedSettings`)."""
 
     model: BeliefModel
     settings: LearnedSettings = LearnedSettings()
@@ -99,21 +88,20 @@ class BeliefTracker(Tracker):
         return view.replace(belief=frozen_beliefs(runner.tracker, runner.adversary.active))
 
     def learn(self, setup, runner, proposal, traj):
-        """The active adversary's model learns from a rollout of its own levels (:func:`learn`)."""
+        """The active adversary's model learns from a rollout of its own levels."""
         memory, loss = learn(self.model, self.optimizer, runner.tracker, runner.adversary.active, traj,
                              setup.algo.adversary.own_levels(proposal), self.settings.epochs, fresh=fresh_levels(proposal))
         return memory, {"belief/loss": loss}
 
     def freeze(self, setup, runner, switch):
-        """At a switch the active adversary's model is frozen and calibrated (:func:`freeze`)."""
+        """At a switch the active model is frozen and calibrated."""
         return freeze(self.optimizer, runner.tracker, runner.adversary.active, switch, self.settings.false_rate,
                       self.settings.margin, self.model, self.settings.spread)
 
     def metrics(self, setup, runner) -> dict:
-        """:func:`~remidi.engine.trackers.audit.threshold_metrics`, and ``belief/heldout_score``
-        (the active model's mean held-out prefix score since the switch) and
-        ``belief/uniform_score`` (a model that knows nothing: a frozen model whose scores sit near
-        it explains almost anything), in nats per step."""
+        """:func:`~remidi.engine.trackers.audit.threshold_metrics`, ``belief/heldout_score`` and
+        ``belief/uniform_score`` (a model that knows nothing: scores near it explain almost anything),
+        nats per step."""
         return {**threshold_metrics(runner.tracker.threshold, runner.adversary.active),
                 "belief/heldout_score": heldout_score(runner.tracker),
                 "belief/uniform_score": jnp.float32(uniform_score(self.model))}
@@ -124,8 +112,8 @@ class BeliefTracker(Tracker):
     # -- per rollout step
 
     def _judge(self, frozen, total, count, ref_total=None) -> jax.Array:
-        """bool[N, B]: each valid frozen model's threshold is reached by the env's prefix score
-        (with a reference: the log-likelihood ratio of the frozen model over its reference)."""
+        """bool[N, B]: the env's prefix score reaches each valid frozen model's threshold (with a
+        reference: the log-likelihood ratio over it)."""
         b = frozen.belief
         score = (total if ref_total is None else total - ref_total) / jnp.maximum(count, 1)[:, None]
         if b.threshold.ndim == 1:
@@ -148,12 +136,11 @@ class BeliefTracker(Tracker):
                            ref_total=ref_total)
 
     def indistinguishable(self, state: BeliefState) -> jax.Array:
-        """bool[N]: some frozen model explains each env's prefix so far."""
+        """bool[N]: some frozen model explains each env's prefix."""
         return jnp.any(state.match, axis=-1)
 
     def observe(self, env, params, frozen, env_keys, state: BeliefState, action, next_obs, done) -> BeliefState:
-        """After the envs took ``action`` i32[N] and saw ``next_obs`` (the next episode's first
-        observation where ``done`` bool[N])."""
+        """After ``action`` i32[N]; ``next_obs`` is the next episode's first where ``done`` bool[N]."""
         cats = self.model.coding.encode(next_obs)  # [N, E]
         hidden, total = frozen_step(self.model, frozen.belief.params, state.hidden, state.total, state.last, action,
                                     cats, done)
@@ -174,20 +161,14 @@ class BeliefTracker(Tracker):
 # ---------------------------------------------------------------------------- in a run
 @struct.dataclass
 class BeliefMemory:
-    """What a ReMiDi run with ``remidi.tracker=belief`` carries (``Runner.tracker``): one model per
-    adversary (a buffer of the sequence, or a generator), trained while it is active and frozen
-    with it.
+    """A belief run's ``Runner.tracker``: one model per adversary, trained while active, then frozen.
 
-    ``params`` leaves [K, ...] (model k: adversary k's); ``opt_state``: the active model's
-    optimiser state (restarted at each switch); ``threshold`` f32[K, L] (per prefix-length
-    bucket, :func:`calibrate_by_length`; +inf until calibrated at the model's freeze);
-    ``scores`` f32[R, T, N] and ``lengths`` i32[R, T, N]: the prefix scores (and prefix lengths) of
-    the active adversary's last R rollouts of its own levels (a buffer's replays, a generator's
-    updates), each under the model as it was before fitting on that rollout (held out from it);
-    ``written`` i32[]: rollouts recorded since the switch (row ``written mod R`` is next);
-    ``fits`` i32[]: rollouts the active model has learnt from since the switch. The first one's
-    scores are not recorded: they are those of the untrained model, whose scores sit near the
-    uniform model's, and a threshold calibrated on them would let every prefix through."""
+    ``params`` leaves [K, ...]; ``opt_state``: the active model's (restarted at each switch);
+    ``threshold`` f32[K, L] (+inf until calibrated); ``scores`` f32[R, T, N], ``lengths``
+    i32[R, T, N]: prefix scores of the active adversary's last R own rollouts, each under the model
+    before it fit that rollout (held out); ``written`` i32[]: rows recorded since the switch (next:
+    ``written mod R``); ``fits`` i32[]: rollouts learnt from since the switch. The first rollout is
+    not recorded: the untrained model scores near uniform and would let every prefix through."""
 
     params: Any
     opt_state: Any
@@ -212,10 +193,9 @@ class BeliefMemory:
 
 def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batch: tuple[int, int], rng,
                 max_length: int | None = None, reference: bool = False) -> BeliefMemory:
-    """Fresh models for ``num_buffers`` adversaries (independent initialisations from ``rng``),
-    a calibration record of ``rows`` replays of T·N prefix scores each (``batch`` = (T, N): the
-    rollout's steps and envs); the prefix lengths, at most ``min(T, max_length)`` (the episode
-    limit), set the length buckets (:func:`~remidi.engine.trackers.calibration.num_length_buckets`)."""
+    """Fresh models for ``num_buffers`` adversaries and an empty record of ``rows`` × ``batch`` (T, N).
+
+    Prefix lengths of at most ``min(T, max_length)`` set the number of length buckets."""
     num_steps = batch[0]
     params = jax.vmap(model.init)(jax.random.split(rng, num_buffers))
     first = jax.tree.map(lambda x: x[0], params)
@@ -234,7 +214,7 @@ def init_memory(model: BeliefModel, optimizer, num_buffers: int, rows: int, batc
 
 
 def frozen_beliefs(memory: BeliefMemory, active) -> FrozenBeliefs:
-    """The models of the buffers before ``active`` (B = K − 1 entries, the last never frozen)."""
+    """The models of the buffers before ``active`` (B = K − 1: the last is never frozen)."""
     k = memory.threshold.shape[0]
     return FrozenBeliefs(params=jax.tree.map(lambda x: x[:-1], memory.params), threshold=memory.threshold[:-1],
                          valid=jnp.arange(k - 1) < active, ref=earlier_references(memory))
@@ -250,9 +230,10 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
     its steps. ``traj``: a :class:`~remidi.engine.learner.Trajectory` (leaves [T, N, ...]). Returns
     ``(memory, loss f32[]: the first epoch's, NaN when not trained)``.
 
-    With a reference (``memory.ref``, :func:`freeze` judges by the ratio over it): the rollout is
-    recorded too, for the frozen reference's part of the ratio; the reference itself learns from
-    rollouts of the task generator's fresh levels (``fresh`` bool[])."""
+    ``trained``: the rollout played the adversary's own levels. First the rollout's held-out scores
+    are recorded (not for the first fit since the switch), then ``epochs`` fit steps; loss is the
+    first epoch's, NaN when not trained. With a reference the rollout is recorded too, and the
+    reference learns from the generator's ``fresh`` (bool[]) levels."""
 
     def fit(m: BeliefMemory):
         params = jax.tree.map(lambda x: x[active], m.params)
@@ -283,9 +264,8 @@ def learn(model: BeliefModel, optimizer, memory: BeliefMemory, active, traj, tra
 
 
 def heldout_score(memory: BeliefMemory) -> jax.Array:
-    """f32[]: the mean of the recorded held-out prefix scores of the active model's replays (its own
-    log-likelihood, also with a reference, whose part is computed only at the freeze; the
-    units of its threshold; NaN until the second replay since the switch, the first recorded)."""
+    """f32[]: mean recorded held-out score of the active model (its own log-likelihood, the threshold's
+    units); NaN until one is recorded."""
     rows = memory.scores.shape[0]
     recorded = (jnp.arange(rows) < memory.written)[:, None, None]
     per_row = memory.scores[0].size
@@ -294,25 +274,20 @@ def heldout_score(memory: BeliefMemory) -> jax.Array:
 
 
 def uniform_score(model: BeliefModel) -> float:
-    """The per-step log-likelihood of a model that knows nothing (every entry uniform over its
-    leaf's categories; the first step's, which has no continues factor, as ``belief/threshold``
-    is the one-step prefixes'): a frozen model whose held-out scores are near this one explains
-    anything its adversary could show, and its threshold lets nearly every prefix through."""
+    """Per-step log-likelihood of a model uniform over every entry's categories (first step, as
+    ``belief/threshold``): held-out scores near it mean the threshold lets nearly everything through."""
     c = model.coding
     return -sum(size * math.log(k) for size, k in zip(c.sizes, c.categories))
 
 
 def freeze(optimizer, memory: BeliefMemory, active, switch, false_rate: float, margin: float = 1e-3,
            model: BeliefModel | None = None, spread: float = 0.0) -> BeliefMemory:
-    """At a buffer switch (``switch`` bool[]) the active model is frozen: its thresholds are
-    calibrated on the recorded scores per prefix-length bucket for the monotone judgement
-    (:func:`calibrate_monotone`; +inf, explaining nothing, if no replay was recorded: the model
-    learnt from at most one replay; each at most its
-    :func:`~remidi.engine.trackers.calibration.spread_fence` of ``spread`` robust standard
-    deviations) and lowered by ``margin`` nats per step, the record emptied
-    and the optimiser restarted for the next model. Computed only at a switch. With a reference
-    (``model`` needed) the recorded scores become ratios: minus the frozen reference's prefix
-    scores of the recorded rollouts, computed now by the reference that is frozen with the model."""
+    """At a switch (``switch`` bool[]): calibrate the active model's thresholds, empty the record,
+    restart the optimiser.
+
+    Thresholds: :func:`calibrate_monotone` (each at most its ``spread`` fence) lowered by ``margin``
+    nats; +inf (explaining nothing) if nothing was recorded. With a reference (``model`` needed) the
+    recorded scores become ratios over the frozen reference, computed now."""
 
     def switched(m: BeliefMemory) -> BeliefMemory:
         rows, k = m.scores.shape[0], m.threshold.shape[0]

@@ -1,36 +1,18 @@
 """The learned belief model P(h | Λ): a GRU over an episode's (observation, action) pairs that
-predicts the next observation, for the belief tracker (:mod:`remidi.engine.trackers.belief`).
+predicts the next observation, for the belief tracker.
 
-The exact trackers (:mod:`remidi.engine.trackers.exact`) replay frozen levels and compare
-observations: exact when the environment is deterministic given the level, useless when the
-environment's randomness is in what the agent sees (:mod:`remidi.envs.noisy`). The paper's
-appendix proposes instead to learn, with each adversary Λᵢ, a model of the trajectories it
-produces. This module is that model, for discrete observations:
+Exact trackers fail when the env's randomness is in what the agent sees (:mod:`remidi.envs.noisy`);
+the paper's appendix learns, with each adversary Λᵢ, a model of its trajectories instead:
 
-* an :class:`ObsCoding` reads an observation pytree as E *entries*, each a category in
-  ``[0, K)`` (the lever's one-hot vector: K = 2 per entry; the maze's egocentric image, integers
-  divided by 10: ``round(10·x)``, K = 11; its direction: K = 4);
-* the model is a GRU over the episode's (observation, action) pairs whose state ``h_t`` (zeros at
-  an episode's start) predicts the next observation as E independent categoricals (a
-  *factorised* categorical); the first observation of an episode is predicted from the zero
-  state, i.e. it is the adversary's distribution of first observations;
-* the same state predicts whether the episode *continues* (a Bernoulli): at every later step of
-  an episode the step's likelihood includes "it did not end before this step", and training also
-  sees the steps where episodes did end, so a prefix that goes on where the adversary's episodes
-  end is unlikely under its model, as the exact tracker requires that a frozen level's episode
-  not end where the agent's goes on (where the agent's ends, both restart);
-* :func:`step_logliks` gives ``log P(o_t, and that the episode went on to t | o_<t, a_<t)`` per
-  step of a batch of trajectories (episodes delimited by ``reset``), :func:`prefix_scores` the
-  mean log-likelihood per step of each episode's prefix so far (the score a threshold is
-  compared with), :func:`fit_step` one Optax update on a batch, masked to the chosen steps;
-* :func:`frozen_logliks` and :func:`frozen_step` run B frozen models side by side, step by step
-  (what a tracker does during a rollout); the ``*_reference`` functions keep a model of the task
-  generator's trajectories, the denominator of a likelihood ratio.
+* an :class:`ObsCoding` reads an observation as E categorical *entries* in ``[0, K)`` (the lever's
+  one-hot: K = 2; the maze's image ``round(10·x)``: K = 11; its direction: K = 4);
+* a GRU state ``h_t`` (zeros at an episode's start) predicts the next observation as E independent
+  categoricals; the first observation is predicted from the zero state;
+* the same state predicts whether the episode *continues* (Bernoulli), so a prefix that goes on
+  where the adversary's episodes end is unlikely, as the exact tracker requires.
 
-All functions are pure over pytrees (params are a dict of arrays) and jit/vmap-friendly; the
-coding, sizes and optimiser are static. Shapes: T steps, N envs, E entries, K categories,
-A actions, H hidden units, B frozen models.
-"""
+Pure, jit/vmap-friendly functions over dict params; coding, sizes and optimiser static. Shapes:
+T steps, N envs, E entries, K categories, A actions, H hidden units, B frozen models."""
 
 from __future__ import annotations
 
@@ -49,11 +31,9 @@ from remidi.engine.core.seeds import cond_per_seed
 class ObsCoding:
     """How an observation pytree reads as E categorical entries (static, hashable).
 
-    Per leaf of the observation (in ``jax.tree.leaves`` order): ``scales[i]`` (an entry's
-    category is ``round(x · scale)``, clipped to ``[0, categories[i])``). ``categories``: K of
-    each leaf; the model uses ``max(categories)`` for every entry (an unused category simply
-    gets no mass). ``sizes``: the number of entries of each leaf (its size); ``ndims``: the
-    number of dims of one observation's leaf (its trailing dims in a batch)."""
+    Per leaf (``jax.tree.leaves`` order): category ``round(x · scales[i])`` clipped to
+    ``[0, categories[i])``; the model uses ``max(categories)`` for every entry. ``sizes``: entries per
+    leaf; ``ndims``: one observation's dims per leaf (its trailing dims in a batch)."""
 
     scales: tuple[float, ...]
     categories: tuple[int, ...]
@@ -69,8 +49,7 @@ class ObsCoding:
         return max(self.categories)
 
     def encode(self, obs) -> jax.Array:
-        """i32[..., E]: the categories of an observation with any leading batch dims (the
-        leaves' trailing dims are the ones of one observation, of ``sizes``)."""
+        """i32[..., E]: the categories of an observation with any leading batch dims."""
         leaves = jax.tree.leaves(obs)
         out = []
         ndims = self.ndims or (None,) * len(leaves)
@@ -82,8 +61,7 @@ class ObsCoding:
 
 
 def _event_ndim(leaf, size: int) -> int:
-    """How many trailing dims of ``leaf`` make up one observation of ``size`` entries (for a
-    coding built without ``ndims``)."""
+    """How many trailing dims of ``leaf`` make one observation of ``size`` entries (coding without ``ndims``)."""
     n, prod = 0, 1
     while prod < size:
         n += 1
@@ -94,12 +72,10 @@ def _event_ndim(leaf, size: int) -> int:
 
 
 def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
-    """The coding of the task's observation ``example_obs`` (one unbatched observation).
+    """The coding of one unbatched observation ``example_obs``.
 
-    ``categories`` maps a leaf's field name to ``(scale, K)``; unnamed leaves: the maze's
-    ``image`` is ``(10, 11)`` (MiniGrid's object, colour and state ids divided by 10, K the most
-    object types), ``agent_dir`` ``(1, 4)``, and any other leaf ``(1, 2)`` (one-hot vectors and
-    bits, as the lever's)."""
+    ``categories``: ``{leaf name: (scale, K)}``; defaults: ``image`` ``(10, 11)`` (MiniGrid ids / 10),
+    ``agent_dir`` ``(1, 4)``, anything else ``(1, 2)`` (one-hot vectors and bits)."""
     defaults = {"image": (10.0, 11), "agent_dir": (1.0, 4)}
     defaults.update(categories or {})
     scales, ks, sizes, ndims = [], [], [], []
@@ -114,9 +90,9 @@ def coding_for(example_obs, categories: dict | None = None) -> ObsCoding:
 
 
 def coding_problem(coding: ObsCoding, obs) -> str | None:
-    """Why ``coding`` cannot read the observation ``obs`` (one unbatched observation, concrete
-    values) without losing information, or None: every value of a leaf must be a category
-    ``c / scale`` with ``c`` an integer in ``[0, K)``. The message names the leaf and a value."""
+    """Why ``coding`` cannot read ``obs`` (concrete, unbatched) losslessly, naming the leaf and a value; else None.
+
+    Every value must be ``c / scale`` with ``c`` an integer in ``[0, K)``."""
     for (path, leaf), scale, k in zip(jax.tree_util.tree_leaves_with_path(obs), coding.scales, coding.categories):
         x = np.asarray(leaf, np.float64).ravel()
         c = x * scale
@@ -133,10 +109,10 @@ def coding_problem(coding: ObsCoding, obs) -> str | None:
 # ---------------------------------------------------------------------------- the model
 @dataclass(frozen=True)
 class BeliefModel:
-    """A GRU next-observation model over ``coding``'s entries and the actions with ``hidden``
-    units (static, hashable: pass it as a static argument). ``num_actions``: ``n`` for one
-    discrete choice (actions ``i32[...]``), or a tuple of choice counts, one per component
-    (``MultiDiscrete``, actions ``i32[..., k]``); each choice is one-hot coded."""
+    """A GRU next-observation model over ``coding``'s entries and the actions (static, hashable).
+
+    ``num_actions``: ``n`` (actions ``i32[...]``) or a tuple of counts for ``MultiDiscrete``
+    (``i32[..., k]``); each choice is one-hot coded."""
 
     coding: ObsCoding
     num_actions: int | tuple[int, ...]
@@ -159,9 +135,8 @@ class BeliefModel:
         return jnp.concatenate([jax.nn.one_hot(action[..., i], n) for i, n in enumerate(self.num_actions)], axis=-1)
 
     def init(self, rng) -> dict:
-        """The parameters: GRU kernels ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], biases ``b`` f32[3H],
-        ``bh`` f32[H] (the candidate's recurrent bias), head ``wo`` f32[H, E·K], ``bo`` f32[E·K],
-        and the episode-continues logit's ``wc`` f32[H], ``bc`` f32[]."""
+        """The parameters: GRU ``wx`` f32[D, 3H], ``wh`` f32[H, 3H], ``b`` f32[3H], ``bh`` f32[H]; head
+        ``wo`` f32[H, E·K], ``bo`` f32[E·K]; continue logit ``wc`` f32[H], ``bc`` f32[]."""
         d, h, ek = self.input_size, self.hidden, self.coding.num_entries * self.coding.num_categories
         k1, k2, k3, k4 = jax.random.split(rng, 4)
         return {"wx": jax.random.normal(k1, (d, 3 * h)) / jnp.sqrt(d),
@@ -175,21 +150,19 @@ class BeliefModel:
         return jnp.zeros(tuple(batch_shape) + (self.hidden,))
 
     def loglik(self, params, hidden, cats) -> jax.Array:
-        """f32[...]: log P(observation with categories ``cats`` i32[..., E] | state ``hidden`` f32[..., H])."""
+        """f32[...]: log P(``cats`` i32[..., E] | ``hidden`` f32[..., H])."""
         e, k = self.coding.num_entries, self.coding.num_categories
         logits = (hidden @ params["wo"] + params["bo"]).reshape(hidden.shape[:-1] + (e, k))
         logp = jax.nn.log_softmax(logits, axis=-1)
         return jnp.sum(jnp.take_along_axis(logp, cats[..., None], axis=-1)[..., 0], axis=-1)
 
     def continues(self, params, hidden, go_on) -> jax.Array:
-        """f32[...]: log P(the episode continues, where ``go_on`` bool[...]; else ends | ``hidden``
-        f32[..., H], the state after a step's observation and action)."""
+        """f32[...]: log P(the episode continues where ``go_on`` bool[...], else ends | ``hidden`` after a step)."""
         logit = hidden @ params["wc"] + params["bc"]
         return jnp.where(go_on, jax.nn.log_sigmoid(logit), jax.nn.log_sigmoid(-logit))
 
     def cell(self, params, hidden, cats, action) -> jax.Array:
-        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action`` (i32[...],
-        or i32[..., k] for components)."""
+        """f32[..., H]: the state after seeing ``cats`` i32[..., E] and taking ``action``."""
         k = self.coding.num_categories
         x = jnp.concatenate([jax.nn.one_hot(cats, k).reshape(cats.shape[:-1] + (-1,)), self.action_code(action)],
                             axis=-1)
@@ -203,27 +176,24 @@ class BeliefModel:
 
 
 def step_logliks(model: BeliefModel, params, obs, action, reset) -> jax.Array:
-    """f32[T, N]: ``log P(obs[t], and at a later step of an episode that it continued | the
-    episode's observations and actions before t)``.
+    """f32[T, N]: log P(obs[t], and that the episode continued to t | the episode before t).
 
-    ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an
-    episode: the state restarts from zeros; a rollout's first step starts what it holds of its
-    episode, marked or not)."""
+    ``obs`` leaves [T, N, ...], ``action`` i32[T, N], ``reset`` bool[T, N] (step t starts an episode;
+    a rollout's first step always starts what it holds)."""
     return coded_logliks(model, params, model.coding.encode(obs), action, reset)
 
 
 def coded_logliks(model: BeliefModel, params, cats, action, reset) -> jax.Array:
-    """:func:`step_logliks` of observations already coded, ``cats`` int[T, N, E]."""
+    """:func:`step_logliks` of coded observations ``cats`` int[T, N, E]."""
     obs_ll, went_on = _scan_logliks(model, params, cats, action, reset)
     return obs_ll + jnp.where(reset, 0.0, went_on)
 
 
 def _scan_logliks(model: BeliefModel, params, cats, action, reset):
-    """(f32[T, N] ``log P(obs[t] | the episode before t)``, f32[T, N] ``log P(the episode went on
-    to step t, where it did; else that it ended after step t − 1)``, 0 at the rollout's first
-    step). The second is the outcome of step t − 1: a prefix's score includes it where the
-    episode went on; where it ended the model learns from it, and the agent's next episode
-    starts afresh."""
+    """``(obs_ll f32[T, N], went_on f32[T, N])``: log P(obs[t] | episode before t) and log P(step t − 1's
+    outcome: went on, or ended), 0 at the rollout's first step.
+
+    A prefix's score includes ``went_on`` only where the episode went on; training sees both outcomes."""
     cats = cats.astype(jnp.int32)
     n = action.shape[1]
 
@@ -239,9 +209,8 @@ def _scan_logliks(model: BeliefModel, params, cats, action, reset):
 
 
 def episode_running(op, x, start) -> jax.Array:
-    """[T, N]: ``op`` (a binary function: ``jnp.add``, ``jnp.minimum``) folded over ``x`` [T, N]
-    along each episode's steps so far (step t included), restarting where ``start`` bool[T, N]
-    (and at step 0: a rollout's first step starts what it holds of its episode)."""
+    """[T, N]: ``op`` (``jnp.add``, ``jnp.minimum``) folded over ``x`` [T, N] along each episode so far,
+    restarting where ``start`` bool[T, N] and at step 0."""
 
     def body(acc, inp):
         xt, s = inp
@@ -252,19 +221,17 @@ def episode_running(op, x, start) -> jax.Array:
 
 
 def prefix_lengths(reset) -> jax.Array:
-    """i32[T, N]: the number of steps of each episode's prefix so far (step t included)."""
+    """i32[T, N]: steps of each episode's prefix so far (step t included)."""
     return episode_running(jnp.add, jnp.ones(reset.shape, jnp.int32), reset)
 
 
 def prefix_scores(ll, reset) -> jax.Array:
-    """f32[T, N]: the mean of ``ll`` f32[T, N] over each episode's steps so far (step t included)."""
+    """f32[T, N]: mean of ``ll`` f32[T, N] over each episode's prefix so far."""
     return episode_running(jnp.add, ll, reset) / prefix_lengths(reset)
 
 
 def belief_loss(model: BeliefModel, params, obs, action, reset, mask=None) -> jax.Array:
-    """f32[]: the mean negative log-likelihood per step over the steps of ``mask`` bool[T, N]
-    (all if None), each step's observation and its outcome (the episode went on or ended after
-    it); 0 when no step is masked in."""
+    """f32[]: mean NLL per step (observation and outcome) over ``mask`` bool[T, N] (None: all); 0 if empty."""
     obs_ll, outcome = _scan_logliks(model, params, model.coding.encode(obs), action, reset)
     mask = jnp.ones(obs_ll.shape, bool) if mask is None else mask
     outcome = jnp.concatenate([outcome[1:], jnp.zeros_like(outcome[:1])])  # step t's outcome, seen at t + 1
@@ -278,11 +245,9 @@ def make_optimizer(lr: float = 1e-2, max_grad_norm: float = 1.0) -> optax.Gradie
 
 @dataclass(frozen=True)
 class LearnedSettings:
-    """How a learned tracker (belief or simulated) learns and calibrates: the ``remidi.belief_*``
-    keys. ``lr`` the models' Adam learning rate, ``epochs`` their updates per rollout,
-    ``false_rate``, ``margin`` and ``spread`` the calibration's, ``calibration`` the rollouts
-    recorded for it, ``reference`` judge by the ratio over a model of the task generator's
-    trajectories."""
+    """A learned tracker's ``remidi.belief_*`` keys: Adam ``lr``, ``epochs`` per rollout, calibration's
+    ``false_rate``, ``margin``, ``spread``, ``calibration`` rollouts recorded, ``reference`` (judge by
+    the ratio over a model of the task generator's trajectories)."""
 
     lr: float = 1e-2
     epochs: int = 4
@@ -300,9 +265,7 @@ class LearnedSettings:
 
 def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
              mask=None):
-    """One Optax update on a batch of trajectories (as :func:`belief_loss`). Returns
-    ``(params, opt_state, loss f32[])`` (the loss before the update). An all-masked batch gives a
-    zero gradient."""
+    """``(params, opt_state, loss f32[])``: one Optax update on :func:`belief_loss` (loss before it)."""
     loss, grads = jax.value_and_grad(lambda p: belief_loss(model, p, obs, action, reset, mask))(params)
     updates, opt_state = optimizer.update(grads, opt_state, params)
     return optax.apply_updates(params, updates), opt_state, loss
@@ -310,8 +273,7 @@ def fit_step(model: BeliefModel, optimizer: optax.GradientTransformation, params
 
 def fit_steps(model: BeliefModel, optimizer: optax.GradientTransformation, params, opt_state, obs, action, reset,
               steps: int):
-    """``steps`` :func:`fit_step` updates on the same batch (one ``lax.scan``). Returns ``(params,
-    opt_state, losses f32[steps])`` (each the loss before its update)."""
+    """``(params, opt_state, losses f32[steps])``: ``steps`` :func:`fit_step` on one batch (``lax.scan``)."""
 
     def body(carry, _):
         p, o = carry
@@ -325,16 +287,15 @@ def fit_steps(model: BeliefModel, optimizer: optax.GradientTransformation, param
 
 # ---------------------------------------------------------------------------- frozen models
 def frozen_logliks(model: BeliefModel, params, hidden, cats) -> jax.Array:
-    """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats``
-    [N, E] from ``hidden`` [N, B, H]."""
+    """f32[N, B]: each frozen model's (``params`` leaves [B, ...]) log-likelihood of ``cats`` [N, E]."""
     return jax.vmap(lambda p, h: model.loglik(p, h, cats), in_axes=(0, 1), out_axes=1)(params, hidden)
 
 
 def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, done):
-    """Each frozen model (``params`` leaves [B, ...]) one step on: its state [N, B, H] after the
-    last observation ``last`` [N, E] and ``action`` [N] (zeros where ``done`` bool[N]: an episode
-    starts), and the summed log-likelihood ``total`` [N, B] of the episode with ``cats`` [N, E]
-    (and, where it goes on, with its continuing: :func:`step_logliks` step by step)."""
+    """``(hidden [N, B, H], total [N, B])``: each frozen model one step on.
+
+    From ``last`` [N, E] and ``action`` [N] (restarting where ``done`` bool[N]), adding the
+    log-likelihood of ``cats`` [N, E] and of continuing: :func:`step_logliks` step by step."""
     cells = jax.vmap(lambda p, h: model.cell(p, h, last, action), in_axes=(0, 1), out_axes=1)(params, hidden)
     goes_on = jax.vmap(lambda p, h: model.continues(p, h, True), in_axes=(0, 1), out_axes=1)(params, cells)
     hidden = jnp.where(done[:, None, None], 0.0, cells)
@@ -342,30 +303,26 @@ def frozen_step(model: BeliefModel, params, hidden, total, last, action, cats, d
 
 
 def init_reference(model: BeliefModel, optimizer, num_buffers: int, rng):
-    """A fresh reference model of the task generator's trajectories: ``(ref, ref_opt, ref_frozen)``,
-    its parameters, its optimiser state and its copies for the ``num_buffers`` buffers (leaves
-    [K, ...], each set by :func:`freeze_reference` when its buffer is frozen)."""
+    """``(ref, ref_opt, ref_frozen)``: a fresh model of the task generator's trajectories, its optimiser
+    state and its per-buffer frozen copies (leaves [K, ...])."""
     ref = model.init(jax.random.fold_in(rng, 1))
     return ref, optimizer.init(ref), jax.tree.map(lambda x: jnp.stack([x] * num_buffers), ref)
 
 
 def freeze_reference(memory, active):
-    """``memory.ref_frozen`` (any memory with ``ref`` and ``ref_frozen``; None without a reference)
-    with the reference as it is now frozen for buffer ``active``."""
+    """``memory.ref_frozen`` with the current reference frozen for buffer ``active`` (None without one)."""
     if memory.ref is None:
         return None
     return jax.tree.map(lambda all_, r: all_.at[active].set(r), memory.ref_frozen, memory.ref)
 
 
 def earlier_references(memory):
-    """The references frozen with the buffers before the last (leaves [K − 1, ...]; None without
-    a reference): what the rollout's tracker reads, as its frozen models."""
+    """The references frozen with the buffers before the last (leaves [K − 1, ...]; None without)."""
     return None if memory.ref_frozen is None else jax.tree.map(lambda x: x[:-1], memory.ref_frozen)
 
 
 def fit_reference(model: BeliefModel, optimizer, memory, traj, epochs: int, fresh):
-    """``memory`` (any with ``ref`` and ``ref_opt``) with the generator's reference model fit
-    ``epochs`` steps on ``traj``, a rollout of fresh levels (``fresh`` bool[]; else unchanged)."""
+    """``memory`` with the reference fit ``epochs`` steps on ``traj`` where ``fresh`` bool[] (fresh levels)."""
 
     def fit(m):
         ref, ref_opt, _ = fit_steps(model, optimizer, m.ref, m.ref_opt, traj.obs, traj.action, traj.reset, epochs)

@@ -1,42 +1,24 @@
-"""The exact distinguishability tracker ("parallel step") of ReMiDi: the default tracker.
+"""The exact distinguishability tracker, ReMiDi's default.
 
-While the agent acts on its own level, the tracker steps the agent's *same actions* on frozen
-levels in lock-step and remembers, per frozen level, whether it has produced exactly the agent's
-observations (and episode ends) so far. Environments are deterministic given the level, so the
-agent's current trajectory prefix is *indistinguishable* from the earlier adversaries iff ONE
-frozen level produced the entire prefix: ``any(match)``, with each ``match`` AND-ed every step
-(mode ``"prefix"``, the definition).
+The tracker steps the agent's *same actions* on frozen levels in lock-step and records, per frozen
+level, whether it has produced exactly the agent's observations and episode ends so far. Envs are
+deterministic given the level, so the prefix is *indistinguishable* from the earlier adversaries
+iff ONE frozen level produced all of it: ``any(match)``, each ``match`` AND-ed every step (mode
+``"prefix"``, the definition). Mode ``"per_step"`` is the authors' looser rule: "some frozen level
+matches *this* step", AND-ed; a prefix can pass it that no single level produced.
 
-Two trackers compute that, over *slots* (each slot follows one frozen level, ``index``):
+Two trackers, over *slots* (each follows one frozen level, ``index``):
 
-* the **reference** tracker (:func:`tracker_reset`, :func:`tracker_step`) has one slot per
-  frozen level and steps all F of them beside every rollout env at every step, restarting all
-  of them at each episode start. Exact for any environment; its cost grows with F.
-* the **candidate** tracker (:meth:`CandidateTracker.start`, :meth:`CandidateTracker.step`) needs a
-  deterministic reset (``reset_to_level`` ignores its key, as in every UED environment whose
-  level fixes the start). It computes the frozen levels' first observations once per rollout;
-  a rollout env (whose restarts replay the same level, so every episode starts alike) keeps as
-  slots only the first ``budget`` frozen levels whose first observation equals its own, and
-  steps those while they match (:meth:`CandidateTracker.step`: only the live slots, in a batch sized
-  to them). Its per-step cost is at most ``budget`` environment steps per env, whatever F, and
-  none where no frozen level shares the env's first observation. A frozen level
-  that diverged never matches again within the episode, so this equals the reference whenever
-  no more than ``budget`` frozen levels share the env's first observation; ``overflow`` counts
-  those that did not fit (then a prefix might be judged distinguishable although a dropped
-  level would still match it).
+* **reference** (:func:`tracker_reset`, :func:`tracker_step`): one slot per frozen level, all F
+  stepped beside every env. Exact for any env, cost grows with F; the only one for ``per_step``.
+* **candidate** (:class:`CandidateTracker`): needs a reset that ignores its key. Each env keeps as
+  slots the first ``budget`` frozen levels whose first observation equals its own and steps only
+  those still matching. A diverged level never matches again in the episode, so this equals the
+  reference unless more than ``budget`` levels share the first observation; ``overflow`` counts
+  those dropped (a prefix only they explain is then judged distinguishable).
 
-Mode ``"per_step"`` reproduces the authors' looser rule, one boolean AND-ed with "some frozen
-level matches *this* step" — a prefix can pass that test although no single frozen level
-produced it. It needs every frozen level stepped: the reference tracker only.
-
-The functions act on ONE rollout environment. The rollout uses them through the tracker
-components (:class:`ExactTracker`, :class:`CandidateTracker`; :func:`make_tracker` picks one),
-which vmap them over its N envs (the protocol: :mod:`remidi.engine.trackers.base`): ``start`` at
-the rollout's first step, ``indistinguishable`` (bool[N]: the prefix so far could have come from a
-frozen level) before each action, ``observe`` after each environment step. They keep no state
-across updates: the frozen levels are the adversary's.
-Shapes: F = number of frozen levels (padding entries have ``valid[f] = False``), S = slots.
-"""
+The functions act on ONE env; :class:`ExactTracker` and :class:`CandidateTracker` vmap them over
+N. No state across updates. Shapes: F frozen levels (padding has ``valid[f] = False``), S slots."""
 
 from __future__ import annotations
 
@@ -69,18 +51,15 @@ class TrackerState:
 
 
 def _compare(obs_f, obs) -> jax.Array:
-    """bool[F]: frozen observation f equals the agent's observation (the exact trackers' rule;
-    another tracker passes its own as ``compare``, e.g. :mod:`~remidi.engine.trackers.tolerance`)."""
+    """bool[F]: frozen observation f equals the agent's (other trackers pass their own ``compare``)."""
     return jax.vmap(tree_equal, in_axes=(0, None))(obs_f, obs)
 
 
 # ---------------------------------------------------------------------- the reference tracker
 def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs, compare=_compare) -> TrackerState:
-    """Start a new episode on every frozen level and compare first observations.
+    """Start an episode on every frozen level and compare first observations.
 
-    ``rng`` must be the key the agent's own reset used, so that environments whose reset
-    draws randomness stay in lock-step.
-    """
+    ``rng`` must be the agent's own reset key, so envs whose reset draws randomness stay in lock-step."""
     obs_f, states = jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(rng, frozen_levels, params)
     match = valid & compare(obs_f, agent_obs)
     return TrackerState(index=jnp.arange(valid.shape[0]), env_states=states, match=match,
@@ -89,13 +68,11 @@ def tracker_reset(env, params, rng, frozen_levels, valid, agent_obs, compare=_co
 
 def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_obs, agent_done,
                  compare=_compare) -> TrackerState:
-    """Advance after the agent took ``action`` and saw ``agent_obs`` (``agent_done``: its episode
-    ended); ``frozen``: the frozen levels (``levels`` leaves [F, ...], ``valid`` bool[F]).
+    """Advance after the agent took ``action``, saw ``agent_obs`` and ``agent_done``.
 
-    ``rng`` is the key given to the agent's :class:`~remidi.envs.interface.AutoReplay` step
-    (split the same way). When the agent's episode ended, ``agent_obs`` is the first
-    observation of its next episode and the tracker restarts every frozen level.
-    """
+    ``frozen``: ``levels`` leaves [F, ...], ``valid`` bool[F]. ``rng``: the key of the agent's
+    :class:`~remidi.envs.interface.AutoReplay` step (split the same way). When the episode ended,
+    ``agent_obs`` is the next episode's first observation and every frozen level restarts."""
     rng_step, rng_reset = jax.random.split(rng)
     obs_f, states, _, done_f, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
         rng_step, state.env_states, action, params)
@@ -108,15 +85,13 @@ def tracker_step(env, params, rng, state: TrackerState, frozen, action, agent_ob
 
 # ---------------------------------------------------------------------- the candidate tracker
 def frozen_starts(env, params, frozen_levels):
-    """``(first observations, first states)`` of the F frozen levels (leaves [F, ...]); once per
-    rollout, for the candidate tracker (a deterministic reset: any key gives the same start)."""
+    """``(first observations, first states)`` of the F frozen levels (a deterministic reset: any key)."""
     return jax.vmap(env.reset_to_level, in_axes=(None, 0, None))(jax.random.PRNGKey(0), frozen_levels, params)
 
 
 def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, agent_done,
                     compare=_compare) -> TrackerState:
-    """Advance the slots as :func:`tracker_step` does (same keys); a restart restores the slots'
-    first states, since the env's restart replays the same level from the same start."""
+    """:func:`tracker_step` for the slots; a restart restores their first states (same level, same start)."""
     rng_step, _ = jax.random.split(rng)
     obs_s, states, _, done_s, _ = jax.vmap(env.step, in_axes=(None, 0, None, None))(
         rng_step, state.env_states, action, params)
@@ -128,8 +103,7 @@ def candidates_step(env, params, rng, state: TrackerState, action, agent_obs, ag
 
 # ---------------------------------------------------------------------- reading a tracker
 def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
-    """bool[B]: some level of frozen buffer b produced the whole prefix (frozen levels are
-    buffer-major: level f belongs to buffer f // capacity)."""
+    """bool[B]: some level of frozen buffer b produced the whole prefix (level f is in buffer f // capacity)."""
     owner = jnp.where(state.match, state.index // capacity, -1)  # [S]
     return jnp.any(owner[None, :] == jnp.arange(num_buffers)[:, None], axis=1)
 
@@ -137,10 +111,7 @@ def buffer_match(state: TrackerState, num_buffers: int, capacity: int) -> jax.Ar
 # ---------------------------------------------------------------------- the components
 @dataclass(frozen=True)
 class ExactTracker(Tracker):
-    """The reference tracker over N rollout envs: every frozen level stepped beside each env.
-    ``mode``: ``"prefix"`` (the definition) or ``"per_step"`` (the authors' rule). Its methods
-    take the rollout's ``frozen`` (:class:`~remidi.engine.trackers.base.Frozen`) and act on leaves
-    [N, ...]."""
+    """The reference tracker over N envs; ``mode``: ``"prefix"`` or ``"per_step"``. Leaves [N, ...]."""
 
     mode: str = "prefix"
 
@@ -163,8 +134,7 @@ class ExactTracker(Tracker):
             env, params, reset_keys, frozen.levels, frozen.valid, obs)
 
     def indistinguishable(self, state: TrackerState) -> jax.Array:
-        """bool[N]: each env's prefix so far could have come from a frozen level (``prefix``: one
-        frozen level produced all of it; ``per_step``: some frozen level matched every step)."""
+        """bool[N]: each env's prefix could have come from a frozen level (per ``mode``)."""
         return state.every_step if self.mode == "per_step" else jnp.any(state.match, axis=-1)
 
     def observe(self, env, params, frozen, env_keys, state: TrackerState, action, next_obs, done) -> TrackerState:
@@ -174,7 +144,7 @@ class ExactTracker(Tracker):
             env, params, env_keys, state, frozen, action, next_obs, done)
 
     def overflow(self, state: TrackerState) -> jax.Array:
-        """i32[N]: frozen levels the tracker could not follow (none: it follows all)."""
+        """i32[N]: zeros (it follows every frozen level)."""
         return jnp.zeros(state.match.shape[:1], jnp.int32)
 
     def buffer_match(self, state: TrackerState, num_buffers: int, capacity: int) -> jax.Array:
@@ -182,16 +152,13 @@ class ExactTracker(Tracker):
         return jax.vmap(buffer_match, in_axes=(0, None, None))(state, num_buffers, capacity)
 
     def at_first_observation(self) -> ExactTracker:
-        """The reference tracker of this mode (every frozen level stepped)."""
+        """The reference tracker of this mode."""
         return ExactTracker(mode=self.mode)
 
 
 @dataclass(frozen=True)
 class CandidateTracker(ExactTracker):
-    """The candidate tracker over N rollout envs: ``budget`` slots per env, the frozen levels
-    sharing the env's first observation (mode ``prefix`` only; the environment's reset must
-    ignore its key). ``starts``: the frozen levels' first observations and states
-    (:func:`frozen_starts`), computed once per rollout."""
+    """The candidate tracker over N envs: ``budget`` slots per env (``prefix`` only; key-free reset)."""
 
     budget: int = 64
 
@@ -200,9 +167,9 @@ class CandidateTracker(ExactTracker):
             raise ValueError("the candidate tracker computes the prefix mode only, with budget ≥ 1")
 
     def reset(self, envs, frozen, reset_keys, levels):
-        """The envs' reset and the frozen levels' in one batch where they share it (the reset
-        ignores its keys and the frozen levels play in the envs' own environment: each further
-        copy of the reset or step in the program costs compile time, seconds for Brax)."""
+        """The envs' and the frozen levels' resets in one batch where possible.
+
+        Why: each copy of reset or step in the program costs compile time (seconds for Brax)."""
         if not (envs.deterministic_reset and envs.tracker_env is envs.raw):
             return super().reset(envs, frozen, reset_keys, levels)
         num_envs = reset_keys.shape[0]
@@ -216,8 +183,8 @@ class CandidateTracker(ExactTracker):
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs, starts)
 
     def start(self, env, params, frozen, reset_keys, obs, starts=None) -> TrackerState:
-        """Each env's slots: the first ``budget`` valid frozen levels (in index order: earlier
-        buffers first) whose first observation equals the env's (``obs``, leaves [N, ...])."""
+        """Each env's slots: the first ``budget`` valid frozen levels (index order: earlier buffers first)
+        whose first observation equals the env's."""
         first_obs, first_states = frozen_starts(env, params, frozen.levels) if starts is None else starts
         matches = frozen.valid & jax.vmap(self.compare, in_axes=(None, 0))(first_obs, obs)  # bool[N, F]
         index = jax.vmap(lambda m: jnp.nonzero(m, size=self.budget, fill_value=-1)[0])(matches)  # i32[N, S]
@@ -229,13 +196,12 @@ class CandidateTracker(ExactTracker):
                             restarted=jnp.zeros(index.shape[:1], bool))
 
     def step(self, envs, frozen, env_keys, state, tstate, action):
-        """One step of the N envs and of their live slots together, as one batch [N + M]: each
-        slot takes its env's action and the key its env's own step takes (the first half of
-        ``split(env_key)``, as in :meth:`~remidi.envs.interface.AutoReplay.step_env`), so the
-        results are theirs. Only live slots (``match``: their frozen level produced the whole
-        prefix) are stepped; a slot that diverged is read again only after its env restarts. M is
-        the smallest size of :func:`slot_ladder` that holds the live slots of every seed of the
-        program (``lax.switch``: where nothing matches the step costs the envs' alone)."""
+        """One step of the N envs and their live slots as one batch [N + M].
+
+        Each slot takes its env's action and step key (the first half of ``split(env_key)``), so its
+        results are the frozen level's. Only live slots (``match``) are stepped. M is the smallest
+        :func:`slot_ladder` size holding every seed's live slots (``lax.switch``: with nothing live the
+        step costs the envs' alone)."""
         if not (envs.deterministic_reset and envs.tracker_env is envs.raw):
             return super().step(envs, frozen, env_keys, state, tstate, action)
         num_envs, slots = tstate.match.shape
@@ -259,8 +225,7 @@ class CandidateTracker(ExactTracker):
 
 
 def make_tracker(mode: str = "prefix", budget: int = 0) -> ExactTracker:
-    """The tracker of ``remidi.tracker`` (``mode``) with ``budget`` slots per env: the candidate
-    tracker for a budget > 0, else the reference tracker."""
+    """The exact tracker of ``mode``: candidate with ``budget`` > 0 slots per env, else reference."""
     return CandidateTracker(mode=mode, budget=budget) if budget > 0 else ExactTracker(mode=mode)
 
 
@@ -269,10 +234,10 @@ LADDER_FACTOR = 8
 
 
 def slot_ladder(num_envs: int, slots: int, factor: int = LADDER_FACTOR) -> tuple[int, ...]:
-    """The sizes M of the batch of live slots :meth:`CandidateTracker.step` may step, ascending: 0 (no
-    slot live: the N envs alone), ``N·S`` (every slot) and between them ``N·S`` divided by
-    ``factor`` again and again, down to about ``N / factor``. Each size is one copy of the
-    environment's step in the program (compile time), each gap a factor of slots stepped in vain."""
+    """The batch sizes M :meth:`CandidateTracker.step` may use, ascending: 0, ``N·S`` and ``N·S``
+    divided by ``factor`` repeatedly down to about ``N / factor``.
+
+    Each size is one copy of the env's step (compile time); each gap wastes up to a factor of steps."""
     top = num_envs * slots
     floor = max(1, num_envs // factor)
     sizes, m = {0, top}, top
@@ -283,11 +248,11 @@ def slot_ladder(num_envs: int, slots: int, factor: int = LADDER_FACTOR) -> tuple
 
 
 def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tstate, action):
-    """:meth:`CandidateTracker.step` with a batch of ``size`` slots, which holds every live one:
-    they are picked (in (env, slot) order, the rest of the batch filled with the last slot and
-    dropped), stepped beside the envs, compared with their envs' next observations and episode
-    ends, and put back; a restarting env's slots restart (``restarted``: from their first states
-    at the next step). ``size`` 0: the envs alone."""
+    """:meth:`CandidateTracker.step` with a batch of ``size`` slots holding every live one.
+
+    Live slots are picked in (env, slot) order (padding dropped), stepped beside the envs, compared
+    and put back; a restarting env's slots restart from their first states next step. ``size`` 0:
+    the envs alone."""
     num_envs, slots = tstate.match.shape
     pick = jnp.nonzero(tstate.match.reshape(-1), size=size, fill_value=num_envs * slots)[0]  # i32[M]
     owner = jnp.minimum(pick // slots, num_envs - 1)  # i32[M]: the env each picked slot follows
@@ -320,10 +285,8 @@ def _step_live(envs, tracker: CandidateTracker, size: int, step_keys, state, tst
 
 
 def exact_budget(task, r, mode: str) -> int:
-    """Slots per env of the candidate tracker, or 0 for the reference tracker, for the exact
-    tracker of ``mode`` on ``task`` under ``r`` (the run's ``ReMiDiConfig``):
-    ``remidi.tracker_budget``, at most the number of frozen levels, for the prefix mode on a task
-    whose reset ignores its key."""
+    """Candidate slots per env (0: reference tracker): ``remidi.tracker_budget``, at most the number of
+    frozen levels, for ``prefix`` on a task whose reset ignores its key."""
     if mode != "prefix" or not task.deterministic_reset:
         return 0
     return min(r.tracker_budget, (r.num_buffers - 1) * r.buffer_capacity)

@@ -1,12 +1,10 @@
-"""The simulated tracker's noise model (:mod:`remidi.engine.trackers.simulated`): a table
-q(o | d, ô¹, ô²) per observation entry, learnt by counting (agent, copy, copy) triples of the same
-level played three times with the same actions (the copies under fresh draws of the level's
-randomness, ``UEDTask.reseed_level``), and the mixture over a frozen buffer's levels that scores a
-prefix with it.
+"""The simulated tracker's noise model: a table q(o | d, ô¹, ô²) per observation entry, learnt by
+counting (agent, copy, copy) triples of one level played three times with the same actions (the
+copies under fresh draws of its randomness, ``UEDTask.reseed_level``), and the mixture over a
+frozen buffer's levels that scores a prefix with it.
 
-Shapes: E entries of the observation coding plus the end entry (E + 1), K categories, F frozen
-levels, S candidate slots per env, T steps, N envs.
-"""
+Shapes: E coded entries plus the end entry (E + 1), K categories, F frozen levels, S slots per
+env, T steps, N envs."""
 
 from __future__ import annotations
 
@@ -26,15 +24,12 @@ def init_counts(coding: ObsCoding) -> jax.Array:
 
 
 def agree(sim1, sim2) -> jax.Array:
-    """i32[...]: 1 where the two simulated copies' coded observations ``sim1``, ``sim2``
-    i32[..., E + 1] agree on every entry."""
+    """i32[...]: 1 where copies ``sim1``, ``sim2`` i32[..., E + 1] agree on every entry."""
     return jnp.all(sim1 == sim2, axis=-1).astype(jnp.int32)
 
 
 def count_triples(counts, agent, sim1, sim2, mask=None) -> jax.Array:
-    """``counts`` with the triples ``(agent, sim1, sim2)`` (i32[..., E + 1] each, the same level
-    played with the same actions, the copies under fresh randomness) added where ``mask``
-    bool[...] (all if None)."""
+    """``counts`` plus the triples ``(agent, sim1, sim2)`` (i32[..., E + 1]) where ``mask`` bool[...] (None: all)."""
     d = agree(sim1, sim2)
     e = jnp.broadcast_to(jnp.arange(agent.shape[-1]), agent.shape)
     weight = jnp.ones(agent.shape[:-1]) if mask is None else mask.astype(jnp.float32)
@@ -44,15 +39,13 @@ def count_triples(counts, agent, sim1, sim2, mask=None) -> jax.Array:
 
 
 def log_q(counts, smoothing: float = 0.1) -> jax.Array:
-    """f32[E + 1, 2, K, K, K]: log q(o | d, ô¹, ô²) per entry, the counts' frequencies with
-    ``smoothing`` added to every cell (a symmetric Dirichlet prior: an unseen row is uniform)."""
+    """f32[E + 1, 2, K, K, K]: log q(o | d, ô¹, ô²), frequencies plus ``smoothing`` per cell (unseen: uniform)."""
     k = counts.shape[-1]
     return jnp.log((counts + smoothing) / (jnp.sum(counts, axis=-1, keepdims=True) + smoothing * k))
 
 
 def step_logq(logq, agent, sim1, sim2) -> jax.Array:
-    """f32[...]: log q of the agent's coded observation ``agent`` i32[..., E + 1] given the two
-    simulated copies' ``sim1``, ``sim2`` (broadcast against it), summed over the entries."""
+    """f32[...]: log q of ``agent`` i32[..., E + 1] given copies ``sim1``, ``sim2``, summed over entries."""
     agent, sim1, sim2 = jnp.broadcast_arrays(agent, sim1, sim2)
     d = jnp.broadcast_to(agree(sim1, sim2)[..., None], agent.shape)
     e = jnp.broadcast_to(jnp.arange(agent.shape[-1]), agent.shape)
@@ -60,17 +53,15 @@ def step_logq(logq, agent, sim1, sim2) -> jax.Array:
 
 
 def with_end(coding: ObsCoding, obs, ended) -> jax.Array:
-    """i32[..., E + 1]: ``obs`` coded, and the end entry (``ended`` bool[...]: the step before
-    this observation ended an episode)."""
+    """i32[..., E + 1]: ``obs`` coded plus the end entry (``ended`` bool[...]: the step before ended an episode)."""
     return jnp.concatenate([coding.encode(obs), jnp.asarray(ended, jnp.int32)[..., None]], axis=-1)
 
 
 # ---------------------------------------------------------------------------- simulating a level
 def replay_level(env, params, coding: ObsCoding, level, actions, resets, key) -> jax.Array:
-    """i32[T, E + 1]: ``level`` played with the recorded ``actions`` i32[T] and restarted where the
-    recorded episode restarted (``resets`` bool[T]: step t starts an episode; the environment's
-    reset must ignore its key, as the candidate tracker's), coded with the end entry (the
-    simulated step before ended its episode). ``key``: the environment steps' randomness."""
+    """i32[T, E + 1]: ``level`` replayed with ``actions`` i32[T], restarting where ``resets`` bool[T].
+
+    Coded with the end entry. The reset must ignore its key; ``key``: the steps' randomness."""
     obs0, state0 = env.reset_to_level(key, level, params)
 
     def body(carry, inp):
@@ -88,8 +79,7 @@ def replay_level(env, params, coding: ObsCoding, level, actions, resets, key) ->
 
 
 def recorded_codes(coding: ObsCoding, obs, resets) -> jax.Array:
-    """i32[T, N, E + 1]: a rollout's observations ``obs`` (leaves [T, N, ...]) coded with the end
-    entry (an episode restart at t means the step before ended it)."""
+    """i32[T, N, E + 1]: a rollout's ``obs`` (leaves [T, N, ...]) coded with the end entry."""
     ended = resets.at[0].set(False)
     return with_end(coding, obs, ended)
 
@@ -115,10 +105,10 @@ def count_rollout(counts, env, params, coding: ObsCoding, reseed, levels, traj, 
 
 # ---------------------------------------------------------------------------- scoring a prefix
 def mixture(totals, index, valid, num_buffers: int, capacity: int) -> jax.Array:
-    """f32[B]: log of the mean over each frozen buffer's valid levels of P(prefix | θ), from the
-    candidate slots' log-likelihoods ``totals`` f32[S] (``index`` i32[S]: the frozen level each
-    follows, −1 empty; levels buffer-major, ``valid`` bool[F]). Levels without a slot count as
-    0 (they were not among the most likely at the first observation)."""
+    """f32[B]: log mean over each frozen buffer's valid levels of P(prefix | θ).
+
+    From the slots' log-likelihoods ``totals`` f32[S] (``index`` i32[S], −1 empty; ``valid``
+    bool[F], buffer-major). Levels without a slot count as 0 (not among the likeliest at the start)."""
     owner = jnp.where(index >= 0, index // capacity, -1)
     mine = owner[None, :] == jnp.arange(num_buffers)[:, None]  # [B, S]
     total = jax.nn.logsumexp(jnp.where(mine, totals[None, :], -jnp.inf), axis=-1)
@@ -127,10 +117,10 @@ def mixture(totals, index, valid, num_buffers: int, capacity: int) -> jax.Array:
 
 
 def candidates(logq, first_agent, first1, first2, valid, budget: int):
-    """The ``budget`` frozen levels whose two copies' first observations (``first1``, ``first2``
-    i32[F, E + 1]) make the agent's ``first_agent`` i32[E + 1] most likely: ``(index i32[S], −1
-    for a slot left empty (no valid level, or log q −inf), log q f32[S])``, highest first, ties in
-    index order (earlier buffers first)."""
+    """``(index i32[S], log q f32[S])``: the ``budget`` frozen levels making ``first_agent`` likeliest.
+
+    From their copies' first observations ``first1``, ``first2`` i32[F, E + 1]; highest first, ties
+    by index; −1 for an empty slot (no valid level, or log q −inf)."""
     lq = step_logq(logq, first_agent[None], first1, first2)  # [F]
     lq = jnp.where(valid, lq, -jnp.inf)
     top, index = jax.lax.top_k(lq, budget)

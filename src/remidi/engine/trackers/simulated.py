@@ -1,35 +1,21 @@
-"""The simulated tracker (``remidi.tracker=simulated``): the frozen levels simulated under fresh
+"""The simulated tracker (``remidi.tracker=simulated``): frozen levels simulated under fresh
 randomness, judged with a learnt noise model.
 
-The exact tracker asks whether one frozen level produced exactly the agent's observations; with
-randomness in what the agent sees (a noisy TV, a noise code) no level ever does. The learned
-adversary-level model (:mod:`remidi.engine.trackers.belief`) generalises over levels and cannot
-say "one of *these* levels". This model keeps the exact tracker's level-conditioning and learns
-only the noise:
+With randomness in what the agent sees no frozen level reproduces its observations exactly, and
+the belief model cannot say "one of *these* levels". This keeps the exact tracker's
+level-conditioning and learns only the noise:
 
     P(h | θ) = Π_t Π_e q(o_e,t | d_t, ô¹_e,t, ô²_e,t),     P(h | Λ) = mean over θ ∈ Λ of P(h | θ)
 
-where ô¹, ô² are the frozen level θ stepped in lock-step with the agent's actions under two fresh
-draws of its randomness (``UEDTask.reseed_level``; a task without one is deterministic given the
-level, and both copies are θ itself), ``d_t`` says whether the two simulated observations agree
-entirely, and ``q`` is the noise table of :mod:`remidi.engine.trackers.noise`. One more entry (the
-last, K = 2) is the episode's end: whether the step before ended it.
+ô¹, ô²: θ stepped with the agent's actions under two fresh draws of its randomness
+(``UEDTask.reseed_level``; none: both are θ); ``d_t``: the two copies agree entirely; ``q``: the
+table of :mod:`remidi.engine.trackers.noise`. A last entry (K = 2) is the episode's end. In a
+deterministic env ``q`` learns the identity and this *is* the exact tracker. Judged alone or as
+a ratio over a model of the generator's trajectories (needed on a noisy TV).
 
-In a deterministic environment every triple agrees, ``q`` learns the identity and the mixture *is*
-the exact tracker; where the randomness is, the rows with ``d = 0`` learn its distribution, so a
-fresh draw of the same situation costs what noise costs. Judged alone (a threshold on the
-mixture) or as a ratio over a model of the generator's trajectories (needed on a noisy TV, where
-uniform noise makes any view as likely as any other). Measured on constructed adversaries:
-``docs/belief_probe_simulated.py``, ``docs/belief-tracker-plan.md``.
-
-:class:`SimulatedTracker` is the rollout's component over one set of frozen buffers;
-:class:`Simulated` the run's tracker (:mod:`remidi.engine.trackers.base`), which keeps the table,
-the reference and the calibration record (:class:`SimMemory`) and builds a
-:class:`SimulatedTracker` for each rollout.
-
-Shapes: E entries of the observation coding plus the end entry (E + 1), K categories, F frozen
-levels, S candidate slots per env (each with two simulated copies).
-"""
+:class:`SimulatedTracker`: the rollout's component; :class:`Simulated`: the run's tracker, keeping
+the table, reference and calibration record (:class:`SimMemory`). Shapes: E + 1 entries, K
+categories, F frozen levels, S slots per env (two copies each)."""
 
 from __future__ import annotations
 
@@ -55,11 +41,11 @@ from remidi.envs.interface import tree_equal
 # ---------------------------------------------------------------------------- the tracker
 @struct.dataclass
 class FrozenSims:
-    """What the simulated tracker reads from the rollout's ``Frozen.belief``: ``logq`` (:func:`log_q`
-    of the run's table), ``threshold`` f32[B, L] (per prefix-length bucket), ``valid`` bool[B]
-    (buffer b has been frozen), ``ref`` (leaves [B, ...]: the generator's GRU model frozen with
-    each buffer, the ratio's denominator; None: judge by the mixture alone) and ``key`` (the
-    randomness of the frozen levels' copies in this rollout)."""
+    """What the tracker reads from ``Frozen.belief``.
+
+    ``logq`` (the table's :func:`log_q`), ``threshold`` f32[B, L], ``valid`` bool[B] (frozen),
+    ``ref`` (leaves [B, ...], the ratio's denominator; None: mixture alone), ``key`` (the copies'
+    randomness in this rollout)."""
 
     logq: jax.Array
     threshold: jax.Array
@@ -70,12 +56,11 @@ class FrozenSims:
 
 @struct.dataclass
 class SimState:
-    """The tracker state of one env (leaves [N, ...] in the component): ``index`` i32[S] (the
-    frozen level each slot follows, −1 empty), the slots' two copies' environment states (leaves
-    [S, 2, ...]) and their first states, ``total`` f32[S] (log P(prefix | the slot's level)) and
-    ``start_total`` (its first observation's), ``count`` i32[] (the prefix's steps), the
-    reference's GRU state f32[B, H], summed log-likelihood f32[B] and the last coded observation
-    i32[E + 1] (its input), and ``match`` bool[B] (buffer b explains the prefix)."""
+    """One env's tracker state (leaves [N, ...] in the component).
+
+    ``index`` i32[S] (−1 empty), the slots' copies' states (leaves [S, 2, ...]) and first states,
+    ``total`` f32[S] (log P(prefix | level)) and ``start_total``, ``count`` i32[], the reference's
+    state f32[B, H] and total f32[B], ``last`` i32[E + 1] (its input), ``match`` bool[B]."""
 
     index: jax.Array
     copies: Any
@@ -91,12 +76,10 @@ class SimState:
 
 @dataclass(frozen=True)
 class SimulatedTracker(Tracker):
-    """The simulated belief model as a tracker component over N rollout envs (the rollout's
-    ``frozen``: levels [F, ...] buffer-major with ``valid`` bool[F], and ``belief`` a
-    :class:`FrozenSims`). ``budget`` candidate slots per env, each following one frozen level in
-    two copies; ``reseed`` (static: ``UEDTask.reseed_level``, or None) draws a copy's randomness;
-    ``ref_model`` the GRU of the ratio's reference. The environment's reset must ignore its key
-    (the candidate tracker's condition): the copies' first states are computed once per rollout."""
+    """The simulated model as a rollout component over N envs (``frozen.belief``: :class:`FrozenSims`).
+
+    ``budget`` slots per env, each one frozen level in two copies; ``reseed`` (static, or None)
+    draws a copy's randomness; ``ref_model``: the reference's GRU. The reset must ignore its key."""
 
     coding: ObsCoding
     ref_model: BeliefModel
@@ -113,8 +96,7 @@ class SimulatedTracker(Tracker):
 
     # -- scoring
     def scores(self, frozen, state: SimState) -> jax.Array:
-        """f32[N, B]: each frozen buffer's score of each env's prefix, per step: the mixture's
-        log-likelihood, minus the reference's with a reference, over the prefix's length."""
+        """f32[N, B]: per-step score of each env's prefix under each frozen buffer (mixture minus reference)."""
         capacity = frozen.valid.shape[0] // self.num_buffers
         mix = jax.vmap(mixture, in_axes=(0, 0, None, None, None))(state.total, state.index, frozen.valid,
                                                                    self.num_buffers, capacity)  # [N, B]
@@ -128,7 +110,7 @@ class SimulatedTracker(Tracker):
         return sims.valid[None, :] & (self.scores(frozen, state) >= tau)
 
     def _copies(self, frozen):
-        """The frozen levels' two copies (leaves [F, ...] each), their randomness drawn afresh."""
+        """The frozen levels' two copies (leaves [F, ...] each), freshly reseeded."""
         if self.reseed is None:
             return frozen.levels, frozen.levels
         f = frozen.valid.shape[0]
@@ -164,8 +146,7 @@ class SimulatedTracker(Tracker):
         return jnp.any(state.match, axis=-1)
 
     def observe_coded(self, env, params, frozen, env_keys, state: SimState, action, agent, done) -> SimState:
-        """After the envs took ``action`` [N] with ``env_keys`` [N] and saw the coded observation
-        ``agent`` i32[N, E + 1] (the next episode's first where ``done`` bool[N]: the slots restart)."""
+        """After ``action`` [N] with ``env_keys`` [N], seeing ``agent`` i32[N, E + 1]; slots restart where ``done``."""
         step_keys = jax.vmap(lambda k: jax.random.split(k)[0])(env_keys)
         step = jax.vmap(jax.vmap(jax.vmap(env.step, in_axes=(None, 0, None, None)),  # the two copies
                                  in_axes=(None, 0, None, None)),  # the slots
@@ -198,9 +179,9 @@ class SimulatedTracker(Tracker):
 
 
 def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, actions, resets, key) -> jax.Array:
-    """f32[T, N, B]: the tracker's per-step scores (:meth:`SimulatedTracker.scores`) of a recorded
-    rollout (``codes`` i32[T, N, E + 1] of :func:`recorded_codes`, ``actions`` [T, N], ``resets``
-    bool[T, N]) against ``frozen``: what calibration needs, the same computation as in a rollout."""
+    """f32[T, N, B]: :meth:`SimulatedTracker.scores` of a recorded rollout against ``frozen``, as in a rollout.
+
+    ``codes`` i32[T, N, E + 1] (:func:`recorded_codes`), ``actions`` [T, N], ``resets`` bool[T, N]."""
     agent = codes.at[:, :, -1].set(0)  # an ended episode restarts: the agent's own end entry is 0
     state = tracker.start_coded(env, params, frozen, agent[0])
     first = tracker.scores(frozen, state)
@@ -219,16 +200,13 @@ def score_recorded(tracker: SimulatedTracker, env, params, frozen, codes, action
 # ---------------------------------------------------------------------------- in a run
 @struct.dataclass
 class SimMemory:
-    """What a ReMiDi run with ``remidi.tracker=simulated`` carries (``Runner.tracker``).
+    """A simulated run's ``Runner.tracker``.
 
-    ``counts`` (:func:`init_counts`): the noise table, learnt from every rollout (the noise is the
-    environment's, not an adversary's); ``ref`` / ``ref_opt``: the generator's GRU model (the
-    ratio's denominator, learning from rollouts of fresh levels; None without
-    ``remidi.belief_reference``), copied into ``ref_frozen`` [K, ...] when buffer k is frozen;
-    ``threshold`` f32[K, L] (+inf until calibrated); the active buffer's last R replays
-    (``codes`` i8[R, T, N, E + 1], ``actions``, ``resets``, and the replayed ``levels`` leaves
-    [R, N, ...]; ``written`` i32[] since the switch), scored against the buffer at its freeze to
-    calibrate its threshold (the envs whose level the buffer has since dropped left out)."""
+    ``counts``: the noise table, learnt from every rollout (the noise is the env's, not an
+    adversary's); ``ref``/``ref_opt``: the reference (None without ``remidi.belief_reference``),
+    copied into ``ref_frozen`` [K, ...] at each freeze; ``threshold`` f32[K, L] (+inf until
+    calibrated); the active buffer's last R replays (``codes`` i8[R, T, N, E + 1], ``actions``,
+    ``resets``, ``levels`` [R, N, ...]; ``written`` i32[]), scored at the freeze to calibrate."""
 
     counts: jax.Array
     threshold: jax.Array
@@ -243,21 +221,19 @@ class SimMemory:
 
 
 def simulation_key(runner, purpose: int) -> jax.Array:
-    """The simulated tracker's key for one of its uses in this update (19: the rollout's frozen
-    copies, 23: the counted replays, 29: the calibration): from the seed's own key, so each seed
-    draws its own noise. ``runner.rng``'s children in the train step are ``fold_in(rng, 0..5)``
-    (``split`` with JAX's partitionable threefry), so ``purpose`` must not be below 6."""
+    """This update's key for ``purpose`` (19: frozen copies, 23: counted replays, 29: calibration).
+
+    From the seed's own key; the train step uses ``fold_in(rng, 0..5)``, so ``purpose`` must be ≥ 6."""
     return jax.random.fold_in(runner.rng, purpose)
 
 
 @dataclass(frozen=True)
 class Simulated(Tracker):
-    """The run's simulated tracker: ``model`` (the observation coding, and the GRU of the ratio's
-    reference), ``budget`` candidate slots per env at most (``remidi.tracker_budget``),
-    ``capacity`` each buffer's (``remidi.buffer_capacity``), ``reseed`` (static:
-    ``UEDTask.reseed_level``, or None); the ``remidi.belief_*`` settings as the belief tracker's
-    (:class:`~remidi.engine.trackers.belief.BeliefTracker`). The environment's reset must ignore
-    its key (the candidate tracker's condition)."""
+    """The run's simulated tracker (``remidi.tracker=simulated``).
+
+    ``model``: coding and the reference's GRU; ``budget``: ``remidi.tracker_budget``; ``capacity``:
+    ``remidi.buffer_capacity``; ``reseed``: ``UEDTask.reseed_level`` or None; settings as the belief
+    tracker's. The reset must ignore its key."""
 
     model: BeliefModel
     budget: int = 64
@@ -281,14 +257,12 @@ class Simulated(Tracker):
         return self.settings.optimizer
 
     def component(self, num_buffers: int) -> SimulatedTracker:
-        """The rollout's component over ``num_buffers`` frozen buffers (the earlier buffers; one to calibrate)."""
+        """The rollout's component over ``num_buffers`` frozen buffers."""
         return SimulatedTracker(self.model.coding, self.model, num_buffers,
                                 budget=min(self.budget, num_buffers * self.capacity), reseed=self.reseed)
 
     def init(self, setup, rng) -> SimMemory:
-        """A fresh memory: an empty table, ``calibration`` replays of the rollout's T steps of N envs
-        recorded (levels like the task's), thresholds per length bucket (prefixes of at most the
-        episode limit), and with ``reference`` a fresh GRU reference (from ``fold_in(rng, 31)``)."""
+        """A fresh memory: empty table and record, +inf thresholds, and a fresh reference if ``reference``."""
         cfg, coding = setup.cfg, self.model.coding
         rng = jax.random.fold_in(rng, 31)
         level = jax.eval_shape(setup.task.sample_level, jax.random.PRNGKey(0))
@@ -313,9 +287,8 @@ class Simulated(Tracker):
                                                                           SMOOTHING, simulation_key(runner, 19)))
 
     def learn(self, setup, runner, proposal, traj):
-        """After a rollout (``traj`` leaves [T, N, ...]) of the proposal's levels: the noise table
-        counts its triples (every rollout, key 23); a rollout of the active adversary's own levels
-        is recorded for its calibration; the reference learns from rollouts of fresh levels."""
+        """The table counts the rollout's triples (every rollout); the active adversary's own rollouts are
+        recorded for calibration; the reference learns from fresh levels."""
         memory, levels, task = runner.tracker, proposal.levels, setup.task
         coding, own = self.model.coding, setup.algo.adversary.own_levels(proposal)
         counts = count_rollout(memory.counts, task.env, task.params, coding, task.reseed_level, levels, traj,
@@ -334,12 +307,11 @@ class Simulated(Tracker):
         return memory, {}
 
     def freeze(self, setup, runner, switch):
-        """At a switch (``switch`` bool[]): the active buffer's threshold is calibrated on its
-        recorded replays, each scored against the buffer's levels as the tracker will score fresh
-        prefixes against it (with the reference frozen now;
-        :func:`~remidi.engine.trackers.calibration.calibrate_monotone`, with ``spread``; +inf,
-        explaining nothing, without a recorded replay; key 29); the reference is frozen with it and
-        the record emptied. Computed only at a switch."""
+        """At a switch: calibrate the active buffer's threshold on its recorded replays, freeze the
+        reference, empty the record.
+
+        Each replay is scored against the buffer as fresh prefixes will be; replays of levels the buffer
+        has since dropped are left out; +inf without a recorded replay."""
         task, active = setup.task, runner.adversary.active
         buffer_levels, buffer_valid = setup.algo.adversary.active_levels(setup, runner)
         tracker, key = self.component(1), simulation_key(runner, 29)
@@ -366,8 +338,7 @@ class Simulated(Tracker):
         return cond_per_seed(switch, switched, lambda m: m, runner.tracker)
 
     def metrics(self, setup, runner) -> dict:
-        """The thresholds (:func:`~remidi.engine.trackers.audit.threshold_metrics`; no model of the
-        buffer's own: its scores are the mixture's)."""
+        """The thresholds (:func:`~remidi.engine.trackers.audit.threshold_metrics`)."""
         return threshold_metrics(runner.tracker.threshold, runner.adversary.active)
 
     def audit(self, setup, runner, rng) -> dict:
@@ -382,7 +353,7 @@ def _one_buffer(levels, valid, memory: SimMemory, key, ref):
 
 
 def frozen_sims(memory: SimMemory, active, smoothing: float, key) -> FrozenSims:
-    """What the rollout's tracker reads: the buffers before ``active`` (B = K − 1 entries)."""
+    """What the rollout's tracker reads: the buffers before ``active`` (B = K − 1)."""
     k = memory.threshold.shape[0]
     return FrozenSims(logq=log_q(memory.counts, smoothing), threshold=memory.threshold[:-1],
                       valid=jnp.arange(k - 1) < active, key=key, ref=earlier_references(memory))

@@ -1,40 +1,16 @@
-"""The tolerance tracker (``remidi.tracker=tolerance``): the exact prefix rule, with observations
-compared up to a tolerance, for continuous and noisy observations.
+"""The tolerance tracker (``remidi.tracker=tolerance``): the exact prefix rule with observations
+compared up to a tolerance, for continuous and noisy observations (exact equality never matches
+them; the learned trackers read categorical observations only).
 
-The exact trackers (:mod:`~remidi.engine.trackers.exact`) call a prefix indistinguishable from the
-earlier adversaries while ONE frozen level, stepped in lock-step with the agent's actions, has
-produced exactly the agent's observations and episode ends so far. On float observations that
-judgement matches nothing: a level that carries its own observation noise (a seed) never shows
-another level's noise, and positions or lidar readings reached by slightly different states never
-repeat bit for bit. The learned trackers read categorical observations only.
+Frozen observation ``b`` and the agent's ``a`` are the same when, leaf by leaf, every float entry
+has ``|a − b| ≤ atol + rtol·|b|`` (or ``a == b``: equal infinities match) and every integer or
+boolean entry is equal; episode ends must coincide exactly. As in the exact tracker one single
+frozen level must stay close at every step. ``atol = rtol = 0`` is the exact tracker bit for bit.
 
-This tracker keeps the prefix rule and changes what "the same observation" means: frozen
-observation ``b`` and the agent's ``a`` are the same when, leaf by leaf,
-
-* a float leaf: every entry has ``|a − b| ≤ atol + rtol·|b|`` (numpy's ``isclose`` with ``b`` the
-  frozen level's; ``a == b`` also counts, so equal infinities match);
-* an integer or boolean leaf: every entry is equal;
-
-and the episode ends (``done``) must coincide exactly. The per-level AND over the prefix is the
-exact tracker's: one single frozen level must stay close at every step (a prefix close to level 1
-on some steps and to level 2 on the others is distinguishable). ``atol = rtol = 0`` is exact
-equality, the exact tracker's judgement bit for bit.
-
-The tolerance is in the observation's own units (``remidi.tracker_tolerance`` is ``atol``,
-``remidi.tracker_rtol`` is ``rtol``), not in units of the agent's running observation statistics:
-the judgement then does not move as the policy visits other states, and the user who knows the
-sensor knows its noise. It needs to be wider than the noise (two draws of one state's observation
-differ by up to about ``2·3σ`` for Gaussian noise of deviation σ) and narrower than the
-differences that carry information (a goal shown at another place): then levels that differ only
-in their noise are one level to the tracker (a complete overlap: ReMiDi rejects them) and levels
-that show something else are not. Too wide, and a later buffer rejects levels the agent could
-tell apart, if only a little (docs/tolerance.md).
-
-Two components, as for the exact tracker: :class:`ToleranceTracker` (every frozen level stepped
-beside each env) and :class:`ToleranceCandidates` (slots for the frozen levels whose first
-observation is within tolerance of the env's, for a reset that ignores its key); both are the
-exact components with :meth:`compare` overridden.
-"""
+Units are the observation's own (``remidi.tracker_tolerance`` = atol, ``remidi.tracker_rtol`` =
+rtol), not the running statistics', so the judgement does not drift with the policy. It should
+be wider than the noise (about ``2·3σ`` for Gaussian σ) and narrower than informative differences;
+too wide, and a later buffer rejects levels the agent could tell apart (docs/tolerance.md)."""
 
 from __future__ import annotations
 
@@ -48,8 +24,7 @@ from remidi.engine.trackers.exact import CandidateTracker, ExactTracker
 
 
 def leaf_close(a, b, atol: float, rtol: float) -> jax.Array:
-    """bool[]: every entry of the agent's leaf ``a`` is within tolerance of the frozen ``b``
-    (float leaves: ``|a − b| ≤ atol + rtol·|b|``, or equal; other dtypes: equal)."""
+    """bool[]: every entry of leaf ``a`` is within tolerance of the frozen ``b`` (non-floats: equal)."""
     if not (jnp.issubdtype(jnp.result_type(a), jnp.inexact) or jnp.issubdtype(jnp.result_type(b), jnp.inexact)):
         return jnp.all(a == b)
     return jnp.all((a == b) | (jnp.abs(a - b) <= atol + rtol * jnp.abs(b)))
@@ -68,8 +43,7 @@ def close_to(obs_f, obs, atol: float, rtol: float) -> jax.Array:
 
 @dataclass(frozen=True)
 class ToleranceTracker(ExactTracker):
-    """The reference tracker (every frozen level stepped) with observations compared up to
-    ``atol + rtol·|frozen|``; ``mode`` as the exact tracker's."""
+    """The reference tracker (every frozen level stepped) comparing up to ``atol + rtol·|frozen|``."""
 
     atol: float = 0.0
     rtol: float = 0.0
@@ -83,9 +57,7 @@ class ToleranceTracker(ExactTracker):
 
 @dataclass(frozen=True)
 class ToleranceCandidates(CandidateTracker, ToleranceTracker):
-    """The candidate tracker (``budget`` slots per env: the frozen levels whose first observation
-    is within tolerance of the env's) with :class:`ToleranceTracker`'s comparison (``compare`` and
-    ``at_first_observation`` come from it: the candidate tracker defines neither)."""
+    """The candidate tracker (``budget`` slots per env) with :class:`ToleranceTracker`'s comparison."""
 
 
 def make_tolerance_tracker(budget: int, atol: float, rtol: float) -> ExactTracker:

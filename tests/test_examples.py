@@ -228,7 +228,8 @@ def test_my_replay_rule_example_sets_the_replay_distribution(restore_registries)
     import jax.numpy as jnp
 
     from remidi.engine.adversaries import level_buffer as B
-    from remidi.engine.config import BufferConfig, validate_buffer_config
+    from remidi.engine.adversaries.level_buffer import validate_buffer_config
+    from remidi.engine.config import BufferConfig
 
     load_example(EXAMPLE.parent / "my_replay_rule.py")
     cfg = BufferConfig(capacity=4, prioritization="proportional", staleness_coef=0.2)

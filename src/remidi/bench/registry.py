@@ -29,7 +29,7 @@ def check_overrides(overrides: dict) -> None:
     """Raise ConfigError for a ``--set`` key that is no UED config key, a value of the wrong type,
     or a value no workload can run with (sizes below 1, PPO and buffer settings out of range), before
     any benchmark starts."""
-    from remidi.engine.config import validate_buffer_config
+    from remidi.engine.adversaries.level_buffer import validate_buffer_config
     from remidi.engine.core.ppo import validate_ppo_config
     from remidi.engine.config import UEDConfig
     from remidi.engine.run.validation import validate_section

@@ -54,25 +54,6 @@ def _check_unit_interval(name: str, value) -> None:
         raise ConfigError(f"{name}: must be a number in [0, 1], got {value!r}")
 
 
-def validate_buffer_config(config: BufferConfig) -> None:
-    """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
-    if not (_is_int(config.capacity) and config.capacity >= 1):
-        raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
-    from remidi.engine.adversaries.level_buffer import REPLAY_RULES
-
-    if config.prioritization not in REPLAY_RULES:
-        raise one_of("prioritization", config.prioritization, REPLAY_RULES)
-    if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
-        raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
-    if not (_is_int(config.topk_k) and config.topk_k >= 1):
-        raise ConfigError(f"topk_k: must be an integer ≥ 1, got {config.topk_k!r}")
-    _check_unit_interval("staleness_coef", config.staleness_coef)
-    _check_unit_interval("replay_prob", config.replay_prob)
-    _check_unit_interval("min_fill", config.min_fill)
-    if not isinstance(config.duplicate_check, bool):
-        raise ConfigError(f"duplicate_check: must be true or false, got {config.duplicate_check!r}")
-
-
 @dataclass(frozen=True)
 class ReMiDiConfig:
     num_buffers: int = field(default=2, metadata={

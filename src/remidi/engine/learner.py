@@ -11,7 +11,6 @@ policy frozen with each earlier adversary. The train step (:mod:`remidi.engine.t
 - :func:`score_rollout`: each level's score for the adversary;
 - :func:`train`: masked PPO on the collection (its epochs: :func:`ppo_update`), then the
   observation statistics;
-- :func:`freeze_policy`: Combine's copy of the policy at an adversary switch.
 
 :func:`play` is the rollout alone, of any number of levels and steps (SFL's candidate levels);
 :func:`rollout` steps any policy on any environments (PAIRED's generator, the evaluation).
@@ -504,17 +503,6 @@ def normalize_advantages(advantages, mask):
     mean = masked_mean(advantages, mask)
     std = jnp.sqrt(masked_mean(jnp.square(advantages - mean), mask))
     return jnp.where(mask, (advantages - mean) / (std + 1e-8), 0.0)
-
-
-def freeze_policy(learner: LearnerState, active, switch) -> LearnerState:
-    """Combine: at an adversary switch (``switch`` bool[]) the policy trained on the adversary
-    being frozen (``active``) is kept as its policy; nothing without Combine."""
-    if learner.frozen_params is None:
-        return learner
-    frozen_params = jax.tree.map(
-        lambda f, p: f.at[active].set(jnp.where(switch, p, f[active]), mode="drop"),
-        learner.frozen_params, learner.train_state.params)
-    return learner.replace(frozen_params=frozen_params)
 
 
 # ---------------------------------------------------------------------------- non-finite rollouts

@@ -11,18 +11,16 @@ from functools import partial
 
 import jax
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from remidi.engine.adversaries.scores import SCORES, info_key
+from remidi.engine.adversaries.scores import SCORES
 from remidi.engine.config import BufferConfig, UEDConfig, buffer_config, score_name
 from remidi.engine.core.distributions import for_task
 from remidi.engine.core.networks import NETWORKS, make_network
-from remidi.engine.learner import Stepping
 from remidi.envs.interface import UEDTask
 from remidi.errors import ConfigError
 
 if TYPE_CHECKING:
-    from remidi.engine.algorithms import Algorithm
     from remidi.engine.trackers.base import Tracker
 
 
@@ -42,19 +40,17 @@ class Setup:
 
     task: UEDTask
     cfg: UEDConfig
-    algo: Algorithm
+    algo: Any  # the Algorithm (engine/algorithms.py, which imports the adversaries that take a Setup)
     net: object = field(compare=False)
     tracker: Tracker | None = field(compare=False, default=None)
+    envs: Any = field(compare=False, default=None)  # the learner's Stepping, built by make_setup
     dist: object = field(init=False, compare=False, repr=False)
-    envs: Stepping = field(init=False, compare=False, repr=False)
     score: object = field(init=False, compare=False, repr=False)
     buffer: BufferConfig = field(init=False, compare=False, repr=False)
 
     def __post_init__(self):
         task = self.task
         object.__setattr__(self, "dist", for_task(task))
-        object.__setattr__(self, "envs", Stepping(task.env, task.params, task.deterministic_reset,
-                                                  solved_info=info_key(task.solved)))
         object.__setattr__(self, "score", SCORES.get(score_name(self.cfg, self.algo)))
         object.__setattr__(self, "buffer", buffer_config(self.cfg, self.algo))
 

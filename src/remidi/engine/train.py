@@ -38,6 +38,7 @@ from typing import Any
 
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries.base import AdversaryState, Outcome
+from remidi.engine.adversaries.scores import info_key
 from remidi.engine.algorithms import Algorithm, get_algorithm
 from remidi.engine.config import UEDConfig
 from remidi.engine.learner import nonfinite
@@ -62,7 +63,9 @@ def make_setup(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm) -> Setup:
     """The set-up of a run of ``algo`` (a name or an :class:`Algorithm`): its network, its
     tracker and its buffers' settings chosen once, here."""
     algo = get_algorithm(algo)
-    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task), tracker=tracker_for(task, cfg, algo))
+    envs = lrn.Stepping(task.env, task.params, task.deterministic_reset, solved_info=info_key(task.solved))
+    return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task), tracker=tracker_for(task, cfg, algo),
+                 envs=envs)
 
 
 def init_runner(setup: Setup, rng) -> Runner:

@@ -39,7 +39,8 @@ import flax.struct
 import jax
 import jax.numpy as jnp
 
-from remidi.engine.config import BufferConfig, validate_buffer_config
+from remidi.engine.config import BufferConfig, _check_unit_interval, _is_int, _is_real
+from remidi.errors import ConfigError, one_of
 
 RUNNING_MAX_PREFIX = "max_"  # extras named max_* keep their maximum on updates (module docstring)
 
@@ -152,6 +153,23 @@ def register_replay_rule(name: str, rule: ReplayRule) -> None:
         raise TypeError(f"register_replay_rule: {rule!r} is no ReplayRule")
     hash(rule)  # static under jit: a frozen dataclass
     REPLAY_RULES[name] = rule
+
+
+def validate_buffer_config(config: BufferConfig) -> None:
+    """Raise :class:`~remidi.errors.ConfigError` (one line, naming the field) if invalid."""
+    if not (_is_int(config.capacity) and config.capacity >= 1):
+        raise ConfigError(f"capacity: must be an integer ≥ 1, got {config.capacity!r}")
+    if config.prioritization not in REPLAY_RULES:
+        raise one_of("prioritization", config.prioritization, REPLAY_RULES)
+    if not (_is_real(config.temperature) and config.temperature > 0 and math.isfinite(config.temperature)):
+        raise ConfigError(f"temperature: must be a finite number > 0, got {config.temperature!r}")
+    if not (_is_int(config.topk_k) and config.topk_k >= 1):
+        raise ConfigError(f"topk_k: must be an integer ≥ 1, got {config.topk_k!r}")
+    _check_unit_interval("staleness_coef", config.staleness_coef)
+    _check_unit_interval("replay_prob", config.replay_prob)
+    _check_unit_interval("min_fill", config.min_fill)
+    if not isinstance(config.duplicate_check, bool):
+        raise ConfigError(f"duplicate_check: must be true or false, got {config.duplicate_check!r}")
 
 
 def _normalise(x: jax.Array, valid: jax.Array) -> jax.Array:

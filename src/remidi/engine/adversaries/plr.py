@@ -20,7 +20,6 @@ import jax.numpy as jnp
 
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Outcome, Proposal, empty_buffers, tag_counts
-from remidi.engine.learner import freeze_policy
 
 
 @dataclass(frozen=True)
@@ -154,7 +153,10 @@ def sequence_advance(setup, runner, state, proposal: Proposal, outcome: Outcome)
         tracker, metrics = setup.tracker.learn(setup, runner, proposal, outcome.collection.traj)
         runner = runner.replace(tracker=setup.tracker.freeze(setup, runner.replace(tracker=tracker), switch))
     if runner.learner.frozen_params is not None:  # remidi.policy=combine
-        runner = runner.replace(learner=freeze_policy(runner.learner, runner.adversary.active, switch))
+        learner, active = runner.learner, runner.adversary.active  # keep the policy trained on the frozen one
+        frozen_params = jax.tree.map(lambda f, p: f.at[active].set(jnp.where(switch, p, f[active]), mode="drop"),
+                                     learner.frozen_params, learner.train_state.params)
+        runner = runner.replace(learner=learner.replace(frozen_params=frozen_params))
     state = state.replace(active=jnp.where(switch, state.active + 1, state.active),
                           count=jnp.where(switch, 0, state.count))
     return runner.replace(adversary=state), metrics

@@ -13,7 +13,8 @@ from remidi.engine.adversaries.paired import ESTIMATORS, GENERATOR_NETWORKS, OVE
 from remidi.engine.adversaries.plr import LevelBuffers
 from remidi.engine.adversaries.sfl import LearnabilityBuffers
 from remidi.engine.algorithms import ALGORITHMS, Algorithm, get_algorithm
-from remidi.engine.config import (POLICIES, UEDConfig, buffer_config, score_name, validate_buffer_config,
+from remidi.engine.adversaries.level_buffer import validate_buffer_config
+from remidi.engine.config import (POLICIES, UEDConfig, buffer_config, score_name,
                                   validate_sfl_config)
 from remidi.engine.core.ppo import validate_ppo_config
 from remidi.engine.run.task_checks import check_network_reads_observations, step_reads_its_key, validate_task

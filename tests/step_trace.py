@@ -38,6 +38,7 @@ def step_trace(algo: str, experiment: str = "lever") -> list[tuple[str, str]]:
             if key not in seen:
                 seen[key] = (os.path.relpath(code.co_filename, ROOT), code.co_qualname.replace(".<locals>", ""))
 
+    jax.clear_caches()  # a jitted function traced before (same shapes) would not run its Python again
     sys.setprofile(profile)
     try:
         jax.make_jaxpr(lambda r: tr.train_step(setup, r))(runner)

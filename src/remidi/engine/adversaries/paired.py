@@ -240,8 +240,7 @@ class GeneratorSequence(LevelGenerator):
             raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
                               "LevelGenerator); allowed: buffer_sequence=True")
 
-    def frozen(self, setup, runner, proposal: Proposal | None = None):
-        return sequence_frozen(setup, runner, proposal)
+    frozen = sequence_frozen
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
         """Every update plays the active generator's levels, so a learned tracker learns from each."""

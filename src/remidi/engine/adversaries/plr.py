@@ -22,6 +22,26 @@ from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Outcome, Proposal, empty_buffers, tag_counts
 
 
+def sequence_frozen(adversary, setup, runner, proposal: Proposal | None = None):
+    """A sequence's ``frozen`` method (:meth:`~remidi.engine.adversaries.base.Adversary.frozen`):
+    the tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of every buffer
+    before the active one as one batch of F = (K−1)·capacity (buffer-major; nothing frozen with
+    fewer than two buffers); None without a tracker (an algorithm that is no sequence). A
+    rehearsal's rollout explains no step (its levels are frozen levels: rehearsal trains on every
+    step to keep what they taught)."""
+    if setup.tracker is None:
+        return None
+    state, earlier = runner.adversary, None
+    if setup.cfg.remidi.num_buffers >= 2:
+        buffers = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
+        valid = buffers.valid & (jnp.arange(buffers.valid.shape[0]) < state.active)[:, None]
+        earlier = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), buffers.levels), valid.reshape(-1)
+    view = setup.tracker.frozen(setup, runner, earlier)
+    if view is None or proposal is None or proposal.rehearse is None:
+        return view
+    return view.replace(rehearse=proposal.rehearse)
+
+
 @dataclass(frozen=True)
 class LevelBuffers(Adversary):
     """The PLR family's adversary (module docstring). State: :class:`~remidi.engine.adversaries.base.AdversaryState`."""
@@ -49,9 +69,7 @@ class LevelBuffers(Adversary):
             proposal = rehearse_frozen(setup, state, proposal, jax.random.fold_in(k_branch, 1))
         return proposal
 
-    def frozen(self, setup, runner, proposal: Proposal | None = None):
-        """A sequence's tracker view of its earlier buffers (:func:`sequence_frozen`); None for one buffer."""
-        return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
+    frozen = sequence_frozen  # a sequence's tracker view of its earlier buffers; None for one buffer
 
     def best_return(self, proposal: Proposal, best_return):
         """For a replayed level, the buffer's record too."""
@@ -123,22 +141,6 @@ def rehearse_frozen(setup, state, proposal: Proposal, rng) -> Proposal:
     levels = jax.tree.map(lambda f, o: jnp.where(rehearse, f, o), frozen, proposal.levels)
     return proposal.replace(levels=levels, replay=proposal.replay & ~rehearse, train=proposal.train | rehearse,
                             rehearse=rehearse)
-
-
-def sequence_frozen(setup, runner, proposal: Proposal | None = None):
-    """The tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of a sequence's
-    frozen levels, every buffer before the active one as one batch of F = (K−1)·capacity
-    (buffer-major; nothing frozen with fewer than two buffers). A rehearsal's rollout explains no
-    step (its levels are frozen levels: rehearsal trains on every step to keep what they taught)."""
-    state, earlier = runner.adversary, None
-    if setup.cfg.remidi.num_buffers >= 2:
-        buffers = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
-        valid = buffers.valid & (jnp.arange(buffers.valid.shape[0]) < state.active)[:, None]
-        earlier = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), buffers.levels), valid.reshape(-1)
-    view = setup.tracker.frozen(setup, runner, earlier)
-    if view is None or proposal is None or proposal.rehearse is None:
-        return view
-    return view.replace(rehearse=proposal.rehearse)
 
 
 def sequence_advance(setup, runner, state, proposal: Proposal, outcome: Outcome):

@@ -142,9 +142,7 @@ class LearnabilityBuffers(Adversary):
                            extras={"solve_rate": kept(rates)}, last_seen=jnp.zeros_like(old.last_seen),
                            time=old.time + 1), jax.tree.map(jnp.max, flags)
 
-    def frozen(self, setup, runner, proposal: Proposal | None = None):
-        """A sequence's tracker view of its earlier buffers; None for one buffer."""
-        return sequence_frozen(setup, runner, proposal) if self.buffer_sequence else None
+    frozen = sequence_frozen  # a sequence's tracker view of its earlier buffers; None for one buffer
 
     def update(self, setup, runner, proposal: Proposal, outcome, rng):
         """The refreshed buffer becomes the active one; reports ``sfl/buffer_learnability`` and

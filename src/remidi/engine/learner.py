@@ -1,20 +1,9 @@
-"""The learner: the agent's policy, how it plays an update's levels and how it learns from them,
-written top to bottom as PureJaxRL's PPO is: collect trajectories, calculate the advantages,
-update the network.
+"""The learner: the agent's policy, how it plays an update's levels and learns from them, top to
+bottom as PureJaxRL's PPO: collect trajectories, calculate the advantages, update the network.
 
-Its state (:class:`LearnerState`, ``Runner.learner``) is PPO's train state, with the running
-observation statistics under ``normalize_obs`` and, under ReMiDi's ``remidi.policy=combine``, the
-policy frozen with each earlier adversary. The train step (:mod:`remidi.engine.train`) calls
-
-- :func:`collect`: roll the policy out on the update's levels and compute the advantages (a
-  :class:`Collection`);
-- :func:`score_rollout`: each level's score for the adversary;
-- :func:`train`: masked PPO on the collection (its epochs: :func:`ppo_update`), then the
-  observation statistics;
-
-:func:`play` is the rollout alone, of any number of levels and steps (SFL's candidate levels);
-:func:`rollout` steps any policy on any environments (PAIRED's generator, the evaluation).
-Shapes: ``T`` rollout steps, ``N`` envs.
+The train step calls :func:`collect`, :func:`score_rollout` and :func:`train`; :func:`play` is the
+rollout alone, of any number of levels and steps; :func:`rollout` steps any policy on any
+environments. Shapes: ``T`` rollout steps, ``N`` envs.
 """
 
 from __future__ import annotations
@@ -42,10 +31,9 @@ if TYPE_CHECKING:
 
 @struct.dataclass
 class LearnerState:
-    """The agent: ``train_state`` (PPO's), ``obs_stats`` (``normalize_obs``: running observation
-    statistics, :mod:`remidi.engine.core.normalize`; else None) and ``frozen_params``
-    (``remidi.policy=combine``: the policy frozen with each buffer but the last, leaves [K−1, ...];
-    else None)."""
+    """The agent: PPO's ``train_state``, ``obs_stats`` (running observation statistics under
+    ``normalize_obs``, else None) and ``frozen_params`` (``remidi.policy=combine``: the policy frozen
+    with each buffer but the last, leaves [K−1, ...]; else None)."""
 
     train_state: TrainState
     obs_stats: object = None
@@ -64,19 +52,16 @@ class Trajectory:
     reward: jax.Array  # f32
     done: jax.Array  # bool: the episode ended at step t
     indist: jax.Array  # bool: the prefix up to obs[t] is indistinguishable from a frozen level
-    overflow: jax.Array  # i32: frozen levels sharing the episode's first observation that the
-    #                      candidate tracker had no slot for (0 for the reference tracker)
+    overflow: jax.Array  # i32: frozen levels sharing the episode's first observation, beyond the tracker's slots
     solved: Any = None  # bool: the step's info flag of solving (Stepping.solved_info); None without one
 
 
 @struct.dataclass
 class Collection:
-    """What :func:`collect` gathers for one update: the rollout ``traj`` [T, N], GAE's
-    ``advantages`` and value ``targets`` (f32[T, N], in units of ``reward × reward_scale``), and
-    per env the ``mean_return`` and ``best_return`` (f32[N], the environment's units) of its
-    episodes (an env without a finished episode: its partial return). The train step replaces
-    ``traj.indist`` (a rehearsal explains no step) and ``best_return`` (MaxMC's record) before
-    scoring and training."""
+    """One update's rollout ``traj`` [T, N], GAE's ``advantages`` and value ``targets`` (f32[T, N],
+    in units of ``reward × reward_scale``), and per env the ``mean_return`` and ``best_return``
+    (f32[N], the environment's units) of its episodes (without a finished episode: its partial
+    return)."""
 
     traj: Trajectory
     advantages: jax.Array
@@ -89,13 +74,10 @@ class Collection:
 class Stepping:
     """The environments a rollout steps: ``raw`` (the env), ``params`` (its parameters),
     ``deterministic_reset`` (its reset ignores its key, so a restart restores the episode's first
-    state instead of resetting) and ``tracker_env`` (where a tracker plays the frozen levels: they
-    are training levels, so a larger evaluation environment passes the training one; default
-    ``raw``), ``solved_info`` (the info key a task's ``solved`` names, whose value at each step
-    the trajectory records as ``solved``; None: none). An env whose episode ends restarts its
-    level (:meth:`start`, :meth:`restart_where_done`, batched over N envs; ``auto``: the same for
-    one env, :class:`~remidi.envs.interface.AutoReplay`). The run's own is built once, at set-up
-    (``Setup.envs``)."""
+    state), ``tracker_env`` (where a tracker plays the frozen levels: training levels, so a larger
+    evaluation env passes the training one; default ``raw``) and ``solved_info`` (the info key the
+    trajectory records as ``solved``; None: none). An env whose episode ends restarts its level
+    (:meth:`restart_where_done` over N envs; ``auto``: one env, :class:`~remidi.envs.interface.AutoReplay`)."""
 
     raw: UnderspecifiedEnv
     params: Any
@@ -116,9 +98,9 @@ class Stepping:
                                solved=jnp.zeros((num_envs,), bool) if self.solved_info is not None else None)
 
     def restart_where_done(self, state: AutoReplayState, stepped, reset_keys):
-        """Given the N envs' step ``stepped = (obs, env_state, reward, done, info)`` from
-        ``state``, restart the level where the episode ended (from its first state, or reset with
-        ``reset_keys`` [N] where the reset draws randomness): ``(obs, state, reward, done, info)``."""
+        """The N envs' step ``stepped = (obs, env_state, reward, done, info)`` from ``state``, the
+        level restarted where the episode ended (from its first state, or reset with ``reset_keys``
+        [N]): ``(obs, state, reward, done, info)``."""
         next_obs, env_state, reward, done, info = stepped
         if self.deterministic_reset:
             fresh = state.start
@@ -136,8 +118,8 @@ class Stepping:
 @dataclass(frozen=True)
 class Policy:
     """The policy a rollout acts with: ``apply({"params": params}, carry, obs[1, N, ...], reset
-    bool[1, N]) -> carry, (logits [1, N, P], value [1, N])`` (a flax module's ``apply``), its
-    ``params`` and its initial recurrent state ``carry`` (leaves [N, ...])."""
+    bool[1, N]) -> carry, (logits [1, N, P], value [1, N])``, its ``params`` and its initial
+    recurrent state ``carry`` (leaves [N, ...])."""
 
     apply: Callable
     params: Any
@@ -163,9 +145,8 @@ def init_learner(setup: Setup, rng, example_obs) -> LearnerState:
 
 
 def policy_apply(setup: Setup, learner: LearnerState):
-    """The network's ``apply`` reading observations as the agent sees them: under
-    ``normalize_obs`` flattened to ``f32[T, N, D]`` and normalised with the learner's running
-    statistics as they were when the update started (:mod:`remidi.engine.core.normalize`)."""
+    """The network's ``apply`` on observations as the agent sees them: under ``normalize_obs``
+    flattened to ``f32[T, N, D]`` and normalised with the statistics as the update started."""
     stats = learner.obs_stats
     if stats is None:
         return setup.net.apply
@@ -193,9 +174,7 @@ def collect(setup: Setup, learner: LearnerState, rng, levels, frozen) -> Collect
 
 def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, frozen):
     """The current policy's rollout on ``levels`` [B] for ``num_steps`` steps (with the tracker of
-    ``frozen`` beside the envs; None: none), nothing learnt: ``(traj [T, B], last_value f32[B])``.
-    :func:`collect`'s rollout, and SFL's learnability rollouts of candidate levels
-    (:mod:`remidi.engine.adversaries.sfl`), whose B and T are their own."""
+    ``frozen`` beside the envs; None: none), nothing learnt: ``(traj [T, B], last_value f32[B])``."""
     num_levels = jax.tree.leaves(levels)[0].shape[0]
     if setup.cfg.reseed:  # a stochastic environment: each rollout draws the levels' own randomness afresh
         keys = jax.random.split(jax.random.fold_in(rng, 17), num_levels)
@@ -205,19 +184,16 @@ def play(setup: Setup, learner: LearnerState, rng, levels, num_steps: int, froze
 
 
 def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=None, dist=CATEGORICAL):
-    """Roll out ``policy`` on ``levels`` (leaves [N, ...]) of ``envs`` for ``num_steps`` steps.
+    """Roll out ``policy`` on ``levels`` (leaves [N, ...]) of ``envs`` for ``num_steps`` steps:
+    ``(trajectory, last_value f32[N])``.
 
-    Every env starts a fresh episode on its level; an env whose episode ends restarts the same
-    level (the step's observation and state are the fresh episode's, ``done`` is still True and
-    the reward the terminal one). With ``frozen``
-    (:class:`~remidi.engine.trackers.base.Frozen`), its tracker (``frozen.tracker``) resets and
-    steps the environments instead, beside the frozen levels, and judges at every step whether the
-    prefix so far is indistinguishable from a frozen level. With ``frozen.params`` the actions
-    come from :func:`combine` (ReMiDi's Combine); ``log_prob`` and ``value`` are always the current
-    policy's (PPO trains only on the steps it acted on, ``~indist``). Without ``frozen``,
-    ``indist`` is all False. ``dist`` (:class:`~remidi.engine.core.networks.base.Categorical` and
-    its kin) reads the policy output ``logits`` and samples the actions. Returns ``(trajectory,
-    last_value f32[N])``.
+    An env whose episode ends restarts its level (the step's observation and state are the fresh
+    episode's; ``done`` and the reward are the terminal ones). With ``frozen``
+    (:class:`~remidi.engine.trackers.base.Frozen`) its tracker steps the envs beside the frozen
+    levels and judges at every step whether the prefix is indistinguishable from one (``indist``;
+    all False without ``frozen``); with ``frozen.params`` :func:`combine` chooses the actions, but
+    ``log_prob`` and ``value`` stay the current policy's (PPO trains only where it acted,
+    ``~indist``).
     """
     env, apply_fn, params = envs.raw, policy.apply, policy.params
     num_envs = jax.tree.leaves(levels)[0].shape[0]
@@ -272,13 +248,12 @@ def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=
 
 
 def combine(frozen, tstate, apply_fn: Callable, frozen_hidden, obs_in, reset, logits):
-    """ReMiDi's ``Combine`` (Algorithm 1), the one place it is computed: each frozen buffer's
-    policy (``frozen.params``, leaves [B, ...], each with its recurrent state ``frozen_hidden``
-    [B, ...]) reads the observations ``obs_in`` [1, N, ...]; the earliest buffer one of whose
-    levels produced env n's whole prefix, or whose learned model explains it
-    (``frozen.tracker.buffer_match``), acts there, the current
-    policy (``logits`` f32[N, P]) where none did. Returns ``(frozen_hidden, acting logits
-    f32[N, P])``."""
+    """ReMiDi's ``Combine`` (Algorithm 1): ``(frozen_hidden, acting logits f32[N, P])``.
+
+    Each frozen buffer's policy (``frozen.params``, leaves [B, ...]; recurrent state
+    ``frozen_hidden`` [B, ...]) reads ``obs_in`` [1, N, ...]; the earliest buffer whose level (or
+    learned model, ``frozen.tracker.buffer_match``) explains env n's whole prefix acts there, the
+    current policy (``logits`` f32[N, P]) where none does."""
     copies = jax.tree.leaves(frozen.params)[0].shape[0]
     capacity = frozen.valid.shape[0] // copies
     frozen_hidden, (frozen_logits, _) = jax.vmap(
@@ -288,11 +263,10 @@ def combine(frozen, tstate, apply_fn: Callable, frozen_hidden, obs_in, reset, lo
 
 
 def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: jax.Array) -> jax.Array:
-    """ReMiDi's ``Combine``: f32[N, P], the policy output of the policy that acts on each env.
+    """f32[N, P]: the output of the policy acting on each env, the earliest matching buffer's.
 
-    ``buffer_match`` bool[N, B] (some level of frozen buffer b produced env n's whole prefix),
-    ``frozen_logits`` f32[B, N, P] (each frozen buffer's policy), ``logits`` f32[N, P] (current).
-    The earliest buffer with a matching level acts; the current policy where none matches.
+    ``buffer_match`` bool[N, B] (frozen buffer b explains env n's whole prefix), ``frozen_logits``
+    f32[B, N, P], ``logits`` f32[N, P] (current: where no buffer matches).
     """
     earliest = jnp.argmax(buffer_match, axis=-1)  # first True (0 if none)
     chosen = jnp.take_along_axis(jnp.moveaxis(frozen_logits, 0, 1), earliest[:, None, None], axis=1)[:, 0]
@@ -301,11 +275,10 @@ def combined_logits(buffer_match: jax.Array, frozen_logits: jax.Array, logits: j
 
 # ---------------------------------------------------------------------------- advantages and scores
 def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
-    """Generalised advantage estimation.
+    """Generalised advantage estimation: ``(advantages, targets)``, both ``f32[T, N]``.
 
-    ``rewards``, ``values``: ``f32[T, N]``; ``dones``: ``bool[T, N]``, True where the episode ended
-    at step t (no bootstrapping from step t+1); ``last_value``: ``f32[N]``, value of the state after
-    the last step. Returns ``(advantages, targets)``, both ``f32[T, N]``, targets = advantages + values.
+    ``rewards``, ``values``: ``f32[T, N]``; ``dones``: ``bool[T, N]`` (episode ended at step t: no
+    bootstrapping from t+1); ``last_value``: ``f32[N]``, the value after the last step.
     """
     not_done = 1.0 - dones.astype(jnp.float32)
     next_values = jnp.concatenate([values[1:], last_value[None]], axis=0)
@@ -321,11 +294,10 @@ def compute_gae(rewards, values, dones, last_value, gamma: float, lam: float):
 
 
 def score_rollout(setup: Setup, levels, collection: Collection):
-    """f32[N]: each level's score, in the environment's reward units (the critic's values and
-    the advantages, learnt on ``reward × reward_scale``, are scaled back). Perfect regret compares
-    the optimum and the agent's mean episodic return in the same units: both discounted by
-    ``ppo.gamma`` (the paper's utility), or with ``discounted_regret`` off the undiscounted
-    ``mean_return`` the rollout already gave. ``collection.best_return`` is MaxMC's."""
+    """f32[N]: each level's score, in the environment's reward units (values and advantages,
+    learnt on ``reward × reward_scale``, are scaled back). Perfect regret compares the optimum and
+    the mean return both discounted by ``ppo.gamma`` (the paper's utility), or both undiscounted
+    with ``discounted_regret`` off. ``collection.best_return`` is MaxMC's record."""
     traj, mean_return = collection.traj, collection.mean_return
     score = setup.score
     optimal = None
@@ -344,19 +316,17 @@ def score_rollout(setup: Setup, levels, collection: Collection):
 
 
 # ---------------------------------------------------------------------------- masked PPO
-#: PPO's diagnostics of an update that trains, logged as ``ppo/<name>`` (the mean over its epochs'
-#: minibatches that trained; NaN on updates that do not train or whose every step ReMiDi masked,
-#: left out of a block's mean)
+#: PPO's diagnostics, logged as ``ppo/<name>``: the mean over the minibatches that trained (NaN
+#: when none did, left out of a block's mean)
 PPO_METRICS = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "grad_norm")
 
 
 def train(setup: Setup, learner: LearnerState, trained, rng, collection: Collection):
-    """Masked PPO on the collection (:func:`ppo_update`): only the distinguishable steps
-    (``~indist``) of a proposal that is trained on (``trained`` bool[]: a replay, or fresh levels
-    of an adversary that trains on them) enter the loss; a proposal that is not leaves the train
-    state as it was (every step masked). Then the observation statistics absorb the rollout's
-    observations. Returns the learner with PPO's diagnostics (:data:`PPO_METRICS`, f32[]; NaN
-    when nothing was trained)."""
+    """Masked PPO on the collection, then the observation statistics: ``(learner, metrics)``.
+
+    Only the distinguishable steps (``~indist``) enter the loss, and only when ``trained``
+    (bool[]); otherwise the train state is left as it was. ``metrics``: :data:`PPO_METRICS`,
+    f32[] each (NaN when nothing was trained)."""
     # UPDATE NETWORK
     traj = collection.traj
     batch = Batch(obs=traj.obs, reset=traj.reset, actions=traj.action, log_probs=traj.log_prob,
@@ -375,12 +345,9 @@ def train(setup: Setup, learner: LearnerState, trained, rng, collection: Collect
 
 @struct.dataclass
 class Batch:
-    """A rollout for PPO; every field is ``[T, N, ...]``.
-
-    ``obs`` pytree; ``reset`` bool (new episode starts at this step); ``actions`` i32 (or
-    ``i32[T, N, k]``, multi-discrete; ``f32[T, N, A]``, continuous);
-    ``log_probs``, ``values``, ``advantages``, ``targets`` f32; ``mask`` bool (train on this step).
-    """
+    """A rollout for PPO, every field ``[T, N, ...]``: ``obs`` pytree; ``reset`` bool (an episode
+    starts); ``actions`` i32 (``i32[T, N, k]`` multi-discrete, ``f32[T, N, A]`` continuous);
+    ``log_probs``, ``values``, ``advantages``, ``targets`` f32; ``mask`` bool (train on this step)."""
 
     obs: Any
     reset: jax.Array
@@ -394,20 +361,15 @@ class Batch:
 
 def ppo_update(train_state: TrainState, init_carry, batch: Batch, rng: jax.Array, cfg: PPOConfig,
                apply_fn: Callable | None = None, dist=CATEGORICAL):
-    """Run ``cfg.epochs`` x ``cfg.minibatches`` masked PPO steps on a rollout.
+    """``cfg.epochs`` x ``cfg.minibatches`` masked PPO steps on a rollout: ``(train_state, metrics)``.
 
-    ``init_carry``: the net's carry for the ``N`` envs at the rollout's first step (env axis
-    first in every leaf). Minibatches are shuffled groups of ``N / minibatches`` envs with their
-    whole ``T``-step sequences (with one minibatch, all envs in their order), so a recurrent net
-    replays each group from its slice of ``init_carry``. A minibatch with no unmasked entry
-    leaves params, optimiser state and step count unchanged. ``apply_fn`` defaults to
-    ``train_state.apply_fn``; ``dist`` is the action distribution. Jit-able with ``cfg``,
-    ``apply_fn`` and ``dist`` static; ``cfg`` is validated at set-up
-    (:func:`~remidi.engine.core.ppo.validate_ppo_config`). Returns ``(train_state, metrics)``
-    where metrics (total_loss, policy_loss, value_loss, entropy, approx_kl, clip_frac, grad_norm,
-    masked_fraction) are averaged over the minibatch steps that trained (an all-masked minibatch
-    is skipped, and its zeros would dilute them; NaN if none trained), ``masked_fraction`` over
-    all of them.
+    ``init_carry``: the net's carry for the ``N`` envs at the first step (env axis first). A
+    minibatch is a shuffled group of ``N / minibatches`` envs with their whole ``T``-step sequences,
+    so a recurrent net replays it from its slice of ``init_carry``. An all-masked minibatch leaves
+    params, optimiser state and step count unchanged and is left out of the metrics' means (its
+    zeros would dilute them; NaN if none trained); ``masked_fraction`` is over all minibatches.
+    Static: ``cfg`` (validated at set-up, :func:`~remidi.engine.core.ppo.validate_ppo_config`),
+    ``apply_fn``, ``dist``.
     """
     apply_fn = train_state.apply_fn if apply_fn is None else apply_fn
     num_envs = batch.mask.shape[1]
@@ -443,15 +405,12 @@ def ppo_update(train_state: TrainState, init_carry, batch: Batch, rng: jax.Array
 
 
 def ppo_loss(params, apply_fn: Callable, carry, batch: Batch, cfg: PPOConfig, dist=CATEGORICAL):
-    """Masked PPO loss on one minibatch (envs ``M``): returns ``(total_loss, metrics dict)``.
+    """Masked PPO loss on one minibatch of ``M`` envs: ``(total_loss, metrics dict)``.
 
-    ``carry``: the net's carry for the ``M`` envs at the first step of ``batch``. Clipped
-    surrogate + ``vf_coef`` x value loss (``0.5 * max(unclipped^2, clipped^2)`` if ``clip_value``)
-    - ``ent_coef`` x entropy, each a masked mean (:func:`masked_mean`), the advantages normalised
-    over the unmasked steps. The masked steps' actions, log-probs, values, advantages and targets
-    are replaced by zeros before any arithmetic, so whatever they hold (even NaN) cannot reach the
-    update; their observations still pass through the network (a recurrent net needs them as
-    inputs) and must be finite.
+    ``carry``: the net's carry for the ``M`` envs at the first step of ``batch``. The masked steps'
+    actions, log-probs, values, advantages and targets are zeroed before any arithmetic, so even a
+    NaN there cannot reach the update; their observations still pass through the network (a
+    recurrent net needs them) and must be finite.
     """
     mask = batch.mask
     action_mask = mask.reshape(mask.shape + (1,) * (batch.actions.ndim - mask.ndim))
@@ -496,32 +455,30 @@ def masked_mean(x, mask):
 
 
 def normalize_advantages(advantages, mask):
-    """Standardise ``advantages`` with the mean and (population) std of its unmasked entries.
-
-    ``std + 1e-8`` in the denominator; one unmasked entry becomes 0, masked entries become 0.
-    """
+    """``advantages`` standardised over its unmasked entries (population std + 1e-8); masked
+    entries, and a single unmasked one, become 0."""
     mean = masked_mean(advantages, mask)
     std = jnp.sqrt(masked_mean(jnp.square(advantages - mean), mask))
     return jnp.where(mask, (advantages - mean) / (std + 1e-8), 0.0)
 
 
 # ---------------------------------------------------------------------------- non-finite rollouts
-#: the prefix of the step metrics that flag a rollout's non-finite rewards and observations
-#: (:func:`nonfinite`); the driver stops the run on one and keeps them out of the history
+#: the prefix of the step metrics flagging non-finite rewards and observations (:func:`nonfinite`);
+#: the driver stops the run on one and keeps them out of the history
 NONFINITE = "nonfinite/"
 
 
 def nonfinite_names(rollout_name: str | None = None) -> tuple[str, str]:
-    """The keys of :func:`nonfinite`: ``nonfinite/reward`` and ``nonfinite/observation``, each
-    ending in ``/<rollout_name>`` for a rollout other than the agent's."""
+    """``nonfinite/reward`` and ``nonfinite/observation``, with ``/<rollout_name>`` for a rollout
+    other than the agent's."""
     tail = "" if rollout_name is None else f"/{rollout_name}"
     return f"{NONFINITE}reward{tail}", f"{NONFINITE}observation{tail}"
 
 
 def nonfinite(traj: Trajectory, rollout_name: str | None = None) -> dict[str, jax.Array]:
-    """f32[] 1.0 or 0.0 under :func:`nonfinite_names`: whether some reward, and some floating
-    observation leaf (integer leaves cannot be), of ``traj`` is NaN or ±inf. Unchecked, a NaN is
-    silent: PLR's scores drop it, so nothing enters the buffer and nothing trains."""
+    """f32[] 1.0 or 0.0 under :func:`nonfinite_names`: whether a reward, and a floating observation
+    leaf, of ``traj`` is NaN or ±inf. Unchecked, a NaN is silent: PLR's scores drop it, so nothing
+    enters the buffer and nothing trains."""
     floats = [jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(traj.obs) if jnp.issubdtype(x.dtype, jnp.inexact)]
     tail = "" if rollout_name is None else f"/{rollout_name}"
     return {f"{NONFINITE}reward{tail}": jnp.asarray(~jnp.all(jnp.isfinite(traj.reward)), jnp.float32),

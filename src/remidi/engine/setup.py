@@ -1,7 +1,5 @@
-"""The static set-up of a run (:class:`Setup`: the task, the config, the algorithm, and the
-components derived from them: the network, the tracker, the policy's distribution and the
-environments the agent's rollout steps) and what is read off it before a runner exists (the
-network of a config, an example observation)."""
+"""The static set-up of a run (:class:`Setup`) and what is read off a config and a task before a
+runner exists (the network, an example observation)."""
 
 from __future__ import annotations
 
@@ -26,17 +24,12 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Setup:
-    """Static pieces of a run: the task, the config, the algorithm (its adversary and score,
-    :mod:`remidi.engine.algorithms`), and the components derived from those three, left out of
-    equality: the agent's network and the distinguishability tracker
-    (:mod:`remidi.engine.trackers`; None for an algorithm that freezes nothing). Hashable: a static
-    argument under jit. Built by :func:`remidi.engine.train.make_setup`. Derived here, once:
-    ``dist``, the policy's action distribution
-    (:func:`~remidi.engine.core.distributions.for_task`), ``envs``, the environments the agent's
-    rollout steps (:class:`~remidi.engine.learner.Stepping`), ``score``, the score levels are
-    ranked by (:data:`~remidi.engine.adversaries.scores.SCORES`' entry; None for a name the
-    config's validation refuses), and ``buffer``, the level buffers' settings
-    (:func:`~remidi.engine.config.buffer_config`)."""
+    """Static pieces of a run: the task, the config, the algorithm, and what is derived from them,
+    left out of equality: the agent's network, the tracker (None for an algorithm that freezes
+    nothing), ``envs`` (the :class:`~remidi.engine.learner.Stepping` the agent's rollout steps),
+    ``dist`` (the policy's action distribution), ``score`` (the levels' score, a
+    :data:`~remidi.engine.adversaries.scores.SCORES` entry; None for a name the config's validation
+    refuses) and ``buffer`` (the level buffers' settings). Hashable: a static argument under jit."""
 
     task: UEDTask
     cfg: UEDConfig
@@ -56,11 +49,9 @@ class Setup:
 
 
 def network_for(cfg: UEDConfig, task: UEDTask):
-    """The network ``cfg.network`` for the task's actions (its policy output sized for the task's
-    distribution, :func:`~remidi.engine.core.distributions.for_task`), with
-    ``hidden_size``/``lstm_size`` where set (ConfigError if that network has no such layer):
-    ``hidden_size`` sets every layer of a ``hidden`` option that is a tuple of widths (its length
-    kept), or ``hidden`` itself if it is one width; ``lstm_size`` sets ``lstm_size``."""
+    """The network ``cfg.network`` sized for the task's action distribution, with ``hidden_size`` /
+    ``lstm_size`` where set (ConfigError if the network has no such layer): ``hidden_size`` sets
+    every width of ``hidden`` (a tuple keeps its length), ``lstm_size`` sets ``lstm_size``."""
     options = {}
     cls = NETWORKS.get(cfg.network)
     fields = {f.name: f.default for f in dataclasses.fields(cls)} if cls is not None else {}
@@ -77,11 +68,10 @@ def network_for(cfg: UEDConfig, task: UEDTask):
 
 
 def example_observation(task: UEDTask, key=None):
-    """One observation (unbatched leaves): the first of a level the task samples with ``key``
-    (``PRNGKey(0)`` if None), reset with the same key. Returns ``(obs, level)``.
-
-    One compiled program: called outside a trace, the generator's and the reset's operations
-    would each compile a program of their own (about a hundred for the maze, seconds per process)."""
+    """``(obs, level)``: the first observation (unbatched leaves) of a level sampled with ``key``
+    (``PRNGKey(0)`` if None), reset with the same key. One compiled program: outside a trace, the
+    generator's and the reset's operations would each compile their own (about a hundred for the
+    maze, seconds per process)."""
     return _first_observation(task, jax.random.PRNGKey(0) if key is None else key)
 
 

@@ -1,31 +1,23 @@
 """The one UED train step shared by every algorithm (:mod:`remidi.engine.algorithms`).
 
-One update, top to bottom (:func:`train_step`), each stage a call to one of the run's components,
-chosen when the run is set up (:func:`make_setup`): the algorithm's adversary
-(:mod:`remidi.engine.adversaries`) and the learner (:mod:`remidi.engine.learner`); a buffer
-sequence (ReMiDi) brings its distinguishability tracker (:mod:`remidi.engine.trackers`) through
-its adversary, so PLR⊥, DR and minimax return run no tracker and no frozen policy.
+One update, top to bottom (:func:`train_step`), each stage a call to the adversary or the learner,
+chosen at set-up (:func:`make_setup`); only a buffer sequence (ReMiDi) brings a tracker.
 
-1. PROPOSE LEVELS: N fresh levels from the task's generator, and the adversary's choice among
-   them and its buffers (DR: the fresh ones; the PLR family: a replay from the active buffer with
-   probability ``buffer.replay_prob``; ACCEL: after a replay, edits of its levels; ReMiDi with
-   ``remidi.rehearsal``: a frozen buffer's levels; SFL: a mix of its buffer and fresh levels),
-   and whether the learner trains on them.
-2. COLLECT TRAJECTORIES: one rollout on them (a sequence's tracker beside the environments,
-   against its frozen levels), GAE, returns.
-3. SCORE LEVELS: the levels' scores, MaxMC's record, and which new levels a frozen level
-   explains at every step ("complete overlap": scored −inf, never inserted).
-4. UPDATE ADVERSARY: replayed levels rescored, new ones inserted by score (PAIRED: the
-   antagonist plays, the generator is paid).
-5. UPDATE NETWORK: masked PPO if the proposal is trained on (the loss masked to the steps no
-   frozen level explains).
-6. ADVANCE ADVERSARY: the update counted; a sequence's switch after ``remidi.steps_per_buffer``
-   (freeze the active buffer with the policy and the tracker's model, move to the next).
-7. METRICS: the step's scalars (:data:`BLOCK_REDUCTIONS` says how the driver reduces them over a
-   block); ``nonfinite/...`` flags a NaN or infinite reward or observation, which stops the run.
+1. PROPOSE LEVELS: N fresh levels, the adversary's choice among them and its buffers (PLR: a replay
+   with probability ``buffer.replay_prob``; ACCEL: edits after a replay; ``remidi.rehearsal``: a
+   frozen buffer's levels; SFL: a mix), and whether the learner trains on them.
+2. COLLECT TRAJECTORIES: one rollout (a sequence's tracker beside the envs), GAE, returns.
+3. SCORE LEVELS: scores, MaxMC's record, and the new levels a frozen level explains at every step
+   ("complete overlap": scored −inf, never inserted).
+4. UPDATE ADVERSARY: replays rescored, new levels inserted by score (PAIRED: the antagonist plays,
+   the generator is paid).
+5. UPDATE NETWORK: masked PPO on the steps no frozen level explains, if the proposal is trained on.
+6. ADVANCE ADVERSARY: the update counted; after ``remidi.steps_per_buffer`` a sequence freezes the
+   active buffer with the policy and the tracker's model and moves to the next.
+7. METRICS: the step's scalars; ``nonfinite/...`` flags a NaN or infinite reward or observation,
+   which stops the run.
 
-Everything is a pure function of :class:`Runner`, jit-ed and vmapped over seeds by the driver
-(:mod:`remidi.engine.run.driver`).
+A pure function of :class:`Runner`, jit-ed and vmapped over seeds by the driver.
 """
 
 from __future__ import annotations
@@ -49,8 +41,8 @@ from remidi.envs.interface import UEDTask
 
 @struct.dataclass
 class Runner:
-    """Everything one seed's training carries from step to step: its key, the updates done, and
-    one state per component."""
+    """What one seed's training carries from step to step: its key, the updates done, one state
+    per component."""
 
     rng: jax.Array
     updates_done: jax.Array  # i32[], train steps done
@@ -60,8 +52,7 @@ class Runner:
 
 
 def make_setup(task: UEDTask, cfg: UEDConfig, algo: str | Algorithm) -> Setup:
-    """The set-up of a run of ``algo`` (a name or an :class:`Algorithm`): its network, its
-    tracker and its buffers' settings chosen once, here."""
+    """The set-up of a run of ``algo`` (a name or an :class:`Algorithm`), its components chosen once."""
     algo = get_algorithm(algo)
     envs = lrn.Stepping(task.env, task.params, task.deterministic_reset, solved_info=info_key(task.solved))
     return Setup(task=task, cfg=cfg, algo=algo, net=network_for(cfg, task), tracker=tracker_for(task, cfg, algo),
@@ -91,8 +82,8 @@ def train_step(setup: Setup, runner: Runner):
     collection = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
     traj = collection.traj
 
-    # SCORE LEVELS (MaxMC's record takes only episodes that ended: with negative rewards an
-    # unfinished episode's partial return would beat every full one and stay in the record)
+    # SCORE LEVELS (MaxMC's record takes only ended episodes: with negative rewards a partial
+    # return would beat every full one and stay in the record)
     best = adversary.best_return(proposal, jnp.where(jnp.any(traj.done, axis=0), collection.best_return, -jnp.inf))
     collection = collection.replace(best_return=best)
     scores = lrn.score_rollout(setup, proposal.levels, collection)
@@ -134,9 +125,9 @@ def train_step(setup: Setup, runner: Runner):
                     **advance_metrics, **(proposal.nonfinite or {})}
 
 
-#: how the driver reduces a step metric over a block of updates: "sum", "last", "mean" (any
-#: metric not listed) or "nanmean" (the mean over the updates where it is defined, NaN if none).
-#: ``replayed/<tag>`` counts become the block's ``replay_fraction/<tag>``.
+#: how the driver reduces a step metric over a block: "sum", "last", "mean" (one not listed) or
+#: "nanmean" (over the updates where it is defined; NaN if none); ``replayed/<tag>`` counts become
+#: the block's ``replay_fraction/<tag>``
 BLOCK_REDUCTIONS = {"rejected": "sum", "inserted": "sum", "tracker_overflow": "sum", "active_buffer": "last",
                     "belief/loss": "nanmean",
                     **{f"ppo/{name}": "nanmean" for name in lrn.PPO_METRICS}}

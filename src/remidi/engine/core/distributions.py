@@ -1,24 +1,17 @@
-"""The policy's action distribution, one per kind of action space, behind one small interface.
+"""The policy's action distribution, one per kind of action space, behind one interface.
 
-A network's policy output ``out`` (``f32[..., P]``) parameterises the distribution:
+A network's policy output ``out`` (``f32[..., P]``) parameterises it:
 
-- :class:`Categorical` (``Discrete(A)``): ``out`` holds ``P = A`` logits; actions are ``i32[...]``
-  in ``[0, A)``.
-- :class:`MultiCategorical` (``MultiDiscrete(nvec)``): ``out`` holds ``P = Σ nvec`` logits, the
-  components' in order; actions are ``i32[..., k]``, one independent choice per component.
-- :class:`DiagGaussian` (``Box(A)``): ``out`` holds ``P = 2A`` entries, the mean then the log
-  standard deviation of a diagonal Gaussian; actions are ``f32[..., A]`` (unbounded: the
-  environment clips).
+- :class:`Categorical` (``Discrete(A)``): ``P = A`` logits; actions ``i32[...]`` in ``[0, A)``.
+- :class:`MultiCategorical` (``MultiDiscrete(nvec)``): ``P = Σ nvec`` logits, the components' in
+  order; actions ``i32[..., k]``, one independent choice per component.
+- :class:`DiagGaussian` (``Box(A)``): ``P = 2A`` entries, the mean then the log standard deviation;
+  actions ``f32[..., A]`` (unbounded: the environment clips).
 
-The rollout samples, PPO scores log-probabilities and entropies through the same functions
-whichever the task's action space (:func:`for_task`, chosen once at set-up: ``Setup.dist``), so
-there is one code path. The three distributions live beside the networks' policy heads
-(:mod:`remidi.engine.core.networks.base`), whose output they read; this module chooses one.
-``network_actions`` is what :func:`remidi.engine.core.networks.make_network` takes as
-``num_actions`` for it (the discrete head's logits, or the Gaussian's dimensions).
-An evaluation that acts with the policy's most likely action (``remidi evaluate --action mode``:
-the Gaussian's mean, the categorical's arg-max, each component's arg-max) plays the same rollout
-with :class:`Greedy`.
+The rollout and PPO call the same functions whatever the action space (:func:`for_task`, chosen
+once at set-up), so there is one code path. The distributions live beside the policy heads
+(:mod:`remidi.engine.core.networks.base`); ``network_actions`` is the ``num_actions`` a network is
+made with. :class:`Greedy` acts with the most likely action (``remidi evaluate --action mode``).
 """
 
 from __future__ import annotations
@@ -47,9 +40,8 @@ def for_space(space):
 
 
 def for_task(task):
-    """The distribution of ``task``'s policy, from its action space (``task.actions``; for an
-    object without one, ``num_actions`` and ``continuous``, the shorthand). A bool
-    (``continuous``, the earlier form) gives the size-free :data:`GAUSSIAN` or :data:`CATEGORICAL`."""
+    """The distribution of ``task``'s policy, from ``task.actions`` (without it: ``num_actions`` and
+    ``continuous``). A bool (``continuous``) gives the size-free :data:`GAUSSIAN` or :data:`CATEGORICAL`."""
     if isinstance(task, bool):
         return GAUSSIAN if task else CATEGORICAL
     space = getattr(task, "actions", None)
@@ -60,8 +52,7 @@ def for_task(task):
 
 @dataclass(frozen=True)
 class Greedy:
-    """``base``'s most likely action every time (its ``mode``), scored as ``base`` scores it: the
-    deterministic policy an evaluation reports beside the sampled one."""
+    """``base``'s most likely action every time (its ``mode``), scored as ``base`` scores it."""
 
     base: object
 

@@ -1,14 +1,11 @@
 """Running observation normalisation (as in PureJaxRL's and Brax's continuous-control PPO).
 
-The statistics live in the run state (:class:`remidi.engine.train.Runner`), so checkpoints and
-``--resume`` keep them. A rollout normalises every observation with the statistics as they were
-when it started (PPO then trains on exactly what the policy saw), and the statistics absorb the
-rollout's observations afterwards. The distinguishability tracker compares *raw* observations.
-
-Observations are flattened: every leaf of the observation pytree, ``[..., D_leaf]`` after the
-batch axes, concatenated to ``f32[..., D]`` (:func:`remidi.engine.core.networks.flatten_obs`), so a
-normalising agent must read flat vector observations (the MLP networks do). The agent's network
-reads them through :func:`remidi.engine.learner.policy_apply`.
+The statistics live in the run state, so checkpoints and ``--resume`` keep them. A rollout
+normalises with the statistics as they were when it started (PPO then trains on exactly what the
+policy saw); they absorb the rollout's observations afterwards. The tracker compares *raw*
+observations. Observations are flattened (every leaf after the batch axes, concatenated to
+``f32[..., D]``: :func:`remidi.engine.core.networks.flatten_obs`), so a normalising agent must read
+flat vector observations (the MLP networks do).
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""PPO's set-up: its hyperparameters (:class:`PPOConfig`, validated once by
-:func:`validate_ppo_config`), the optimiser and a fresh train state.
-
-The update itself, masked PPO on a rollout (GAE, the loss, the epochs of minibatches), is part of
-the learner's step: :mod:`remidi.engine.learner` (``compute_gae``, ``ppo_update``, ``ppo_loss``).
-Networks follow :mod:`remidi.engine.core.networks`:
-``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``.
+"""PPO's set-up: its hyperparameters (:class:`PPOConfig`), the optimiser and a fresh train state.
+The update itself (GAE, the loss, the epochs) is the learner's (:mod:`remidi.engine.learner`).
+Networks are called as ``carry, (logits, value) = apply_fn({"params": params}, carry, obs, reset)``.
 """
 
 from __future__ import annotations
@@ -23,14 +19,11 @@ from remidi.errors import ConfigError
 
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO hyperparameters (hashable: pass as a static argument to ``jax.jit``).
-
-    Defaults are the paper's maze settings. With ``anneal_lr`` the learning rate decays linearly
-    from ``lr`` to 0 over ``total_updates * epochs * minibatches`` optimiser steps. The optimiser
-    steps only on updates that train, so an algorithm that trains on some updates only (PLR⊥,
-    ReMiDi: replay probability 0.8) ends its run with about ``(1 − 0.8)·lr``, as the authors'
-    code does.
-    """
+    """PPO hyperparameters (hashable: a static argument to ``jax.jit``), by default the paper's maze
+    settings. With ``anneal_lr`` the learning rate decays linearly from ``lr`` to 0 over
+    ``total_updates * epochs * minibatches`` optimiser steps; the optimiser steps only on updates
+    that train, so PLR⊥ and ReMiDi (replay probability 0.8) end at about ``(1 − 0.8)·lr``, as the
+    authors' code does."""
 
     gamma: float = field(default=0.995, metadata={"help": "discount factor"})
     gae_lambda: float = field(default=0.95, metadata={"help": "GAE λ"})
@@ -72,12 +65,10 @@ def validate_ppo_config(cfg: PPOConfig, num_envs: int) -> None:
 def make_optimizer(cfg: PPOConfig) -> optax.GradientTransformation:
     """Global-norm gradient clipping then Adam, with a linear LR decay to 0 if ``cfg.anneal_lr``.
 
-    Cached per config: train states built from equal configs then share one ``tx`` object, which
-    is part of the :class:`TrainState` pytree structure, so jitted updates are not recompiled.
-    The optimiser runs on all parameters as one flat vector (``optax.flatten``): the same
-    arithmetic, but XLA compiles a few fused loops instead of several per parameter array
-    (measured on the lever agent: a PPO minibatch step compiles in 1.7 s instead of 2.7 s).
-    """
+    Cached per config: equal configs share one ``tx``, part of the :class:`TrainState` pytree, so
+    jitted updates are not recompiled. It runs on all parameters as one flat vector
+    (``optax.flatten``): the same arithmetic in a few fused loops instead of several per parameter
+    array (the lever agent's PPO minibatch step compiles in 1.7 s instead of 2.7 s)."""
     lr = cfg.lr
     if cfg.anneal_lr:
         lr = optax.linear_schedule(cfg.lr, 0.0, cfg.total_updates * cfg.epochs * cfg.minibatches)
@@ -90,11 +81,9 @@ def _is_rollout_shaped(example_obs: Any, num_envs: int) -> bool:
 
 
 def create_train_state(rng: jax.Array, net, example_obs: Any, num_envs: int, cfg: PPOConfig) -> TrainState:
-    """Initialise ``net`` and a :class:`TrainState` with :func:`make_optimizer`.
-
-    ``example_obs``: leaves ``[1, num_envs, ...]`` or a single unbatched observation (then a
-    ``[1, 1]`` prefix is added; parameters do not depend on the batch size). Validates ``cfg``.
-    """
+    """A :class:`TrainState` of ``net`` freshly initialised, with :func:`make_optimizer`; validates
+    ``cfg``. ``example_obs``: leaves ``[1, num_envs, ...]`` or one unbatched observation (given a
+    ``[1, 1]`` prefix: the parameters do not depend on the batch size)."""
     validate_ppo_config(cfg, num_envs)
     n = num_envs
     if not _is_rollout_shaped(example_obs, num_envs):

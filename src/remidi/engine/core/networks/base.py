@@ -1,11 +1,7 @@
-"""The pieces every network is built from: initialisers, activations, reading an observation's
-fields, the policy and value heads, the LSTM over a rollout and the patch convolution; and the
-action distributions the policy head's output parameterises (:class:`Categorical`,
-:class:`MultiCategorical`, :class:`DiagGaussian`; one is chosen per task by
-:mod:`remidi.engine.core.distributions`).
-
-Initialisation follows common PPO practice: orthogonal weights with gain ``sqrt(2)`` in hidden
-layers, ``0.01`` on the policy output and ``1.0`` on the value output, zero biases.
+"""The pieces every network is built from (initialisers, activations, observation fields, the
+heads, the LSTM over a rollout, the patch convolution) and the action distributions the policy
+head's output parameterises. Initialisation as is common for PPO: orthogonal weights, gain
+``sqrt(2)`` in hidden layers, ``0.01`` on the policy output, ``1.0`` on the value output; zero biases.
 """
 
 from __future__ import annotations
@@ -44,18 +40,15 @@ def obs_field(obs: Any, name: str):
 
 
 def has_field(obs: Any, name: str) -> bool:
-    """Whether :func:`obs_field` finds ``name`` in ``obs`` (a dict key or an attribute of a
-    non-array object)."""
+    """Whether :func:`obs_field` finds ``name``: a dict key, or an attribute of a non-array object."""
     if isinstance(obs, dict):
         return name in obs
     return not hasattr(obs, "shape") and hasattr(obs, name)
 
 
 def flatten_obs(obs: Any) -> jax.Array:
-    """Flatten every leaf of ``obs`` (leaves ``[T, N, ...]``) after ``[T, N]`` and concatenate.
-
-    Returns ``f32[T, N, D]`` with leaves in ``jax.tree.leaves`` order.
-    """
+    """``f32[T, N, D]``: every leaf of ``obs`` (leaves ``[T, N, ...]``) flattened after ``[T, N]``,
+    concatenated in ``jax.tree.leaves`` order."""
     leaves = jax.tree.leaves(obs)
     return jnp.concatenate(
         [jnp.reshape(x, x.shape[:2] + (-1,)).astype(jnp.float32) for x in leaves], axis=-1
@@ -68,17 +61,12 @@ def dense(features: int, name: str) -> nn.Dense:
 
 
 class ActorCriticHeads(nn.Module):
-    """Separate policy and value heads: ``Dense(hidden) -> act -> Dense(out)`` each.
-
-    ``x``: ``f32[..., D]`` -> ``(logits f32[..., num_actions], value f32[...])``; with
-    ``continuous`` the policy output is ``f32[..., 2·num_actions]``: the Gaussian mean (the
-    Dense output) then a state-independent log-std parameter ``log_std`` (zeros initially).
-
-    The parameters are those of ``nn.Dense`` layers named ``policy_hidden``, ``policy_out``,
-    ``value_hidden`` and ``value_out`` (same names, shapes, initialisers and so initial values);
-    the two hidden layers are computed as one product with their kernels side by side
-    (``[D, 2·hidden]``): one product forward and one backward instead of two each plus a sum.
-    """
+    """Separate policy and value heads, ``Dense(hidden) -> act -> Dense(out)`` each: ``x f32[..., D]
+    -> (logits f32[..., num_actions], value f32[...])``; with ``continuous`` the policy output is
+    ``f32[..., 2·num_actions]``, the mean then a state-independent ``log_std`` (zeros initially).
+    Its parameters are those of ``nn.Dense`` layers ``policy_hidden``, ``policy_out``, ``value_hidden``
+    and ``value_out``; the two hidden layers are one product, kernels side by side (``[D, 2·hidden]``):
+    one product forward and one backward instead of two plus a sum."""
 
     num_actions: int
     hidden: int = 32
@@ -108,16 +96,13 @@ def zero_lstm_carry(batch_size: int, features: int) -> tuple[jax.Array, jax.Arra
 
 
 class ResetLSTM(nn.Module):
-    """An LSTM scanned over time whose carry is zeroed at steps where ``reset`` is True.
+    """An LSTM scanned over time, its carry zeroed at steps where ``reset`` is True.
 
-    ``carry``: ``(c, h)`` each ``f32[N, features]``; ``inputs``: ``(x f32[T, N, D], reset bool[T, N])``.
-    Returns ``(carry, y f32[T, N, features])``.
-
-    The parameters are those of :class:`flax.linen.OptimizedLSTMCell` (submodule ``cell``: input
-    kernels ``ii if ig io`` ``[D, features]``, recurrent kernels and biases ``hi hf hg ho``, the
-    same initialisers), and so is the arithmetic (:mod:`remidi.engine.core.lstm`). The kernels and
-    the bias are joined once, outside the loop over time, into one ``[D + 1 + features,
-    4·features]`` matrix that multiplies ``[x, 1, h]`` at each step, and the backward pass
+    ``carry``: ``(c, h)`` each ``f32[N, features]``; ``inputs``: ``(x f32[T, N, D], reset bool[T, N])``;
+    returns ``(carry, y f32[T, N, features])``. Parameters and arithmetic are
+    :class:`flax.linen.OptimizedLSTMCell`'s (submodule ``cell``: input kernels ``ii if ig io``
+    ``[D, features]``, recurrent kernels and biases ``hi hf hg ho``), joined once, outside the loop,
+    into one ``[D + 1 + features, 4·features]`` matrix multiplying ``[x, 1, h]``; the backward pass
     computes the weight gradients after the loop, as single large products.
     """
 
@@ -131,9 +116,8 @@ class ResetLSTM(nn.Module):
 
 
 class _LSTMParams(nn.Module):
-    """The parameters of :class:`flax.linen.OptimizedLSTMCell` (same names, shapes, initialisers
-    and so the same initial values), returned joined: ``(kernel f32[D + H, 4H], bias f32[4H])``,
-    gates in the order ``i f g o``."""
+    """:class:`flax.linen.OptimizedLSTMCell`'s parameters (same names, shapes, initialisers), joined:
+    ``(kernel f32[D + H, 4H], bias f32[4H])``, gates in the order ``i f g o``."""
 
     features: int
 
@@ -163,13 +147,12 @@ class _Kernel(nn.Module):
 
 
 class PatchConv(nn.Module):
-    """``nn.Conv(features, kernel_size, padding="VALID")`` with the same parameters (``kernel``
-    ``[kh, kw, C, features]``, ``bias``), initial values and outputs, computed as one matrix
-    product of the image's patches ``[..., kh·kw·C]`` with the kernel. ``x``: ``[..., H, W, C]``
-    (any leading axes); returns ``[..., H − kh + 1, W − kw + 1, features]``.
+    """``nn.Conv(features, kernel_size, padding="VALID")`` (same ``kernel [kh, kw, C, features]``,
+    ``bias``, initial values and outputs) as one product of the image's patches ``[..., kh·kw·C]``
+    with the kernel. ``x``: ``[..., H, W, C]``; returns ``[..., H − kh + 1, W − kw + 1, features]``.
 
-    Why: on a CPU, XLA's convolution of the maze agent's 5×5 views ran at ≈ 3 GFLOP/s (its
-    weight gradient alone took 7% of a PPO update); the product runs at the machine's matrix rate.
+    Why: on a CPU, XLA's convolution of the maze agent's 5×5 views ran at ≈ 3 GFLOP/s (its weight
+    gradient alone 7% of a PPO update); the product runs at the machine's matrix rate.
     """
 
     features: int
@@ -187,18 +170,16 @@ class PatchConv(nn.Module):
 
 
 def lstm_carry_or_dummy(batch_size: int, lstm_size: int):
-    """The initial carry of a network whose LSTM is optional (:func:`lstm_and_heads`): zero
-    ``(c, h)``, each ``f32[batch_size, lstm_size]``, or with ``lstm_size`` 0 the feed-forward
-    dummy ``f32[batch_size]``."""
+    """The initial carry for :func:`lstm_and_heads`: zero ``(c, h)``, each ``f32[batch_size,
+    lstm_size]``, or with ``lstm_size`` 0 the feed-forward dummy ``f32[batch_size]``."""
     return zero_lstm_carry(batch_size, lstm_size) if lstm_size > 0 else jnp.zeros((batch_size,), jnp.float32)
 
 
 def lstm_and_heads(net: nn.Module, carry, x, reset):
-    """What follows an encoder, called inside ``net``'s compact ``__call__`` (its submodules
-    ``lstm`` and ``heads``): an LSTM of ``net.lstm_size`` units (none if 0: the carry passes
-    unchanged), then the policy and value heads (:class:`ActorCriticHeads`, ``net.head_hidden``
-    units, ``net.activation``). ``x``: ``f32[T, N, D]``; ``reset``: ``bool[T, N]``. Returns
-    ``(carry, (logits, value))``."""
+    """What follows an encoder inside ``net``'s compact ``__call__`` (submodules ``lstm``,
+    ``heads``): an LSTM of ``net.lstm_size`` units (none if 0: the carry passes unchanged), then
+    the heads (``net.head_hidden`` units, ``net.activation``). ``x``: ``f32[T, N, D]``; ``reset``:
+    ``bool[T, N]``. Returns ``(carry, (logits, value))``."""
     if net.lstm_size > 0:
         carry, x = ResetLSTM(net.lstm_size, name="lstm")(carry, (x, reset))
     heads = ActorCriticHeads(net.num_actions, net.head_hidden, net.activation, net.continuous, name="heads")
@@ -226,8 +207,7 @@ def flat_problem(obs) -> str | None:
 
 
 # ---------------------------------------------------------------------------- the policy's distributions
-# what a policy head's output parameterises (chosen per action space by
-# :func:`remidi.engine.core.distributions.for_task`): sampled in the rollout, scored in PPO's loss
+# what a policy head's output parameterises: sampled in the rollout, scored in PPO's loss
 
 
 @dataclass(frozen=True)
@@ -313,9 +293,8 @@ class DiagGaussian:
 
 @dataclass(frozen=True)
 class MultiCategorical:
-    """Independent categoricals, one per component: component ``i`` has ``nvec[i]`` choices and
-    its logits are the next ``nvec[i]`` entries of ``out`` (``f32[..., Σ nvec]``); an action is
-    ``i32[..., k]``. Its log-probability and entropy are the components' sums."""
+    """Independent categoricals: component ``i``'s ``nvec[i]`` logits are the next entries of ``out``
+    (``f32[..., Σ nvec]``); an action is ``i32[..., k]``; log-probability and entropy are sums."""
 
     nvec: tuple[int, ...]
     continuous = False

@@ -14,19 +14,16 @@ from remidi.engine.core.networks.base import (ACTIVATIONS, HIDDEN_INIT, ZEROS, A
 
 
 class FeedForwardActorCritic(nn.Module):
-    """MLP actor-critic: flattened obs -> ``hidden`` trunk -> 32-unit policy and value heads.
+    """MLP actor-critic: flattened obs -> ``hidden`` trunk -> 32-unit policy and value heads; the
+    carry is a dummy ``f32[N]`` returned unchanged.
 
-    Default: two 256-unit tanh layers (the lever-game agent), tanh in both heads' hidden layers.
-    The paper does not name the activation; the authors' lever agent (``ActorCriticFeedForward``
-    in their ``lib/common/ppo.py``) has a ReLU trunk, a tanh policy head and a ReLU value head,
-    with flax's default initialisation in the trunk. tanh is kept deliberately: in this engine
-    ReLU learns the visible levels far more slowly (one untested difference: the lever preset
-    plays 16 steps per rollout, the authors' code 256). Measured on ``remidi run lever --algo
-    remidi --preset smoke`` (2 seeds), the solve rate on visible levels is about 0.3 with tanh,
-    0.06 with ReLU (still below 0.1 after 1000 updates), and 0.15 with the authors' exact
-    architecture and initialisation, so the smoke pattern of the paper's Figure 8
-    (``tests/test_lever_smoke.py``) holds only with tanh. ``activation="relu"`` is available.
-    The carry is a dummy ``f32[N]`` returned unchanged.
+    Default: two 256-unit tanh layers (the lever-game agent), tanh in the heads. The paper names no
+    activation and the authors' lever agent has a ReLU trunk, a tanh policy head and a ReLU value
+    head; tanh is kept because here ReLU learns the visible levels far more slowly. On ``remidi run
+    lever --algo remidi --preset smoke`` (2 seeds; untested difference: 16 steps per rollout, the
+    authors' 256) the visible-level solve rate is about 0.3 with tanh, 0.06 with ReLU and 0.15 with
+    the authors' exact architecture, so the smoke pattern of the paper's Figure 8
+    (``tests/test_lever_smoke.py``) holds only with tanh.
     """
 
     reads = "any observation: every leaf flattened into one vector"
@@ -60,15 +57,13 @@ class FeedForwardActorCritic(nn.Module):
 
 
 class MazeLSTMActorCritic(nn.Module):
-    """The maze agent of the paper (SPEC §5) and of jaxued's maze examples: conv(5x5 view) +
-    embedded direction -> LSTM(256) -> 32-unit heads.
+    """The maze agent of the paper and of jaxued's maze examples: conv(5x5 view) + embedded
+    direction -> LSTM(256) -> 32-unit relu heads.
 
-    ``obs`` has ``image`` (u8/f32 ``[T, N, 5, 5, 3]``) and ``agent_dir`` (i32 ``[T, N]``, 0..3),
-    as attributes (e.g. jaxued's ``Observation``) or dict keys. The image goes through a 3x3
-    ``VALID`` conv with 16 channels, is flattened and passes a relu; the direction is one-hot
-    encoded and embedded by a linear ``Dense(5)``; their concatenation feeds the LSTM, whose
-    output feeds the relu policy and value heads (``Dense(32) -> relu -> Dense``). Carry:
-    ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially.
+    ``obs`` has ``image`` (u8/f32 ``[T, N, 5, 5, 3]``) and ``agent_dir`` (i32 ``[T, N]``, 0..3), as
+    attributes or dict keys. The image passes a 3x3 ``VALID`` conv with 16 channels, is flattened
+    and relu'd; the direction is one-hot and embedded by a linear ``Dense(5)``. Carry: ``(c, h)``
+    each ``f32[N, lstm_size]``, zeros initially.
     """
 
     reads = "image [H, W, C] (H, W ≥ 3; the mazes' 5×5×3 view) and agent_dir [] (an integer, 0..3)"
@@ -116,13 +111,12 @@ class MazeLSTMActorCritic(nn.Module):
 
 
 class MLPLSTMActorCritic(nn.Module):
-    """A recurrent agent for vector observations (the Brax agent): flattened obs -> ``hidden``
-    fully-connected layers -> LSTM(``lstm_size``) -> ``head_hidden``-unit policy and value heads.
+    """A recurrent agent for vector observations: flattened obs -> ``hidden`` layers ->
+    LSTM(``lstm_size``) -> ``head_hidden``-unit heads. Carry: ``(c, h)`` each ``f32[N, lstm_size]``.
 
     Default (the paper's Brax agent, appendix): two 256-unit tanh layers, a 256-unit LSTM, 64-unit
-    tanh heads; with ``continuous``
-    a Gaussian policy with a state-independent log-std (PureJaxRL's continuous PPO agent, with
-    a recurrent cell between trunk and heads). Carry: ``(c, h)`` each ``f32[N, lstm_size]``.
+    tanh heads; with ``continuous`` a Gaussian policy with a state-independent log-std
+    (PureJaxRL's continuous PPO agent, a recurrent cell between trunk and heads).
     """
 
     reads = "any observation: every leaf flattened into one vector"
@@ -157,13 +151,12 @@ class MLPLSTMActorCritic(nn.Module):
 
 
 class GeneratorLSTMActorCritic(nn.Module):
-    """The level generator of the reference libraries (JaxUED's ``maze_paired.py`` adversary, as
-    DCD's): over a builder's observation (:mod:`remidi.envs.builder`) ``design`` (an image
-    ``[T, N, H, W, C]`` goes through a 3x3 ``VALID`` conv with ``conv_features`` channels and a
-    relu, anything else is flattened), ``time`` (one-hot ``[T, N, num_steps]``, embedded by a
-    linear ``Dense(time_embed)``: an embedding table of the step) and ``noise`` (as it is), all
-    concatenated -> LSTM(``lstm_size``) -> relu policy and value heads (``Dense(32)``).
-    Carry: ``(c, h)`` each ``f32[N, lstm_size]``, zeros initially."""
+    """The level generator of JaxUED's ``maze_paired.py`` (as DCD's), over a builder's observation
+    (:mod:`remidi.envs.builder`): ``design`` (an image ``[T, N, H, W, C]`` through a 3x3 ``VALID``
+    conv of ``conv_features`` channels and a relu, else flattened), ``time`` (one-hot ``[T, N,
+    num_steps]`` embedded by a linear ``Dense(time_embed)``) and ``noise``, concatenated ->
+    LSTM(``lstm_size``) -> relu heads (``Dense(32)``). Carry: ``(c, h)`` each ``f32[N, lstm_size]``,
+    zeros initially."""
 
     reads = "design (an image [H, W, C] or any array), time (one-hot f32[num_steps]) and noise f32[D]"
 

@@ -525,7 +525,7 @@ def test_remidi_over_paired_learns_a_model_of_each_generator_and_freezes_it_at_t
     frozen0 = jax.tree.map(lambda x: x[0], runner.tracker.params)
     runner, metrics = step(runner)  # the next generator's model learns; the frozen one stays as it was
     assert int(runner.tracker.fits) == 1 and not changed(jax.tree.map(lambda x: x[0], runner.tracker.params), frozen0)
-    assert setup.algo.adversary.frozen(setup, runner).belief is not None
+    assert setup.tracker.frozen(setup, runner).belief is not None
 
 
 @pytest.mark.parametrize("extra, needle", [
@@ -645,10 +645,10 @@ def test_the_audit_compares_the_belief_judgement_with_the_exact_trackers_on_the_
             buffers=bufs, active=jnp.asarray(1, runner0.adversary.active.dtype)), tracker=belief)
         out = {k: float(v) for k, v in audit(setup, runner, jax.random.PRNGKey(1)).items()}
         exact = collect(plain, runner.replace(tracker=None), k_roll, fresh,
-                        plain.algo.adversary.frozen(plain, runner.replace(tracker=None))).indist
+                        plain.tracker.frozen(plain, runner.replace(tracker=None))).indist
         share = float(np.mean(np.asarray(exact)))
         # the audit's two rollouts (belief-judged and exact-judged) are the same steps
-        frozen = setup.algo.adversary.frozen(setup, runner).replace(params=None)
+        frozen = setup.tracker.frozen(setup, runner).replace(params=None)
         one = collect(setup, runner, k_roll, fresh, frozen)
         two = collect(setup, runner, k_roll, fresh, frozen.replace(belief=None, tracker=ExactTracker()))
         for a, b in ((one.action, two.action), (one.done, two.done), (one.obs, two.obs)):

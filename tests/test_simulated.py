@@ -314,7 +314,7 @@ def test_each_seed_draws_its_own_simulation_noise():
     runner = runner.replace(adversary=runner.adversary.replace(active=jnp.asarray(1, jnp.int32)))
 
     def key(seed):
-        return np.asarray(jax.random.key_data(setup.algo.adversary.frozen(setup, runner.replace(rng=jax.random.PRNGKey(seed))).belief.key))
+        return np.asarray(jax.random.key_data(setup.tracker.frozen(setup, runner.replace(rng=jax.random.PRNGKey(seed))).belief.key))
 
     assert not np.array_equal(key(0), key(1))
     np.testing.assert_array_equal(key(0), key(0))

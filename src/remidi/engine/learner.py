@@ -90,13 +90,6 @@ class Stepping:
             object.__setattr__(self, "tracker_env", self.raw)
         object.__setattr__(self, "auto", AutoReplay(self.raw, self.deterministic_reset, self.solved_info))
 
-    def start(self, obs, env_state, levels) -> AutoReplayState:
-        """The N envs' state at the start of their episodes (the reset's ``obs`` and ``env_state``)."""
-        num_envs = jax.tree.leaves(levels)[0].shape[0]
-        return AutoReplayState(env_state=env_state, level=levels,
-                               start=(obs, env_state) if self.deterministic_reset else None,
-                               solved=jnp.zeros((num_envs,), bool) if self.solved_info is not None else None)
-
     def restart_where_done(self, state: AutoReplayState, stepped, reset_keys):
         """The N envs' step ``stepped = (obs, env_state, reward, done, info)`` from ``state``, the
         level restarted where the episode ended (from its first state, or reset with ``reset_keys``
@@ -202,9 +195,12 @@ def rollout(rng, envs: Stepping, policy: Policy, levels, num_steps: int, frozen=
     tracker = frozen.tracker if frozen is not None else None
     if tracker is None:
         obs, env_state = jax.vmap(env.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, envs.params)
-        state, tstate = envs.start(obs, env_state, levels), None
+        tstate = None
     else:
-        obs, state, tstate = tracker.reset(envs, frozen, reset_keys, levels)
+        obs, env_state, tstate = tracker.reset(envs, frozen, reset_keys, levels)
+    # each env's episode restarts its level: from its first state where the reset ignores its key
+    state = AutoReplayState(env_state=env_state, level=levels, start=(obs, env_state) if envs.deterministic_reset else None,
+                            solved=jnp.zeros((num_envs,), bool) if envs.solved_info is not None else None)
     combining = frozen is not None and frozen.params is not None
 
     def _env_step(carry, key):

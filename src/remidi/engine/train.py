@@ -78,7 +78,7 @@ def train_step(setup: Setup, runner: Runner):
 
     # COLLECT TRAJECTORIES
     # a sequence's tracker beside the envs, against its frozen levels (no tracker: the envs alone)
-    frozen = adversary.frozen(setup, runner, proposal) if setup.tracker is not None else None
+    frozen = setup.tracker.frozen(setup, runner, proposal) if setup.tracker is not None else None
     collection = lrn.collect(setup, runner.learner, k_roll, proposal.levels, frozen)
     traj = collection.traj
 

@@ -4,7 +4,6 @@ The train step asks the algorithm's adversary, never its flags:
 
 * :meth:`Adversary.init`: its state (``Runner.adversary``);
 * :meth:`Adversary.propose`: this update's N levels (a :class:`Proposal`);
-* :meth:`Adversary.frozen`: what the tracker compares against (None: no tracker runs);
 * :meth:`Adversary.update`: after scoring (an :class:`Outcome`): new scores or insertions;
 * :meth:`Adversary.advance`: the end of the update (a sequence's switch, ACCEL's memory);
 * :meth:`Adversary.metrics`: what its buffers hold.
@@ -112,11 +111,6 @@ class Adversary:
         replay = jnp.asarray(False)
         return Proposal(replay=replay, levels=fresh, buffer=buf.select_buffer(state.buffers, state.active),
                         slots=None, train=replay | self.trains_on_fresh)
-
-    def frozen(self, setup, runner, proposal: Proposal | None = None):
-        """The rollout's :class:`~remidi.engine.trackers.base.Frozen` view (None: nothing is frozen
-        and no tracker runs beside the environments)."""
-        return None
 
     def active_levels(self, setup, runner):
         """``(levels [C, ...], valid bool[C])``: the active buffer's (a simulated tracker calibrates on them)."""

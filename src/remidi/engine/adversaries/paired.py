@@ -24,7 +24,7 @@ from flax import struct
 from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal, empty_buffers
-from remidi.engine.adversaries.plr import buffer_contents, sequence_advance, sequence_frozen
+from remidi.engine.adversaries.plr import buffer_contents, sequence_advance
 from remidi.engine.config import buffer_config
 from remidi.engine.core.networks import FeedForwardActorCritic, GeneratorLSTMActorCritic
 from remidi.engine.core.ppo import create_train_state
@@ -239,8 +239,6 @@ class GeneratorSequence(LevelGenerator):
         if not self.buffer_sequence:
             raise ConfigError("adversary: GeneratorSequence is a sequence of generators (without it, it is PAIRED's "
                               "LevelGenerator); allowed: buffer_sequence=True")
-
-    frozen = sequence_frozen
 
     def own_levels(self, proposal: Proposal) -> jax.Array:
         """Every update plays the active generator's levels, so a learned tracker learns from each."""

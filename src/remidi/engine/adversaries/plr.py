@@ -6,7 +6,7 @@ levels sampled from it (by score rank or top-k, mixed with staleness:
 inserted by score. With ``buffer_sequence`` (ReMiDi) the adversary is a sequence of
 ``remidi.num_buffers`` buffers: after ``remidi.steps_per_buffer`` updates the active one is frozen
 and the next takes over (the last stays); the frozen ones' levels go to the tracker
-(:func:`sequence_frozen`), a fresh level a frozen one explains at every step (a
+(:meth:`~remidi.engine.trackers.base.Tracker.frozen`), a fresh level a frozen one explains at every step (a
 complete overlap) is never inserted, and with ``remidi.rehearsal`` an update may instead rehearse
 a frozen buffer's levels (:func:`rehearse_frozen`).
 """
@@ -20,26 +20,6 @@ import jax.numpy as jnp
 
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Outcome, Proposal, empty_buffers, tag_counts
-
-
-def sequence_frozen(adversary, setup, runner, proposal: Proposal | None = None):
-    """A sequence's ``frozen`` method (:meth:`~remidi.engine.adversaries.base.Adversary.frozen`):
-    the tracker's view (:meth:`~remidi.engine.trackers.base.Tracker.frozen`) of every buffer
-    before the active one as one batch of F = (K−1)·capacity (buffer-major; nothing frozen with
-    fewer than two buffers); None without a tracker (an algorithm that is no sequence). A
-    rehearsal's rollout explains no step (its levels are frozen levels: rehearsal trains on every
-    step to keep what they taught)."""
-    if setup.tracker is None:
-        return None
-    state, earlier = runner.adversary, None
-    if setup.cfg.remidi.num_buffers >= 2:
-        buffers = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
-        valid = buffers.valid & (jnp.arange(buffers.valid.shape[0]) < state.active)[:, None]
-        earlier = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), buffers.levels), valid.reshape(-1)
-    view = setup.tracker.frozen(setup, runner, earlier)
-    if view is None or proposal is None or proposal.rehearse is None:
-        return view
-    return view.replace(rehearse=proposal.rehearse)
 
 
 @dataclass(frozen=True)
@@ -68,8 +48,6 @@ class LevelBuffers(Adversary):
         if self.buffer_sequence and setup.cfg.remidi.rehearsal > 0:
             proposal = rehearse_frozen(setup, state, proposal, jax.random.fold_in(k_branch, 1))
         return proposal
-
-    frozen = sequence_frozen  # a sequence's tracker view of its earlier buffers; None for one buffer
 
     def best_return(self, proposal: Proposal, best_return):
         """For a replayed level, the buffer's record too."""

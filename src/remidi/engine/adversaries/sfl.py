@@ -32,7 +32,7 @@ from remidi.engine import learner as lrn
 from remidi.engine.adversaries import level_buffer as buf
 from remidi.engine.adversaries import scores as sc
 from remidi.engine.adversaries.base import Adversary, AdversaryState, Proposal
-from remidi.engine.adversaries.plr import buffer_contents, sequence_advance, sequence_frozen
+from remidi.engine.adversaries.plr import buffer_contents, sequence_advance
 from remidi.engine.config import BufferConfig, num_buffers
 from remidi.engine.learner import nonfinite, nonfinite_names
 from remidi.engine.core.seeds import cond_per_seed
@@ -122,7 +122,7 @@ class LearnabilityBuffers(Adversary):
         tracker against the frozen levels), the K most learnable kept (:func:`select_top`).
         Returns it with its rollouts' :func:`~remidi.engine.learner.nonfinite` flags."""
         s = setup.cfg.sfl
-        frozen = self.frozen(setup, runner, None)
+        frozen = setup.tracker.frozen(setup, runner) if setup.tracker is not None else None
 
         def one_batch(key):
             k_levels, k_roll = jax.random.split(key)
@@ -141,8 +141,6 @@ class LearnabilityBuffers(Adversary):
         return old.replace(levels=jax.tree.map(kept, levels), scores=kept(scores), valid=valid,
                            extras={"solve_rate": kept(rates)}, last_seen=jnp.zeros_like(old.last_seen),
                            time=old.time + 1), jax.tree.map(jnp.max, flags)
-
-    frozen = sequence_frozen  # a sequence's tracker view of its earlier buffers; None for one buffer
 
     def update(self, setup, runner, proposal: Proposal, outcome, rng):
         """The refreshed buffer becomes the active one; reports ``sfl/buffer_learnability`` and

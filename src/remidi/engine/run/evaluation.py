@@ -60,7 +60,7 @@ def first_step_policy(setup: Setup, runner: Runner, env, levels, action: str = "
     if combines(setup):
         # every frozen level stepped at the first observation: the tracker's reference (the exact
         # trackers' reference tracker; a learned tracker judges the first observation itself)
-        frozen = setup.algo.adversary.frozen(setup, runner)
+        frozen = setup.tracker.frozen(setup, runner)
         frozen = frozen.replace(tracker=frozen.tracker.at_first_observation())
         tstate = frozen.tracker.start(task.env, task.params, frozen, keys, obs)
         copies = jax.tree.leaves(frozen.params)[0].shape[0]
@@ -83,7 +83,7 @@ def level_episodes(setup: Setup, runner: Runner, env, levels, attempts: int, rng
     ``ppo.gamma``; ``flags``: the last-step info flag where ``solved`` names an info key, else None
     (judge with :func:`~remidi.engine.adversaries.scores.episode_solved`)."""
     task = setup.task
-    frozen = setup.algo.adversary.frozen(setup, runner) if combines(setup) else None  # act as the combined policy
+    frozen = setup.tracker.frozen(setup, runner) if combines(setup) else None  # act as the combined policy
     tiled = jax.tree.map(lambda x: jnp.repeat(x, attempts, axis=0), levels)  # each level's attempts side by side
     n = jax.tree.leaves(tiled)[0].shape[0]
     traj, _ = rollout(rng, Stepping(env, task.params, task.deterministic_reset, tracker_env=task.env,

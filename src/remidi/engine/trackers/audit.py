@@ -30,7 +30,7 @@ def audit_against_exact(tracker, setup, runner, rng) -> dict[str, jax.Array]:
     cfg = setup.cfg
     k_levels, k_roll = jax.random.split(rng)
     levels = jax.vmap(setup.task.sample_level)(jax.random.split(k_levels, cfg.num_envs))
-    frozen = setup.algo.adversary.frozen(setup, runner).replace(params=None)  # the current policy acts in both
+    frozen = setup.tracker.frozen(setup, runner).replace(params=None)  # the current policy acts in both
     # the exact tracker a `prefix` run would use (candidate slots where the reset allows)
     budget = exact_budget(setup.task, cfg.remidi, "prefix")
     exact = frozen.replace(belief=None, tracker=make_tracker("prefix", budget))

@@ -9,7 +9,7 @@ tracks against; None: nothing frozen), :meth:`Tracker.learn`, :meth:`Tracker.fre
 switch), :meth:`Tracker.metrics`, :meth:`Tracker.audit`.
 
 * :meth:`Tracker.init`: the state it carries across updates (None: nothing);
-* :meth:`Tracker.frozen`: the :class:`Frozen` view of the earlier adversaries' levels a rollout
+* 
   tracks against (None while nothing is frozen, and for an adversary that freezes nothing);
 * :meth:`Tracker.learn`: after a rollout, what it learns from it (a learned model);
 * :meth:`Tracker.freeze`: at an adversary switch, what it freezes with the adversary;
@@ -72,13 +72,20 @@ class Tracker:
         """The state carried across updates (``Runner.tracker``); ``rng``: the runner's key, folded."""
         return None
 
-    def frozen(self, setup, runner, earlier) -> Frozen | None:
-        """The rollout's view of the earlier adversaries' levels ``earlier = (levels [F, ...],
-        valid bool[F])`` (None: nothing frozen), with the policies frozen with them under Combine."""
-        if earlier is None:
+    def frozen(self, setup, runner, proposal=None) -> Frozen | None:
+        """The rollout's view of the sequence's frozen levels: every buffer before the active one
+        (``runner.adversary``'s buffers, leaves [K, C, ...]) as one batch of F = (K−1)·C,
+        buffer-major, with the policies frozen with them under Combine; None with fewer than two
+        buffers. On a rehearsal (``proposal.rehearse``) the rollout explains no step: its levels
+        are frozen levels, and rehearsal trains on every step to keep what they taught."""
+        if setup.cfg.remidi.num_buffers < 2:
             return None
-        levels, valid = earlier
-        return Frozen(levels=levels, valid=valid, params=runner.learner.frozen_params, tracker=self)
+        state = runner.adversary
+        buffers = jax.tree.map(lambda x: x[:-1], state.buffers)  # the last buffer is never frozen
+        valid = buffers.valid & (jnp.arange(buffers.valid.shape[0]) < state.active)[:, None]
+        levels = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), buffers.levels)
+        return Frozen(levels=levels, valid=valid.reshape(-1), params=runner.learner.frozen_params, tracker=self,
+                      rehearse=None if proposal is None else proposal.rehearse)
 
     def learn(self, setup, runner, proposal, traj) -> tuple[Any, dict]:
         """After the update's rollout ``traj`` of ``proposal``: ``(state, step metrics)``."""
@@ -103,8 +110,8 @@ class Tracker:
     # ------------------------------------------------------------------ per rollout step
     def reset(self, envs, frozen: Frozen, reset_keys, levels):
         """The N envs reset to ``levels`` with ``reset_keys`` [N] (``envs``: the rollout's
-        :class:`~remidi.engine.learner.Stepping`): ``(obs, env state, tracker state)``."""
-        obs, state = jax.vmap(envs.auto.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, envs.params)
+        :class:`~remidi.engine.learner.Stepping`): ``(obs, the environment's state, tracker state)``."""
+        obs, state = jax.vmap(envs.raw.reset_to_level, in_axes=(0, 0, None))(reset_keys, levels, envs.params)
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs)
 
     def step(self, envs, frozen: Frozen, env_keys, state, tstate, action):

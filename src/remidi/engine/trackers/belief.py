@@ -80,9 +80,9 @@ class BeliefTracker(Tracker):
                            (cfg.num_steps, cfg.num_envs), jax.random.fold_in(rng, 31),
                            max_length=setup.task.max_episode_steps, reference=self.settings.reference)
 
-    def frozen(self, setup, runner, earlier) -> Frozen | None:
+    def frozen(self, setup, runner, proposal=None) -> Frozen | None:
         """The earlier adversaries' learned models judge (their levels kept for the audit)."""
-        view = super().frozen(setup, runner, earlier)
+        view = super().frozen(setup, runner, proposal)
         if view is None:
             return None
         return view.replace(belief=frozen_beliefs(runner.tracker, runner.adversary.active))

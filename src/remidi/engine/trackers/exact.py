@@ -177,8 +177,7 @@ class CandidateTracker(ExactTracker):
         frozen_keys = jnp.broadcast_to(reset_keys[:1], (frozen.valid.shape[0],) + reset_keys.shape[1:])
         keys = jnp.concatenate([reset_keys, frozen_keys])
         obs_all, states_all = jax.vmap(envs.raw.reset_to_level, in_axes=(0, 0, None))(keys, both, envs.params)
-        obs, raw_state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
-        state = envs.start(obs, raw_state, levels)
+        obs, state = jax.tree.map(lambda x: x[:num_envs], (obs_all, states_all))
         starts = jax.tree.map(lambda x: x[num_envs:], (obs_all, states_all))
         return obs, state, self.start(envs.tracker_env, envs.params, frozen, reset_keys, obs, starts)
 

@@ -277,9 +277,9 @@ class Simulated(Tracker):
                          levels=jax.tree.map(lambda x: jnp.zeros(batch[:1] + (cfg.num_envs,) + x.shape, x.dtype), level),
                          written=jnp.zeros((), jnp.int32), ref=ref, ref_opt=ref_opt, ref_frozen=ref_frozen)
 
-    def frozen(self, setup, runner, earlier) -> Frozen | None:
+    def frozen(self, setup, runner, proposal=None) -> Frozen | None:
         """The earlier buffers' levels, simulated with the learnt noise (the copies' key: 19)."""
-        view = super().frozen(setup, runner, earlier)
+        view = super().frozen(setup, runner, proposal)
         if view is None:
             return None
         k = setup.cfg.remidi.num_buffers - 1  # the last buffer is never frozen

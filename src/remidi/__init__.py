@@ -1,9 +1,10 @@
 """remidi: ReMiDi and Bayesian level-perfect minimax regret (BLP) for unsupervised environment design.
 
 ``remidi.run_ued`` trains a task of your own (docs/extending.md); ``remidi.register_algorithm``,
-``remidi.register_score`` and ``remidi.register_network`` add an algorithm made of existing
-components, a level score and an agent network without editing the library (docs/extending.md,
-examples/my_algorithm.py, examples/my_score.py, examples/my_network.py).
+``remidi.register_score``, ``remidi.register_network`` and ``remidi.register_replay_rule`` add an
+algorithm made of existing components, a level score, an agent network and a buffer's replay rule
+without editing the library (docs/extending.md, examples/my_algorithm.py, examples/my_score.py,
+examples/my_network.py, examples/my_replay_rule.py).
 """
 
 __version__ = "0.1.0"

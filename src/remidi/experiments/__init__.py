@@ -1,11 +1,9 @@
 """Registry of the reproducible experiments: ``remidi run NAME``.
 
-The built-in experiments are described in ``catalog.json`` (each one's module, description,
-presets and algorithms), generated from the modules by ``python -m remidi.experiments`` and
-checked to be current by ``tests/test_catalog.py``: the command line answers ``remidi list``,
-``remidi run --help`` and a mistyped name or preset from it without importing JAX (which takes
-seconds), and :func:`get_experiment` imports only the module of the experiment asked for.
-"""
+``catalog.json`` describes the built-in ones (module, description, presets, algorithms), generated
+by ``python -m remidi.experiments`` and checked by ``tests/test_catalog.py``, so ``remidi list``,
+``--help`` and a mistyped name are answered without importing JAX (seconds), and
+:func:`get_experiment` imports only the module asked for."""
 
 from __future__ import annotations
 
@@ -24,8 +22,8 @@ MODULES = ("tabular", "lever", "darkroom", "darkreach", "maze", "brax", "gymnax"
 @cache
 def catalog() -> dict[str, dict]:
     """{name: {"module", "description", "presets", "preset_seeds", "algorithms",
-    "default_algorithms"}} of the built-in experiments, in ``remidi list``'s order; the algorithms
-    are those of the library itself (:func:`remidi.register_algorithm` adds more at run time)."""
+    "default_algorithms"}} of the built-in experiments in ``remidi list``'s order (the library's own
+    algorithms only)."""
     return json.loads(CATALOG.read_text())
 
 
@@ -65,12 +63,10 @@ def get_experiment(name: str):
 
 
 def saved_experiment(name: str, task: dict | None = None):
-    """The experiment of a run's ``config.json``: ``name`` (its ``experiment``) and ``task`` (its
-    ``task`` record, ``{"import": "module:function", "folder": ...}``, written for a user's task
-    given by import path): the task rebuilt from its import path, looked up in the recorded folder
-    first, whatever the current folder; else the registered experiment (or ``module:function`` from
-    the current folder, for runs recorded before the folder was). ConfigError (one line, saying what
-    to pass) for a user's task recorded without an import path."""
+    """The experiment of a run's ``config.json`` (``name``, ``task``): a user's task rebuilt from its
+    import path, looked up in the recorded folder first; else the registered experiment (or
+    ``module:function`` from the current folder where no folder is recorded). ConfigError (one line)
+    for a user's task recorded without an import path."""
     if task is not None:
         from remidi.experiments.custom import import_experiment
 

@@ -1,11 +1,9 @@
 """The experiment contract: what every ``remidi run`` goes through.
 
-An :class:`Experiment` says which algorithms and presets it has, how to build and validate its
-configuration, how to train one algorithm for a set of seeds (returning a :class:`RunResult`)
-and how to plot results; a :class:`RunSpec` is one run of it (algorithms, preset, seeds,
-``--set`` overrides, devices, loggers). :mod:`remidi.experiments.running` trains a fresh run and
-writes its folder, :mod:`remidi.experiments.resuming` continues one from its folder.
-"""
+An :class:`Experiment` names its algorithms and presets, builds and validates its configuration,
+trains one algorithm over seeds (a :class:`RunResult`) and plots; a :class:`RunSpec` is one run of
+it. :mod:`~remidi.experiments.running` trains a fresh run, :mod:`~remidi.experiments.resuming`
+continues one."""
 
 from __future__ import annotations
 
@@ -21,11 +19,8 @@ from remidi.experiments.overrides import apply_overrides, scale_dependents
 
 @dataclass
 class RunResult:
-    """What training one algorithm for all seeds produced.
-
-    ``history[name]`` f[S, T] at ``steps`` i[T]; ``final[name]`` f[S] (defaults to the last
-    history entry); ``extra`` goes into summary.json as additional top-level keys.
-    """
+    """What training one algorithm for all seeds produced: ``history[name]`` f[S, T] at ``steps``
+    i[T]; ``final[name]`` f[S] (default: the last history entry); ``extra``: more summary.json keys."""
 
     steps: np.ndarray
     history: dict[str, np.ndarray]
@@ -115,13 +110,10 @@ class Experiment:
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of an experiment, as ``remidi run`` (or ``run_ued``) asks for it: the algorithms in
-    the order given (each gets ``OUT/<algo>/`` when there are several), the preset and the
-    ``--set`` overrides on top of it (a resumed run's configuration comes from its config.json
-    instead), the seeds, the devices they are sharded over, the logging backends
-    (:mod:`remidi.loggers`), the command line that config.json records (None: this process's) and
-    the caller's words for its messages (:class:`~remidi.errors.Naming`: ``run_ued`` names its
-    arguments, not the command line's options)."""
+    """One run of an experiment, as ``remidi run`` or ``run_ued`` asks for it: the algorithms in the
+    order given, the preset and ``--set`` overrides, the seeds, the devices they shard over, the logging
+    backends, the command config.json records (None: this process's) and ``naming``, the caller's
+    words in messages (:class:`~remidi.errors.Naming`)."""
 
     exp: Experiment
     algos: list[str]
@@ -141,9 +133,8 @@ def default_preset(exp: Experiment) -> str:
 
 def resolve_config(exp: Experiment, preset: str, overrides: dict[str, Any], notes: list[str] | None = None,
                    naming: Naming = COMMAND_LINE):
-    """The preset's configuration with ``overrides`` on top; keys that depend on a length the
-    overrides change (``exp.scaled_keys``) and that they leave alone are scaled in proportion,
-    and a line saying so is appended to ``notes``. ``naming``: the caller's words in errors and notes."""
+    """The preset's configuration with ``overrides`` on top; keys depending on a changed length
+    (``exp.scaled_keys``) are scaled in proportion, said in a line appended to ``notes``."""
     if preset not in exp.presets:
         raise one_of("--preset", preset, exp.presets)
     base = apply_overrides(exp.config_factory(), exp.presets[preset], source=f"preset {preset}")

@@ -1,18 +1,13 @@
 """The robotics experiments (paper §6.5, Table 1): ``remidi run brax-ant|brax-halfcheetah|brax-hopper|brax-walker2d``.
 
-Training levels are Brax morphologies whose actions are scaled per dimension (type A) mixed with
-one-step guessing games of ±10000 (type B, irreducible regret), each type B with probability
-``brax.type_b_prob`` (:mod:`remidi.envs.brax`). PLR⊥ and minimax return fill their buffers and
-their replay with type B levels and never learn to walk; ReMiDi's second buffer rejects them
-(every type B level plays like the frozen ones) and trains on type A levels. Evaluation:
-``return/undisturbed``, the mean return on type A levels with θ = 1.
+Training levels mix Brax morphologies with per-dimension action scales (type A) and one-step
+guessing games of ±10000 (type B, irreducible regret, probability ``brax.type_b_prob``;
+:mod:`remidi.envs.brax`). PLR⊥ and minimax return fill up with type B and never walk; ReMiDi's
+second buffer rejects them. Evaluation: ``return/undisturbed``, type A with θ = 1.
 
-The optimal return of a type A level (for the perfect-regret score) is the return of a reference
-policy trained to convergence without disturbance, cached per morphology in
-``brax_reference.json`` beside this module with the command that produced it
-(``remidi run brax-<m> --algo dr --preset reference``); ``--set brax.reference_return=R`` uses
-another value.
-"""
+A type A level's optimal return is a converged reference policy's, cached per morphology in
+``brax_reference.json`` with its command (``--preset reference``); ``--set
+brax.reference_return=R`` overrides it."""
 
 from __future__ import annotations
 

@@ -29,34 +29,28 @@ MAX_ROLLOUT = 256  # an import-path task's rollouts last its episode bound, at m
 
 
 def buffer_capacity(config: UEDConfig) -> int:
-    """C, the one buffer capacity of an import-path task's run (PLR⊥, minimax return, ACCEL, each
-    ReMiDi buffer, SFL's kept levels): a sixteenth of the fresh levels PLR⊥ evaluates over the run,
-    ``num_updates × num_envs × (1 − buffer.replay_prob)``, rounded up and clamped to
-    [:data:`MIN_CAPACITY`, :data:`MAX_CAPACITY`]. A buffer then keeps about the best sixteenth of
-    what the generator offers (replay stays selective) while each level it holds can be replayed
-    about 16·p/(1 − p) times (64 at p = 0.8), enough for its score to follow the agent."""
+    """C, the one buffer capacity of an import-path task's run (every buffer and SFL's kept levels):
+    a sixteenth of the fresh levels PLR⊥ sees, ``num_updates × num_envs × (1 − buffer.replay_prob)``,
+    rounded up and clamped to [:data:`MIN_CAPACITY`, :data:`MAX_CAPACITY`]. Replay then stays
+    selective while each level is replayed about 16·p/(1 − p) times (64 at p = 0.8), enough for its
+    score to follow the agent."""
     fresh = config.num_updates * config.num_envs * (1.0 - config.buffer.replay_prob)
     return int(min(max(math.ceil(fresh / FRESH_PER_SLOT), MIN_CAPACITY), MAX_CAPACITY))
 
 
 def budget_defaults(task: UEDTask, config: UEDConfig, overrides: dict[str, Any]) -> UEDConfig:
-    """``config`` (a run's, its overrides applied) with the budget keys (:data:`BUDGET_KEYS`) that
-    ``overrides`` leave alone derived from its other keys, so that they follow ``--set
-    num_updates=N`` (and ``num_envs``, ``buffer.replay_prob``, ``remidi.num_buffers``,
-    ``num_steps``, ``eval_every``); a key the overrides set is kept as set:
+    """``config`` with the :data:`BUDGET_KEYS` that ``overrides`` leave alone derived from its other
+    keys, so they follow ``--set num_updates=N`` (and ``num_envs``, ``buffer.replay_prob``, ...):
 
-    * one capacity C for every buffer (:func:`buffer_capacity`; a capacity set by hand,
-      ``buffer.capacity`` or else ``remidi.buffer_capacity``, is C): ``buffer.capacity`` (PLR⊥,
-      minimax return, ACCEL), ``remidi.buffer_capacity`` (each of ReMiDi's adversaries is a PLR⊥
-      over its phase), ``sfl.buffer_size``;
-    * ``buffer.duplicate_check`` true: a small level space repeats levels, and a repeated level
-      updates its entry instead of filling the buffer with copies;
-    * ``remidi.steps_per_buffer`` = ⌈num_updates / remidi.num_buffers⌉: the switches spread over the run;
+    * one capacity C (:func:`buffer_capacity`, or a hand-set ``buffer.capacity`` /
+      ``remidi.buffer_capacity``) for ``buffer.capacity``, ``remidi.buffer_capacity`` and
+      ``sfl.buffer_size``;
+    * ``buffer.duplicate_check`` true: a repeated level updates its entry instead of copying;
+    * ``remidi.steps_per_buffer`` = ⌈num_updates / remidi.num_buffers⌉;
     * SFL keeps the C most learnable of 4·C candidates (published: 1,000 of 25,000), each played
-      ``sfl.rollout_steps`` = 4 episodes of the task's bound (at most 4 × :data:`MAX_ROLLOUT`), in
-      batches whose rollouts hold about as many steps as 8 training rollouts (``sfl.batch_size`` =
-      ⌈8 · num_envs · num_steps / rollout_steps⌉, at most 4·C; ``sfl.num_batches`` = ⌈4·C /
-      batch_size⌉), refreshed every ``eval_every`` updates (published: the evaluation period)."""
+      ``sfl.rollout_steps`` = 4 task episodes (≤ 4 × :data:`MAX_ROLLOUT`), in batches of about 8
+      training rollouts' steps (``sfl.batch_size`` = ⌈8 · num_envs · num_steps / rollout_steps⌉, ≤ 4·C;
+      ``sfl.num_batches`` = ⌈4·C / batch_size⌉), refreshed every ``eval_every`` updates."""
     given = set(overrides)
     if "buffer.capacity" in given:
         capacity = config.buffer.capacity
@@ -80,9 +74,8 @@ def budget_defaults(task: UEDTask, config: UEDConfig, overrides: dict[str, Any])
 
 
 def budget_line(config: UEDConfig, algo_name: str) -> str | None:
-    """The one line a fresh run says of ``algo_name``'s budget under ``config``: its buffers (how
-    many, how large, what a duplicate does), ReMiDi's switches, SFL's refresh, the replay
-    probability and the score; None for an algorithm of an adversary it does not know."""
+    """The line a fresh run says of ``algo_name``'s budget under ``config`` (buffers, ReMiDi's
+    switches, SFL's refresh, replay probability, score); None for an unknown adversary."""
     algo = get_algorithm(algo_name)
     adversary, b, r, s = algo.adversary, config.buffer, config.remidi, config.sfl
     score = f"score {algo.score_name(config.score)}"

@@ -1,33 +1,24 @@
-"""A user's own :class:`~remidi.envs.interface.UEDTask` as an experiment: the same outputs as the
-built-in ones (``config.json``, ``metrics.csv``, ``summary.json``, ``training.png``), resumable.
+"""A user's own :class:`~remidi.envs.interface.UEDTask` as an experiment, with the built-in
+outputs (``config.json``, ``metrics.csv``, ``summary.json``, ``training.png``), resumable.
 
-Two entry points:
-
-* Python: :func:`run_ued` (``remidi.run_ued``) trains a task you built with the algorithms and
-  seeds you name and writes the standard outputs::
+* Python: :func:`run_ued` (``remidi.run_ued``)::
 
       from remidi import run_ued
       summaries = run_ued(make_task(), {"num_updates": 200}, ["plr", "remidi"], seeds=[0, 1], out="runs/mine")
 
 * Command line: ``remidi run mypkg.tasks:make_task [--task-arg NAME=VALUE ...] [--algo ...] [--set
-  key=value ...]`` imports ``make_task`` (a function returning a ``UEDTask``, called with the
-  ``--task-arg`` keyword arguments, each value a JSON scalar or else a string; or a ``UEDTask``)
-  as Python does, from the current folder first, and runs it on defaults chosen from what the task
-  provides (:func:`task_defaults`: the score, the rollout length, how often to evaluate; said in
-  one line at the start) and budgets derived from the run's size (:func:`~remidi.experiments.budgets.budget_defaults`: one
-  line per algorithm at the start) with your ``--set`` keys.
+  key=value ...]`` imports ``make_task`` (a ``UEDTask`` or a function returning one, called with the
+  ``--task-arg`` values, each a JSON scalar or else a string) from the current folder first, and runs
+  it on defaults from what the task provides (:func:`task_defaults`) and budgets from the run's size
+  (:func:`~remidi.experiments.budgets.budget_defaults`), each said in one line at the start.
 
-``config.json`` records where the task comes from (``"task": {"import": "mypkg.tasks:make_task",
-"folder": the folder it was imported from, "args": the keyword arguments, where any}``), so ``remidi
-run --resume DIR``, ``remidi evaluate DIR`` and ``remidi render DIR`` rebuild the same task from any
-folder. :func:`run_ued` records it when given ``task_ref="mypkg.tasks:make_task"`` (and
-``task_args={...}``); without, the run is resumed with ``run_ued(..., resume=True)`` and evaluated
-with ``evaluate_run(DIR, task=...)`` in Python.
+``config.json`` records the task's source (``"task": {"import": ..., "folder": ..., "args": ...}``),
+so ``remidi run --resume DIR``, ``remidi evaluate DIR`` and ``remidi render DIR`` rebuild it from any
+folder. :func:`run_ued` records it when given ``task_ref`` (and ``task_args``); without, resume with
+``run_ued(..., resume=True)`` and evaluate with ``evaluate_run(DIR, task=...)``.
 
-Metrics reported and plotted: ``solve_rate/<set>`` (and ``regret/<set>/mean`` when the task gives
-an optimal return) for each evaluation set, ``replay_fraction/<tag>`` and ``buffer_fraction/<tag>``
-for each level tag.
-"""
+Metrics: ``solve_rate/<set>`` (and ``regret/<set>/mean`` given an optimal return) per evaluation
+set, ``replay_fraction/<tag>`` and ``buffer_fraction/<tag>`` per level tag."""
 
 from __future__ import annotations
 
@@ -62,11 +53,9 @@ _IMPORTED: dict[tuple[str, str, str], Experiment] = {}  # (import path, folder, 
 
 def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConfig | None = None,
                     description: str = "a user's UEDTask", task_ref: dict | None = None) -> Experiment:
-    """An :class:`Experiment` named ``name`` that trains the task ``make_task()`` returns, with
-    ``config`` (default: :func:`task_defaults`) as its only preset, ``default``. ``task_ref``: where the
-    task comes from (:func:`task_source`), recorded in ``config.json``. The task is validated first
-    (:func:`~remidi.engine.run.validation.validate_task`). Without ``config`` the defaults come
-    from the task (:func:`task_defaults`), said in one line at the start of a run."""
+    """An :class:`Experiment` named ``name`` training ``make_task()``, with ``config`` (default:
+    :func:`task_defaults`, said in one line at the start) as its only preset, ``default``. The task is
+    validated first; ``task_ref`` (:func:`task_source`) is recorded in ``config.json``."""
     task = make_task()
     if not isinstance(task, UEDTask):
         raise ConfigError(f"experiment: {name} gives {a_type(task)}, not a remidi UEDTask")
@@ -95,22 +84,18 @@ def task_experiment(name: str, make_task: Callable[[], UEDTask], config: UEDConf
 
 
 def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
-    """The configuration a run of an import-path task starts from (``UEDConfig()`` otherwise), and
-    why each key differs from it (key → reason), from what the task provides:
+    """The configuration a run of an import-path task starts from, and why each key differs from
+    ``UEDConfig()`` (key → reason):
 
-    * ``score``: perfect regret where the task gives its optimal return (on the discounted
-      utility where it gives the discounted optimum, else ``discounted_regret=false``), else
-      positive value loss where its episodes outlast the rollout (``max_episode_steps`` >
-      :data:`MAX_ROLLOUT`: it scores a truncated rollout by its bootstrapped value), else
-      learnability (SFL's p(1 − p), p a level's solve rate) where it defines ``solved``, else
-      positive value loss (needs neither);
-    * ``num_steps``: the task's episode bound, at most :data:`MAX_ROLLOUT`, so that an episode can
-      end inside a rollout (every score reads finished episodes);
-    * ``eval_every``: ``num_updates`` / :data:`EVALUATIONS` (scaled with ``--set num_updates=N``,
-      but never below :data:`EVAL_FLOOR` updates).
+    * ``score``: perfect regret given the optimal return (discounted given the discounted optimum,
+      else ``discounted_regret=false``), else positive value loss where episodes outlast the rollout
+      (``max_episode_steps`` > :data:`MAX_ROLLOUT`: it reads the bootstrapped value), else
+      learnability (SFL's p(1 − p)) given ``solved``, else positive value loss;
+    * ``num_steps``: the episode bound, at most :data:`MAX_ROLLOUT`, so episodes end inside a rollout
+      (every score reads finished episodes);
+    * ``eval_every``: ``num_updates`` / :data:`EVALUATIONS`, never below :data:`EVAL_FLOOR`.
 
-    The algorithms' budgets (buffer sizes, ReMiDi's switch schedule, SFL's refresh) follow the
-    run's size instead, recomputed from the configuration a run resolves: :func:`budget_defaults`."""
+    The algorithms' budgets follow the run's size instead: :func:`budget_defaults`."""
     base = UEDConfig()
     why: dict[str, str] = {}
     changes: dict[str, Any] = {}
@@ -138,9 +123,8 @@ def task_defaults(task: UEDTask) -> tuple[UEDConfig, dict[str, str]]:
 
 
 def defaults_note(why: dict[str, str]):
-    """``(config, overrides, naming) -> line``: the one line a fresh run of an import-path task says
-    first, naming the defaults it derived from the task (:func:`task_defaults`) that the overrides
-    (``--set``, ``run_ued``'s config dict) left alone (None where they set them all)."""
+    """``(config, overrides, naming) -> line``: the first line of a fresh run of an import-path
+    task, naming the derived defaults the overrides left alone (None where they set them all)."""
     def note(config, overrides, naming: Naming) -> str | None:
         kept = [f"{key} {getattr(config, key)} ({reason})" for key, reason in why.items() if key not in overrides]
         if not kept:
@@ -153,29 +137,23 @@ def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str
             seeds: int | Sequence[int], out: str | Path, *, progress: bool = True, resume: bool = False,
             name: str = "custom", task_ref: str | None = None,
             task_args: dict[str, Any] | None = None) -> dict[str, dict]:
-    """Train ``task`` with each of ``algos`` (``dr``, ``plr``, ``minimax-return``, ``remidi``, ...:
-    a list or a comma-separated string, or ``"all"``) over ``seeds`` (a list of seeds, or how many:
-    ``2`` is ``[0, 1]``) and write the standard outputs into ``out`` (one sub-folder per algorithm
-    when there are several); ``resume=True`` continues the run in ``out`` from its checkpoints.
+    """Train ``task`` with each of ``algos`` (a list, a comma-separated string, or ``"all"``) over
+    ``seeds`` (a list, or how many: ``2`` is ``[0, 1]``) and write the standard outputs into ``out``
+    (one sub-folder per algorithm when there are several); ``resume=True`` continues the run in ``out``.
+    Returns ``{algo: summary}`` (the ``summary.json`` documents).
 
-    ``config``: a dict of :class:`~remidi.engine.config.UEDConfig` keys (dotted, ``"ppo.lr"``, or
-    nested dicts), set on the defaults chosen from what the task provides as ``remidi run
-    module:function --set KEY=VALUE`` does (:func:`task_defaults`, said in one line at the start);
-    or a whole ``UEDConfig``, used as it is; None: the task's defaults. Validates everything first,
-    the task included (one-line :class:`~remidi.errors.ConfigError` naming the argument or the key,
-    nothing written). Returns ``{algo: summary}`` (the ``summary.json`` documents).
+    ``config``: a dict of :class:`~remidi.engine.config.UEDConfig` keys (dotted or nested), set on the
+    task's defaults (:func:`task_defaults`) as ``--set`` does; a whole ``UEDConfig``, used as it is; or
+    None. Everything, the task included, is validated before anything is written (one-line
+    :class:`~remidi.errors.ConfigError` naming the argument or key).
 
-    ``task_ref``: ``"module:function"`` (or ``"module:attribute"``) giving this task again, recorded
-    in ``config.json`` with the folder the module imports from, so that ``remidi run --resume OUT``
-    and ``remidi evaluate OUT`` can rebuild the task from any folder; checked to import (not
-    called) before anything is written. Without it the command line cannot rebuild the task (it
-    says so): resume with ``resume=True`` here and evaluate with
+    ``task_ref``: ``"module:function"`` (or ``"module:attribute"``) giving this task again, recorded in
+    ``config.json`` with its folder so that ``remidi run --resume OUT`` and ``remidi evaluate OUT``
+    rebuild the task; checked to import (not called). Without it, resume here and evaluate with
     ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``.
 
-    ``task_args``: the keyword arguments ``task`` was built with (``task_ref``'s function called as
-    ``make_task(**task_args)``; JSON scalars: str, int, float, bool, None), recorded beside the
-    import path so that ``--resume`` and ``remidi evaluate`` rebuild the same task; checked against
-    the function's parameters (one line naming a wrong one) before anything is written."""
+    ``task_args``: the keyword arguments (JSON scalars) ``task_ref``'s function built ``task`` with,
+    recorded and checked against its parameters."""
     naming = python_naming(config)
     if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
         raise ConfigError(f"out: must be a folder path (a str or a Path), got {out!r}")
@@ -194,9 +172,8 @@ def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str
 
 
 def python_naming(config) -> Naming:
-    """:func:`run_ued`'s words in its errors and notes: its arguments, and a configuration key
-    spelt as the configuration was given (``config["ppo.lr"]`` for a dict, ``config.ppo.lr`` for
-    a ``UEDConfig``)."""
+    """How :func:`run_ued`'s errors and notes spell a key: ``config["ppo.lr"]`` for a dict,
+    ``config.ppo.lr`` for a ``UEDConfig``."""
     if isinstance(config, UEDConfig):
         return dataclasses.replace(PYTHON, setting_form="config.{key}={value}")
     return PYTHON
@@ -204,9 +181,8 @@ def python_naming(config) -> Naming:
 
 def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
     """``(whole config or None, overrides)`` of :func:`run_ued`'s ``config``: a ``UEDConfig`` is
-    the whole configuration; a dict (nested dicts flattened to dotted keys) or None gives
-    overrides of the task's defaults, checked by the run (an unknown key is one line naming it
-    and the allowed keys). ConfigError for anything else."""
+    whole; a dict (flattened to dotted keys) or None gives overrides, checked by the run. ConfigError
+    for anything else."""
     if isinstance(config, UEDConfig):
         return config, {}
     if config is None:
@@ -218,8 +194,7 @@ def config_argument(config) -> tuple[UEDConfig | None, dict[str, Any]]:
 
 
 def algos_argument(algos) -> str:
-    """:func:`run_ued`'s ``algos`` as the comma-separated text that ``parse_algos`` reads (``--algo``'s):
-    a string as it is, a list or tuple of names joined. ConfigError (naming ``algos``) otherwise."""
+    """:func:`run_ued`'s ``algos`` as ``--algo``'s comma-separated text. ConfigError otherwise."""
     if isinstance(algos, str):
         return algos
     if not isinstance(algos, (list, tuple)) or not all(isinstance(a, str) for a in algos):
@@ -229,9 +204,8 @@ def algos_argument(algos) -> str:
 
 
 def seeds_argument(seeds) -> list[int]:
-    """:func:`run_ued`'s ``seeds`` as a list: a list or tuple of seeds as it is, an integer ``n``
-    the seeds ``0 .. n-1`` (``--seeds n``). ConfigError (naming ``seeds``) for anything else; the
-    run checks the range."""
+    """:func:`run_ued`'s ``seeds`` as a list (an integer ``n``: ``0 .. n-1``). ConfigError for
+    anything else; the run checks the range."""
     if _is_int(seeds):
         if seeds < 1:
             raise ConfigError(f"seeds: must be a number of seeds ≥ 1 or a list of seeds, got {seeds!r}")
@@ -257,7 +231,7 @@ def _split(path: str) -> tuple[str, str]:
 @contextlib.contextmanager
 def _folder_on_path(folder: str | None):
     """``folder`` (default: the current one) first on ``sys.path`` while the block runs, as Python
-    puts a script's folder there: the user's module and what it imports are found in it."""
+    does for a script, so the user's module and its imports are found."""
     where = str(Path(folder if folder is not None else os.getcwd()).resolve())
     added = where not in sys.path
     if added:
@@ -283,9 +257,8 @@ def _import(module_name: str, folder: str | None):
 
 
 def _module_folder(module, module_name: str) -> str:
-    """The folder ``module`` (imported as ``module_name``) is imported from: the one holding its
-    top-level package (``F`` for ``F/pkg/mod.py`` imported as ``pkg.mod``); the current folder for
-    a module without a file."""
+    """The folder holding ``module``'s top-level package (``F`` for ``F/pkg/mod.py`` as ``pkg.mod``);
+    the current folder for a module without a file."""
     file = getattr(module, "__file__", None)
     if not file:
         return str(Path.cwd().resolve())
@@ -296,11 +269,10 @@ def _module_folder(module, module_name: str) -> str:
 
 def task_source(path: str, folder: str | None = None, args: dict[str, Any] | None = None,
                 key: str = "--task-arg") -> dict[str, Any]:
-    """``{"import": path, "folder": F}`` for ``module:attribute``, ``F`` the folder the module is
-    imported from (looked up in ``folder``, default the current one, then the installed packages),
-    with ``"args": args`` where the attribute is called with keyword arguments (checked against
-    its parameters: :func:`check_task_args`, ``key`` naming them in the error). ConfigError (one
-    line) when the module cannot be imported, lacks the attribute or does not take ``args``."""
+    """``{"import": path, "folder": F}`` for ``module:attribute``, ``F`` the folder the module
+    imports from (``folder`` first, default the current one), with ``"args": args`` where given (checked
+    against its parameters, ``key`` naming them). ConfigError (one line) when it cannot be imported,
+    lacks the attribute or does not take ``args``."""
     module_name, attribute = _split(path)
     module = _import(module_name, folder)
     target = getattr(module, attribute, None)
@@ -312,12 +284,10 @@ def task_source(path: str, folder: str | None = None, args: dict[str, Any] | Non
 
 def import_experiment(path: str, folder: str | None = None, name: str | None = None,
                       args: dict[str, Any] | None = None, key: str = "--task-arg") -> Experiment:
-    """The experiment of ``module:attribute``: the attribute a ``UEDTask`` or a function returning
-    one, called with the keyword arguments ``args`` (none by default; recorded in ``config.json``),
-    the module imported from ``folder`` (default: the current folder) first, then from the
-    installed packages. Named ``name`` (default: ``path``). ConfigError (one line) when it cannot
-    be imported or is neither, or when ``args`` do not fit the function (``key`` names them: a name
-    it does not take, or a TypeError it raises on them)."""
+    """The experiment of ``module:attribute`` (a ``UEDTask`` or a function returning one, called
+    with ``args``), the module imported from ``folder`` (default: the current one) first. Named ``name``
+    (default: ``path``). ConfigError (one line) when it cannot be imported, is neither, or refuses
+    ``args`` (``key`` names them)."""
     import json
 
     module_name, attribute = _split(path)

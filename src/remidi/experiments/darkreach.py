@@ -1,22 +1,16 @@
 """The dark reach experiments (beyond the paper): ``remidi run darkreach`` and ``darkreach-lit``.
 
 A point in the unit square reaches a goal (:mod:`remidi.envs.darkreach`), seen through float
-observations with Gaussian noise of deviation 0.01 drawn from the level's seed: lit levels show
-the goal, dark ones hide it (irreducible regret, which a regret adversary keeps replaying). No two
-levels show the same float, so the exact tracker matches nothing and ReMiDi would be PLR⊥; these
-experiments judge with the tolerance tracker (``remidi.tracker=tolerance``,
-``remidi.tracker_tolerance=0.05``: five deviations of the noise, half the lattice spacing), under
-which dark levels with the same start are one level (a complete overlap: a later buffer rejects
-them) and lit levels whose goals lie farther apart than 0.05 on some axis are not.
-``--set remidi.tracker=prefix`` runs the exact tracker for comparison.
+observations with N(0, 0.01) noise from the level's seed: lit levels show the goal, dark ones hide
+it (irreducible regret). No float repeats, so the exact tracker matches nothing; these experiments
+judge with the tolerance tracker (``remidi.tracker_tolerance=0.05``: five noise deviations, half
+the lattice spacing), under which dark levels with one start are one level (rejected later) and
+lit levels with goals over 0.05 apart are not. ``--set remidi.tracker=prefix`` compares the exact one.
 
-``darkreach-lit``: every level lit, the start anywhere on the lattice, so every level differs from
-every other: the tolerance tracker should reject none and ReMiDi should be PLR⊥.
+``darkreach-lit``: every level lit and distinct, so ReMiDi should reject none and be PLR⊥.
 
-Budgets are comparable: one capacity (64) for PLR⊥'s buffer and for each of ReMiDi's two, no
-duplicate check (goals are continuous: no two levels are equal), the switch at half of the run
-(``remidi.steps_per_buffer = num_updates / num_buffers``).
-"""
+Budgets: one capacity (64) for every buffer, no duplicate check (continuous goals), the switch at
+half the run."""
 
 from __future__ import annotations
 
@@ -31,9 +25,8 @@ NUM_UPDATES = 1000
 
 
 def base_config() -> UEDConfig:
-    """32 envs × 20 steps (an episode lasts at most 20), a 64-unit MLP, perfect regret, rank
-    prioritisation over a buffer of 64; ReMiDi 2 buffers of 64, switching at half of the run,
-    judged by the tolerance tracker."""
+    """32 envs × 20 steps (episodes ≤ 20), a 64-unit MLP, perfect regret, rank prioritisation over
+    64 levels; ReMiDi 2 buffers of 64 switching at half the run, tolerance tracker."""
     return UEDConfig(
         num_updates=NUM_UPDATES, num_envs=32, num_steps=20, score="perfect_regret", network="mlp", hidden_size=64,
         eval_every=50, eval_attempts=4, checkpoint_every=250,

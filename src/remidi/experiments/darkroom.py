@@ -1,17 +1,11 @@
 """The dark room experiment (beyond the paper): ``remidi run darkroom``.
 
-A 5×5 grid, 12 border goals (:mod:`remidi.envs.darkroom`): on lit levels the observation shows
-the goal, on dark ones nothing, so a dark level's best policy guesses (1/12) and its regret is
-irreducible. Only 108 lit levels: the small level space of a user's own environment, where
-ReMiDi's first buffer holds a good part of the learnable levels, its second rejects them (a
-complete overlap) and masks their steps. ``buffer_solve_rate/b<k>`` (each buffer's levels,
-played by the current policy) shows what the agent keeps of a frozen buffer after the switch
-(docs/retention.md).
+A 5×5 grid, 12 border goals (:mod:`remidi.envs.darkroom`): lit levels show the goal, dark ones do
+not (a guess, 1/12: irreducible regret). Only 108 lit levels, like a user's small level space:
+ReMiDi's first buffer holds many learnable levels, its second rejects and masks them.
+``buffer_solve_rate/b<k>`` shows what the agent keeps of a frozen buffer (docs/retention.md).
 
-Budgets are comparable: one capacity for PLR⊥'s buffer and for each of ReMiDi's, duplicate check
-on (a small level space), and the switch at half of the run (``remidi.steps_per_buffer =
-ceil(num_updates / num_buffers)``).
-"""
+Budgets: one capacity for every buffer, duplicate check on, the switch at half the run."""
 
 from __future__ import annotations
 
@@ -25,10 +19,9 @@ CAPACITY = 64  # PLR⊥'s buffer and each ReMiDi buffer
 
 
 def base_config() -> UEDConfig:
-    """600 updates of 32 envs × 16 steps (an episode lasts at most 15), a 64-unit MLP, perfect
-    regret, rank prioritisation over a buffer of 64 with duplicate check; ReMiDi 2 buffers of 64,
-    switching at half of the run (docs/retention.md measured this, 3 seeds: about 6 minutes for
-    PLR⊥ and 8 for ReMiDi on a loaded 2-core CPU)."""
+    """600 updates of 32 envs × 16 steps (episodes ≤ 15), a 64-unit MLP, perfect regret, rank
+    prioritisation over 64 levels with duplicate check; ReMiDi 2 buffers of 64 switching at half the
+    run (3 seeds: about 6 min for PLR⊥, 8 for ReMiDi on a loaded 2-core CPU)."""
     return UEDConfig(
         num_updates=600, num_envs=32, num_steps=16, score="perfect_regret", network="mlp", hidden_size=64,
         eval_every=50, eval_attempts=5, checkpoint_every=300,

@@ -1,18 +1,14 @@
 """gymnax's classic-control environments as UED domains: ``remidi run cartpole|acrobot|pendulum``.
 
-Beyond the paper (SPEC §6, as JaxUED's gymnax examples do by hand): a level is some physical
-parameters of the environment, each uniform in a range, and the start state's seed
-(:mod:`remidi.envs.gymnax`). The agent trains on the levels the algorithm picks and is evaluated
-on a held-out grid over two of the parameters: ``return/<point>`` per grid point (mean over 4
-start seeds and ``eval_attempts`` episodes), ``return/mean`` their mean, and likewise
-``solve_rate/<point>`` and ``solve_rate/mean`` (CartPole: the pole stays up for the whole
-episode; Acrobot: the tip swings up within 100 steps, return ≥ −100; Pendulum: return ≥ −200).
+Beyond the paper (SPEC §6): a level is physical parameters, each uniform in a range, and the start
+seed (:mod:`remidi.envs.gymnax`). Evaluation on a held-out grid over two parameters:
+``return/<point>`` (mean over 4 start seeds × ``eval_attempts``), ``return/mean``, and likewise
+``solve_rate/<point>``, ``solve_rate/mean`` (CartPole: the pole stays up all episode; Acrobot:
+return ≥ −100; Pendulum: return ≥ −200).
 
-There is no optimal return, so no perfect regret: the presets score levels by positive value loss
-(``pvl``). ``paper`` is the full run (there is no paper setting for these domains; 10 seeds as
-for the paper's experiments); ``smoke`` is minutes on a 2-core CPU with episodes capped at 200
-steps (``gymnax.max_steps``).
-"""
+No optimal return, so the presets score by positive value loss (``pvl``). ``paper`` is the full run
+(10 seeds; no paper setting exists); ``smoke`` takes minutes on a 2-core CPU, episodes capped at
+200 steps (``gymnax.max_steps``)."""
 
 from __future__ import annotations
 
@@ -47,11 +43,10 @@ class GymnaxUEDConfig(UEDConfig):
 
 @dataclass(frozen=True)
 class Domain:
-    """A built-in gymnax domain: the environment, the level's ranges, the held-out grid, what
-    counts as solved (``solved_at`` at gymnax's own episode limit; None: the whole episode,
-    CartPole's pole never falling; ``solved_scales``: the threshold scales with the episode limit,
-    Pendulum's cost per step; otherwise −1 per step until the goal, Acrobot's "up within 100
-    steps", or within the episode when it is shorter: a failed episode never counts as solved)."""
+    """A built-in gymnax domain: the environment, level ranges, held-out grid and what counts as
+    solved: ``solved_at`` at gymnax's episode limit (None: the whole episode survived); with
+    ``solved_scales`` the threshold scales with the limit (a cost per step), otherwise −1 per step
+    until the goal. A failed episode never counts as solved."""
 
     name: str
     env_name: str

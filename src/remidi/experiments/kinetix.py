@@ -1,29 +1,23 @@
 """Kinetix (Matthews et al., ICLR 2025): ``remidi run kinetix-s|kinetix-m|kinetix-l``.
 
-Beyond the paper: open-ended 2-D physics tasks (make the green shape touch the blue one, avoid
-the red) on Kinetix's own random levels (behind its no-op filter) at one of Kinetix's three
-sizes, evaluated on its hand-made held-out levels of that size and the smaller ones
-(:mod:`remidi.envs.kinetix`): ``solve_rate/<size>_<level>`` per level, ``solve_rate/<size>`` the
-mean over a size's levels, ``solve_rate/mean`` over all of them.
+Beyond the paper: 2-D physics tasks (make green touch blue, avoid red) on Kinetix's random levels
+(behind its no-op filter) at one of its three sizes, evaluated on its hand-made held-out levels of
+that size and smaller (:mod:`remidi.envs.kinetix`): ``solve_rate/<size>_<level>``, the mean per
+size ``solve_rate/<size>``, and ``solve_rate/mean``.
 
-Needs the optional extra: ``pip install -e ".[kinetix]"`` (``kinetix-env``, which caps JAX at
-0.9.0: install it in an environment of its own; the core stays on the newest JAX). This module
-imports Kinetix only when a task is built, so ``remidi list`` shows the experiments without it.
+Needs ``pip install -e ".[kinetix]"`` (``kinetix-env`` caps JAX at 0.9.0: use an environment of its
+own); Kinetix is imported only when a task is built, so ``remidi list`` works without it.
 
-Presets: ``paper`` (10 seeds) and ``gpu`` (3 seeds: one accelerator's budget) are Kinetix's own
-PLR configuration (``configs/plr.yaml``: 2048 envs × 256 steps
-per update, 2048 updates ≈ 2^30 environment steps, PPO 8 epochs × 32 minibatches, γ 0.995,
-λ 0.9, lr 5e-5 constant, entropy 0.01, gradient norm 1.0; MaxMC over a rank-prioritised buffer
-of 4000, replay 0.5, staleness 0.3; ACCEL 5 edits), with ReMiDi's 2 buffers, the first for a
-quarter of the run. ``cpu`` and ``smoke`` are smaller, each deviation with its reason
-(``remidi list kinetix-s``).
+Presets: ``paper`` (10 seeds) and ``gpu`` (3 seeds) are Kinetix's own PLR configuration
+(``configs/plr.yaml``: 2048 envs × 256 steps, 2048 updates ≈ 2^30 steps, PPO 8 epochs × 32
+minibatches, γ 0.995, λ 0.9, lr 5e-5, entropy 0.01, gradient norm 1.0; MaxMC over a rank-prioritised
+buffer of 4000, replay 0.5, staleness 0.3; ACCEL 5 edits), with ReMiDi's 2 buffers, the first for a
+quarter of the run. ``cpu`` and ``smoke`` are smaller, each deviation with its reason.
 
-Observations and actions (:mod:`remidi.envs.kinetix_obs`): every preset reads Kinetix's
-``symbolic_flat`` observation with the ``mlp`` network and plays Kinetix's ``discrete`` actions
-(11 choices). Kinetix's own agent reads ``symbolic_entity`` observations (``kinetix.observation=
-entity``, remidi's entity convention) with multi-discrete actions; the presets move to those when
-the engine has a network over entities and multi-discrete actions.
-"""
+Every preset reads the ``symbolic_flat`` observation with the ``mlp`` network and plays the
+``discrete`` actions (11; :mod:`remidi.envs.kinetix_obs`). Kinetix's own agent reads
+``symbolic_entity`` (``kinetix.observation=entity``) with multi-discrete actions; the presets move
+there once the engine has such a network."""
 
 from __future__ import annotations
 

@@ -1,15 +1,11 @@
 """The lever game experiment (paper §6.4, Figure 8): ``remidi run lever``.
 
-64 levers; half of the levels hide the answer (±10), the others show it (±1). Hidden levels
-carry irreducible regret, so PLR⊥ fills its buffer and its replay with them and never learns
-the visible ones; ReMiDi's second buffer rejects them (complete overlap with the first) and
-learns to pull the shown lever.
+64 levers; half the levels hide the answer (±10), the others show it (±1). Hidden levels carry
+irreducible regret, so PLR⊥ fills up with them and never learns the visible ones; ReMiDi's second
+buffer rejects them and learns to pull the shown lever.
 
-PAIRED and ReMiDi over PAIRED (``--algo paired,remidi-paired``) run with PAIRED's own regret
-estimate by default (``paired.estimator=paired``: the antagonist's best return minus the
-protagonist's mean), but the results page's claims on both lever games set
-``paired.estimator=perfect`` (:data:`PAIRED_NOTE`, shown by ``remidi list lever``).
-"""
+PAIRED and ``remidi-paired`` default to PAIRED's own regret estimate (``paired.estimator=paired``),
+but the results page's lever claims set ``paired.estimator=perfect`` (:data:`PAIRED_NOTE`)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,9 @@
 """The maze experiments (paper §6.3, Figures 6–7): ``remidi run tmaze`` and ``remidi run blindfold``.
 
-Training levels are random 13×13 mazes mixed with levels of irreducible regret: T-mazes whose
-goal side cannot be seen (``tmaze``) or blindfolded mazes (``blindfold``), each with probability
-``maze.prob``. PLR⊥ fills its buffer and its replay with them; ReMiDi's later buffers reject
-them (their rollouts are indistinguishable from the first buffer's) and train on ordinary
-mazes. Evaluation: the solve rate on the ten held-out mazes (:mod:`remidi.envs.maze`).
-"""
+Random 13×13 mazes mixed (probability ``maze.prob``) with irreducible-regret levels: T-mazes with
+a hidden goal side (``tmaze``) or blindfolded mazes (``blindfold``). PLR⊥ fills up with them;
+ReMiDi's later buffers reject them and train on ordinary mazes. Evaluation: the solve rate on the
+ten held-out mazes (:mod:`remidi.envs.maze`)."""
 
 from __future__ import annotations
 

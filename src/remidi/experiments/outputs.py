@@ -1,17 +1,14 @@
-"""What every experiment writes into its output folder, written atomically.
+"""What every experiment writes into its output folder, atomically.
 
-* ``config.json``: everything needed to rerun (experiment, algorithm, preset, seeds, the full
-  resolved configuration, the command line, the package version).
+* ``config.json``: everything needed to rerun (experiment, algorithm, preset, seeds, the resolved
+  configuration, the command line, the package version).
 * ``metrics.csv``: long format, one row per (seed, step, metric, value).
-* ``summary.json``: ``{"experiment", "algo", "preset", "seeds", "metrics": {NAME: {"mean",
-  "std", "per_seed"}}}`` with the final value of each metric; ``std`` is the sample standard
-  deviation over seeds (ddof 1; null for one seed).
+* ``summary.json``: ``{"experiment", "algo", "preset", "seeds", "metrics": {NAME: {"mean", "std",
+  "per_seed"}}}`` of final values; ``std`` with ddof 1 (null for one seed).
 * PNG plots.
 
-Each file is written to a temporary name in the same folder and moved into place, so a killed
-run never leaves a half-written file, and a folder that already holds a run is never reused
-unless the caller resumes it.
-"""
+Each file is written to a temporary name beside it and moved into place, so a killed run leaves no
+half-written file; a folder holding a run is reused only to resume it."""
 
 from __future__ import annotations
 
@@ -65,12 +62,9 @@ OUTPUT_FILES = ("config.json", "metrics.csv", "summary.json")  # written by the 
 
 
 def remove_stale_temporaries(folder: Path) -> list[Path]:
-    """Delete the temporaries that an interrupted write of a run's outputs left in ``folder``
-    (``.<name>.<random>.tmp`` of :data:`OUTPUT_FILES`; a plot's ``.<plot>.png[.<pid>].tmp.png``
-    whose process is gone): Ctrl-C exits at once, before an atomic write renames or removes its
-    temporary. Called by --resume with the folder locked (:func:`folder_lock`); a ``remidi
-    evaluate`` or ``render`` writing there takes no lock, so its plots' temporaries are kept
-    while their process lives."""
+    """Delete the temporaries an interrupted write left in ``folder`` (``.<name>.<random>.tmp`` of
+    :data:`OUTPUT_FILES`; a plot's ``.<plot>.png[.<pid>].tmp.png`` whose process is gone). Called by
+    --resume under :func:`folder_lock`; a live ``evaluate`` or ``render`` process's plots are kept."""
     plots = list(folder.glob(".*.png.tmp.png"))  # before plots carried their process id
     for path in folder.glob(".*.png.*.tmp.png"):
         pid = path.name.split(".")[-3]
@@ -92,10 +86,8 @@ def _alive(pid: int) -> bool:
 
 
 def several_algorithm_run(folder: Path) -> bool:
-    """Whether ``folder`` is one several-algorithm run (``remidi run --algo a,b --out folder``): its
-    sub-folders that hold a run are named after their algorithm, and their config.json lists more
-    than one algorithm, theirs among them. A folder of separate runs (``runs/lever/<time>/``, which
-    ``remidi table`` also reads) is not."""
+    """Whether ``folder`` is one several-algorithm run: sub-folders named after their algorithm whose
+    config.json lists several, theirs among them. A folder of separate runs is not."""
     if not Path(folder).is_dir():
         return False
     subs = [p for p in Path(folder).iterdir() if (p / "config.json").is_file()]
@@ -113,13 +105,10 @@ def several_algorithm_run(folder: Path) -> bool:
 
 @contextmanager
 def folder_lock(folder: Path, flag: str):
-    """Within: this process holds an exclusive lock on the run folder ``folder`` (``flock`` on the
-    folder itself: no file is added to it, and the lock ends with the process). A second remidi
-    process that would write the same run (two ``--resume`` of one folder: a scheduler's requeue
-    while the old job still drains, a resume by hand) gets ConfigError (one line) instead of
-    deleting the first's temporaries and interleaving checkpoints. On NFS, where ``flock`` of a
-    folder is refused, a POSIX lock on a hidden ``.remidi.lock`` file in it does the same; where
-    the file system has no locks at all, nothing is locked."""
+    """Within: this process holds an exclusive lock on run folder ``folder`` (``flock`` of the
+    folder; ends with the process), so a second writer (two ``--resume``, a scheduler's requeue) gets
+    a one-line ConfigError instead of interleaving checkpoints. On NFS a POSIX lock on a hidden
+    ``.remidi.lock`` does the same; without locks nothing is locked."""
     try:
         import fcntl
 
@@ -222,9 +211,8 @@ def write_metrics_csv(path: Path, rows: Iterable[tuple]) -> None:
 
 
 def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
-    """The rows :func:`write_metrics_csv` wrote (``.gz``: gzipped); ConfigError (one line naming
-    the file and the line) for an empty file, another header, or a row that is not
-    ``seed,step,metric,value`` with integer seed and step and a number value."""
+    """The rows :func:`write_metrics_csv` wrote; ConfigError (one line naming file and line) for an
+    empty file, another header, or a malformed row."""
     rows = []
     with (gzip.open(path, "rt", newline="") if Path(path).suffix == ".gz" else open(path, newline="")) as fh:
         r = csv.reader(fh)
@@ -245,8 +233,8 @@ def read_metrics_csv(path: Path) -> list[tuple[int, int, str, float]]:
 
 
 def summarize(final: Mapping[str, np.ndarray]) -> dict[str, dict[str, Any]]:
-    """``{name: {"mean", "std", "per_seed"}}`` from final values f[S] per metric; ``std`` is the
-    sample standard deviation (ddof 1), NaN (null in JSON) for a single seed."""
+    """``{name: {"mean", "std", "per_seed"}}`` of final values f[S]; ``std`` ddof 1, NaN (null in
+    JSON) for one seed."""
     out = {}
     for name, values in final.items():
         values = np.asarray(values, dtype=float)

@@ -1,10 +1,8 @@
 """Experiment configuration: presets, ``--set key=value`` overrides and validation.
 
-An experiment's configuration is a frozen dataclass whose defaults are the paper's values. A
-preset is a dict of overrides (``paper`` is empty), and ``--set`` adds more on top. Keys may be
-dotted to reach nested dataclasses (``--set ppo.lr=3e-4``). Every problem raises
-:class:`~remidi.errors.ConfigError` with one line naming the key and what is allowed.
-"""
+A configuration is a frozen dataclass of the paper's values; a preset is a dict of overrides
+(``paper`` is empty) and ``--set`` adds more, dotted keys reaching nested dataclasses
+(``ppo.lr``). Every problem is a one-line :class:`~remidi.errors.ConfigError` naming the key."""
 
 from __future__ import annotations
 
@@ -32,12 +30,8 @@ def parse_set_items(items: Iterable[str]) -> dict[str, str]:
 
 
 def field_names(config) -> list[str]:
-    """All settable keys of a (nested) config dataclass, dotted, in declaration order.
-
-    A config class (or any of its base classes) may name keys it derives itself in a
-    ``DERIVED_KEYS`` attribute of the module that defines it
-    (e.g. ``ppo.total_updates`` follows ``num_updates``); those are not settable.
-    """
+    """All settable keys of a (nested) config dataclass, dotted, in declaration order; keys named in
+    the defining module's ``DERIVED_KEYS`` (e.g. ``ppo.total_updates``) are not settable."""
     derived = {key for cls in type(config).__mro__
                for key in getattr(sys.modules.get(cls.__module__), "DERIVED_KEYS", ())}
     names = []
@@ -51,9 +45,8 @@ def field_names(config) -> list[str]:
 
 
 def key_help(config, key: str) -> str:
-    """The one-line description of the dotted ``key`` of ``config``: the ``help`` metadata of its
-    field (``dataclasses.field(metadata={"help": ...})``, next to the field: the one source of
-    ``remidi list``), else ``""``."""
+    """The one-line ``help`` metadata of dotted ``key``'s field (the one source of ``remidi list``),
+    else ``""``."""
 
     def from_metadata(cfg, dotted: str) -> str:
         head, _, rest = dotted.partition(".")
@@ -102,8 +95,8 @@ def _convert(key: str, text: Any, kind) -> Any:
 
 
 def apply_overrides(config, overrides: dict[str, Any], *, source: str = "--set", prefix: str = ""):
-    """Return ``config`` with ``overrides`` (dotted keys → text or JSON values) applied.
-    ``prefix``: the dotted path of ``config`` inside the top-level config, for error messages."""
+    """``config`` with ``overrides`` (dotted keys → text or JSON values) applied; ``prefix``:
+    ``config``'s dotted path, for errors."""
     allowed = field_names(config)
     nested: dict[str, dict[str, Any]] = {}
     direct: dict[str, Any] = {}
@@ -142,19 +135,14 @@ def nearest_divisor(length: int, target: float) -> int:
 def scale_dependents(config, base, overrides: dict[str, Any], rules: dict[str, tuple[str, ...]],
                      divisors: tuple[str, ...] = (), floors: dict[str, int] | None = None,
                      where_set: str = "with --set"):
-    """Scale the keys that depend on a length the user changed, in proportion.
+    """Scale the keys depending on a length the user changed, in proportion; returns ``(config,
+    note)``, ``note`` one line saying what was scaled (None: nothing).
 
-    ``rules`` maps a length (``num_updates``) to the keys measured against it (``eval_every``,
-    ``checkpoint_every``, ``remidi.steps_per_buffer``). When ``overrides`` set the length but not
-    a dependent key, that key becomes ``max(1, round(base value × new length / base length))``,
-    ``base`` being the preset's configuration, so that ``--set num_updates=20`` alone gives a
-    run with the preset's proportions. Returns ``(config, note)``, ``note`` one line saying what
-    was scaled (``None`` if nothing was). A key in ``divisors`` (a block length, e.g. ``eval_every``:
-    a short last block would compile another program) becomes the divisor of the new length
-    nearest to that value instead. ``floors`` (key → least value): a scaled key is at least
-    ``min(floor, new length)`` before it is rounded. ``where_set``: where the caller gives keys, in
-    the note (``with --set``; ``run_ued``: ``in config``).
-    """
+    ``rules`` maps a length (``num_updates``) to its dependent keys. A dependent key the overrides
+    leave alone becomes ``max(1, round(base value × new length / base length))``, ``base`` the
+    preset's configuration. A key in ``divisors`` (a block length: a short last block compiles another
+    program) becomes the nearest divisor of the new length instead. ``floors``: a scaled key is at
+    least ``min(floor, new length)``. ``where_set``: the note's words for where keys are given."""
     scaled: dict[str, int] = {}
     parts = []
     for length, dependents in rules.items():

@@ -1,16 +1,10 @@
 """Plots: panels of training curves, mean ± std over seeds.
 
-Every algorithm keeps one colour, line style and marker in every plot of every experiment
-(:func:`algorithm_style`), and the algorithms appear in the order the run was given them, so a
-resumed run draws exactly what a fresh one does and two identical curves stay visible (different
-dashes, markers at different positions).
-
-Every figure shows what it claims: its value axes contain every curve, band, interval and
-reference line with a margin (:func:`padded`), so nothing lies on a frame; legends sit outside
-the axes, off the data; the title names the run as the experiment gave it (experiment, preset,
-seeds: :func:`run_title`) and the caption says what a line, band or bar is. Figures are built
-(``*_figure``) apart from saving, so tests can walk them.
-"""
+Each algorithm keeps one colour, line style and marker everywhere (:func:`algorithm_style`) and the
+run's order, so a resumed run draws what a fresh one does and identical curves stay visible.
+Value axes contain every curve, band and reference line with a margin (:func:`padded`); legends
+sit off the data; the title names the run (:func:`run_title`) and the caption says what a line,
+band or bar is. Figures are built (``*_figure``) apart from saving, so tests can walk them."""
 
 from __future__ import annotations
 
@@ -53,9 +47,9 @@ VARIANT_STYLES = {
 
 
 def algorithm_style(name: str) -> dict:
-    """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``: fixed per name. A
-    results-page label (``paired (perfect)``, ``remidi (combine)``) takes its algorithm's style,
-    with the colour and line style of :data:`VARIANT_STYLES` where its first word names one."""
+    """Matplotlib keywords (color, linestyle, marker) of algorithm ``name``, fixed per name. A
+    results-page label (``remidi (combine)``) takes its algorithm's style, recoloured by
+    :data:`VARIANT_STYLES` where its first word names one."""
     name, _, variant = name.partition(" (")
     if name in ALGORITHM_STYLES:
         color, linestyle, marker = ALGORITHM_STYLES[name]
@@ -72,10 +66,8 @@ SERIES_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
 
 def distinct_styles(names: list[str], style=None) -> dict[str, dict]:
-    """The plot style of each of ``names`` in one figure (``style(name)``, default
-    :func:`algorithm_style`), with no two alike: a name whose style an earlier one already has
-    (``remidi (rehearsal 0.1)`` and ``(rehearsal 0.3)``, ``remidi`` and ``remidi (masked)``) takes
-    the next line style, then the next marker, that no earlier name has with its colour."""
+    """The style of each of ``names`` in one figure (``style``, default :func:`algorithm_style`),
+    no two alike: a name styled like an earlier one takes the next free line style, then marker."""
     style = style or algorithm_style
     out, used = {}, set()
     for name in names:
@@ -90,9 +82,8 @@ def distinct_styles(names: list[str], style=None) -> dict[str, dict]:
 
 
 def series_style(i: int) -> dict:
-    """Matplotlib keywords of the ``i``-th curve of a panel whose curves are not algorithms (the
-    tabular games' observations): the colour cycle's ``i``-th colour with its own line style and
-    marker, so curves that coincide stay visible (the markers are shifted per curve)."""
+    """Matplotlib keywords of a panel's ``i``-th non-algorithm curve: the ``i``-th cycle colour with
+    its own line style and marker, so coinciding curves stay visible."""
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     return {"color": colors[i % len(colors)], "linestyle": SERIES_LINES[i % len(SERIES_LINES)],
             "marker": SERIES_MARKERS[i % len(SERIES_MARKERS)]}
@@ -101,8 +92,7 @@ def series_style(i: int) -> dict:
 @dataclass
 class Curve:
     """One line: ``values`` f[S, T] over seeds and log points, drawn as mean ± std. ``style``:
-    matplotlib keywords (``color``, ``linestyle``, ``marker``); default: the colour cycle by
-    position, solid, no marker."""
+    matplotlib keywords; default: the colour cycle by position, solid, no marker."""
 
     label: str
     steps: np.ndarray
@@ -152,8 +142,7 @@ def seeds_text(seeds) -> str:
 
 
 def run_title(experiment: str = "", preset: str | None = None, seeds=None) -> str:
-    """The run a figure shows, as given to it: ``lever, preset smoke, 2 seeds (0, 1)`` (what is not
-    known left out)."""
+    """The run a figure shows: ``lever, preset smoke, 2 seeds (0, 1)`` (what is not known left out)."""
     parts = [experiment] if experiment else []
     if preset:
         parts.append(f"preset {preset}")
@@ -164,10 +153,8 @@ def run_title(experiment: str = "", preset: str | None = None, seeds=None) -> st
 
 def padded(lo: float, hi: float, want: tuple[float | None, float | None] | None = None,
            margin: float = MARGIN) -> tuple[float, float]:
-    """Limits of a value axis showing the data's range [``lo``, ``hi``] and ``want``'s given ends,
-    with ``margin`` of that range free beyond it at both ends: no curve, band, interval or
-    reference line lies on the frame, and axes asked for the same range (a share's [0, 1]) get
-    the same limits."""
+    """Value-axis limits showing [``lo``, ``hi``] and ``want``'s given ends with ``margin`` of the
+    range free at both ends, so nothing lies on the frame and equal asked ranges get equal limits."""
     want_lo, want_hi = want if want is not None else (None, None)
     lo = lo if want_lo is None else min(lo, want_lo)
     hi = hi if want_hi is None else max(hi, want_hi)
@@ -177,8 +164,7 @@ def padded(lo: float, hi: float, want: tuple[float | None, float | None] | None 
 
 def algorithm_curves(results: dict, metric: str) -> list[Curve]:
     """One styled curve of ``metric`` per algorithm of ``results`` ({algo: RunResult}, in order),
-    leaving out algorithms without the metric or without a single defined value of it (DR's
-    replay share: it never replays)."""
+    leaving out algorithms without a defined value of it (DR's replay share)."""
     curves = []
     for algo, result in results.items():
         values = result.history.get(metric)
@@ -189,9 +175,9 @@ def algorithm_curves(results: dict, metric: str) -> list[Curve]:
 
 
 def _merge(curves: list[Curve], colors: list[str]) -> list[list[Curve]]:
-    """Curves with default styles get their colour by position first (so a curve keeps its colour
-    whatever it is merged with); then each curve whose mean is within 2% of the panel's range of an
-    earlier one (root mean square over the log points) joins its group: ``[[first, joined, ...]]``."""
+    """Group coinciding curves: ``[[first, joined, ...]]``, a curve joining an earlier one whose mean
+    is within 2% of the panel's range (RMS over log points). Default colours are given by position
+    first, so a curve keeps its colour whatever it merges with."""
     means = [np.nanmean(np.asarray(c.values, dtype=float), axis=0) for c in curves]
     finite = np.concatenate([m[np.isfinite(m)] for m in means]) if means else np.zeros(0)
     span = float(finite.max() - finite.min()) if finite.size else 0.0
@@ -218,11 +204,9 @@ def _mean_std(values) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _draw_group(ax, members: list[Curve], first: int, count: int):
-    """Draw the curves ``members`` (one, or several whose means coincide: the first one's mean and
-    band) and return the legend handle: one line, or for several a line in dashes of each member's
-    colour in turn (each member its own ``Line2D``, labelled with its curve), as a tuple.
-    ``first``: the index of the group's first line among the panel's ``count`` lines (marker
-    positions are spread over them, so coinciding curves each show theirs)."""
+    """Draw ``members`` (one curve, or several coinciding: the first's mean and band) and return the
+    legend handle (for several, a tuple of one dashed ``Line2D`` per member colour). ``first``: the
+    group's first line among the panel's ``count``, spreading marker positions."""
     mean, std = _mean_std(members[0].values)
     steps, k = members[0].steps, len(members)
     lines = []
@@ -285,9 +269,8 @@ def _draw_panel(ax, panel: Panel, colors: list[str]) -> list[tuple[object, str]]
 
 
 def _legend_below(ax, entries: list[tuple[object, str]], renderer):
-    """The legend of ``entries`` under the axes' x axis and any note there, off the data, in as
-    many columns (at most 3) as fit the panel's width (its y axis included). Its place is set in
-    points below the axes' frame, so it stays under them however the layout moves the axes."""
+    """The legend of ``entries`` below the x axis (and any note), in as many columns (≤ 3) as fit
+    the panel's width; placed in points below the frame, so it follows the axes through layout."""
     from matplotlib.legend_handler import HandlerTuple
     from matplotlib.transforms import ScaledTranslation
 
@@ -308,8 +291,7 @@ def _legend_below(ax, entries: list[tuple[object, str]], renderer):
 
 
 def _captioned(fig, title: str, caption: str) -> None:
-    """The figure's title above its panels and its caption (what lines, bands or bars are) below,
-    wrapped to the figure's width."""
+    """The figure's title above its panels and caption below, wrapped to its width."""
     width = int(fig.get_figwidth() * 15)  # characters of 9-point text per line
     if title:
         fig.suptitle("\n".join(textwrap.wrap(title, width)), fontsize=13, fontweight="bold")
@@ -318,9 +300,9 @@ def _captioned(fig, title: str, caption: str) -> None:
 
 
 def panels_figure(panels: list[Panel], title: str = "", columns: int = 3, caption: str | None = None):
-    """The figure of ``panels``, at most ``columns`` per row, each with its legend below it;
-    ``title`` above (the run: :func:`run_title`), ``caption`` below (default: what a line, a band
-    and a dashed line are). Constrained layout: laid out as it is drawn or saved."""
+    """The figure of ``panels``, at most ``columns`` per row, each with its legend below; ``title``
+    above (:func:`run_title`), ``caption`` below (default: what a line, band and dashed line are).
+    Constrained layout."""
     cols = min(columns, len(panels))
     rows = math.ceil(len(panels) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.0 * rows), squeeze=False, layout="constrained")
@@ -349,10 +331,9 @@ def plot_panels(path: Path, panels: list[Panel], title: str = "", columns: int =
 
 def bars_figure(title: str, labels: list[str], series: dict[str, np.ndarray], ylabel: str = "",
                 ylim: tuple[float, float] | None = None, caption: str | None = None):
-    """Grouped bar chart: one group per label, one bar per series (an algorithm, in its fixed
-    colour); ``series[name]`` f[len(labels), S] over seeds, drawn as mean with a ± std error bar.
-    ``ylim``: the range shown at least (the bars and error bars widen it); the legend right of the
-    axes; ``caption`` below (default: what a bar and an error bar are)."""
+    """Grouped bar chart: one group per label, one bar per series (an algorithm, in its colour);
+    ``series[name]`` f[len(labels), S], drawn as mean ± std. ``ylim``: the range shown at least; legend
+    right of the axes; ``caption`` below (default: what a bar and error bar are)."""
     fig, ax = plt.subplots(figsize=(min(14.0, max(6.0, 0.55 * len(labels) * max(1, len(series)) ** 0.5 + 2)) + 1.5,
                                     4.6), layout="constrained")
     width = 0.8 / max(1, len(series))
@@ -381,8 +362,8 @@ def plot_bars(path: Path, title: str, labels: list[str], series: dict[str, np.nd
 
 
 def _save(fig, path: Path) -> None:
-    """Save atomically (temporary file, then rename) and close the figure; a figure without a
-    layout engine of its own is laid out tightly first."""
+    """Save atomically (temporary file, then rename) and close the figure; laid out tightly first
+    unless it has a layout engine."""
     if fig.get_layout_engine() is None:
         fig.tight_layout()
     tmp = Path(path).with_name(f".{Path(path).name}.{os.getpid()}.tmp.png")  # two writers never share one

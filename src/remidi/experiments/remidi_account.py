@@ -1,7 +1,5 @@
 """What a buffer sequence (ReMiDi over PLR⊥, ACCEL, SFL, ...) did over a run, said in one line at
-its end (:func:`remidi_line`, from :func:`remidi_account`): the fresh levels it rejected, the
-masked share of trained steps, its frozen buffers' solve rates, and its cost beside its base
-algorithm's when both ran."""
+its end (:func:`remidi_line`): rejected fresh levels, masked share, frozen solve rates, cost."""
 
 from __future__ import annotations
 
@@ -14,18 +12,17 @@ BASE_NAMES = {"plr": "PLR⊥", "accel": "ACCEL", "sfl": "SFL"}
 
 
 def remidi_account(algo_name: str, result: RunResult, num_envs: int | None) -> dict | None:
-    """What a buffer sequence (ReMiDi over PLR⊥, ACCEL, SFL, ...) did over the whole run, per seed,
-    from its block history (``result.history`` {name: f[S, T]}, blocks ending at ``result.steps``
-    i[T]): ``fresh_levels`` (the levels of updates that neither replayed nor rehearsed: a block's
-    ``length × num_envs × (1 − replay − rehearsal)``, ``replay`` the block's mean share of replayed
-    envs), ``rejected`` (those a frozen level explained completely, the step metric's sum),
-    ``masked_share`` (the share of the rollout steps trained on that a frozen level explained:
-    ``trained_fraction_masked`` is that share on a trained update and 0 on another, so its sum over
-    updates over the number of trained updates; an update of PLR⊥'s family trains when it replays
-    or rehearses, any other every update; NaN without one) and ``frozen_solve_rate`` {buffer:
-    f[S]} (``buffer_solve_rate/b<i>`` of the final metrics, where the run evaluates it, for the
-    buffers before the one active at the end on every seed: the frozen ones). None for
-    an algorithm that is no buffer sequence, or a history without those metrics."""
+    """What a buffer sequence did over the whole run, per seed, from ``result.history``
+    ({name: f[S, T]}, blocks ending at ``result.steps`` i[T]):
+
+    * ``fresh_levels``: levels neither replayed nor rehearsed, ``length × num_envs × (1 − replay −
+      rehearsal)`` per block;
+    * ``rejected``: those a frozen level explained completely;
+    * ``masked_share``: the share of trained steps a frozen level explained (``trained_fraction_masked``
+      summed over trained updates, divided by their number; NaN without one);
+    * ``frozen_solve_rate`` {buffer: f[S]}: ``buffer_solve_rate/b<i>`` of the buffers frozen at the end.
+
+    None for a non-sequence algorithm or a history without those metrics."""
     from remidi.engine.algorithms import ALGORITHMS
 
     algo = ALGORITHMS.get(algo_name)
@@ -71,9 +68,8 @@ def _base_algorithm(algo) -> str | None:
 
 
 def _cost_per_update(summary: dict) -> float | None:
-    """Seconds per update of the part of the run this invocation trained: the steady rate of its
-    blocks after the first (``parts``' ``train_s / train_updates``) where recorded, else its wall
-    time over its updates; None where neither is known."""
+    """Seconds per update this invocation trained: the steady rate after the first block where
+    recorded, else wall time over updates; None where neither is known."""
     parts = summary.get("parts") or []
     last = parts[-1] if parts and isinstance(parts[-1], dict) else {}
     if last.get("train_updates"):
@@ -83,12 +79,9 @@ def _cost_per_update(summary: dict) -> float | None:
 
 
 def remidi_line(algo: str, summary: dict, summaries: dict[str, dict]) -> str | None:
-    """The one line a run says at its end of what the buffer sequence ``algo`` did (its summary's
-    ``remidi_did``: :func:`remidi_account`), over every seed: the fresh levels it rejected out of
-    those it evaluated, the masked share of the steps it trained on, the frozen buffers' solve rates
-    where evaluated; and, where nothing was rejected or masked, that the run was the algorithm it
-    refines, at the cost ratio to that algorithm's run in ``summaries`` (the same invocation's)
-    where there is one."""
+    """The line a run says at its end of what buffer sequence ``algo`` did (:func:`remidi_account`)
+    over every seed; where nothing was rejected or masked, that it ran as its base algorithm, with
+    the cost ratio to that algorithm's run in ``summaries`` where there is one."""
     did = summary["remidi_did"]
     fresh, rejected = sum(did["fresh_levels"]), sum(did["rejected"])
     shares = [s for s in did["masked_share"] if isinstance(s, (int, float)) and s == s]  # NaN, null: none trained

@@ -23,15 +23,11 @@ from remidi.files import writable
 def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path,
                       progress: bool = True, naming: Naming = COMMAND_LINE) -> dict[str, dict]:
     """Continue the run in ``folder`` from its last checkpoint. ``exp_lookup(name, task)``: the
-    experiment of ``config.json``'s ``experiment`` and ``task`` (its user's task's import record,
-    or None): :func:`remidi.experiments.saved_experiment`.
+    experiment of ``config.json``'s ``experiment`` and ``task`` (:func:`remidi.experiments.saved_experiment`).
 
-    ``folder`` is one algorithm's run (it holds config.json), or the folder of a several-algorithm
-    run, whose unfinished algorithms (no summary.json) are resumed before the comparison plots
-    are redrawn. The run keeps its recorded ``devices``. A finished run (:func:`finished_run`) is
-    checked, then returned as it is: nothing is trained or written. ``naming``: the caller's words
-    in errors (``run_ued``'s ``out``, not ``--resume``).
-    """
+    ``folder`` is one algorithm's run, or a several-algorithm run whose unfinished algorithms are
+    resumed before the comparison plots are redrawn. The recorded ``devices`` are kept. A finished
+    run is checked and returned as it is. ``naming``: the caller's words in errors."""
     folder = Path(folder)
     if _secondary_process(_saved_devices(folder)):  # only process 0 writes the run folder; the others
         with tempfile.TemporaryDirectory(prefix="remidi-process-") as scratch:  # resume a scratch copy of it
@@ -46,8 +42,7 @@ def resume_experiment(exp_lookup: Callable[[str, dict | None], Experiment], fold
 
 
 def finished_run(folder: Path) -> bool:
-    """Whether ``folder`` holds a finished run: its summary.json is written (of a several-algorithm
-    run, every algorithm's), so resuming it has nothing to train."""
+    """Whether ``folder``'s run is finished: its summary.json (every algorithm's) is written."""
     folder = Path(folder)
     if (folder / "config.json").exists():
         return (folder / "summary.json").exists()
@@ -57,10 +52,9 @@ def finished_run(folder: Path) -> bool:
 
 
 def _missing_algorithms(folder: Path, subs: list[Path]) -> list[str]:
-    """The algorithms a several-algorithm run (:func:`outputs.several_algorithm_run`) records
-    (``algos`` in its config.json files) that have no sub-folder with a config.json: a run stopped
-    while it wrote them (one after another, before training) never trained them. None for a
-    folder of separate runs, or where a config.json is damaged (resuming it says what is wrong)."""
+    """The algorithms a several-algorithm run's config.json files list that have no sub-folder with
+    a config.json (a run stopped while writing them, before training). None for a folder of separate
+    runs, or a damaged config.json (resuming says what is wrong)."""
     if not outputs.several_algorithm_run(folder):
         return []
     algos = outputs.read_json(subs[0] / "config.json").get("algos") or []
@@ -69,9 +63,8 @@ def _missing_algorithms(folder: Path, subs: list[Path]) -> list[str]:
 
 
 def _write_missing_configs(exp_lookup, folder: Path, subs: list[Path], naming: Naming) -> list[Path]:
-    """Write the config.json of :func:`_missing_algorithms` from one that was written (every
-    algorithm of a several-algorithm run shares its experiment, preset, seeds, config, devices,
-    tracking and command), so that --resume trains them; returns their sub-folders."""
+    """Write the config.json of :func:`_missing_algorithms` from one that was written (the
+    algorithms share all but ``algo``), so --resume trains them; returns their sub-folders."""
     missing = _missing_algorithms(folder, subs)
     if not missing:
         return []
@@ -116,8 +109,7 @@ def _resume(exp_lookup: Callable[[str, dict | None], Experiment], folder: Path, 
 
 
 def _note_fresh_start(exp: Experiment, folder: Path) -> None:
-    """Say so when the UED run to resume in ``folder`` has no checkpoint yet (it stopped before
-    its first): --resume then trains it from its start. (The tabular games keep no checkpoint.)"""
+    """Say so when the UED run in ``folder`` has no checkpoint yet: --resume trains it from the start."""
     from remidi.engine.run.checkpoint import CHECKPOINT
 
     if exp.make_task is not None and not (folder / CHECKPOINT).exists():
@@ -126,24 +118,22 @@ def _note_fresh_start(exp: Experiment, folder: Path) -> None:
 
 
 def _check_writable(folder: Path, flag: str = "--resume") -> None:
-    """ConfigError (one line) for a run folder to resume that cannot be written: before, the run
-    compiled and trained a block before its first checkpoint failed."""
+    """ConfigError (one line) for a run folder to resume that cannot be written, before any training."""
     if not writable(folder):
         raise ConfigError(f"{flag}: {folder} is not writable: the resumed run could not write its checkpoints "
                           f"and results; resume a writable copy of it")
 
 
 def _finished_summary(folder: Path, naming: Naming = COMMAND_LINE) -> dict:
-    """A finished run's summary.json, checked: a damaged one is a one-line error (the run's
-    outputs are written again from its last checkpoint once it is deleted)."""
+    """A finished run's summary.json, checked: a damaged one is a one-line error."""
     return outputs.read_json_object(folder / "summary.json", naming.resume,
                                     f"; delete it, and {naming.resumes} writes the run's outputs again from "
                                     f"checkpoint.npz")
 
 
 def _saved_log(folder: Path, flag: str = "--resume") -> list[str]:
-    """The tracking backends recorded in ``folder/config.json`` (checked again: a resume on a
-    machine without the package says so before anything is written)."""
+    """The tracking backends recorded in ``folder/config.json``, checked again (a missing package is
+    said before anything is written)."""
     from remidi.loggers import parse_log
 
     saved = outputs.read_json(folder / "config.json").get("log") or []
@@ -175,9 +165,8 @@ def saved_run(exp_lookup, folder: Path, flag: str = "--resume"):
 
 
 def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
-    """ConfigError unless the saved run's algorithm and (UED) score and network are known to this
-    process: one registered by a plugin (remidi.register_algorithm / register_score /
-    register_network) must be loaded again."""
+    """ConfigError unless the saved algorithm, (UED) score and network are known to this process
+    (a plugin's must be loaded again)."""
     hint = "registered by a plugin? load it again: REMIDI_PLUGINS=module (docs/extending.md)"
     if algo not in exp.algorithms:
         raise ConfigError(f"{where}: the run's algorithm {algo!r} is unknown here ({hint}); "
@@ -199,9 +188,8 @@ def _check_registered(exp: Experiment, algo: str, config, where: str) -> None:
 
 
 def _saved_devices(folder: Path):
-    """``devices`` of the run in ``folder`` (1 for runs recorded before ``--devices`` existed); of a
-    several-algorithm folder, the largest of its runs'; 1 where nothing is readable (resuming then
-    reports what is wrong)."""
+    """``devices`` of the run in ``folder`` (1 when unrecorded or unreadable); of a several-algorithm
+    folder, the largest."""
     folder = Path(folder)
     try:
         paths = [folder / "config.json"] if (folder / "config.json").exists() else sorted(folder.glob("*/config.json"))
@@ -211,8 +199,8 @@ def _saved_devices(folder: Path):
 
 
 def _run_order(sub: Path, exp: Experiment, algo: str) -> tuple[int, int]:
-    """Where ``algo`` stands in its several-algorithm run: the order the user gave (``algos`` in
-    config.json), then the experiment's own order, so a resumed run plots like a fresh one."""
+    """Where ``algo`` stands in its several-algorithm run: the user's order (``algos``), then the
+    experiment's, so a resumed run plots like a fresh one."""
     saved = outputs.read_json(sub / "config.json").get("algos") or []
     given = saved.index(algo) if algo in saved else len(saved)
     return given, exp.algorithms.index(algo) if algo in exp.algorithms else len(exp.algorithms)

@@ -1,21 +1,16 @@
 """A fresh ``remidi run``: validate everything before writing anything, write ``config.json``
 first (so a killed run can be resumed), then train and write ``metrics.csv``, ``summary.json``
-and the plots, identically for every :class:`~remidi.experiments.base.Experiment`. A UED run
-whose rollouts alone cannot fit the device's memory is refused with the rest of the input
-(:func:`_check_memory`, a lower bound); one that runs out of memory all the same (XLA's
-``RESOURCE_EXHAUSTED`` at allocation or compilation, MemoryError: :class:`TooLarge`) is one line
-naming ``num_envs``; a fresh run then removes the files and folders it made (resuming would fail
-the same way), keeping what was there before and the algorithms that finished; a resumed one
-leaves its folder as it is.
+and the plots, identically for every :class:`~remidi.experiments.base.Experiment`.
 
-With several algorithms, each gets a sub-folder ``OUT/<algo>/`` and the comparison plots (one
-panel per metric, one curve per algorithm, in the order given; tabular: one panel per algorithm)
-go to ``OUT/``; with one, everything goes to ``OUT/`` directly.
+A UED run whose rollouts alone cannot fit the device is refused up front (:func:`_check_memory`,
+a lower bound); one that runs out of memory anyway (:class:`TooLarge`) is one line naming
+``num_envs``, and a fresh run then removes what it made (resuming would fail the same way),
+keeping what was there before and the algorithms that finished.
 
-``devices`` (``remidi run --devices N``, recorded in ``config.json`` and reused by ``--resume``)
-shards the seeds over N devices for the experiments that support it (``Experiment.shards_seeds``;
-``docs/devices.md``). In a multi-process JAX run only process 0 writes the run folder.
-"""
+With several algorithms each gets ``OUT/<algo>/`` and the comparison plots go to ``OUT/``; with
+one, everything goes to ``OUT/``. ``devices`` (``--devices N``, recorded and reused by
+``--resume``) shards the seeds (``Experiment.shards_seeds``; ``docs/devices.md``). In a
+multi-process JAX run only process 0 writes the run folder."""
 
 from __future__ import annotations
 
@@ -39,11 +34,8 @@ from remidi.files import code_version
 
 def run_experiment(spec: RunSpec, out: Path, progress: bool = True) -> dict[str, dict]:
     """Validate, train every algorithm of ``spec`` into ``out``, write all outputs; return
-    ``{algo: summary}``.
-
-    ``spec.devices``: shard the seeds over that many devices (:func:`_check_devices`).
-    ``spec.log``: the logging backends (:mod:`remidi.loggers`, checked by its ``parse_log``).
-    ``spec.naming``: the caller's words in errors and notes (``run_ued``'s arguments)."""
+    ``{algo: summary}``. ``spec.devices``: :func:`_check_devices`; ``spec.log``: backends of
+    :mod:`remidi.loggers`; ``spec.naming``: the caller's words in errors and notes."""
     exp, seeds, devices, naming = spec.exp, spec.seeds, spec.devices, spec.naming
     notes: list[str] = []
     config = resolve_config(exp, spec.preset, spec.overrides, notes, naming)
@@ -105,8 +97,8 @@ class TooLarge(ConfigError):
 
 
 def too_large_message(err: BaseException, config, naming: Naming = COMMAND_LINE) -> str | None:
-    """One line for an error that says the run is too large for the device, naming ``num_envs``
-    (the usual culprit, in the caller's words) and the size XLA asked for; None for any other error."""
+    """One line for an error saying the run is too large for the device, naming ``num_envs`` (the
+    usual culprit) and the size XLA asked for; None for any other error."""
     text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
     if isinstance(err, MemoryError):
         what = "does not fit in memory (MemoryError)"
@@ -131,8 +123,8 @@ def _size(num_bytes: float) -> str:
 
 
 def _device_memory() -> tuple[int | None, str]:
-    """``(bytes, what)``: the memory of the first device JAX sees (an accelerator's limit, a CPU's
-    physical memory); None where it cannot be told."""
+    """``(bytes, what)``: the first device's memory (an accelerator's limit, else physical memory);
+    None where it cannot be told."""
     import os
 
     import jax
@@ -148,11 +140,9 @@ def _device_memory() -> tuple[int | None, str]:
 
 
 def _check_memory(exp: Experiment, config, num_seeds: int, devices: int, naming: Naming = COMMAND_LINE) -> None:
-    """Refuse a UED run before anything is written when its rollouts alone cannot fit one device: a
-    block stores, per seed on the device, ``num_steps × num_envs`` observations and a reward, value
-    and log-probability each (a lower bound of what training holds: parameters, buffers and the
-    compiled program come on top). A run that passes can still run out of memory (then
-    :class:`TooLarge`, after allocating)."""
+    """Refuse a UED run before anything is written when its rollouts alone cannot fit one device
+    (per seed: ``num_steps × num_envs`` observations plus reward, value and log-probability). A lower
+    bound: a run that passes can still raise :class:`TooLarge`."""
     num_envs, num_steps = getattr(config, "num_envs", None), getattr(config, "num_steps", None)
     if exp.make_task is None or not isinstance(num_envs, int) or not isinstance(num_steps, int):
         return
@@ -186,9 +176,8 @@ def _existing_paths(out: Path, folders: list[Path]) -> set[Path]:
 
 
 def _remove_new_paths(out: Path, folders: list[Path], before: set[Path]) -> None:
-    """Remove what a failed fresh run wrote: the entries of ``folders`` that were not in ``before``
-    (new sub-folders with all they hold), then ``out``, the folders and the parents they were made
-    in when they are new and left empty. Nothing that existed before the run is touched."""
+    """Remove what a failed fresh run wrote: the entries of ``folders`` not in ``before``, then
+    ``out``, the folders and their parents where new and left empty. Nothing older is touched."""
     for folder in map(Path, folders):
         for path in (list(folder.iterdir()) if folder.is_dir() else []):
             if path in before:
@@ -205,8 +194,8 @@ def _remove_new_paths(out: Path, folders: list[Path], before: set[Path]) -> None
 
 
 def _check_devices(exp: Experiment, devices, num_seeds: int) -> None:
-    """``--devices``: 1 always; more only for an experiment that shards its seeds, and then at most
-    the devices JAX sees and a divisor of the number of seeds (``driver.check_devices``)."""
+    """``--devices``: 1 always; more only for an experiment that shards its seeds, at most the devices
+    JAX sees and a divisor of the number of seeds."""
     if devices == 1 and not isinstance(devices, bool):
         return  # today's path, without asking JAX anything
     if not exp.shards_seeds:
@@ -217,8 +206,8 @@ def _check_devices(exp: Experiment, devices, num_seeds: int) -> None:
 
 
 def _secondary_process(devices) -> bool:
-    """True in a process other than 0 of a multi-process JAX run (``jax.distributed``); only asked
-    of sharded runs, so a one-device run never touches JAX here."""
+    """True in a process other than 0 of a multi-process JAX run; asked only of sharded runs, so a
+    one-device run never touches JAX here."""
     if devices == 1:
         return False
     import jax
@@ -227,9 +216,8 @@ def _secondary_process(devices) -> bool:
 
 
 def write_run_config(folder: Path, spec: RunSpec, algo: str, config) -> None:
-    """``folder/config.json`` of ``algo``'s part of ``spec``, trained with ``config``: it records
-    every algorithm of the run in the order the user gave (plots keep it on resume) and the
-    logging backends (a resume continues them)."""
+    """``folder/config.json`` of ``algo``'s part of ``spec``, trained with ``config``; it records all
+    the run's algorithms in the user's order (plots keep it on resume) and the logging backends."""
     exp = spec.exp
     outputs.write_json(folder / "config.json", {
         "experiment": exp.name,
@@ -249,11 +237,10 @@ def write_run_config(folder: Path, spec: RunSpec, algo: str, config) -> None:
 
 def _train_and_write(spec: RunSpec, config, folders: dict[str, Path], out: Path, *, resume: bool, progress: bool,
                      compare: Callable[[dict[str, RunResult]], None] | None = None):
-    """Train each of ``folders``' algorithms and write its outputs: metrics.csv, the plots, then
-    summary.json, which marks the run finished (:func:`finished_run`), so a run stopped while it
-    plots is resumed and plotted again. ``compare(results)`` draws a several-algorithm run's
-    comparison plots (default, for several ``folders``: at ``out``); it runs before the last
-    algorithm's summary.json is written, for the same reason."""
+    """Train each of ``folders``' algorithms and write metrics.csv, the plots, then summary.json,
+    which marks the run finished (:func:`finished_run`), so a run stopped while plotting is replotted
+    on resume. ``compare(results)`` draws the comparison plots, before the last summary.json for the
+    same reason."""
     exp, preset, seeds, devices, log = spec.exp, spec.preset, spec.seeds, spec.devices, spec.log
     results: dict[str, RunResult] = {}
     summaries: dict[str, dict] = {}

@@ -92,11 +92,9 @@ def make_train(setting: str):
 
 def plot(folder: Path, results: dict[str, RunResult], cfg: TabularUEDConfig, preset: str | None = None,
          seeds: list[int] | None = None, experiment: str = "") -> None:
-    """``regret.png`` (greatest regret per observation, with the exact BLP regrets as dashed
-    lines) and ``adversary.png`` (level probabilities), one panel per algorithm in the run's
-    order, mean ± std over seeds, titled with the ``experiment``, ``preset`` and ``seeds`` of the
-    run. An observation or a level keeps its colour in every panel; levels whose curves coincide
-    are drawn once, labelled together, in dashes of each one's colour."""
+    """``regret.png`` (greatest regret per observation, exact BLP regrets dashed) and
+    ``adversary.png`` (level probabilities), one panel per algorithm, mean ± std over seeds. Colours
+    are fixed per observation or level; coinciding curves are drawn once, labelled together."""
     any_result = next(iter(results.values()))
     blp = any_result.extra["reference"]["blp_regret"]
     by_value: dict[float, list[str]] = {}

@@ -1,6 +1,6 @@
 """A task function's keyword arguments (``--task-arg NAME=VALUE``, ``run_ued(task_args=...)``):
-read from the command line, checked against the function's signature before anything is
-written, and kept to what ``config.json`` records and gives back unchanged (JSON scalars)."""
+parsed, checked against the function's signature before anything is written, and limited to JSON
+scalars, which ``config.json`` gives back unchanged."""
 
 from __future__ import annotations
 
@@ -14,9 +14,8 @@ SCALARS = (str, int, float, bool, type(None))  # what a task argument may be: JS
 
 
 def task_args_argument(args, key: str = "task_args") -> dict[str, Any]:
-    """``args`` (a dict of keyword arguments for a task's function, or None: none) checked to be
-    what ``config.json`` records and gives back unchanged: str keys, JSON scalar values (str, int,
-    float, bool, None; a finite float). ConfigError (one line, naming ``key`` and the argument)."""
+    """``args`` (keyword arguments, or None) checked to round-trip through ``config.json``: str keys,
+    JSON scalar values (finite floats). ConfigError (one line, naming ``key``)."""
     if args is None:
         return {}
     if not isinstance(args, dict) or not all(isinstance(name, str) and name.isidentifier() for name in args):
@@ -30,10 +29,9 @@ def task_args_argument(args, key: str = "task_args") -> dict[str, Any]:
 
 
 def parse_task_args(items: Sequence[str], key: str = "--task-arg") -> dict[str, Any]:
-    """``["size=9", "dark=true", "name=big"]`` → ``{"size": 9, "dark": True, "name": "big"}``: each
-    value read as a JSON scalar (a number, ``true``/``false``, ``null``, a quoted string), else kept
-    as the string given; a name given twice keeps the last. ConfigError (one line) for an item that
-    is not ``NAME=VALUE`` with NAME a Python identifier."""
+    """``["size=9", "dark=true", "name=big"]`` → ``{"size": 9, "dark": True, "name": "big"}``: a
+    value is a JSON scalar where it parses, else the string; the last of a repeated name wins.
+    ConfigError (one line) for an item not ``NAME=VALUE`` with NAME an identifier."""
     import json
 
     out: dict[str, Any] = {}
@@ -52,10 +50,8 @@ def parse_task_args(items: Sequence[str], key: str = "--task-arg") -> dict[str, 
 
 
 def check_task_args(target, path: str, args: dict[str, Any], key: str = "--task-arg") -> None:
-    """ConfigError (one line) unless ``target`` (the attribute ``path`` names) can be called with
-    ``args`` as keyword arguments: a name that is none of its parameters, a required parameter
-    left out where some are given, or arguments for a ``UEDTask`` (no function), each said with the
-    parameters it takes."""
+    """ConfigError (one line, with the parameters taken) unless ``target`` accepts ``args`` as
+    keywords: an unknown name, a missing required parameter, or arguments for a ``UEDTask``."""
     import inspect
 
     if isinstance(target, UEDTask) or not callable(target):

@@ -1,9 +1,6 @@
-"""Experiments on the UED engine (DR, PLR⊥, minimax return, ReMiDi), shared by every domain.
-
-A domain supplies its :class:`~remidi.envs.interface.UEDTask`, its default
-:class:`~remidi.engine.config.UEDConfig`, presets and which metrics to plot; this module turns
-that into an :class:`~remidi.experiments.base.Experiment`.
-"""
+"""Experiments on the UED engine (DR, PLR⊥, minimax return, ReMiDi), shared by every domain: a
+domain's task, default config, presets and plotted metrics made into an
+:class:`~remidi.experiments.base.Experiment`."""
 
 from __future__ import annotations
 
@@ -39,13 +36,10 @@ def final_replay_fractions(raw: dict[str, np.ndarray], num_envs: int, last: floa
 
 
 def stalled_seeds(metrics: dict[str, np.ndarray]) -> np.ndarray:
-    """bool[S]: the seeds whose block of updates (``metrics``: the driver's block metrics, f[S]
-    each) trained the agent on nothing while ReMiDi rejected levels: a frozen adversary explained
-    some level at every step (``rejected`` > 0), and no update of the block had a step to learn
-    from (``ppo/policy_loss`` NaN: it is NaN on an update that does not train or whose every step
-    was masked, and the block's mean leaves those out). For PLR⊥'s family that is a block without
-    a replay (the active buffer never reached its replay minimum), for an algorithm that trains on
-    every rollout a block whose every level was explained."""
+    """bool[S]: the seeds whose block of updates (``metrics``: block means, f[S] each) trained on
+    nothing while ReMiDi rejected levels: ``rejected`` > 0 at every step, and ``ppo/policy_loss`` NaN
+    (NaN on an update with no step to learn from; the block mean leaves those out). For PLR⊥'s family:
+    a block without a replay; for an algorithm training on every rollout: every level explained."""
     loss = metrics.get("ppo/policy_loss")
     if loss is None:
         return np.zeros(0, bool)
@@ -53,9 +47,9 @@ def stalled_seeds(metrics: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> Callable[[int, dict], list[str]]:
-    """A block callback ``(done, metrics) -> warnings``: one line for each seed the first time (in
-    this invocation) one of its blocks (of ``block`` updates, ``eval_every``, the last one possibly
-    shorter: a run resumes at a block's end) is :func:`stalled_seeds`, with the block's counts."""
+    """A block callback ``(done, metrics) -> warnings``: one line, with the block's counts, for
+    each seed the first time (in this invocation) one of its blocks of ``block`` updates (the last
+    possibly shorter) is :func:`stalled_seeds`."""
     warned: set[int] = set()
     start: list[int | None] = [None]  # where the block before ended (None: the first of this invocation)
     hint = ("" if tracker in ("prefix", "per_step") else
@@ -80,10 +74,9 @@ def stall_warner(seeds: list[int], tracker: str, num_envs: int, block: int) -> C
 
 
 def stalled_updates(seeds: list[int], steps: np.ndarray, history: dict[str, np.ndarray]) -> dict[str, list]:
-    """``{seed: [[first, last], ...]}``: the update ranges (inclusive, merged where blocks follow
-    each other) of each seed's blocks that were :func:`stalled_seeds`, from the whole run's
-    ``history`` ({name: f[S, T]}, blocks ending at ``steps`` i[T]; resumed parts included); seeds
-    without one are left out. Written to summary.json as ``stalled_updates``."""
+    """``{seed: [[first, last], ...]}``: the inclusive update ranges (adjacent blocks merged) of
+    each seed's :func:`stalled_seeds` blocks, from the whole run's ``history`` ({name: f[S, T]}, blocks
+    ending at ``steps`` i[T]); seeds without one left out. summary.json's ``stalled_updates``."""
     if "ppo/policy_loss" not in history:
         return {}
     out: dict[str, list] = {}
@@ -106,13 +99,11 @@ UNSEPARATED = 0.9
 
 
 def separation_warning(seeds: list[int], final: dict[str, np.ndarray]) -> str | None:
-    """The one-line warning for a run with a learned tracker (``remidi.tracker=belief`` or
-    ``simulated``) whose last audit (``final``: each metric's last logged point, f[S]) shows frozen
-    models that cannot separate the adversaries: on fresh generator levels they explain at least
-    :data:`UNSEPARATED` of the steps (``belief/explained``) while judging fewer than that share as
-    the exact tracker does (``belief/agreement``): a later adversary's levels are then rejected or
-    masked as an earlier one's, whatever they hold (the mazes of docs/results.md: 0.91–1.00 explained,
-    agreement 0.00–0.66). None where no seed shows it or the run has no audit."""
+    """The one-line warning for a learned tracker (``belief`` or ``simulated``) whose last audit
+    (``final``: f[S]) shows frozen models that cannot separate the adversaries: they explain at least
+    :data:`UNSEPARATED` of fresh steps (``belief/explained``) but agree with the exact tracker on fewer
+    (``belief/agreement``), so a later adversary's levels are judged as an earlier one's (the mazes
+    of docs/results.md). None where no seed shows it or there is no audit."""
     explained, agreement = final.get("belief/explained"), final.get("belief/agreement")
     if explained is None or agreement is None:
         return None
@@ -128,10 +119,9 @@ def separation_warning(seeds: list[int], final: dict[str, np.ndarray]) -> str | 
 
 
 def make_run_warnings(task_factory: Callable[[UEDConfig], UEDTask], check_step: bool = False):
-    """``(spec, config) -> warnings``: :func:`~remidi.engine.run.validation.run_warnings` for all of
-    the run's algorithms at once (said once per run, not once per algorithm), naming the preset
-    where it, not the user's ``--set``, chose ``num_steps`` (the maze smoke presets' short
-    rollouts). ``check_step``: warn of a step that draws from its key (a user's task)."""
+    """``(spec, config) -> warnings``: :func:`~remidi.engine.run.validation.run_warnings` for all
+    the run's algorithms at once, naming the preset where it, not ``--set``, chose ``num_steps``.
+    ``check_step``: warn of a step that draws from its key (a user's task)."""
 
     def warnings(spec, cfg: UEDConfig) -> list[str]:
         chosen = "num_steps" in spec.exp.presets.get(spec.preset, {}) and "num_steps" not in spec.overrides
@@ -144,12 +134,9 @@ def make_run_warnings(task_factory: Callable[[UEDConfig], UEDTask], check_step: 
 def make_train(task_factory: Callable[[UEDConfig], UEDTask], summary_metrics: tuple[str, ...],
                derive: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
                cheap_step: bool = False):
-    """``derive(history) -> more history`` adds metrics computed from the others (e.g. a mean
-    over evaluation sets), f[S, T] each. ``cheap_step``: the environment's step costs little
-    beside the agent's network, so the tracker's cost
-    (:func:`~remidi.engine.trackers.tracker_cost_note`) is not said. (The warnings about a run
-    that would train degenerately are said once per run, before its first algorithm trains:
-    :func:`make_run_warnings`.)"""
+    """``derive(history) -> more history`` adds metrics computed from the others, f[S, T] each.
+    ``cheap_step``: the step costs little beside the network, so the tracker's cost
+    (:func:`~remidi.engine.trackers.tracker_cost_note`) is not said."""
 
     def train(ctx: RunContext) -> RunResult:
         cfg: UEDConfig = ctx.config
@@ -194,14 +181,12 @@ UNIT_INTERVAL = ("solve_rate", "replay_fraction", "buffer_fraction", "generated"
 
 
 def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | None = None, name: str = ""):
-    """``panels``: (metric, title) or (metric, title, options) tuples; one panel per metric, one
-    curve per algorithm (fixed style per algorithm, in the run's order; algorithms without the
-    metric, or that never define it, left out), saved as ``training.png``. ``options``:
-    ``references`` [(y, label)] dashed lines, ``ylim`` (the range shown at least), ``optional``
-    (left out when no algorithm of the run has the metric: a learned generator's); metrics of a
-    share or rate are drawn on [0, 1]. ``bars``: (title, metrics): a bar chart of those metrics'
-    final values per algorithm (mean ± std over seeds), saved as ``final.png``. The figures' titles
-    name the experiment ``name`` and the run's ``preset`` and ``seeds``, as the run gives them."""
+    """``training.png``: one panel per metric of ``panels`` ((metric, title[, options]) tuples), one
+    curve per algorithm in the run's order (those without the metric left out). ``options``:
+    ``references`` [(y, label)] dashed lines, ``ylim`` (the range shown at least), ``optional`` (left
+    out when no algorithm has the metric); shares and rates on [0, 1]. ``bars``: (title, metrics) for
+    ``final.png``, final values per algorithm (mean ± std over seeds). Titles name ``name``, the
+    preset and the seeds."""
 
     def plot(folder: Path, results: dict[str, RunResult], cfg, preset: str | None = None,
              seeds: list[int] | None = None) -> None:
@@ -233,21 +218,16 @@ def make_plot(panels: tuple[tuple, ...], bars: tuple[str, tuple[str, ...]] | Non
 
 @dataclass(frozen=True)
 class UEDSpec:
-    """A UED experiment's definition: its name and description, the task ``task_factory(cfg)``
-    builds, the configuration (``config_factory``, ``presets``, ``preset_seeds``,
-    ``preset_reasons``), what it logs and draws (``summary_metrics``, ``plot_panels_spec``,
-    ``derive``, ``bar_chart``: :func:`make_train`, :func:`make_plot`; ``cheap_step``: the
-    environment's step costs little beside the agent's network, measured, so the exact tracker's
-    cost is not said at the start of a run). ``builds_levels``: whether
-    its task has a level-building MDP (``UEDTask.level_builder``); without one the algorithms with
-    a learned level generator are not among its algorithms (``--algo all`` leaves them out).
-    ``refusal(algorithm) -> str | None``: more generally, why the task cannot run an algorithm
-    (None: it can; :func:`remidi.engine.run.validation.task_refusal` of one task). ``check_step``: warn
-    of a step that draws from its key (a user's task, :func:`make_train`). ``notes``: lines ``remidi
-    list NAME`` prints (:attr:`~remidi.experiments.base.Experiment.notes`). ``task_gives``: which of
-    the task's fields that a level score may need (``optimal_return``, ``solved``) it sets, known
-    without building it, so that ``remidi list NAME`` lists only the scores it can use without
-    building a physics model; None: the task is built to see (a user's task, built already)."""
+    """A UED experiment's definition: the task ``task_factory(cfg)`` builds, its configuration
+    (``config_factory``, ``presets``, ``preset_seeds``, ``preset_reasons``), what it logs and draws
+    (:func:`make_train`, :func:`make_plot`).
+
+    ``cheap_step``: the step costs little beside the network (measured), so the exact tracker's cost is
+    not said. ``builds_levels``: the task has ``UEDTask.level_builder``; without, the learned-generator
+    algorithms are left out. ``refusal(algorithm) -> str | None``: why the task cannot run an
+    algorithm (None: it can). ``check_step``: warn of a step that draws from its key. ``notes``: lines
+    ``remidi list NAME`` prints. ``task_gives``: the score fields (``optimal_return``, ``solved``) the
+    task sets, known without building it, for ``remidi list NAME``; None: build the task to see."""
 
     name: str
     description: str
@@ -269,8 +249,7 @@ class UEDSpec:
 
 
 def make_ued_experiment(spec: UEDSpec) -> Experiment:
-    """The :class:`~remidi.experiments.base.Experiment` of ``spec``: a UED experiment over the task
-    ``spec.task_factory(cfg)`` builds."""
+    """The :class:`~remidi.experiments.base.Experiment` of ``spec``."""
     name, description, task_factory, config_factory = spec.name, spec.description, spec.task_factory, spec.config_factory
     presets, preset_seeds, preset_reasons = spec.presets, spec.preset_seeds, spec.preset_reasons
     summary_metrics, plot_panels_spec, derive, bar_chart = spec.summary_metrics, spec.plot_panels_spec, spec.derive, \

@@ -1,21 +1,14 @@
 """``remidi compare RUN ... --metric M --algo A --baseline B``: is A better than B on M?
 
-For each experiment among the given finished runs (each must hold both algorithms), from the
-per-seed values of ``M`` (``summary.json``, or the mean of the last K logged points with
-``--last K``): both algorithms' seeds, mean ± sample std (ddof 1), IQM and 95% bootstrap
-intervals; the difference of means; the probability of improvement P(A > B) + ½ P(A = B) with
-its 95% bootstrap interval; the exact one-sided permutation p-value of "A's mean > B's"
-(paired by seed with ``--paired``: both algorithms must then have the same seeds), and, for
-more than one experiment, its Holm–Bonferroni adjustment over them (the experiments are the
-comparisons of one claim). Over several experiments the probability of improvement is also
-averaged (rliable's aggregate: scale-free, unlike a pooled mean), its interval resampling seeds
-within each experiment. ``--out FIG.png`` draws the interval plot. :mod:`remidi.stats` does the
-statistics; :func:`compare` is the same computation from per-seed values for other callers
-(the results page), :func:`compare_runs` from run summaries.
+Per experiment among the finished runs (each holding both algorithms), from ``M``'s per-seed values
+(``summary.json``, or with ``--last K`` the mean of the last K points): each algorithm's mean ±
+std (ddof 1), IQM and 95% bootstrap intervals; the difference of means; the probability of
+improvement P(A > B) + ½ P(A = B) with its interval; the exact one-sided permutation p-value (by
+seed with ``--paired``) and, over several experiments, its Holm–Bonferroni adjustment and the
+averaged probability of improvement (rliable's scale-free aggregate). ``--out FIG.png`` draws the
+interval plot. :func:`compare` works from per-seed values, :func:`compare_runs` from summaries.
 
-Several run folders of one experiment × algorithm (seeds run in parts) are merged; a seed in two
-of them is an error.
-"""
+Run folders of one experiment × algorithm are merged; a seed in two of them is an error."""
 
 from __future__ import annotations
 
@@ -45,8 +38,8 @@ def describe(values: Mapping[int, float]) -> dict:
 
 def compare(algo: Mapping[str, Mapping[int, float]], baseline: Mapping[str, Mapping[int, float]], *,
             paired: bool = False) -> dict:
-    """The comparison of ``algo`` against ``baseline``, each ``{experiment: {seed: value}}`` with
-    the same experiments, as a JSON-ready dict::
+    """The comparison of ``algo`` against ``baseline`` (each ``{experiment: {seed: value}}``, the
+    same experiments) as a JSON-ready dict::
 
         {"paired": bool, "confidence": 0.95,
          "experiments": {experiment: {"algo": {seeds, n, mean, std, iqm, mean_ci, iqm_ci},
@@ -55,9 +48,7 @@ def compare(algo: Mapping[str, Mapping[int, float]], baseline: Mapping[str, Mapp
                                       "p_value": one-sided, "exact": bool, "p_holm": Holm-adjusted}},
          "probability_of_improvement": P averaged over experiments, "poi_ci": [low, high]}
 
-    ``paired``: pair the seeds (x[i], y[i] from the same seed); ConfigError unless both
-    algorithms have the same seeds in every experiment. Deterministic (fixed resampling seeds).
-    """
+    ``paired``: pair by seed; ConfigError unless both have the same seeds everywhere. Deterministic."""
     if list(algo) != list(baseline):
         raise ConfigError(f"compare: the algorithm ran {', '.join(algo)} and the baseline {', '.join(baseline)}; "
                           "both need the same experiments")
@@ -109,9 +100,8 @@ def _values(docs: list[dict], metric: str, algo: str, last: int | None) -> dict[
 
 def compare_runs(docs: list[dict], metric: str, algo: str, baseline: str, *, paired: bool = False,
                  last: int | None = None) -> dict:
-    """:func:`compare` on the runs ``docs`` (:func:`remidi.runs.table.summaries`), with
-    ``"metric"``, ``"algo"`` and ``"baseline"`` added. Every experiment where either algorithm
-    ran must have both. ConfigError (one line) for an unknown metric or algorithm."""
+    """:func:`compare` on the runs ``docs``, with ``"metric"``, ``"algo"`` and ``"baseline"`` added;
+    every experiment must have both. ConfigError (one line) for an unknown metric or algorithm."""
     if not docs:
         raise ConfigError("RUN: no finished runs given")
     if last is not None and (not isinstance(last, int) or last < 1):
@@ -147,9 +137,8 @@ def _p(value: float) -> str:
 
 
 def format_comparison(result: dict) -> str:
-    """The comparison as text (one block per experiment, then the average over experiments);
-    ``result`` from :func:`compare_runs` (or :func:`compare` with ``metric``, ``algo`` and
-    ``baseline`` names added)."""
+    """The comparison as text (one block per experiment, then the average); ``result`` from
+    :func:`compare_runs`."""
     algo, base, metric = result["algo"], result["baseline"], result["metric"]
     digits = _digits(metric)
     width = max(len(algo), len(base))
@@ -180,11 +169,9 @@ def format_comparison(result: dict) -> str:
 
 
 def comparison_figure(result: dict):
-    """rliable-style interval figure: panels mean, IQM and P(algo > baseline); per experiment and
-    algorithm a bar over the 95% interval, capped at both ends, and a white diamond at the point
-    estimate (``result`` as for :func:`format_comparison`). Each value axis reaches past the
-    intervals (P's past [0, 1]), so an interval's clipped end stays visible; the caption says
-    what a bar, a cap, a diamond and the dashed line are."""
+    """rliable-style interval figure: panels mean, IQM and P(algo > baseline), per experiment and
+    algorithm a capped bar over the 95% interval and a white diamond at the estimate. Value axes
+    reach past the intervals (P's past [0, 1]), so clipped ends stay visible."""
     import matplotlib.pyplot as plt
 
     from remidi.experiments.plots import _captioned, algorithm_style, padded  # sets the Agg backend
@@ -243,10 +230,8 @@ def _rows(ax, labels: list[str]) -> None:
 
 
 def _interval(ax, y: float, value: float, ci, color: str) -> None:
-    """One row of an interval plot: a bar over ``ci`` with a cap at each end (an interval of a
-    single point is its caps) and a white diamond edged in black at ``value``; what is undefined
-    is left out. The row's height (± 0.4) counts for autoscaling, so a caller that leaves the
-    limits to matplotlib keeps the caps off the frame."""
+    """One interval-plot row: a bar over ``ci`` capped at both ends and a diamond at ``value``
+    (undefined parts left out). Its ± 0.4 height counts for autoscaling, keeping caps off the frame."""
     ends = [v for v in (*ci, value) if math.isfinite(v)]
     if ends:
         ax.update_datalim([(min(ends), y - 0.4), (max(ends), y + 0.4)])

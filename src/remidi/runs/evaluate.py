@@ -1,48 +1,32 @@
 """``remidi evaluate RUN_DIR``: a UED run's trained agents on more evaluation levels.
 
-Every seed of every algorithm in ``RUN_DIR`` (a run folder, or a several-algorithm run's folder)
-is reloaded from its ``checkpoint.npz`` (a finished run's last one, or an interrupted run's
-latest) and evaluated on
+Every seed of every algorithm in ``RUN_DIR`` (a run, or a several-algorithm run) is reloaded from
+its latest ``checkpoint.npz`` and evaluated on
 
-* **the task's own evaluation sets** (the ten held-out mazes, the lever's visible and hidden
-  levels, ...) with ``--attempts`` sampled episodes per level, the metrics training logs for them
-  (``solve_rate/<set>``, ``return/<set>``, ``discounted_return/<set>``, ``regret/<set>/...``)
-  and ``solve_rate/mean`` over the sets;
+* **the task's own evaluation sets** with ``--attempts`` sampled episodes per level: training's
+  metrics for them (``solve_rate/<set>``, ``return/<set>``, ``regret/<set>/...``, ...) and
+  ``solve_rate/mean``;
 * **CVaR over the level generator** (Rutherford et al. 2024, "No Regrets"): ``--cvar-levels``
-  solvable levels drawn from the task's generator with ``--seed`` (the same levels for every seed
-  and algorithm; levels whose optimal return is ≤ 0, which no agent can solve, are drawn again),
-  ``--cvar-attempts`` episodes each, twice, on independent episodes (SFL's protocol): the first
-  set of rollouts ranks the levels (per level its solve rate, or mean return), the second scores
-  them, so the worst levels' luck in ranking does not bias their score downward; then the mean
-  score over the worst α of levels for α ∈ {100%, 10%, 1%}: ``cvar/solve_rate/<α>``,
-  ``cvar/return/<α>`` (100% is the plain mean of the scoring rollouts), in that order, each only
-  where α of the levels is at least one level (1% needs ``--cvar-levels`` ≥ 100: below, it would
-  be the single worst level, said in one line instead); where the task tags its
-  levels (``level_tags``: T-mazes, blind levels, hidden answers), the scoring rollouts' mean over
-  the (solvable) generator levels of one kind alone and over the others: ``generator/solve_rate/<tag>``,
-  ``generator/solve_rate/not-<tag>`` (and ``generator/return/...``);
-* **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per size in
-  ``--perfect-sizes`` (default 21 and 51), each a *perfect* maze (exactly one path between any
-  two open cells, carved by a randomised depth-first search from ``--seed``), the agent and the
-  goal on random open cells; the agent's egocentric view plays any size. Its exact optimal
-  return comes from the same shortest-path search as training's (episodes still last at most
-  250 steps, so a far goal may be out of reach: ``perfect<S>/reachable`` is the share of levels
-  whose optimum is positive). ``perfect<S>/solve_rate``, ``perfect<S>/return``,
-  ``perfect<S>/regret`` (optimal minus mean return).
+  solvable levels drawn with ``--seed`` (the same for every seed and algorithm), ``--cvar-attempts``
+  episodes each, twice (SFL's protocol): one set of rollouts ranks the levels, an independent one
+  scores them, so ranking luck does not bias the worst levels down. ``cvar/solve_rate/<α>`` and
+  ``cvar/return/<α>`` for α ∈ {100%, 10%, 1%}, each only where α of the levels is at least one
+  level (else said in one line). Where the task tags levels (``level_tags``):
+  ``generator/solve_rate/<tag>``, ``generator/solve_rate/not-<tag>`` (and ``generator/return/...``);
+* **larger perfect mazes** (maze experiments): ``--perfect-count`` mazes per side in
+  ``--perfect-sizes`` (default 21 and 51), carved by randomised depth-first search from ``--seed``
+  (one path between any two cells), agent and goal on random cells, with the exact optimal return.
+  Episodes still last at most 250 steps, so ``perfect<S>/reachable`` is the share with a positive
+  optimum; ``perfect<S>/solve_rate``, ``perfect<S>/return``, ``perfect<S>/regret``.
 
-The agent acts as it trained, its actions drawn from its policy; ``--action mode`` evaluates the
-deterministic policy instead (each step the most likely action: a Gaussian policy's mean, a
-categorical one's arg-max) and writes its files beside the sampled evaluation's, named
-``evaluate-mode.*``, so that both can be reported, labelled.
+The agent samples its actions as in training; ``--action mode`` takes the most likely action
+instead and writes ``evaluate-mode.*`` beside the sampled files.
 
-Writes ``RUN_DIR/evaluate.json`` (the run, its experiment, the arguments, the code and device it ran
-on (:func:`remidi.files.code_version`), and per algorithm the
-update its checkpoint is from and every metric's mean, std and per-seed values),
-``RUN_DIR/evaluate.csv`` (long format: algo, seed, metric, value) and ``RUN_DIR/evaluate.png``
-(the main metrics per algorithm, titled with the experiment and the run).
-Every bad argument, or a folder that is not a UED run with a checkpoint, is a one-line error
-before anything is computed or written.
-"""
+Writes ``RUN_DIR/evaluate.json`` (the run, arguments, code and device
+(:func:`remidi.files.code_version`), and per algorithm the checkpoint's update and each metric's
+mean, std and per-seed values), ``evaluate.csv`` (algo, seed, metric, value) and ``evaluate.png``.
+Every bad argument, or a folder that is not a UED run with a checkpoint, is a one-line error before
+anything is computed."""
 
 from __future__ import annotations
 
@@ -67,9 +51,8 @@ MAX_PERFECT_SIZE = 101
 
 @dataclass(frozen=True)
 class EvalSettings:
-    """What ``remidi evaluate`` evaluates on (module docstring; the command's flags of the same
-    names): episodes per evaluation-set level, CVaR levels and their episodes, the perfect mazes'
-    sides and count per side, and the seed that draws the levels and the episodes."""
+    """What ``remidi evaluate`` evaluates on (its flags of the same names): episodes per
+    evaluation-set level, CVaR levels and episodes, the perfect mazes' sides and count, the seed."""
 
     attempts: int = DEFAULTS["attempts"]
     cvar_levels: int = DEFAULTS["cvar_levels"]
@@ -85,17 +68,15 @@ class EvalSettings:
 
 
 def files_stem(action: str) -> str:
-    """The name of the files an evaluation acting by ``action`` writes: ``evaluate`` (sampled
-    actions) or ``evaluate-mode``."""
+    """The stem of an evaluation's files: ``evaluate`` (sampled actions) or ``evaluate-mode``."""
     return "evaluate" if action == "sample" else f"evaluate-{action}"
 
 
 # ------------------------------------------------------------------------------ pure pieces
 def cvar(values: np.ndarray, alpha: float, rank_by: np.ndarray | None = None) -> float:
-    """The conditional value at risk of the worst ``alpha`` share of levels: the mean of
-    ``values`` f[N] over the ``ceil(alpha · N)`` (at least one) levels that rank lowest by
-    ``rank_by`` f[N] (ties in level order), an independent estimate of the same quantity (SFL:
-    rank on one set of rollouts, score on another); ``rank_by=None`` ranks by ``values`` itself."""
+    """The CVaR of the worst ``alpha`` share of levels: the mean of ``values`` f[N] over the
+    ``ceil(alpha · N)`` (≥ 1) levels ranking lowest by ``rank_by`` f[N] (ties in level order; None:
+    ``values`` itself). SFL ranks on one set of rollouts and scores on another."""
     values = np.asarray(values, dtype=float)
     order = np.argsort(values if rank_by is None else np.asarray(rank_by, dtype=float), kind="stable")
     k = max(1, math.ceil(alpha * len(values) - 1e-9))
@@ -103,8 +84,8 @@ def cvar(values: np.ndarray, alpha: float, rank_by: np.ndarray | None = None) ->
 
 
 def cvar_shares(num_levels: int) -> list[tuple[float, str]]:
-    """The shares of :data:`ALPHAS` that hold at least one of ``num_levels`` levels (``α · N ≥ 1``):
-    a smaller one would be the single worst level, not a CVaR at α."""
+    """The :data:`ALPHAS` with ``α · N ≥ 1`` for ``num_levels`` N: a smaller one would be the single
+    worst level, not a CVaR."""
     return [(alpha, label) for alpha, label in ALPHAS if alpha * num_levels + 1e-9 >= 1]
 
 
@@ -152,9 +133,9 @@ def _run_folders(run_dir: Path) -> list[Path]:
 
 
 def _load(folder: Path, task=None) -> _Loaded:
-    """The run in ``folder``, its agent restored from the checkpoint (leaves with the seed axis
-    first); its task rebuilt from config.json (``saved_experiment``), or ``task`` where given.
-    ConfigError (one line) for a run that is no UED run or has no readable checkpoint."""
+    """The run in ``folder`` with its agent restored from the checkpoint (seed axis first) and its
+    task rebuilt from config.json, or ``task`` where given. ConfigError (one line) for a run that is
+    no UED run or has no readable checkpoint."""
     from remidi.engine.run import driver
     from remidi.engine import train as tr
     from remidi.engine.run.checkpoint import CHECKPOINT
@@ -182,10 +163,9 @@ def _load(folder: Path, task=None) -> _Loaded:
 
 
 def _solvable_levels(task, count: int, seed: int):
-    """``count`` levels from the task's generator (drawn with ``seed``), leaving out those no agent
-    can solve where the task knows its optimum (optimal return ≤ 0, e.g. a maze whose goal the walls
-    cut off): they would sit at the bottom of every agent's CVaR. Draws in rounds until ``count``
-    remain (at most 64 rounds; fewer levels if the generator rarely makes a solvable one)."""
+    """``count`` generator levels drawn with ``seed``, leaving out those with optimal return ≤ 0
+    (which would sit at the bottom of every CVaR), in at most 64 rounds (fewer where solvable levels
+    are rare)."""
     import jax
 
     keys = jax.random.split(jax.random.PRNGKey(seed), 64)
@@ -208,11 +188,9 @@ def _solvable_levels(task, count: int, seed: int):
 
 
 def _metrics_fn(setup, settings: EvalSettings, cvar_levels, perfect: dict):
-    """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` computing every raw
-    evaluation of one run: the task's evaluation sets as training evaluates them
-    (:func:`remidi.engine.run.evaluation.evaluate`, with ``attempts`` per level), ``[S]`` values; for CVaR
-    the per-level solve rates and returns ``[S, N]``; per perfect size its returns ``[S, L]``. The
-    agent acts by ``settings.action`` throughout."""
+    """A jitted ``(runner [S, ...], keys [S]) -> {metric: f32[S, ...]}`` of a run's raw
+    evaluations, the agent acting by ``settings.action``: the evaluation sets as training evaluates
+    them, ``[S]``; CVaR's per-level solve rates and returns ``[S, N]``; per perfect size returns ``[S, L]``."""
     import dataclasses
 
     import jax
@@ -276,13 +254,10 @@ def _summarise(raw: dict[str, np.ndarray], setup, perfect_optimal: dict[int, np.
 
 def evaluate_run(run_dir, settings: EvalSettings = EvalSettings(), *, log: Callable[[str], None] | None = None,
                  task=None) -> dict:
-    """Evaluate every algorithm and seed in ``run_dir`` (module docstring) on ``settings`` and write
-    ``evaluate.json``, ``evaluate.csv`` and ``evaluate.png`` there (``evaluate-mode.*`` with
-    ``action="mode"``). Returns the JSON document.
-
-    ``task``: the :class:`~remidi.envs.interface.UEDTask` the run trained on, for a run of a user's
-    task that ``config.json`` cannot rebuild (``run_ued`` without ``task_ref``); by default the task
-    is the run's experiment's, or rebuilt from the import path config.json records."""
+    """Evaluate every algorithm and seed in ``run_dir`` on ``settings`` and write ``evaluate.json``,
+    ``evaluate.csv`` and ``evaluate.png`` there (``evaluate-mode.*`` with ``action="mode"``); returns
+    the JSON document. ``task``: the run's :class:`~remidi.envs.interface.UEDTask` where
+    ``config.json`` cannot rebuild it (``run_ued`` without ``task_ref``)."""
     import jax
 
     from remidi.envs.maze import MazeEnv, optimal_return

@@ -1,19 +1,14 @@
 """``remidi render``: pictures of maze levels, of what the adversary chose, and of the agent playing.
 
-* :func:`render_maze`: a held-out maze (the corridor mazes: one tile per goal placement) as a PNG,
-  with a colour key, at least :data:`~remidi.runs.sheets.MIN_SIDE` pixels on its short side (larger cells than
-  ``tile`` where the maze would be smaller).
-* :func:`render_buffers`: the top-K scored levels of every level buffer in a maze run's
-  checkpoint, one row per buffer (the active one marked), each tile captioned with its score and
-  tags (T-maze / blind), as a PNG.
-* :func:`render_episode`: the checkpoint's agent playing one episode on a held-out maze, as an
-  animated GIF whose frames show the maze (the agent's 5×5 view highlighted) beside what the agent
-  observes, under a colour key (:data:`EPISODE_KEY`).
+* :func:`render_maze`: a held-out maze (corridor mazes: one tile per goal placement) as a PNG with
+  a colour key, at least :data:`~remidi.runs.sheets.MIN_SIDE` pixels on its short side.
+* :func:`render_buffers`: the top-K levels of every buffer in a maze run's checkpoint, one row per
+  buffer (the active one marked), tiles captioned with score and tags, as a PNG.
+* :func:`render_episode`: the checkpoint's agent playing one episode on a held-out maze, as a GIF
+  of the maze (the 5×5 view highlighted) beside the agent's observation (:data:`EPISODE_KEY`).
 
-Drawing: :mod:`remidi.runs.sheets`.
-
-Every bad input raises :class:`~remidi.errors.RemidiError` (one line) before anything is written.
-"""
+Drawing: :mod:`remidi.runs.sheets`. Every bad input raises :class:`~remidi.errors.RemidiError`
+(one line) before anything is written."""
 
 from __future__ import annotations
 
@@ -63,9 +58,9 @@ def _check_maze_name(name: str, flag: str):
 
 # --------------------------------------------------------------------------------- render maze
 def render_maze(name: str, out=None, tile: int = DEFAULT_TILE) -> Path:
-    """Draw the held-out maze ``name`` (every goal placement of a corridor maze) as a PNG titled
-    with its name, each tile captioned with its goal, a colour key under the title; ``tile``
-    pixels per cell, or more where the picture would be too small to read (:func:`readable_tile`)."""
+    """Draw held-out maze ``name`` (every goal placement of a corridor maze) as a titled PNG with a
+    colour key, tiles captioned with their goal; ``tile`` pixels per cell, or more where the picture
+    would be too small (:func:`readable_tile`)."""
     _check_tile(tile)
     size, levels = _check_maze_name(name, "maze")
     path = _check_out(out, Path(f"{name}.png"), ".png")
@@ -161,8 +156,8 @@ def _open_run(run_dir, seed, out, default_name: str, suffix: str):
 # ------------------------------------------------------------------------------ render buffers
 def render_buffers(run_dir, top: int = DEFAULT_TOP, seed: int | None = None, out=None,
                    tile: int = DEFAULT_TILE) -> Path:
-    """Draw the ``top`` highest-scored levels of each level buffer of seed ``seed`` (default: the
-    run's first) in the run's checkpoint, one row per buffer, as a PNG."""
+    """Draw the ``top`` highest-scored levels of each buffer of seed ``seed`` (default: the first)
+    in the run's checkpoint, one row per buffer, as a PNG."""
     import jax
 
     from remidi.envs.maze import TRAIN_SIZE
@@ -235,9 +230,8 @@ class Episode:
 
 
 def _play(env, net, params, level, rng, steps: int):
-    """One episode (``steps`` actions at most) of ``net`` on ``level``; returns host arrays:
-    inner states [steps + 1] (the first is the start), observations [steps + 1], actions,
-    rewards and dones [steps]."""
+    """One episode (at most ``steps`` actions) of ``net`` on ``level``, as host arrays: inner states
+    and observations [steps + 1] (the first the start), actions, rewards and dones [steps]."""
     import jax
     import jax.numpy as jnp
 
@@ -265,9 +259,8 @@ def _play(env, net, params, level, rng, steps: int):
 
 
 def _view_panel(image: np.ndarray, atlas: np.ndarray) -> np.ndarray:
-    """u8[5·v, 5·v, 3]: the agent's egocentric observation (f32[5, 5, 3], ``image[x, y]``, values
-    ÷ 10) drawn with the renderer's tiles: the agent at the bottom centre facing up; cells it
-    cannot see (or every cell, blindfolded) in dark blue."""
+    """u8[5·v, 5·v, 3]: the agent's observation (f32[5, 5, 3], ``image[x, y]``, values ÷ 10) in the
+    renderer's tiles, the agent at the bottom centre facing up, unseen cells dark blue."""
     objects = np.rint(image[..., 0] * 10).astype(int).T  # [row, col]
     view, v = objects.shape[0], atlas.shape[1]
     # atlas: 0 empty, 1 wall, 2 goal, 3..6 agent facing right, down, left, up
@@ -290,9 +283,8 @@ def _view_panel(image: np.ndarray, atlas: np.ndarray) -> np.ndarray:
 
 def render_episode(run_dir, maze: str, seed: int | None = None, attempt_seed: int = 0, goal_index: int | None = None,
                    out=None, tile: int = DEFAULT_TILE) -> Episode:
-    """Play the checkpoint's agent (seed ``seed``, default the run's first) for one episode on the
-    held-out maze ``maze`` (a corridor maze: goal placement ``goal_index``, default 0) and save the
-    frames as an animated GIF. ``attempt_seed`` seeds the sampled actions."""
+    """Save as a GIF one episode of the checkpoint's agent (seed ``seed``, default the first) on
+    held-out maze ``maze`` (goal placement ``goal_index``); ``attempt_seed`` seeds the actions."""
     import jax
     from jaxued.environments.maze.renderer import MazeRenderer
 

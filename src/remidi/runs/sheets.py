@@ -1,15 +1,11 @@
-"""How ``remidi render`` draws (:mod:`remidi.runs.render`): tiles, captions, colour keys and the
-sheets that hold them, and the PNG and GIF files they are written to.
+"""How ``remidi render`` draws: tiles (``jaxued``'s
+:class:`~jaxued.environments.maze.renderer.MazeRenderer`), captions, colour keys and the sheets
+holding them (NumPy and Pillow), written atomically as PNG or GIF.
 
-Tiles are drawn by ``jaxued``'s :class:`~jaxued.environments.maze.renderer.MazeRenderer`; the
-sheets are assembled with NumPy and Pillow and written atomically. Geometry (so it can be
-checked): a sheet is ``HEADER`` pixels of title, then its colour key, then its rows; a row is its
-own header band (``ROW_HEADER``, buffer sheets only), a caption band (``CAPTION``) and the tiles,
-followed by ``PAD``; tiles are ``(size + 2) · tile`` pixels square (the maze plus its border) with
-``PAD`` pixels between and around them (:func:`sheet_size`). The key of a buffer sheet is
-:data:`KEY`, of a maze sheet :data:`MAZE_KEY` (without the buffers' mark): :func:`key_height`
-pixels, ``KEY_ROW`` per line of swatches that fits the sheet's width.
-"""
+Geometry, so tests can check it: a sheet is ``HEADER`` pixels of title, its colour key
+(:data:`KEY` or :data:`MAZE_KEY`, :func:`key_height` pixels, ``KEY_ROW`` per line), then rows; a
+row is a ``ROW_HEADER`` band (buffer sheets only), a ``CAPTION`` band and tiles, then ``PAD``;
+tiles are ``(size + 2) · tile`` pixels square with ``PAD`` between and around (:func:`sheet_size`)."""
 
 from __future__ import annotations
 
@@ -127,9 +123,8 @@ def sheet_size(rows: int, columns: int, tile_px: int, row_header: bool, key=None
 
 
 def readable_tile(tile: int, rows: int, columns: int, cells: int, key=None) -> int:
-    """The pixels per cell of a sheet of ``rows`` × ``columns`` mazes of ``cells`` cells a side
-    (their border included): ``tile``, or more where the sheet's short side would be under
-    :data:`MIN_SIDE` pixels (at most ``TILE_RANGE``'s end)."""
+    """Pixels per cell for ``rows`` × ``columns`` mazes of ``cells`` a side (border included):
+    ``tile``, or more (up to ``TILE_RANGE``'s end) where the short side would be under :data:`MIN_SIDE`."""
     while tile < TILE_RANGE[1] and min(sheet_size(rows, columns, cells * tile, False, key)) < MIN_SIDE:
         tile += 1
     return tile

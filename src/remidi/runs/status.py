@@ -1,9 +1,7 @@
 """``remidi status RUN_DIR ...``: where runs stand, read from their folders without loading a
-model: finished (``summary.json``; evaluated when ``evaluate.json`` is there) or the update of the
-last checkpoint (and how long ago it was written), each part's updates, device and seconds per
-update (after compiling where the part timed its blocks), the time left at the last part's rate
-after compiling, and the updates in which a seed trained on nothing while a frozen adversary rejected
-levels (:func:`remidi.experiments.ued.stalled_updates`, from the checkpoint's metrics)."""
+model: finished (evaluated where ``evaluate.json`` is there) or the last checkpoint's update and
+age; each part's updates, device and seconds per update; the time left at the last part's rate;
+and the stalled updates (:func:`remidi.experiments.ued.stalled_updates`)."""
 
 from __future__ import annotations
 
@@ -48,9 +46,8 @@ def _per_update(seconds: float) -> str:
 
 
 def steady_rate(part: dict) -> float | None:
-    """Seconds per update of a part while it trained, compiling left out: its timed blocks'
-    (``train_s / train_updates``: every block after its first, :class:`~remidi.engine.run.driver.PartClock`);
-    None for a part without them (one block, or written before blocks were timed)."""
+    """Seconds per update of a part while it trained, compiling left out (``train_s /
+    train_updates`` of its timed blocks, :class:`~remidi.engine.run.driver.PartClock`); None without."""
     if part.get("train_updates") and part.get("train_s") is not None:
         return part["train_s"] / part["train_updates"]
     return None

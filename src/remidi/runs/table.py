@@ -1,18 +1,12 @@
 """``remidi table RUN ...``: one Markdown table of finished runs (e.g. the paper's Table 1).
 
-A run folder holds ``summary.json`` (one algorithm) or sub-folders that do (several algorithms
-of one ``remidi run``). Each row is one experiment × algorithm: per chosen metric, three columns
-computed from its per-seed values (:mod:`remidi.stats`): mean ± sample standard deviation
-(ddof 1), the interquartile mean (IQM) and the 95% percentile-bootstrap confidence interval of the
-mean (seeds resampled; :data:`CI_SEED` fixes the resamples, so a table is reproducible); then the
-seeds, the preset and the training wall time. A note under the table says what ± and the
-interval are. The interval is of the mean, not of the IQM, because the mean is what the results
-page's verdicts judge; with 10 seeds the IQM averages the middle 6.
+A run folder holds ``summary.json`` or sub-folders that do. Each row is one experiment ×
+algorithm: per metric, mean ± sample std (ddof 1), IQM and the 95% percentile-bootstrap interval
+of the mean (:mod:`remidi.stats`; :data:`CI_SEED` makes it reproducible); then seeds, preset and
+wall time. The interval is of the mean, which the results page's verdicts judge.
 
-``last=K`` (``--last K``) replaces each seed's final value by its mean over the last K logged
-points of ``metrics.csv`` (for evaluation metrics whose single last point is noisy, such as a
-held-out solve rate); points where a metric is undefined (NaN) are left out of that mean.
-"""
+``last=K`` (``--last K``) uses each seed's mean over the last K logged points of ``metrics.csv``
+(NaN points left out) for noisy evaluation metrics."""
 
 from __future__ import annotations
 
@@ -58,8 +52,8 @@ def _read_summary(path: Path) -> dict:
 
 
 def summaries(folders: list[Path]) -> list[dict]:
-    """The ``summary.json`` documents under ``folders``, in the order given (sub-folders sorted
-    by the algorithm order recorded in ``config.json``, else by name)."""
+    """The ``summary.json`` documents under ``folders`` in the order given (sub-folders in
+    ``config.json``'s algorithm order, else by name)."""
     found = []
     for folder in map(Path, folders):
         require_folder("RUN", folder)
@@ -78,10 +72,8 @@ def summaries(folders: list[Path]) -> list[dict]:
 
 
 def unfinished(folders: list[Path]) -> list[tuple[Path, Path]]:
-    """The runs in the sub-folders of ``folders`` (several-algorithm runs, or folders of runs)
-    that have no summary.json yet, each with the folder whose --resume finishes it (the
-    several-algorithm run's, or its own): :func:`summaries` leaves them out, and the commands say
-    so."""
+    """The runs in ``folders``' sub-folders without summary.json yet, each with the folder whose
+    --resume finishes it; :func:`summaries` leaves them out and the commands say so."""
     found = []
     for folder in map(Path, folders):
         if folder.is_dir() and not (folder / "summary.json").is_file():
@@ -93,13 +85,10 @@ def unfinished(folders: list[Path]) -> list[tuple[Path, Path]]:
 
 def label(algo: str, config: dict, command: list | None = None) -> str:
     """How a table and the results page name an algorithm's runs: a learned generator's with its
-    regret estimator (``paired (perfect)``; ``remidi-paired (perfect, belief)`` with the belief
-    tracker); a buffer sequence's with what differs from its exact single-policy form
-    (``remidi (belief, margin 2)``, ``remidi (simulated, ratio, false rate 0, margin 5)``,
-    ``remidi (belief, spread 0)`` for a ``remidi.belief_spread`` other than its default,
-    ``remidi (tolerance)``, ``remidi (combine)``, ``remidi (rehearsal 0.2)``, and ``remidi (masked)`` where the run's
-    ``command`` asked for the default policy by name: a baseline run beside its variants, kept
-    apart from the plain runs of earlier claims); the others by name."""
+    regret estimator (``paired (perfect)``, ``remidi-paired (perfect, belief)``); a buffer sequence's
+    with what differs from its exact single-policy form (``remidi (belief, margin 2)``,
+    ``remidi (tolerance)``, ``remidi (rehearsal 0.2)``, ...; ``remidi (masked)`` where the command
+    named the default policy, a baseline beside its variants); the others by name."""
     estimator = config.get("paired", {}).get("estimator")
     if algo in ("paired", "remidi-paired") and estimator:
         belief = algo == "remidi-paired" and config.get("remidi", {}).get("tracker") == "belief"
@@ -131,8 +120,7 @@ def label(algo: str, config: dict, command: list | None = None) -> str:
 
 
 def per_seed(entry: dict | None) -> list[float]:
-    """A metric entry's per-seed values f[S] (``None``, JSON's NaN, → NaN); ``[mean]`` for an
-    entry without them; ``[]`` for no entry."""
+    """A metric entry's per-seed values f[S] (None → NaN); ``[mean]`` without them; ``[]`` for no entry."""
     if entry is None:
         return []
     values = entry.get("per_seed", [entry.get("mean")])
@@ -140,8 +128,8 @@ def per_seed(entry: dict | None) -> list[float]:
 
 
 def _cells(entry: dict | None, digits: int) -> list[str]:
-    """The metric's three cells: mean ± sample std (the mean alone for one seed), IQM, 95% CI of
-    the mean; ``n/a`` where undefined (no value, or a seed without one)."""
+    """The metric's three cells: mean ± sample std (the mean alone for one seed), IQM, 95% CI of the
+    mean; ``n/a`` where undefined."""
     values = per_seed(entry)
     mean, std = stats.mean_and_sample_std(values)
     if not math.isfinite(mean):
@@ -153,8 +141,7 @@ def _cells(entry: dict | None, digits: int) -> list[str]:
 
 
 def _digits(metric: str) -> int:
-    """Decimals a metric is shown with: 3 for the tabular games' values (near 0.175, 1/64), 2 for
-    shares and solve rates, 1 for returns and everything else."""
+    """Decimals a metric is shown with: 3 for the tabular games, 2 for shares and solve rates, 1 else."""
     kind = metric.split("/")[0]
     if kind in ("regret", "adversary_prob", "policy"):  # the tabular games' values near 0.175, 1/64
         return 3
@@ -162,9 +149,8 @@ def _digits(metric: str) -> int:
 
 
 def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
-    """``{metric: {"mean", "std", "per_seed"}}``: per seed, the mean of the metric's last ``last``
-    logged points in the run's ``metrics.csv`` (NaN points left out); then mean and std over seeds
-    (``outputs.summarize``: its ``std`` is ddof 0; the table computes its own from ``per_seed``)."""
+    """``{metric: {"mean", "std", "per_seed"}}``: per seed the mean of the last ``last`` logged points
+    (NaN left out), then over seeds (``std`` ddof 0; the table computes its own from ``per_seed``)."""
     path = Path(doc["folder"]) / "metrics.csv"
     if not path.is_file():
         raise ConfigError(f"--last: no metrics.csv in {doc['folder']}")
@@ -182,8 +168,8 @@ def windowed(doc: dict, metrics: list[str], last: int) -> dict[str, dict]:
 
 
 def _name(doc: dict) -> str:
-    """The row's algorithm, named by :func:`label` from the run's ``config.json`` (so that two
-    ReMiDi runs that differ in policy or tracker get two names), by its summary alone without one."""
+    """The row's algorithm, by :func:`label` from the run's ``config.json`` (so ReMiDi variants differ),
+    else by its summary."""
     config = Path(doc["folder"]) / "config.json"
     if not config.is_file():
         return doc["algo"]
@@ -197,28 +183,23 @@ SHARES = ("replay_fraction", "buffer_fraction")  # the level shares that carry t
 
 
 def evaluation_sets(names: list[str]) -> list[str]:
-    """The evaluation sets a summary's metric ``names`` hold, in the order of their first metric:
-    the sets whose ``discounted_return/<set>`` is there (every evaluation set's metrics include it,
-    ``engine/run/evaluation.py``; no training metric is named so)."""
+    """The evaluation sets among metric ``names``, in first-metric order: those with a
+    ``discounted_return/<set>`` (every set logs it, no training metric is named so)."""
     sets = {name.split("/", 1)[1] for name in names if name.startswith("discounted_return/") and name.count("/") == 1}
     order = [name.split("/", 1)[1] for name in names if name.count("/") == 1 and name.split("/", 1)[1] in sets]
     return list(dict.fromkeys(order))
 
 
 def primary_metric(names: list[str], eval_set: str) -> str:
-    """An evaluation set's primary metric among ``names``: its solve rate, its return where the task
-    has no solve criterion (no ``solve_rate/<set>``)."""
+    """An evaluation set's primary metric among ``names``: its solve rate, else its return."""
     return f"solve_rate/{eval_set}" if f"solve_rate/{eval_set}" in names else f"return/{eval_set}"
 
 
 def default_metrics(docs: list[dict]) -> list[str]:
-    """The columns without ``--metrics``: per experiment (in the order of the runs), the primary
-    metric of every evaluation set (:func:`primary_metric`: the lever's visible and hidden levels,
-    a user's task's sets), where the summary's first metric (the headline) is one of them; a
-    headline that sums the sets up instead (``solve_rate/mean`` over the ten held-out mazes,
-    ``return/mean`` over a gymnax grid) stands for them; then its first two level shares
-    (``replay_fraction/<tag>``, ``buffer_fraction/<tag>``: what PLR⊥ replays is the paper's claim).
-    An experiment without shares or evaluation sets (the tabular games): its first three metrics."""
+    """The columns without ``--metrics``, per experiment in run order: each evaluation set's
+    :func:`primary_metric` where the headline (the summary's first metric) is one of them, else the
+    headline that sums them up (``solve_rate/mean``); then the first two level shares
+    (``replay_fraction/<tag>``, ``buffer_fraction/<tag>``). Without shares or sets: the first three metrics."""
     first: dict[str, dict] = {}
     for doc in docs:
         first.setdefault(doc["experiment"], doc)
@@ -234,8 +215,7 @@ def default_metrics(docs: list[dict]) -> list[str]:
 
 def markdown_table(docs: list[dict], metrics: list[str] | None = None, last: int | None = None) -> str:
     """The table as Markdown, then a blank line and :data:`NOTE`; ``metrics`` default to
-    :func:`default_metrics`; with ``last``, each metric is the mean of its last ``last`` logged
-    points (:func:`windowed`)."""
+    :func:`default_metrics`; ``last``: :func:`windowed`."""
     if not docs:
         raise ConfigError("RUN: no finished runs given")
     if last is not None and (not isinstance(last, int) or last < 1):

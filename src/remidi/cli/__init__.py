@@ -1,11 +1,9 @@
 """The ``remidi`` command line, one module per group of commands: :mod:`~remidi.cli.experiments`
-(``solve``, ``run``, ``list``), :mod:`~remidi.cli.runs` (``render``, ``evaluate``, ``table``,
-``compare``, ``status``: the commands that read run folders) and :mod:`~remidi.cli.bench`;
-:mod:`~remidi.cli.common` holds the one-line usage errors and the Ctrl-C and SIGTERM handling.
+(``solve``, ``run``, ``list``), :mod:`~remidi.cli.runs` (the commands reading run folders) and
+:mod:`~remidi.cli.bench`; :mod:`~remidi.cli.common`: usage errors, Ctrl-C and SIGTERM.
 
-Bad input never reaches JAX: every argument is validated first and reported as one line
-``remidi: error: ...`` with exit status 2, before anything is written.
-"""
+Bad input never reaches JAX: every argument is validated first, reported as one line
+``remidi: error: ...`` with exit status 2, before anything is written."""
 
 from __future__ import annotations
 
@@ -34,13 +32,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line. Run as a program (``argv`` None: the ``remidi`` script, ``python -m
-    remidi``), Ctrl-C exits at once with status 130 (:func:`remidi.cli.common._exit_on_sigint`) and SIGTERM with
-    143 after checkpointing a run in training (:func:`remidi.cli.common._on_sigterm`); called with an ``argv`` list,
-    KeyboardInterrupt is caught and 130 returned.
+    """The command line. Run as a program (``argv`` None), Ctrl-C exits at once with 130
+    (:func:`remidi.cli.common._exit_on_sigint`) and SIGTERM with 143 after checkpointing a training
+    run; with an ``argv`` list, KeyboardInterrupt is caught and 130 returned.
 
-    Exit status: 0 done, 1 a failed write, 2 bad input, 130 Ctrl-C, 143 SIGTERM (resume the run
-    with ``remidi run --resume DIR``)."""
+    Exit status: 0 done, 1 a failed write, 2 bad input, 130 Ctrl-C, 143 SIGTERM."""
     from remidi import preemption
 
     previous = _install_sigint_handler() if argv is None else {}

@@ -26,8 +26,8 @@ _RUN_DIR: list[Path] = []  # the folder of the run in progress, for the resume h
 
 
 def _write_failed_message(err: OSError) -> str:
-    """One line for a failed write (``No space left on device``, ...): what failed, that the files
-    written before are whole (every write is atomic), and how to continue a run."""
+    """One line for a failed write: what failed, that earlier files are whole (writes are atomic),
+    and how to continue a run."""
     what = f"{err.filename}: " if err.filename else ""
     return f"remidi: error: {what}{err.strerror or type(err).__name__}; files written before are intact" + _resume_hint()
 
@@ -46,8 +46,7 @@ def _resume_hint() -> str:
 
 
 def _interrupted_message(what: str = "interrupted") -> str:
-    """``remidi: interrupted`` (or ``what`` happened) and, once the run folder holds a resumable
-    run, how to resume it."""
+    """``remidi: interrupted`` (or ``what`` happened), with :func:`_resume_hint`."""
     return f"remidi: {what}" + _resume_hint()
 
 
@@ -64,16 +63,15 @@ def _open_bars() -> list:
 
 
 def _say(line: str) -> None:
-    """Print ``line`` on stderr, on a line of its own: an open progress bar is closed first (it
-    is not drawn again below the line, and its last fragment does not run into it)."""
+    """Print ``line`` on stderr on a line of its own, closing an open progress bar first."""
     for bar in _open_bars():
         bar.close()
     print(line, file=sys.stderr)
 
 
 def _exit_at_once(message: str, status: int) -> None:  # pragma: no cover - runs in a subprocess
-    """Print ``message`` (on a line of its own after a progress bar) and end the process with
-    ``status`` without unwinding: see :func:`_exit_on_sigint` for why that is safe."""
+    """Print ``message`` on its own line and end the process with ``status`` without unwinding
+    (safe: :func:`_exit_on_sigint`)."""
     try:
         sys.stdout.flush()
     except Exception:  # a print the signal cut short
@@ -85,22 +83,17 @@ def _exit_at_once(message: str, status: int) -> None:  # pragma: no cover - runs
 def _exit_on_sigint(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
     """Ctrl-C: print one line and exit with status 130 at once, wherever the interrupt lands.
 
-    Raising KeyboardInterrupt (Python's default) is not safe while JAX imports, traces, compiles or
-    runs: the exception can land in a callback that jaxlib calls (garbage-collection hooks: it is
-    printed as "Exception ignored" and the run goes on) or unwind while XLA's threads still run
-    (the interpreter then aborts at exit with "pure virtual method called", exit 134, or a
-    segfault). Exiting at once is safe because every file a run writes is written atomically
-    (temporary file, then rename): an interrupted run keeps its last complete checkpoint and
-    ``remidi run --resume DIR`` continues from it.
-    """
+    KeyboardInterrupt is not safe while JAX imports, traces, compiles or runs: it can land in a
+    jaxlib callback ("Exception ignored", the run goes on) or unwind while XLA's threads run (an
+    abort at exit, exit 134, or a segfault). Exiting at once is safe because every run file is
+    written atomically: the last complete checkpoint stays and ``--resume`` continues from it."""
     _exit_at_once(_interrupted_message(), 130)
 
 
 def _on_sigterm(signum, frame) -> None:  # pragma: no cover - runs in a subprocess (tests/test_interrupt.py)
-    """SIGTERM (a scheduler's pre-emption notice, :mod:`remidi.preemption`): while a UED run
-    trains, only recorded: the driver checkpoints the block under way and stops, and :func:`main`
-    exits with status 143. Anywhere else, one line and exit 143 at once, as Ctrl-C does with 130
-    (:func:`_exit_on_sigint`: the last checkpoint is whole, nothing newer exists)."""
+    """SIGTERM (a scheduler's pre-emption, :mod:`remidi.preemption`): while a UED run trains, only
+    recorded (the driver checkpoints the block and stops; :func:`main` exits 143); anywhere else one
+    line and exit 143 at once, as :func:`_exit_on_sigint` does."""
     from remidi import preemption
 
     if not preemption.request():
@@ -108,9 +101,9 @@ def _on_sigterm(signum, frame) -> None:  # pragma: no cover - runs in a subproce
 
 
 def _install_sigint_handler():
-    """Install :func:`_exit_on_sigint` (SIGINT) and :func:`_on_sigterm` (SIGTERM) when this process
-    runs the command line (not when a host such as pytest or a notebook has its own handling, or
-    ignores the signal); returns the handlers to restore, {signal: previous handler}."""
+    """Install :func:`_exit_on_sigint` and :func:`_on_sigterm` when this process runs the command
+    line (not under a host with its own handling, or ignoring the signal); returns {signal: previous
+    handler} to restore."""
     if threading.current_thread() is not threading.main_thread():
         return {}
     previous = {}

@@ -13,9 +13,8 @@ from remidi.errors import RemidiError, one_of
 
 
 def _algorithms(entry: dict) -> tuple[list[str], list[str]]:
-    """A built-in experiment's (default, every) algorithms: from its catalog entry, unless this
-    process has imported the algorithm registry, where :func:`remidi.register_algorithm` may have
-    added some (a plugin, or a Python caller of :func:`remidi.cli.main`)."""
+    """A built-in experiment's (default, every) algorithms: from its catalog entry, unless the
+    algorithm registry is imported (:func:`remidi.register_algorithm` may have added some)."""
     if "remidi.engine.algorithms" not in sys.modules:
         return entry["default_algorithms"], entry["algorithms"]
     from remidi.experiments import get_experiment
@@ -154,10 +153,9 @@ def _print_summaries(summaries: dict[str, dict], out: Path) -> None:
 
 
 def _reject_unknown_algos(name: str, text: str | None) -> None:
-    """``--algo``'s names that no built-in experiment has, refused from the catalog as
-    :func:`~remidi.experiments.base.parse_algos` refuses them, before JAX is imported; the rest
-    (an algorithm this experiment leaves out says why) :func:`parse_algos` decides. Only while no
-    algorithm can have been registered (:func:`_algorithms`)."""
+    """Refuse, from the catalog and before JAX is imported, ``--algo`` names no built-in
+    experiment has, as :func:`~remidi.experiments.base.parse_algos` would; the rest it decides. Only
+    while no algorithm can have been registered."""
     from remidi.experiments import catalog
 
     if text is None or "remidi.engine.algorithms" in sys.modules:
@@ -169,8 +167,8 @@ def _reject_unknown_algos(name: str, text: str | None) -> None:
 
 
 def _experiment(name: str, task_args: list[str]):
-    """The experiment ``name`` names; a task given as ``module:function`` called with the
-    ``--task-arg NAME=VALUE`` keyword arguments (refused for a built-in experiment)."""
+    """The experiment ``name`` names; a ``module:function`` task is called with the ``--task-arg``
+    values (refused for a built-in experiment)."""
     from remidi.experiments import get_experiment
 
     if not task_args:

@@ -138,22 +138,18 @@ def run_ued(task: UEDTask, config: dict[str, Any] | UEDConfig | None, algos: str
             name: str = "custom", task_ref: str | None = None,
             task_args: dict[str, Any] | None = None) -> dict[str, dict]:
     """Train ``task`` with each of ``algos`` (a list, a comma-separated string, or ``"all"``) over
-    ``seeds`` (a list, or how many: ``2`` is ``[0, 1]``) and write the standard outputs into ``out``
-    (one sub-folder per algorithm when there are several); ``resume=True`` continues the run in ``out``.
-    Returns ``{algo: summary}`` (the ``summary.json`` documents).
+    ``seeds`` (a list, or how many: ``2`` is ``[0, 1]``) into ``out`` (one sub-folder per algorithm when
+    several); ``resume=True`` continues the run in ``out``. Returns ``{algo: summary}``.
 
-    ``config``: a dict of :class:`~remidi.engine.config.UEDConfig` keys (dotted or nested), set on the
-    task's defaults (:func:`task_defaults`) as ``--set`` does; a whole ``UEDConfig``, used as it is; or
-    None. Everything, the task included, is validated before anything is written (one-line
-    :class:`~remidi.errors.ConfigError` naming the argument or key).
+    ``config``: a dict of :class:`~remidi.engine.config.UEDConfig` keys (dotted or nested) set on the
+    task's defaults (:func:`task_defaults`) as ``--set`` does, a whole ``UEDConfig`` used as it is, or
+    None. All arguments and the task are validated before anything is written (one-line
+    :class:`~remidi.errors.ConfigError`).
 
-    ``task_ref``: ``"module:function"`` (or ``"module:attribute"``) giving this task again, recorded in
-    ``config.json`` with its folder so that ``remidi run --resume OUT`` and ``remidi evaluate OUT``
-    rebuild the task; checked to import (not called). Without it, resume here and evaluate with
-    ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``.
-
-    ``task_args``: the keyword arguments (JSON scalars) ``task_ref``'s function built ``task`` with,
-    recorded and checked against its parameters."""
+    ``task_ref``: ``"module:function"`` giving this task again, and ``task_args`` (JSON scalars) its
+    keyword arguments: recorded in ``config.json`` (checked, not called) so that ``remidi run
+    --resume OUT`` and ``remidi evaluate OUT`` rebuild the task. Without it, resume here and evaluate
+    with ``remidi.runs.evaluate.evaluate_run(OUT, task=task)``."""
     naming = python_naming(config)
     if not isinstance(out, (str, os.PathLike)) or not str(out).strip():
         raise ConfigError(f"out: must be a folder path (a str or a Path), got {out!r}")

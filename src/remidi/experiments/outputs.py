@@ -105,10 +105,9 @@ def several_algorithm_run(folder: Path) -> bool:
 
 @contextmanager
 def folder_lock(folder: Path, flag: str):
-    """Within: this process holds an exclusive lock on run folder ``folder`` (``flock`` of the
-    folder; ends with the process), so a second writer (two ``--resume``, a scheduler's requeue) gets
-    a one-line ConfigError instead of interleaving checkpoints. On NFS a POSIX lock on a hidden
-    ``.remidi.lock`` does the same; without locks nothing is locked."""
+    """Within: this process holds an exclusive lock on run folder ``folder`` (``flock``; on NFS a
+    POSIX lock on a hidden ``.remidi.lock``; none without locking), so a second writer (two
+    ``--resume``, a scheduler's requeue) gets a one-line ConfigError, not interleaved checkpoints."""
     try:
         import fcntl
 

@@ -1,9 +1,8 @@
 """The tabular UED experiment (paper §6.2, Figures 3–5): ``tabular-distinct`` and ``tabular-shared``.
 
-Trains MMR-UED (one adversary) and ReMiDi (a sequence of adversaries with the exact
-multi-policy ``Combine``) on the paper's six-level game with exact expected regret, and
-compares the result with the exact BLP solution computed by :mod:`remidi.solvers.onestep`.
-"""
+MMR-UED (one adversary) and ReMiDi (adversaries with the exact multi-policy ``Combine``) on the
+paper's six-level game with exact expected regret, against the exact BLP solution
+(:mod:`remidi.solvers.onestep`)."""
 
 from __future__ import annotations
 

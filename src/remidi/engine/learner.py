@@ -23,7 +23,7 @@ from remidi.engine.core import normalize as nrm
 from remidi.engine.core.networks import flatten_obs
 from remidi.engine.core.networks.base import CATEGORICAL
 from remidi.engine.core.ppo import PPOConfig, create_train_state
-from remidi.envs.interface import AutoReplay, AutoReplayState, UnderspecifiedEnv, info_flag
+from remidi.envs.interface import AutoReplayState, UnderspecifiedEnv, info_flag
 
 if TYPE_CHECKING:
     from remidi.engine.setup import Setup
@@ -77,7 +77,7 @@ class Stepping:
     state), ``tracker_env`` (where a tracker plays the frozen levels: training levels, so a larger
     evaluation env passes the training one; default ``raw``) and ``solved_info`` (the info key the
     trajectory records as ``solved``; None: none). An env whose episode ends restarts its level
-    (:meth:`restart_where_done` over N envs; ``auto``: one env, :class:`~remidi.envs.interface.AutoReplay`)."""
+    (:meth:`restart_where_done` over N envs; the same rule as :class:`~remidi.envs.interface.AutoReplay` for one env)."""
 
     raw: UnderspecifiedEnv
     params: Any
@@ -88,7 +88,6 @@ class Stepping:
     def __post_init__(self):
         if self.tracker_env is None:
             object.__setattr__(self, "tracker_env", self.raw)
-        object.__setattr__(self, "auto", AutoReplay(self.raw, self.deterministic_reset, self.solved_info))
 
     def restart_where_done(self, state: AutoReplayState, stepped, reset_keys):
         """The N envs' step ``stepped = (obs, env_state, reward, done, info)`` from ``state``, the

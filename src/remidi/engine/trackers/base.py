@@ -116,8 +116,9 @@ class Tracker:
 
     def step(self, envs, frozen: Frozen, env_keys, state, tstate, action):
         """``(next_obs, env state, reward, done, tracker state)``: one step with ``env_keys`` [N]."""
-        next_obs, state, reward, done, _ = jax.vmap(envs.auto.step, in_axes=(0, 0, 0, None))(
-            env_keys, state, action, envs.params)
+        keys = jax.vmap(jax.random.split)(env_keys)  # each env's key: step, restart (as the rollout's own)
+        stepped = jax.vmap(envs.raw.step, in_axes=(0, 0, 0, None))(keys[:, 0], state.env_state, action, envs.params)
+        next_obs, state, reward, done, _ = envs.restart_where_done(state, stepped, keys[:, 1])
         tstate = self.observe(envs.tracker_env, envs.params, frozen, env_keys, tstate, action, next_obs, done)
         return next_obs, state, reward, done, tstate
 
